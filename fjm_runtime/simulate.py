@@ -1,0 +1,247 @@
+"""Closed-loop simulation: RK4 plant with TRUE parameters, controller with NOMINAL ones.
+
+The torque is computed once per step and held (zero-order hold, like a digital
+controller sampling at ``1/dt``); the plant state and the controller's internal
+state are integrated together by classical RK4.
+"""
+from __future__ import annotations
+
+import sys
+from dataclasses import dataclass, field
+from typing import Callable, Optional
+
+import numpy as np
+
+from .rk4 import rk4_step
+
+
+class SimulationDivergedError(RuntimeError):
+    """The closed loop produced a non-finite (or absurdly large) state."""
+
+    def __init__(self, t: float, message: str):
+        super().__init__(message)
+        self.t = t
+
+
+@dataclass
+class Metrics:
+    """Per-run figures of merit (link-position error ``e1 = q_l - q_d``, worst joint).
+
+    Attributes
+    ----------
+    final_error : float
+        ``max_i |e1_i(t_end)|`` in rad.
+    rms_error : float
+        RMS of ``e1`` over the whole run (all joints), rad.
+    rms_error_second_half : float
+        RMS of ``e1`` over ``t >= t_end / 2``, rad.
+    max_abs_u : float
+        ``max |u|`` in N m.
+    reaching_time : float
+        First time after which ``|s_i| <= delta_i`` for all joints until the end
+        (s); ``inf`` if the boundary layer is not reached and kept.
+    total_variation_u : float
+        ``sum_k |u_{k+1} - u_k|`` (summed over joints), N m: the chattering measure.
+    """
+
+    final_error: float
+    rms_error: float
+    rms_error_second_half: float
+    max_abs_u: float
+    reaching_time: float
+    total_variation_u: float
+
+    def as_dict(self) -> dict:
+        return dict(self.__dict__)
+
+
+@dataclass
+class SimulationResult:
+    """Trajectories and metrics of one closed-loop run (``N + 1`` samples, ``n`` joints).
+
+    Attributes
+    ----------
+    t : ndarray, shape (N+1,)
+    x : ndarray, shape (N+1, 4n)
+        Plant state ``[q_l; dq_l; q_m; dq_m]``.
+    z : ndarray, shape (N+1, n_states)
+        Controller state.
+    u : ndarray, shape (N+1, n)
+        Applied torque held over ``[t_k, t_k + dt)`` (the last row is the law at ``t_end``).
+    y : ndarray, shape (N+1, 4, n)
+        True linearizing coordinates ``T(x; p_true)`` (link angle, velocity,
+        acceleration, jerk).
+    y_hat : ndarray, shape (N+1, 4, n)
+        The controller's estimate ``T(x; p_nom)``.
+    ref : ndarray, shape (N+1, 5, n)
+        Reference and its derivatives.
+    s : ndarray, shape (N+1, n)
+        Sliding variable as computed by the controller.
+    e1 : ndarray, shape (N+1, n)
+        Link-position error ``q_l - q_d`` (rad).
+    delta : ndarray, shape (n,)
+        Boundary-layer width used for the reaching time.
+    metrics : Metrics
+    """
+
+    t: np.ndarray
+    x: np.ndarray
+    z: np.ndarray
+    u: np.ndarray
+    y: np.ndarray
+    y_hat: np.ndarray
+    ref: np.ndarray
+    s: np.ndarray
+    e1: np.ndarray
+    delta: np.ndarray
+    metrics: Metrics
+    info: dict = field(default_factory=dict)
+
+
+def compute_metrics(t, e1, u, s, delta) -> Metrics:
+    """Compute :class:`Metrics` from sampled trajectories.
+
+    Parameters
+    ----------
+    t : ndarray, shape (N+1,)
+    e1, u, s : ndarray, shape (N+1, n)
+    delta : ndarray, shape (n,)
+    """
+    half = t >= 0.5 * t[-1]
+    inside = np.all(np.abs(s) <= delta, axis=1)
+    if inside[-1]:
+        outside_idx = np.flatnonzero(~inside)
+        reaching = t[0] if outside_idx.size == 0 else t[min(outside_idx[-1] + 1, t.size - 1)]
+    else:
+        reaching = np.inf
+    return Metrics(
+        final_error=float(np.max(np.abs(e1[-1]))),
+        rms_error=float(np.sqrt(np.mean(e1 ** 2))),
+        rms_error_second_half=float(np.sqrt(np.mean(e1[half] ** 2))),
+        max_abs_u=float(np.max(np.abs(u))),
+        reaching_time=float(reaching),
+        total_variation_u=float(np.sum(np.abs(np.diff(u, axis=0)))),
+    )
+
+
+def _check_state(x, nx, field):
+    a = np.asarray(x, dtype=float)
+    if a.shape != (nx,):
+        raise ValueError(f"{field} with shape {a.shape}: expected ({nx},) = [q_l; dq_l; q_m; dq_m]")
+    if not np.all(np.isfinite(a)):
+        raise ValueError(f"{field} = {a.tolist()}: expected finite values")
+    return a
+
+
+def simulate(model, controller, reference, *, duration: float, dt: float = 1e-3,
+             true_params=None, x0=None, progress: Optional[Callable[[float], None]] = None,
+             max_state: float = 1e6) -> SimulationResult:
+    """Simulate the closed loop with the TRUE plant and the controller's NOMINAL model.
+
+    Parameters
+    ----------
+    model : Model
+        ``fjm_runtime.load(name)``.
+    controller : SlidingModeController
+        Holds its own nominal parameters (see :mod:`fjm_runtime.controllers`).
+    reference : Reference
+        ``reference(t) -> (5, n)``.
+    duration : float
+        Simulated time in s, > 0.
+    dt : float
+        RK4 step and control sample time in s, > 0 (default 1 ms).
+    true_params : dict or array_like, optional
+        Plant parameters (default: model defaults).
+    x0 : array_like, shape (4n,), optional
+        Initial state; default: at rest with ``q_l = q_m = q_d(0)``.
+    progress : callable, optional
+        Called as ``progress(fraction)`` about 20 times during the run.
+    max_state : float
+        ``|x|`` beyond this counts as divergence.
+
+    Returns
+    -------
+    SimulationResult
+
+    Raises
+    ------
+    ValueError
+        Bad durations, steps, shapes or parameters (the message names the field).
+    SimulationDivergedError
+        The state became non-finite or exceeded ``max_state``; ``.t`` is the time.
+    """
+    n, nx = int(model.n), int(model.nx)
+    if not (np.isfinite(duration) and duration > 0):
+        raise ValueError(f"duration = {duration!r}: expected a finite value > 0 s")
+    if not (np.isfinite(dt) and 0 < dt <= duration):
+        raise ValueError(f"dt = {dt!r}: expected a finite step with 0 < dt <= duration")
+    if getattr(reference, "n", n) != n:
+        raise ValueError(f"reference.n = {reference.n}: expected {n} joints for this model")
+    if getattr(controller, "n", n) != n:
+        raise ValueError(f"controller.n = {controller.n}: expected {n} joints for this model")
+    try:
+        p_true = np.asarray(model.params_array({} if true_params is None else true_params), dtype=float)
+    except ValueError as exc:
+        raise ValueError(f"true_params: {exc}") from exc
+    if not np.all(np.isfinite(p_true)):
+        raise ValueError(f"true_params = {p_true.tolist()}: expected finite values")
+    r0 = np.asarray(reference(0.0), dtype=float)
+    if r0.shape != (5, n):
+        raise ValueError(f"reference(0) with shape {r0.shape}: expected (5, {n})")
+    if x0 is None:
+        x0 = np.zeros(nx)
+        x0[0:n] = r0[0]
+        x0[2 * n:3 * n] = r0[0]
+    x = _check_state(x0, nx, "x0")
+    z = np.asarray(controller.initial_state(0.0, x, r0), dtype=float)
+    nz = z.size
+
+    n_steps = int(round(duration / dt))
+    t = dt * np.arange(n_steps + 1)
+    X = np.empty((n_steps + 1, nx)); Z = np.empty((n_steps + 1, nz))
+    U = np.empty((n_steps + 1, n)); S = np.empty((n_steps + 1, n))
+    Yh = np.empty((n_steps + 1, 4, n)); R = np.empty((n_steps + 1, 5, n))
+    report_every = max(1, n_steps // 20)
+
+    for k in range(n_steps + 1):
+        tk = t[k]
+        rk = reference(tk)
+        sample = controller.evaluate(tk, x, z, rk)
+        X[k], Z[k], U[k], S[k], Yh[k], R[k] = x, z, sample.u, sample.s, sample.y_hat, rk
+        if k == n_steps:
+            break
+        u = sample.u
+
+        def rhs(tau, w, u=u, sample=sample):
+            xs = w[:nx]
+            dx = np.asarray(model.f(xs, p_true), dtype=float).reshape(nx) + \
+                np.asarray(model.g(xs, p_true), dtype=float).reshape(nx, n) @ u
+            if nz == 0:
+                return dx
+            dz = controller.state_derivative(tau, xs, w[nx:], reference(tau), sample)
+            return np.concatenate([dx, dz])
+
+        w = rk4_step(rhs, tk, np.concatenate([x, z]), dt)
+        if not np.all(np.isfinite(w)) or np.max(np.abs(w)) > max_state:
+            raise SimulationDivergedError(
+                tk + dt, f"simulation diverged at t = {tk + dt:.4f} s: state "
+                f"{'is not finite' if not np.all(np.isfinite(w)) else f'exceeds |x| = {max_state:g}'}"
+                f" (last applied torque {np.round(u, 3).tolist()} N m)")
+        x, z = w[:nx], w[nx:]
+        if progress is not None and (k + 1) % report_every == 0:
+            progress((k + 1) / n_steps)
+
+    Y = np.stack([np.asarray(model.T(xk, p_true), dtype=float).reshape(4, n) for xk in X])
+    e1 = X[:, :n] - R[:, 0]
+    delta = np.asarray(getattr(controller, "delta", np.full(n, np.inf)), dtype=float)
+    metrics = compute_metrics(t, e1, U, S, delta)
+    return SimulationResult(t=t, x=X, z=Z, u=U, y=Y, y_hat=Yh, ref=R, s=S, e1=e1,
+                            delta=delta, metrics=metrics)
+
+
+def stderr_progress(label: str) -> Callable[[float], None]:
+    """A ``progress`` callback printing ``label: NN %`` to stderr."""
+    def report(fraction: float) -> None:
+        print(f"\r{label}: {100 * fraction:3.0f} %", end="\n" if fraction >= 1 else "",
+              file=sys.stderr, flush=True)
+    return report
