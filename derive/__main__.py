@@ -1,0 +1,140 @@
+"""``python -m derive [--models M ...] [--out DIR] [--check]``.
+
+Derives the requested models (default: all) and writes them into
+``generated/`` atomically: everything is first written to a sibling temp
+directory, which then replaces ``generated/`` by rename. An interrupted run
+(Ctrl-C, SIGTERM, crash) leaves the previous ``generated/`` untouched.
+
+``--check`` regenerates every model into a temp dir and compares with
+``generated/`` byte for byte; it exits 1 with a summary of what differs.
+"""
+
+from __future__ import annotations
+
+import argparse
+import filecmp
+import json
+import shutil
+import signal
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Dict, List
+
+from .linearize import linearize
+from .models import MODEL_NAMES, build
+from .emit.writer import swap_in, write_model
+
+REPO = Path(__file__).resolve().parent.parent
+DEFAULT_OUT = REPO / "generated"
+TIMINGS = REPO / "build" / "derive-timings.json"
+
+
+def _sigterm_to_exit(signum, frame):  # pragma: no cover - exercised by the interrupt test
+    raise SystemExit(128 + signum)
+
+
+def derive_into(root: Path, models: List[str], log=print) -> Dict[str, Dict[str, float]]:
+    """Derive and emit ``models`` into ``root/<model>/``; returns per-model timings (s)."""
+    timings: Dict[str, Dict[str, float]] = {}
+    for i, name in enumerate(models, 1):
+        log(f"[{i}/{len(models)}] {name}: deriving ...", end="", flush=True)
+        t0 = time.perf_counter()
+        lin = linearize(build(name))
+        t1 = time.perf_counter()
+        manifest = write_model(lin, root / name)
+        t2 = time.perf_counter()
+        ops = sum(f["operations"] for f in manifest["functions"].values())
+        timings[name] = {"derive_seconds": t1 - t0, "emit_seconds": t2 - t1, "seconds": t2 - t0,
+                         "operations": ops}
+        log(f" {t2 - t0:.2f} s (symbolic {t1 - t0:.2f} s, emit {t2 - t1:.2f} s), {ops} ops")
+    return timings
+
+
+def diff_trees(expected: Path, actual: Path) -> List[str]:
+    """Human-readable differences between two generated trees (empty if identical)."""
+    problems: List[str] = []
+
+    def walk(rel: Path):
+        a, b = expected / rel, actual / rel
+        cmp = filecmp.dircmp(a, b)
+        for name in sorted(cmp.left_only):
+            problems.append(f"missing from generated/: {rel / name}")
+        for name in sorted(cmp.right_only):
+            problems.append(f"not produced by derive (stale?): {rel / name}")
+        for name in sorted(cmp.common_files):
+            if (a / name).read_bytes() != (b / name).read_bytes():
+                la = (a / name).read_text(errors="replace").splitlines()
+                lb = (b / name).read_text(errors="replace").splitlines()
+                line = next((k for k, (x, y) in enumerate(zip(la, lb)) if x != y), min(len(la), len(lb)))
+                problems.append(f"differs: {rel / name} (first difference at line {line + 1})")
+        for name in sorted(cmp.common_dirs):
+            walk(rel / name)
+
+    walk(Path("."))
+    return problems
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m derive", description=__doc__.split("\n\n")[0])
+    ap.add_argument("--models", nargs="+", metavar="MODEL",
+                    help=f"models to derive (default: all): {' '.join(MODEL_NAMES)}")
+    ap.add_argument("--out", type=Path, default=DEFAULT_OUT, help="output root (default: generated/)")
+    ap.add_argument("--check", action="store_true",
+                    help="regenerate into a temp dir and fail if --out differs")
+    args = ap.parse_args(argv)
+    models = args.models or list(MODEL_NAMES)
+    unknown = [m for m in models if m not in MODEL_NAMES]
+    if unknown:
+        ap.error(f"unknown model(s) {', '.join(unknown)}; available models: {', '.join(MODEL_NAMES)}")
+    signal.signal(signal.SIGTERM, _sigterm_to_exit)
+    out: Path = args.out.resolve()
+
+    if args.check:
+        with tempfile.TemporaryDirectory(prefix="fjm-check-") as tmp:
+            fresh = Path(tmp) / "generated"
+            fresh.mkdir()
+            derive_into(fresh, list(MODEL_NAMES) if not args.models else models)
+            if not out.exists():
+                print(f"check-generated: {out} does not exist; run `make derive`", file=sys.stderr)
+                return 1
+            if args.models:  # compare only the requested models
+                problems = [p for name in models for p in diff_trees(fresh / name, out / name)]
+            else:
+                problems = diff_trees(fresh, out)
+        if problems:
+            print("check-generated: generated/ is stale; run `make derive` and commit:", file=sys.stderr)
+            for p in problems:
+                print("  " + p, file=sys.stderr)
+            return 1
+        print("check-generated: generated/ is up to date")
+        return 0
+
+    out.parent.mkdir(parents=True, exist_ok=True)
+    staging = Path(tempfile.mkdtemp(prefix=f".{out.name}-tmp-", dir=out.parent))
+    try:
+        t0 = time.perf_counter()
+        if out.exists():  # keep the models we are not re-deriving
+            for old in sorted(out.iterdir()):
+                if old.is_dir() and old.name not in models:
+                    shutil.copytree(old, staging / old.name)
+                elif old.is_file():
+                    shutil.copy2(old, staging / old.name)
+        timings = derive_into(staging, models)
+        total = time.perf_counter() - t0
+        swap_in(staging, out)
+    finally:
+        if staging.exists():
+            shutil.rmtree(staging, ignore_errors=True)
+    print(f"derived {len(models)} model(s) in {total:.2f} s -> {out}")
+    try:
+        TIMINGS.parent.mkdir(exist_ok=True)
+        TIMINGS.write_text(json.dumps({"models": timings, "total_seconds": total}, indent=2) + "\n")
+    except OSError:
+        pass
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,175 @@
+"""SymPy expressions -> CasADi SX, and the SPD linear algebra done in SX.
+
+The converter walks the SymPy DAG once (memo on nodes), so shared
+sub-expressions become shared SX nodes. Only the node types our models
+produce are accepted; anything else is an error, never a silent guess.
+"""
+
+from __future__ import annotations
+
+from typing import Dict, List, Mapping
+
+import casadi as ca
+import sympy as sp
+
+
+class SympyToSX:
+    """Convert SymPy expressions to SX given a binding of every free symbol.
+
+    Parameters
+    ----------
+    bindings : mapping sympy.Symbol -> casadi.SX (scalar)
+        Every free symbol of every converted expression must be bound here;
+        an unbound symbol raises ``ValueError`` naming it (DESIGN.md section 4).
+    """
+
+    def __init__(self, bindings: Mapping[sp.Symbol, ca.SX]):
+        self._memo: Dict[sp.Basic, ca.SX] = dict(bindings)
+
+    def bind(self, sym: sp.Symbol, value: ca.SX) -> None:
+        self._memo[sym] = value
+
+    def __call__(self, e) -> ca.SX:
+        if isinstance(e, sp.MatrixBase):
+            out = ca.SX(e.rows, e.cols)
+            for i in range(e.rows):
+                for j in range(e.cols):
+                    out[i, j] = self._convert(e[i, j])
+            return out
+        return self._convert(sp.sympify(e))
+
+    def _convert(self, e: sp.Basic) -> ca.SX:
+        hit = self._memo.get(e)
+        if hit is not None:
+            return hit
+        if e.is_Symbol:
+            raise ValueError(f"free symbol {e} is not bound to any argument")
+        if e.is_Integer:
+            out = ca.SX(float(int(e)))
+        elif e.is_Rational:
+            out = ca.SX(float(e.p) / float(e.q))
+        elif e.is_Float:
+            out = ca.SX(float(e))
+        elif e.is_Add:
+            args = [self._convert(a) for a in e.args]
+            out = args[0]
+            for a in args[1:]:
+                out = out + a
+        elif e.is_Mul:
+            out = self._mul(e)
+        elif e.is_Pow:
+            out = self._pow(e.args[0], e.args[1])
+        elif isinstance(e, sp.sin):
+            out = ca.sin(self._convert(e.args[0]))
+        elif isinstance(e, sp.cos):
+            out = ca.cos(self._convert(e.args[0]))
+        else:
+            raise ValueError(f"cannot emit SymPy node of type {type(e).__name__}: {e}")
+        self._memo[e] = out
+        return out
+
+    def _mul(self, e: sp.Mul) -> ca.SX:
+        # Group denominators: a*b/(c*d) costs one division instead of two.
+        sign = 1.0
+        num: List[ca.SX] = []
+        den: List[ca.SX] = []
+        for a in e.args:
+            if a.is_Number and a == -1:
+                sign = -sign
+            elif a.is_Pow and a.args[1].is_Integer and a.args[1] < 0:
+                den.append(self._pow(a.args[0], -a.args[1]))
+            elif a.is_Rational and not a.is_Integer and a.p in (1, -1):
+                den.append(ca.SX(float(a.q)))
+                sign = sign * a.p
+            else:
+                num.append(self._convert(a))
+        out = num[0] if num else ca.SX(1.0)
+        for a in num[1:]:
+            out = out * a
+        if den:
+            d = den[0]
+            for a in den[1:]:
+                d = d * a
+            out = out / d
+        return -out if sign < 0 else out
+
+    def _pow(self, base: sp.Basic, expo: sp.Basic) -> ca.SX:
+        b = self._convert(base)
+        if expo.is_Integer:
+            k = int(expo)
+            if k < 0:
+                return 1.0 / self._pow(base, -expo)
+            if k == 0:
+                return ca.SX(1.0)
+            out = b
+            for _ in range(k - 1):
+                out = out * b
+            return out
+        if expo == sp.Rational(1, 2):
+            return ca.sqrt(b)
+        raise ValueError(f"cannot emit power with exponent {expo}")
+
+
+def ldl_factor(A: ca.SX):
+    """Unpivoted LDL^T factorization of a symmetric positive definite SX matrix.
+
+    Parameters
+    ----------
+    A : casadi.SX, shape (n, n), symmetric positive definite
+
+    Returns
+    -------
+    L : list of list of casadi.SX
+        Unit lower-triangular factor, ``L[i][j]`` for ``j < i``.
+    d : list of casadi.SX, length n
+        Diagonal of D (all > 0 for SPD input). No pivoting is needed for SPD.
+    """
+    n = A.shape[0]
+    L = [[None] * n for _ in range(n)]
+    d: List[ca.SX] = []
+    for j in range(n):
+        dj = A[j, j]
+        for k in range(j):
+            dj = dj - L[j][k] * L[j][k] * d[k]
+        d.append(dj)
+        for i in range(j + 1, n):
+            lij = A[i, j]
+            for k in range(j):
+                lij = lij - L[i][k] * L[j][k] * d[k]
+            L[i][j] = lij / dj
+    return L, d
+
+
+def ldl_solve(L, d, b: ca.SX) -> ca.SX:
+    """Solve ``A x = b`` given :func:`ldl_factor` of A.
+
+    Parameters
+    ----------
+    b : casadi.SX, shape (n, 1)
+
+    Returns
+    -------
+    casadi.SX, shape (n, 1)
+    """
+    n = len(d)
+    z = [None] * n
+    for i in range(n):
+        zi = b[i]
+        for k in range(i):
+            zi = zi - L[i][k] * z[k]
+        z[i] = zi
+    y = [z[i] / d[i] for i in range(n)]
+    x = [None] * n
+    for i in reversed(range(n)):
+        xi = y[i]
+        for k in range(i + 1, n):
+            xi = xi - L[k][i] * x[k]
+        x[i] = xi
+    return ca.vertcat(*x)
+
+
+def spd_inverse(L, d) -> ca.SX:
+    """``A^-1`` from :func:`ldl_factor` of A, column by column (SX, (n, n))."""
+    n = len(d)
+    cols = [ldl_solve(L, d, ca.SX(ca.DM.eye(n)[:, j])) for j in range(n)]
+    return ca.horzcat(*cols)

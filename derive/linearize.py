@@ -1,0 +1,191 @@
+"""Feedback linearization of a flexible-joint model, with D(q)^-1 kept implicit.
+
+For ``x = [q; dq; q_m; dq_m]`` and the model of :mod:`derive.models`::
+
+    f(x) = [dq; y3; dq_m; J_m^-1 (K (q - q_m) - B_m dq_m)],   g = [0; 0; 0; J_m^-1]
+    T    = [y1; y2; y3; y4] = [q; dq; L_f y2; L_f y3]
+
+where ``y3 = D^-1 r3`` with ``r3 = -(h + K (q - q_m))`` is the link
+acceleration. Inverting D symbolically explodes from n = 3 on (DESIGN.md
+section 5), so we never do it. Instead we differentiate the *identity*
+``E0 = D y3 - r3 = 0`` along f, treating y3 and its time derivatives as
+implicit symbols ``Y3, Y4, A``:
+
+    E1 = d/dt E0 = D Y4 + R1(x, Y3)           ->  y4 = D^-1 (-R1)
+    E2 = d/dt E1 = D A  + R2(x, Y3, Y4)       ->  a  = L_f y4 = D^-1 (-R2)
+
+and ``b = L_g y4 = D^-1 N`` with ``N = -(dR1/d dq_m) J_m^-1`` (= K J_m^-1).
+Hence ``beta = b^-1 = N^-1 D`` and ``alpha = -beta a = N^-1 R2``: alpha and
+beta need no linear solve at all; y3 and y4 need one SPD solve each, done
+numerically in the generated code.
+
+The brackets ``ad_f^k g`` use the same idea with the entries of
+``W = D^-1`` as implicit symbols, differentiated by the rule
+``d W = -W (d D) W``; the generated code computes W from D numerically.
+
+Pure math: no I/O.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Dict, Tuple
+
+import sympy as sp
+
+from .lie import DirectionalDerivative
+from .models import FlexibleJointModel
+
+
+@dataclass
+class Linearization:
+    """Result of :func:`linearize`.
+
+    Attributes
+    ----------
+    model : FlexibleJointModel
+    Y3, Y4 : tuple of sympy.Symbol, length n
+        Implicit symbols bound by ``D Y3 = rhs3`` and ``D Y4 = rhs4``.
+    W : sympy.Matrix, shape (n, n)
+        Implicit symbols for the entries of ``D^-1`` (symmetric: ``W[i, j]``
+        and ``W[j, i]`` are the same symbol).
+    rhs3 : sympy.Matrix, shape (n, 1)
+        ``r3 = -(h + K (q - q_m))``, depends on (x, p).
+    rhs4 : sympy.Matrix, shape (n, 1)
+        ``-R1``, depends on (x, p, Y3).
+    outputs : dict str -> sympy.Matrix
+        ``f`` (4n, 1), ``g`` (4n, n), ``ad`` (4n, 4n), ``T`` (4n, 1),
+        ``alpha`` (n, 1), ``beta`` (n, n), ``energy`` (1, 1), ``inertia`` (n, n).
+        They may contain the implicit symbols above.
+    """
+
+    model: FlexibleJointModel
+    Y3: Tuple[sp.Symbol, ...]
+    Y4: Tuple[sp.Symbol, ...]
+    W: sp.Matrix
+    rhs3: sp.Matrix
+    rhs4: sp.Matrix
+    outputs: Dict[str, sp.Matrix] = field(default_factory=dict)
+
+
+def _implicit(prefix: str, n: int) -> Tuple[sp.Symbol, ...]:
+    return tuple(sp.Symbol(f"{prefix}_{i + 1}", real=True) for i in range(n))
+
+
+def _diag(v) -> sp.Matrix:
+    return sp.diag(*v)
+
+
+def inverse_symbols(n: int) -> sp.Matrix:
+    """Symmetric matrix of symbols ``Dinv_i_j`` (i <= j) standing for D^-1."""
+    return sp.Matrix(n, n, lambda i, j: sp.Symbol(f"Dinv_{min(i, j) + 1}_{max(i, j) + 1}", real=True))
+
+
+def brackets_implicit(m: FlexibleJointModel, W: sp.Matrix, k: int = 3) -> sp.Matrix:
+    """``[g, ad_f g, ..., ad_f^k g]`` with D^-1 kept as the symbols ``W``.
+
+    Uses ``ad_f v = D_v f - D_f v`` (directional derivatives; the paper's
+    sign) with ``D_w W = -W (D_w D) W``.
+
+    Returns
+    -------
+    sympy.Matrix, shape (4n, (k + 1) n)
+    """
+    n = m.n
+    x = m.state
+    q, dq, qm, dqm = (sp.Matrix(b) for b in (m.q, m.dq, m.qm, m.dqm))
+    Kd, Jd, Bd = _diag(m.K), _diag(m.Jm), _diag(m.Bm)
+    Jinv = _diag([1 / j for j in m.Jm])
+    r3 = -(m.h + Kd * (q - qm))
+    f = sp.Matrix.vstack(dq, W * r3, dqm, Jinv * (Kd * (q - qm) - Bd * dqm))
+    g = sp.Matrix.vstack(sp.zeros(3 * n, n), Jinv)
+
+    def along(direction: sp.Matrix) -> DirectionalDerivative:
+        d = DirectionalDerivative({s: direction[i] for i, s in enumerate(x)})
+        dW = {}  # -W (d D) W, formed once per direction on first use
+
+        def rule(i: int, j: int):
+            def seed():
+                if "M" not in dW:
+                    dD = d(m.D)
+                    dW["M"] = sp.zeros(n, n) if dD.is_zero_matrix else -(W * (dD * W))
+                return dW["M"][i, j]
+            return seed
+
+        for i in range(n):
+            for j in range(i, n):
+                d.add_lazy_seed(W[i, j], rule(i, j))
+        return d
+
+    d_f = along(f)
+    blocks = [g]
+    for _ in range(k):
+        v = blocks[-1]
+        cols = []
+        for c in range(n):
+            vc = v[:, c]
+            cols.append(along(vc)(f) - d_f(vc))
+        blocks.append(sp.Matrix.hstack(*cols))
+    return sp.Matrix.hstack(*blocks)
+
+
+def linearize(m: FlexibleJointModel) -> Linearization:
+    """Derive f, g, T, alpha, beta and the brackets of a model (structured).
+
+    Parameters
+    ----------
+    m : FlexibleJointModel
+
+    Returns
+    -------
+    Linearization
+    """
+    n = m.n
+    q, dq, qm, dqm = (sp.Matrix(b) for b in (m.q, m.dq, m.qm, m.dqm))
+    Kd, Jd, Bd = _diag(m.K), _diag(m.Jm), _diag(m.Bm)
+    Jinv = _diag([1 / j for j in m.Jm])
+    Y3, Y4, A = _implicit("y3", n), _implicit("y4", n), _implicit("a", n)
+    acc_m = Jinv * (Kd * (q - qm) - Bd * dqm)  # motor acceleration, explicit
+
+    seeds_x = {}
+    for i in range(n):
+        seeds_x.update({m.q[i]: m.dq[i], m.dq[i]: Y3[i], m.qm[i]: m.dqm[i], m.dqm[i]: acc_m[i]})
+
+    r3 = -(m.h + Kd * (q - qm))
+    if any(r3[i].has(*m.dqm) for i in range(n)):
+        raise ValueError(f"{m.name}: link dynamics must not depend on motor velocity")
+
+    # E0 = D Y3 - r3. Along f, with Y3 -> Y4 the D Y4 term appears; R1 is the rest.
+    d_rest = DirectionalDerivative(seeds_x)  # Y3 has zero seed here: R1 = dE0 - D Y4
+    R1 = d_rest(m.D) * sp.Matrix(Y3) - d_rest(r3)
+    # E1 = D Y4 + R1; along f (Y3 -> Y4, Y4 -> A), minus the D A term, is R2.
+    d_full = DirectionalDerivative({**seeds_x, **{Y3[i]: Y4[i] for i in range(n)}})
+    R2 = d_full(m.D) * sp.Matrix(Y4) + d_full(R1)
+
+    # b = L_g y4 = D^-1 N with N = -(dR1/d dq_m) J_m^-1 (Y3 does not depend on dq_m).
+    N = (-R1.jacobian(list(m.dqm)) * Jinv).applyfunc(sp.simplify)
+    if not N.is_diagonal():
+        raise ValueError(f"{m.name}: expected L_g y4 = D^-1 K J_m^-1 with K diagonal, got N = {N}")
+    Ninv = _diag([1 / N[i, i] for i in range(n)])
+    beta = Ninv * m.D
+    alpha = Ninv * R2
+
+    W = inverse_symbols(n)
+    ad = brackets_implicit(m, W, 3)
+
+    f = sp.Matrix.vstack(dq, sp.Matrix(Y3), dqm, acc_m)
+    g = sp.Matrix.vstack(sp.zeros(3 * n, n), Jinv)
+    T = sp.Matrix.vstack(q, dq, sp.Matrix(Y3), sp.Matrix(Y4))
+
+    spring = q - qm
+    energy = (
+        (dq.T * m.D * dq)[0, 0] / 2 + (dqm.T * Jd * dqm)[0, 0] / 2
+        + (spring.T * Kd * spring)[0, 0] / 2 + m.potential
+    )
+    return Linearization(
+        model=m, Y3=Y3, Y4=Y4, W=W, rhs3=r3, rhs4=-R1,
+        outputs={
+            "f": f, "g": g, "ad": ad, "T": T, "alpha": alpha, "beta": beta,
+            "energy": sp.Matrix([[energy]]), "inertia": m.D,
+        },
+    )

@@ -1,0 +1,97 @@
+"""Input checks shared by the runtime: every error names the argument, the value and what was expected."""
+
+from __future__ import annotations
+
+import re
+from typing import Mapping, Sequence, Tuple, Union
+
+import numpy as np
+
+
+class FjmValueError(ValueError):
+    """A bad input to fjm (subclass of ValueError so callers may catch either)."""
+
+
+ArrayLike = Union[Sequence[float], np.ndarray]
+
+
+def as_vector(name: str, value, length: int) -> np.ndarray:
+    """Return ``value`` as a finite float vector of shape ``(length,)``.
+
+    Raises
+    ------
+    FjmValueError
+        If the shape differs or any entry is NaN/inf.
+    """
+    try:
+        arr = np.asarray(value, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise FjmValueError(f"{name}: expected a numeric array of shape ({length},), got {value!r}") from exc
+    if arr.ndim == 2 and 1 in arr.shape and arr.size == length:
+        arr = arr.reshape(length)
+    if arr.shape != (length,):
+        raise FjmValueError(f"{name}: expected shape ({length},), got shape {arr.shape}")
+    bad = ~np.isfinite(arr)
+    if bad.any():
+        i = int(np.flatnonzero(bad)[0])
+        raise FjmValueError(f"{name}: entry {i} is {arr[i]}; expected finite values")
+    return arr
+
+
+# Parameter groups that must be strictly positive / non-negative (by name prefix).
+_POSITIVE = re.compile(r"^(J_l|J_m|K|M|L|m\d+|l\d+|r\d+|I\d+|K\d+|Jm\d+)$")
+_NON_NEGATIVE = re.compile(r"^(B_m|Bm\d+|g0)$")
+
+
+def check_physical(names: Tuple[str, ...], values: np.ndarray, arg: str = "p") -> None:
+    """Reject non-physical parameter values.
+
+    Masses, lengths, inertias, stiffnesses and motor inertias must be > 0;
+    damping and gravity >= 0; a centre of mass must lie on its link
+    (``r_i <= l_i``).
+    """
+    lookup = dict(zip(names, values))
+    for name, v in lookup.items():
+        if _POSITIVE.match(name) and not v > 0:
+            raise FjmValueError(f"{arg}[{name!r}] = {v}: expected > 0 (a physical {name} is positive)")
+        if _NON_NEGATIVE.match(name) and not v >= 0:
+            raise FjmValueError(f"{arg}[{name!r}] = {v}: expected >= 0")
+    for name, v in lookup.items():
+        if name.startswith("r") and name[1:].isdigit() and f"l{name[1:]}" in lookup:
+            length = lookup[f"l{name[1:]}"]
+            if v > length:
+                raise FjmValueError(
+                    f"{arg}[{name!r}] = {v}: expected <= l{name[1:]} = {length} "
+                    "(the centre of mass must lie on the link)")
+
+
+def params_vector(names: Tuple[str, ...], defaults: Mapping[str, float], p, arg: str = "p") -> np.ndarray:
+    """Convert ``p`` (array in ``names`` order, or dict) to a validated vector.
+
+    A dict may omit keys (they take their defaults) but must not contain
+    unknown ones.
+    """
+    if p is None:
+        values = np.array([defaults[k] for k in names], dtype=float)
+    elif isinstance(p, Mapping):
+        unknown = sorted(set(p) - set(names))
+        if unknown:
+            raise FjmValueError(
+                f"{arg}: unknown parameter name(s) {unknown}; expected names among {list(names)}")
+        for k in names:
+            if k in p and not _is_number(p[k]):
+                raise FjmValueError(f"{arg}[{k!r}] = {p[k]!r}: expected a real number")
+        values = [float(p.get(k, defaults[k])) for k in names]
+        values = as_vector(arg, values, len(names))
+    else:
+        values = as_vector(arg, p, len(names))
+    check_physical(names, values, arg)
+    return values
+
+
+def _is_number(v) -> bool:
+    try:
+        float(v)
+    except (TypeError, ValueError):
+        return False
+    return not isinstance(v, (str, bytes))
