@@ -276,12 +276,73 @@ class SlidingModeController:
         return e1
 
 
+    # -- CasADi mirror (used by the fused simulator; must match evaluate) ----
+    def symbolic_evaluate(self, x, z, r, fns):
+        """CasADi mirror of :meth:`evaluate` for the fused simulator.
+
+        Parameters
+        ----------
+        x : casadi.MX, shape (4n, 1)
+        z : casadi.MX, shape (n_states, 1)
+        r : casadi.MX, shape (5n, 1)
+            Reference rows stacked: ``r.reshape(-1)`` of the (5, n) array.
+        fns : dict
+            CasADi Functions ``T``, ``alpha``, ``beta`` of ``(x, p)``.
+
+        Returns
+        -------
+        dict with ``u``, ``u_cmd``, ``s`` (n, 1) and ``y_hat`` (4n, 1).
+        """
+        import casadi as ca
+        n = self.n
+        blk = lambda v, i: v[i * n:(i + 1) * n]
+        p = ca.DM(self.p_nom)
+        y_hat = fns["T"](x, p)
+        e = [blk(y_hat, i) - blk(r, i) for i in range(4)]
+        chain = ([z] if self.integral else []) + e
+        m = self.c.size
+        s = chain[m]
+        linear = 0
+        for j in range(m):
+            s = s + float(self.c[j]) * chain[j]
+            linear = linear + float(self.c[j]) * chain[j + 1]
+        if self.mode == "sat":
+            psi = ca.fmin(ca.fmax(s / ca.DM(self.delta), -1.0), 1.0)
+        elif self.mode == "sign":
+            psi = ca.sign(s)
+        else:
+            psi = ca.DM.zeros(n, 1)
+        nu = blk(r, 4) - linear - ca.DM(self.k_s) * psi - ca.DM(self.k_lin) * s
+        beta = ca.DM(self.beta_hat) if self.beta_hat is not None else ca.reshape(fns["beta"](x, p), n, n)
+        u_cmd = fns["alpha"](x, p) + ca.mtimes(beta, nu)
+        if self.u_max is None:
+            u = u_cmd
+        else:
+            um = ca.DM(self.u_max)
+            u = ca.fmin(ca.fmax(u_cmd, -um), um)
+        return {"u": u, "u_cmd": u_cmd, "s": s, "y_hat": y_hat}
+
+    def symbolic_state_derivative(self, x, z, r, sample):
+        """CasADi mirror of :meth:`state_derivative` (``sample`` from :meth:`symbolic_evaluate`)."""
+        import casadi as ca
+        if not self.integral:
+            return ca.MX(0, 1)
+        n = self.n
+        e1 = x[:n] - r[:n]
+        if self.u_max is not None:
+            um = ca.DM(self.u_max)
+            uc = sample["u_cmd"]
+            winding = (uc > um) * (e1 < 0) + (uc < -um) * (e1 > 0)
+            e1 = e1 * (1 - winding)
+        return e1
+
+
 def _params_array(model, p, field: str) -> np.ndarray:
     if hasattr(model, "params_array"):
         try:
+            a = np.asarray(model.params_array(p, arg=field), dtype=float)
+        except TypeError:
             a = np.asarray(model.params_array(p), dtype=float)
-        except ValueError as exc:
-            raise ValueError(f"{field}: {exc}") from exc
     else:  # pragma: no cover - every fjm model has params_array
         a = np.asarray(p, dtype=float)
     if not np.all(np.isfinite(a)):

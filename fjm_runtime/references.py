@@ -50,6 +50,19 @@ class Reference:
         """
         raise NotImplementedError
 
+    def sample(self, t) -> np.ndarray:
+        """Evaluate on a time grid.
+
+        Parameters
+        ----------
+        t : array_like, shape (N,)
+
+        Returns
+        -------
+        ndarray, shape (N, 5, n)
+        """
+        return np.stack([self(float(tk)) for tk in np.asarray(t, dtype=float).ravel()])
+
     def derivative_bounds(self) -> np.ndarray:
         """Upper bounds of ``|q_d^(k)|`` over all time, ``k = 0..4``.
 
@@ -126,6 +139,16 @@ class SmoothStep(Reference):
             r[1:] = 0.0
         return r
 
+    def sample(self, t):
+        t = np.asarray(t, dtype=float).ravel()
+        tau = np.clip((t - self.t0) / self.rise_time, 0.0, 1.0)
+        r = np.empty((t.size, 5, self.n))
+        for k in range(5):
+            r[:, k] = np.outer(_SIGMA_DERIVS[k](tau) / self.rise_time ** k, self.q_d - self.q0)
+        r[:, 0] += self.q0
+        r[(tau <= 0.0) | (tau >= 1.0), 1:] = 0.0
+        return r
+
     def derivative_bounds(self):
         tau = np.linspace(0.0, 1.0, 2001)
         span = np.abs(self.q_d - self.q0)
@@ -166,6 +189,13 @@ class Sinusoid(Reference):
         for k in range(5):
             r[k] = self.amplitude * self.omega ** k * np.sin(arg + k * math.pi / 2)
         r[0] += self.offset
+        return r
+
+    def sample(self, t):
+        t = np.asarray(t, dtype=float).ravel()
+        arg = t[:, None, None] * self.omega + self.phase + (np.arange(5) * math.pi / 2)[None, :, None]
+        r = self.amplitude * self.omega ** np.arange(5)[None, :, None] * np.sin(arg)
+        r[:, 0] += self.offset
         return r
 
     def derivative_bounds(self):

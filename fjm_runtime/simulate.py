@@ -135,7 +135,7 @@ def _check_state(x, nx, field):
 
 def simulate(model, controller, reference, *, duration: float, dt: float = 1e-3,
              true_params=None, x0=None, progress: Optional[Callable[[float], None]] = None,
-             max_state: float = 1e6) -> SimulationResult:
+             max_state: float = 1e6, backend: str = "auto") -> SimulationResult:
     """Simulate the closed loop with the TRUE plant and the controller's NOMINAL model.
 
     Parameters
@@ -158,6 +158,13 @@ def simulate(model, controller, reference, *, duration: float, dt: float = 1e-3,
         Called as ``progress(fraction)`` about 20 times during the run.
     max_state : float
         ``|x|`` beyond this counts as divergence.
+    backend : {'auto', 'casadi', 'python'}
+        ``'python'``: a plain loop calling ``model.f``, ``model.g`` and the
+        controller's :meth:`evaluate` (works for any controller object).
+        ``'casadi'``: the same zero-order-hold RK4 closed loop composed from the
+        model's CasADi Functions into one ``mapaccum`` (10-50x faster; needs
+        the controller's ``symbolic_evaluate``). ``'auto'`` picks ``'casadi'``
+        when possible. Both give the same trajectories to rounding.
 
     Returns
     -------
@@ -197,6 +204,18 @@ def simulate(model, controller, reference, *, duration: float, dt: float = 1e-3,
     nz = z.size
 
     n_steps = int(round(duration / dt))
+    if backend not in ("auto", "casadi", "python"):
+        raise ValueError(f"backend = {backend!r}: expected 'auto', 'casadi' or 'python'")
+    fns = casadi_functions(model)
+    fused_ok = fns is not None and hasattr(controller, "symbolic_evaluate")
+    if backend == "casadi" and not fused_ok:
+        raise ValueError("backend = 'casadi': the model exposes no CasADi Functions or the controller "
+                         "has no symbolic_evaluate; use backend='python'")
+    if backend != "python" and fused_ok:
+        t, X, Z, U, S, Yh, R = _run_fused(model, fns, controller, reference, p_true, x, z, dt, n_steps,
+                                          progress, max_state)
+        return _finish(model, controller, p_true, t, X, Z, U, S, Yh, R)
+
     t = dt * np.arange(n_steps + 1)
     X = np.empty((n_steps + 1, nx)); Z = np.empty((n_steps + 1, nz))
     U = np.empty((n_steps + 1, n)); S = np.empty((n_steps + 1, n))
@@ -231,12 +250,117 @@ def simulate(model, controller, reference, *, duration: float, dt: float = 1e-3,
         if progress is not None and (k + 1) % report_every == 0:
             progress((k + 1) / n_steps)
 
-    Y = np.stack([np.asarray(model.T(xk, p_true), dtype=float).reshape(4, n) for xk in X])
+    return _finish(model, controller, p_true, t, X, Z, U, S, Yh, R)
+
+
+def _finish(model, controller, p_true, t, X, Z, U, S, Yh, R) -> SimulationResult:
+    n = int(model.n)
+    Y = _true_outputs(model, p_true, X)
     e1 = X[:, :n] - R[:, 0]
     delta = np.asarray(getattr(controller, "delta", np.full(n, np.inf)), dtype=float)
     metrics = compute_metrics(t, e1, U, S, delta)
     return SimulationResult(t=t, x=X, z=Z, u=U, y=Y, y_hat=Yh, ref=R, s=S, e1=e1,
                             delta=delta, metrics=metrics)
+
+
+def casadi_functions(model):
+    """The model's CasADi Functions ``f, g, T, alpha, beta`` of ``(x, p)``, or ``None``.
+
+    Uses the loader's ``Model.functions`` mapping (name -> casadi.Function).
+    """
+    fns = getattr(model, "functions", None)
+    if fns is None:
+        fns = getattr(model, "casadi_functions", None)
+    if fns is None:
+        return None
+    try:
+        import casadi as ca
+        out = {k: fns[k] for k in ("f", "g", "T", "alpha", "beta")}
+    except (KeyError, TypeError, ImportError):
+        return None
+    return out if all(isinstance(v, ca.Function) for v in out.values()) else None
+
+
+def _true_outputs(model, p_true, X):
+    """``T(x; p_true)`` for every row of ``X``, shape (N+1, 4, n)."""
+    n = int(model.n)
+    fns = casadi_functions(model)
+    if fns is not None:
+        T_all = fns["T"].map(X.shape[0])
+        return np.asarray(T_all(X.T, p_true)).T.reshape(-1, 4, n)
+    return np.stack([np.asarray(model.T(xk, p_true), dtype=float).reshape(4, n) for xk in X])
+
+
+def _build_fused_step(fns, controller, nx, n, nz, n_par, dt):
+    """One closed-loop step (controller sample + RK4 of [x; z] under held u) as a CasADi Function."""
+    import casadi as ca
+    w = ca.MX.sym("w", nx + nz)
+    r0, rh, r1 = (ca.MX.sym(nm, 5 * n) for nm in ("r0", "rh", "r1"))
+    p = ca.MX.sym("p", n_par)
+    x, z = w[:nx], w[nx:]
+    out = controller.symbolic_evaluate(x, z, r0, fns)
+    u = out["u"]
+
+    def rhs(wk, rk):
+        xk, zk = wk[:nx], wk[nx:]
+        dx = fns["f"](xk, p) + ca.mtimes(ca.reshape(fns["g"](xk, p), nx, n), u)
+        if nz == 0:
+            return dx
+        return ca.vertcat(dx, controller.symbolic_state_derivative(xk, zk, rk, out))
+
+    k1 = rhs(w, r0)
+    k2 = rhs(w + 0.5 * dt * k1, rh)
+    k3 = rhs(w + 0.5 * dt * k2, rh)
+    k4 = rhs(w + dt * k3, r1)
+    w_next = w + (dt / 6.0) * (k1 + 2 * k2 + 2 * k3 + k4)
+    step = ca.Function("closed_loop_step", [w, r0, rh, r1, p],
+                       [w_next, ca.vertcat(u, out["s"], out["y_hat"])])
+    try:
+        step = step.expand()
+    except Exception:  # noqa: BLE001 - keep the MX graph if it cannot be expanded
+        pass
+    return step
+
+
+def _run_fused(model, fns, controller, reference, p_true, x0, z0, dt, n_steps, progress, max_state):
+    nx, n, nz = int(model.nx), int(model.n), z0.size
+    step = _build_fused_step(fns, controller, nx, n, nz, p_true.size, dt)
+    t = dt * np.arange(n_steps + 1)
+    r_half = reference.sample(0.5 * dt * np.arange(2 * n_steps + 1)).reshape(2 * n_steps + 1, 5 * n)
+    R = r_half[0::2].reshape(n_steps + 1, 5, n)
+    n_chunks = 20 if (progress is not None and n_steps >= 200) else 1
+    chunk = -(-n_steps // n_chunks)
+    runners = {}
+    W = np.empty((n_steps + 1, nx + nz))
+    aux = np.empty((n_steps, 6 * n))
+    W[0] = np.concatenate([x0, z0])
+    k = 0
+    while k < n_steps:
+        m = min(chunk, n_steps - k)
+        if m not in runners:
+            runners[m] = step.mapaccum("closed_loop", m)
+        cols = slice(2 * k, 2 * (k + m) + 1)
+        rr = r_half[cols]
+        w_out, a_out = runners[m](W[k], rr[0:-1:2].T, rr[1::2].T, rr[2::2].T, p_true)
+        w_out, a_out = np.asarray(w_out).T, np.asarray(a_out).T
+        W[k + 1:k + m + 1], aux[k:k + m] = w_out, a_out
+        bad = ~np.all(np.isfinite(w_out), axis=1) | (np.max(np.abs(w_out), axis=1) > max_state)
+        if np.any(bad):
+            j = int(np.argmax(bad))
+            tb = t[k + j + 1]
+            raise SimulationDivergedError(
+                tb, f"simulation diverged at t = {tb:.4f} s: state "
+                f"{'is not finite' if not np.all(np.isfinite(w_out[j])) else f'exceeds |x| = {max_state:g}'}"
+                f" (last applied torque {np.round(a_out[j, :n], 3).tolist()} N m)")
+        k += m
+        if progress is not None:
+            progress(k / n_steps)
+    X, Z = W[:, :nx], W[:, nx:]
+    last = controller.evaluate(t[-1], X[-1], Z[-1], R[-1])
+    U = np.vstack([aux[:, :n], last.u[None]])
+    S = np.vstack([aux[:, n:2 * n], last.s[None]])
+    Yh = np.concatenate([aux[:, 2 * n:].reshape(n_steps, 4, n), last.y_hat[None]])
+    return t, X, Z, U, S, Yh, R
 
 
 def stderr_progress(label: str) -> Callable[[float], None]:
