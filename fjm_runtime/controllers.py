@@ -150,11 +150,14 @@ class SlidingModeController:
         further into the limit (``u_cmd_i > u_max`` with ``e1_i < 0``, or
         ``u_cmd_i < -u_max`` with ``e1_i > 0``; integral action on ``u_i`` has
         the sign of ``-e1_i``).
+    anti_windup : bool
+        Enable the conditional integration above (default True; False only to
+        demonstrate windup).
     """
 
     def __init__(self, model, nominal_params, *, lam: Optional[float] = None, c=None,
                  k_s=0.0, delta=0.1, mode: str = "sat", beta_hat=None, k_lin=None,
-                 u_max=None, integral: bool = False):
+                 u_max=None, integral: bool = False, anti_windup: bool = True):
         if mode not in MODES:
             raise ValueError(f"mode = {mode!r}: expected one of {', '.join(MODES)}")
         self.model = model
@@ -193,6 +196,7 @@ class SlidingModeController:
                 raise ValueError(f"beta_hat = {b.tolist()}: expected a positive definite matrix")
             self.beta_hat = b
         self.u_max = None if u_max is None else _joint_gain(u_max, n, "u_max", positive=True)
+        self.anti_windup = bool(anti_windup)
         self.n_states = n if self.integral else 0
 
     # -- interface -----------------------------------------------------------
@@ -270,7 +274,7 @@ class SlidingModeController:
         if not self.integral:
             return np.zeros(0)
         e1 = x[:self.n] - r[0]
-        if self.u_max is not None:
+        if self.u_max is not None and self.anti_windup:
             winding = (sample.u_cmd > self.u_max) & (e1 < 0) | (sample.u_cmd < -self.u_max) & (e1 > 0)
             e1 = np.where(winding, 0.0, e1)
         return e1
@@ -329,7 +333,7 @@ class SlidingModeController:
             return ca.MX(0, 1)
         n = self.n
         e1 = x[:n] - r[:n]
-        if self.u_max is not None:
+        if self.u_max is not None and self.anti_windup:
             um = ca.DM(self.u_max)
             uc = sample["u_cmd"]
             winding = (uc > um) * (e1 < 0) + (uc < -um) * (e1 > 0)

@@ -1,0 +1,63 @@
+"""Lemma 1 ingredients (link1): closed forms against the generated model, beta_hat, gain properties."""
+import numpy as np
+import pytest
+
+import fjm_runtime
+from fjm_runtime.controllers import coefficients_from_pole
+from fjm_runtime.robust import (alpha_mismatch_bound, beta_bounds_link1, lemma1_gain, link1_alpha,
+                                link1_T_inverse)
+
+
+@pytest.fixture(scope="module")
+def link1():
+    return fjm_runtime.load("link1")
+
+
+def test_closed_forms_match_generated_model(link1):
+    rng = np.random.default_rng(0)
+    for _ in range(20):
+        p = {"K": rng.uniform(80, 250), "J_l": rng.uniform(0.5, 2), "J_m": rng.uniform(1, 3), "B_m": rng.uniform(0, 1)}
+        x = rng.normal(size=4)
+        assert link1_alpha(x, p) == pytest.approx(link1.alpha(x, p)[0], rel=1e-10, abs=1e-10)
+        assert link1_T_inverse(link1.T(x, p), p) == pytest.approx(x, abs=1e-10)
+        # errata 2: beta = J_l J_m / K (the paper's T3/T4 with K/J_m would give something else)
+        assert link1.beta(x, p)[0, 0] == pytest.approx(p["J_l"] * p["J_m"] / p["K"], rel=1e-12)
+
+
+def test_beta_hat_is_midpoint_of_corrected_beta():
+    beta_min, beta_max, beta_hat, rho = beta_bounds_link1({}, {"K": (100.0, 200.0)})
+    assert (beta_min, beta_max) == pytest.approx((2.0 / 200, 2.0 / 100))
+    assert beta_hat == pytest.approx(0.015)
+    assert rho == pytest.approx(1.0 / 3.0)
+    # eq (14): |beta / beta_hat - 1| < 1 over the whole interval
+    K = np.linspace(100, 200, 101)
+    assert np.max(np.abs(2.0 / K / beta_hat - 1)) == pytest.approx(rho)
+
+
+def test_alpha_mismatch_bound_closed_form_for_stiffness_only():
+    # K-only, B_m = 0: alpha_hat - alpha = J_m M g L sin y1 (y2^2 + g cos y1)(1/K - 1/K_nom)
+    #                                     + (K_nom/K - 1)(J_l + J_m)(y3 + g sin y1),  g = M g0 L / J_l
+    Y = np.array([1.2, 0.7, 3.0, 0.0])
+    H = alpha_mismatch_bound(Y, {}, {"K": (100.0, 200.0)}, n_grid=241)
+    y1 = np.linspace(-Y[0], Y[0], 2401)
+    best = 0.0
+    for K in (100.0, 200.0):
+        for y2sq in (0.0, Y[1] ** 2):
+            for y3 in (-Y[2], Y[2]):
+                val = 2 * 9.8 * np.sin(y1) * (y2sq + 9.8 * np.cos(y1)) * (1 / K - 1 / 150) \
+                    + (150 / K - 1) * 3.0 * (y3 + 9.8 * np.sin(y1))
+                best = max(best, np.max(np.abs(val)))
+    assert H == pytest.approx(best, rel=2e-3)
+    assert alpha_mismatch_bound(Y, {}, None) == 0.0  # no uncertainty, no mismatch
+
+
+def test_lemma1_gain_structure():
+    c = coefficients_from_pole(8.0)
+    R = [0.5, 0.5, 0.5, 0.5, 0.5]
+    g0 = lemma1_gain(c, R, bounds={"K": (100.0, 200.0)})
+    g1 = lemma1_gain(c, R, bounds={"K": (100.0, 200.0)}, error_bounds=(0.05, 0.5, 0.5, 0.5))
+    assert g0.W == pytest.approx(0.5)
+    assert g1.W == pytest.approx(0.5 + 512 * 0.5 + 192 * 0.5 + 24 * 0.5)
+    assert g1.k_s == pytest.approx(g1.W + g1.H / g1.beta_hat + g1.eta)
+    assert g1.k_s_tight < g1.k_s and g1.k_s > g0.k_s
+    assert g1.reaching_time_bound(100.0, 5.0) == pytest.approx(95.0 * 0.02 / (0.015 * 10.0))

@@ -1,0 +1,120 @@
+"""Sliding-mode control on the generated models: numbers that can fail."""
+import numpy as np
+import pytest
+
+import fjm_runtime
+from fjm_runtime.controllers import SlidingModeController, coefficients_from_pole, make_controller
+from fjm_runtime.references import Sinusoid
+from fjm_runtime.rk4 import integrate
+from fjm_runtime.robust import beta_hat_link1, lemma1_gain
+from fjm_runtime.simulate import simulate
+
+LAM = 8.0
+K_BOUNDS = {"K": (100.0, 200.0)}
+
+
+@pytest.fixture(scope="module")
+def link1():
+    return fjm_runtime.load("link1")
+
+
+def linear_error_dynamics(e0, c, k_s, delta, t_end, dt=2.5e-4):
+    """Exact-model error dynamics: e1'=e2, e2'=e3, e3'=e4, e4' = -(c1 e2+c2 e3+c3 e4) - k_s sat(s/delta)."""
+    c1, c2, c3 = c
+
+    def rhs(t, e):
+        s = c1 * e[0] + c2 * e[1] + c3 * e[2] + e[3]
+        return np.array([e[1], e[2], e[3], -(c1 * e[1] + c2 * e[2] + c3 * e[3])
+                         - k_s * np.clip(s / delta, -1, 1)])
+    return integrate(rhs, e0, 0.0, dt, int(round(t_end / dt)))
+
+
+def test_exact_parameters_follow_linear_error_dynamics(link1):
+    """With the true parameters the loop is y4' = nu: e must match the linear ODE (incl. the reaching phase)."""
+    ref = Sinusoid(0.5, 1.0)
+    c = coefficients_from_pole(LAM)
+    ctrl = SlidingModeController(link1, {}, lam=LAM, k_s=400.0, delta=2.0)
+    res = simulate(link1, ctrl, ref, duration=3.0)
+    e0 = res.y[0, :, 0] - res.ref[0, :4, 0]
+    t_lin, e_lin = linear_error_dynamics(e0, c, 400.0, 2.0, 3.0)
+    e1_lin = np.interp(res.t, t_lin, e_lin[:, 0])
+    assert np.max(np.abs(e1_lin)) > 1e-3  # there is a transient to compare
+    # the torque is sampled and held (zero-order hold): the gap is O(dt), well below 1 %
+    gap = np.max(np.abs(res.e1[:, 0] - e1_lin))
+    assert gap < 1e-2 * np.max(np.abs(e1_lin))
+    half = simulate(link1, ctrl, ref, duration=3.0, dt=5e-4)
+    gap_half = np.max(np.abs(half.e1[:, 0] - np.interp(half.t, t_lin, e_lin[:, 0])))
+    assert 1.6 < gap / gap_half < 2.4  # first order in dt: it is the hold, not the model
+    # after reaching, |s| decays at rate k_s/delta and e1 with the triple pole: tiny at the end
+    assert res.metrics.reaching_time < 1.0
+    assert abs(res.e1[-1, 0]) < 1e-5
+
+
+def test_lemma1_gain_reaches_boundary_layer_for_seeded_sweep(link1):
+    """K in [100, 200], J_l, J_m +-20 %: k_s at the Lemma 1 bound -> |s| <= delta in finite time, every sample."""
+    bounds = {"K": (100.0, 200.0), "J_l": (0.8, 1.2), "J_m": (1.6, 2.4)}
+    ref = Sinusoid(0.5, 1.0)
+    gain = lemma1_gain(coefficients_from_pole(LAM), ref.derivative_bounds()[:, 0], bounds=bounds,
+                       error_bounds=(0.05, 0.5, 0.5, 0.5))
+    delta = gain.k_s / 200.0
+    rng = np.random.default_rng(4)
+    for _ in range(5):
+        p = {k: float(rng.uniform(*b)) for k, b in bounds.items()}
+        ctrl = SlidingModeController(link1, {}, lam=LAM, k_s=gain.k_s, delta=delta,
+                                     beta_hat=beta_hat_link1({}, bounds))
+        res = simulate(link1, ctrl, ref, duration=3.0, true_params=p)
+        s0 = abs(res.s[0, 0])
+        assert s0 > delta  # starts outside the layer: reaching is really tested
+        assert res.metrics.reaching_time <= gain.reaching_time_bound(s0, delta), (p, res.metrics)
+
+
+def test_no_switching_gain_under_large_mismatch_is_worse(link1):
+    ref = Sinusoid(0.5, 1.0)
+    gain = lemma1_gain(coefficients_from_pole(LAM), ref.derivative_bounds()[:, 0], bounds=K_BOUNDS,
+                       error_bounds=(0.05, 0.5, 0.5, 0.5))
+    bh = beta_hat_link1({}, K_BOUNDS)
+    rms = {}
+    for k_s in (0.0, gain.k_s):
+        ctrl = SlidingModeController(link1, {}, lam=LAM, k_s=k_s, delta=gain.k_s / 200.0, beta_hat=bh)
+        res = simulate(link1, ctrl, ref, duration=10.0, true_params={"K": 100.0})
+        rms[k_s] = res.metrics.rms_error_second_half
+    assert rms[0.0] > 3.0 * rms[gain.k_s], rms  # measured ~4.6x
+
+
+def test_sign_has_more_control_variation_than_sat(link1):
+    ref = Sinusoid(0.5, 1.0)
+    tv = {}
+    for mode in ("sat", "sign"):
+        ctrl = SlidingModeController(link1, {}, lam=LAM, k_s=400.0, delta=2.0, mode=mode)
+        tv[mode] = simulate(link1, ctrl, ref, duration=3.0, true_params={"K": 120.0}).metrics.total_variation_u
+    assert tv["sign"] > 50.0 * tv["sat"], tv
+
+
+def test_planar2_tracks_with_exact_parameters():
+    m = fjm_runtime.load("planar2")
+    ref = Sinusoid([0.5, 0.3], [1.0, 1.5], n=2)
+    k_s, delta = 400.0, 2.0
+    ctrl = SlidingModeController(m, {}, lam=LAM, k_s=k_s, delta=delta)
+    res = simulate(m, ctrl, ref, duration=4.0)
+    c = coefficients_from_pole(LAM)
+    # in the layer |s| <= delta gives |e1| <= delta / c1 (the triple pole's DC gain 1/lambda^3)
+    tol = delta / c[0]
+    late = res.t >= 2.0
+    assert np.max(np.abs(res.e1[late])) < 1e-2 * tol
+    # each joint follows the same linear error dynamics as link1
+    for j in range(2):
+        e0 = res.y[0, :, j] - res.ref[0, :4, j]
+        t_lin, e_lin = linear_error_dynamics(e0, c, k_s, delta, 4.0)
+        assert np.max(np.abs(res.e1[:, j] - np.interp(res.t, t_lin, e_lin[:, 0]))) < 1e-2 * max(
+            np.max(np.abs(e_lin[:, 0])), 1e-3)
+
+
+def test_python_and_casadi_backends_agree(link1):
+    ref = Sinusoid(0.5, 1.0)
+    for kind, kw in (("smc", {"k_s": 300.0, "delta": 2.0}), ("ismc", {"k_s": 300.0, "delta": 2.0, "u_max": 5.0})):
+        ctrl = make_controller(kind, link1, {}, lam=LAM, **kw)
+        a = simulate(link1, ctrl, ref, duration=0.5, true_params={"K": 110.0}, backend="python")
+        b = simulate(link1, ctrl, ref, duration=0.5, true_params={"K": 110.0}, backend="casadi")
+        assert np.max(np.abs(a.x - b.x)) < 1e-10
+        assert np.max(np.abs(a.u - b.u)) < 1e-8
+        assert np.max(np.abs(a.z - b.z)) < 1e-10 if a.z.size else True
