@@ -1,0 +1,210 @@
+"""Compiled closed loop: the RK4 + sliding-mode step as C, compiled once and cached.
+
+The step is the same CasADi graph the ``'casadi'`` backend of
+:func:`fjm_runtime.simulate.simulate` builds (controller sample with NOMINAL
+parameters, zero-order hold, RK4 of the plant with TRUE parameters); here its
+``mapaccum`` over ``N`` steps is code-generated, compiled with the system C
+compiler and loaded with :func:`casadi.external`.
+
+Cache: ``$FJM_CACHE`` or ``$XDG_CACHE_HOME/fjm`` (default ``~/.cache/fjm``).
+An entry is ``<key>.so`` plus ``<key>.json`` where ``key = sha256(C source,
+compiler, flags)``. The JSON records the SHA-256 of the shared object; an entry
+whose record is missing, unreadable, for another key, or whose bytes do not
+match, is rebuilt, never loaded. New entries are written to a temporary file
+and renamed into place (never overwritten in place), so concurrent processes
+and already-loaded libraries are safe.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import shutil
+import subprocess
+import tempfile
+import threading
+from pathlib import Path
+from typing import Optional, Sequence, Tuple
+
+import casadi as ca
+import numpy as np
+
+#: Default compiler flags (also part of the cache key).
+DEFAULT_FLAGS: Tuple[str, ...] = ("-O2", "-fPIC", "-shared")
+
+_memo: dict = {}
+_lock = threading.Lock()
+
+
+class CompileError(RuntimeError):
+    """The C compiler is missing or failed."""
+
+
+def cache_dir() -> Path:
+    """The compiled-code cache directory (created on demand)."""
+    env = os.environ.get("FJM_CACHE")
+    if env:
+        root = Path(env)
+    else:
+        base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+        root = Path(base) / "fjm"
+    root.mkdir(parents=True, exist_ok=True)
+    return root
+
+
+def _compiler() -> str:
+    exe = os.environ.get("CC") or shutil.which("gcc") or shutil.which("cc")
+    if not exe:
+        raise CompileError("no C compiler found (looked for $CC, gcc, cc); install gcc or set CC")
+    return exe
+
+
+def _sha256_file(path: Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def generate_source(fn: ca.Function) -> str:
+    """C source of ``fn`` (CasADi code generator, same options as ``make derive``)."""
+    with tempfile.TemporaryDirectory(prefix="fjm-cg-") as tmp:
+        cg = ca.CodeGenerator(f"{fn.name()}.c", {"with_header": False})
+        cg.add(fn)
+        path = cg.generate(tmp + os.sep)
+        return Path(path).read_text()
+
+
+def cache_key(source: str, flags: Sequence[str], compiler: Optional[str] = None) -> str:
+    """``sha256(source, compiler, flags)`` as hex."""
+    h = hashlib.sha256()
+    h.update(source.encode())
+    h.update(b"\0" + (compiler or _compiler()).encode())
+    for f in flags:
+        h.update(b"\0" + f.encode())
+    return h.hexdigest()
+
+
+def _entry_valid(so: Path, meta: Path, key: str) -> bool:
+    try:
+        record = json.loads(meta.read_text())
+        return (record.get("key") == key and so.is_file()
+                and record.get("so_sha256") == _sha256_file(so))
+    except (OSError, ValueError, AttributeError):
+        return False
+
+
+def _build(source: str, key: str, flags: Sequence[str], root: Path, name: str) -> Path:
+    so, meta = root / f"{key}.so", root / f"{key}.json"
+    with tempfile.TemporaryDirectory(prefix="fjm-build-", dir=root) as tmp:
+        src = Path(tmp) / f"{name}.c"
+        src.write_text(source)
+        out = Path(tmp) / f"{key}.so"
+        cmd = [_compiler(), *flags, str(src), "-o", str(out), "-lm"]
+        proc = subprocess.run(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        if proc.returncode != 0:
+            raise CompileError(f"{' '.join(cmd)} failed ({proc.returncode}):\n{proc.stderr[-4000:]}")
+        digest = _sha256_file(out)
+        tmp_meta = Path(tmp) / f"{key}.json"
+        tmp_meta.write_text(json.dumps({"key": key, "so_sha256": digest, "function": name,
+                                        "flags": list(flags), "compiler": _compiler()}, indent=1))
+        os.replace(out, so)          # library first, then the record that vouches for it
+        os.replace(tmp_meta, meta)
+    return so
+
+
+def compile_function(fn: ca.Function, flags: Sequence[str] = DEFAULT_FLAGS,
+                     cache: Optional[Path] = None) -> ca.Function:
+    """Code-generate ``fn``, compile it (or reuse a verified cache entry), load it.
+
+    Parameters
+    ----------
+    fn : casadi.Function
+        Any code-generatable Function (SX, or MX of SX/maps).
+    flags : sequence of str
+        Compiler flags; must produce a shared object (default ``-O2 -fPIC -shared``).
+    cache : Path, optional
+        Cache directory (default :func:`cache_dir`).
+
+    Returns
+    -------
+    casadi.Function
+        ``casadi.external(fn.name(), <cached .so>)``, same signature as ``fn``.
+    """
+    source = generate_source(fn)
+    key = cache_key(source, flags)
+    root = Path(cache) if cache is not None else cache_dir()
+    root.mkdir(parents=True, exist_ok=True)
+    memo_key = (str(root), key)
+    with _lock:
+        hit = _memo.get(memo_key)
+        if hit is not None:
+            return hit
+        so, meta = root / f"{key}.so", root / f"{key}.json"
+        ext = None
+        if _entry_valid(so, meta, key):
+            try:
+                ext = ca.external(fn.name(), str(so))
+            except RuntimeError:
+                ext = None
+        if ext is None:
+            so = _build(source, key, flags, root, fn.name())
+            ext = ca.external(fn.name(), str(so))
+        _memo[memo_key] = ext
+        return ext
+
+
+# -- the closed loop ----------------------------------------------------------
+
+def closed_loop_step(model, controller, dt: float) -> ca.Function:
+    """The fused step ``(w, r0, rh, r1, p_true) -> (w_next, [u; s; y_hat])`` (SX)."""
+    from .simulate import _build_fused_step, casadi_functions
+    fns = casadi_functions(model)
+    if fns is None or not hasattr(controller, "symbolic_evaluate"):
+        raise ValueError("backend = 'compiled': the model exposes no CasADi Functions or the "
+                         "controller has no symbolic_evaluate; use backend='python'")
+    nz = int(getattr(controller, "n_states", 0))
+    return _build_fused_step(fns, controller, int(model.nx), int(model.n), nz,
+                             len(model.param_names), float(dt))
+
+
+def closed_loop_runner(model, controller, dt: float, n_steps: int,
+                       flags: Sequence[str] = DEFAULT_FLAGS) -> ca.Function:
+    """Compiled ``mapaccum`` of :func:`closed_loop_step` over ``n_steps`` steps.
+
+    Signature ``(w0, R0, RH, R1, p_true) -> (W, AUX)`` with ``R*`` of shape
+    ``(5n, n_steps)`` (reference at ``t_k``, ``t_k + dt/2``, ``t_k + dt``) and
+    ``W`` ``(nx + nz, n_steps)`` the states after each step.
+    """
+    step = closed_loop_step(model, controller, dt)
+    runner = step.mapaccum("fjm_closed_loop", int(n_steps))
+    return compile_function(runner, flags)
+
+
+def run_compiled(model, controller, reference, p_true, x0, z0, dt, n_steps, max_state):
+    """Run the compiled closed loop; returns ``t, X, Z, U, S, Yh, R`` like the other backends."""
+    from .simulate import SimulationDivergedError
+    nx, n, nz = int(model.nx), int(model.n), int(np.asarray(z0).size)
+    runner = closed_loop_runner(model, controller, dt, n_steps)
+    t = dt * np.arange(n_steps + 1)
+    r_half = reference.sample(0.5 * dt * np.arange(2 * n_steps + 1)).reshape(2 * n_steps + 1, 5 * n)
+    R = r_half[0::2].reshape(n_steps + 1, 5, n)
+    w0 = np.concatenate([np.asarray(x0, float), np.asarray(z0, float)])
+    w_out, a_out = runner(w0, r_half[0:-1:2].T, r_half[1::2].T, r_half[2::2].T, p_true)
+    w_out, a_out = np.asarray(w_out).T, np.asarray(a_out).T
+    bad = ~np.all(np.isfinite(w_out), axis=1) | (np.max(np.abs(w_out), axis=1) > max_state)
+    if np.any(bad):
+        j = int(np.argmax(bad))
+        tb = t[j + 1]
+        raise SimulationDivergedError(
+            tb, f"simulation diverged at t = {tb:.4f} s: state "
+            f"{'is not finite' if not np.all(np.isfinite(w_out[j])) else f'exceeds |x| = {max_state:g}'}"
+            f" (last applied torque {np.round(a_out[j, :n], 3).tolist()} N m)")
+    W = np.vstack([w0[None], w_out])
+    X, Z = W[:, :nx], W[:, nx:]
+    last = controller.evaluate(t[-1], X[-1], Z[-1], R[-1])
+    U = np.vstack([a_out[:, :n], last.u[None]])
+    S = np.vstack([a_out[:, n:2 * n], last.s[None]])
+    Yh = np.concatenate([a_out[:, 2 * n:].reshape(n_steps, 4, n), last.y_hat[None]])
+    return t, X, Z, U, S, Yh, R
