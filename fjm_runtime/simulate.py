@@ -158,13 +158,15 @@ def simulate(model, controller, reference, *, duration: float, dt: float = 1e-3,
         Called as ``progress(fraction)`` about 20 times during the run.
     max_state : float
         ``|x|`` beyond this counts as divergence.
-    backend : {'auto', 'casadi', 'python'}
+    backend : {'auto', 'casadi', 'compiled', 'python'}
         ``'python'``: a plain loop calling ``model.f``, ``model.g`` and the
         controller's :meth:`evaluate` (works for any controller object).
         ``'casadi'``: the same zero-order-hold RK4 closed loop composed from the
         model's CasADi Functions into one ``mapaccum`` (10-50x faster; needs
         the controller's ``symbolic_evaluate``). ``'auto'`` picks ``'casadi'``
-        when possible. Both give the same trajectories to rounding.
+        when possible. ``'compiled'``: that same closed loop code-generated to C,
+        compiled once and cached (:mod:`fjm_runtime.compiled`). All give the
+        same trajectories to rounding.
 
     Returns
     -------
@@ -204,8 +206,12 @@ def simulate(model, controller, reference, *, duration: float, dt: float = 1e-3,
     nz = z.size
 
     n_steps = int(round(duration / dt))
-    if backend not in ("auto", "casadi", "python"):
-        raise ValueError(f"backend = {backend!r}: expected 'auto', 'casadi' or 'python'")
+    if backend not in ("auto", "casadi", "python", "compiled"):
+        raise ValueError(f"backend = {backend!r}: expected 'auto', 'casadi', 'compiled' or 'python'")
+    if backend == "compiled":  # C via fjm_runtime.compiled (compiled once, cached)
+        from .compiled import run_compiled
+        out = run_compiled(model, controller, reference, p_true, x, z, dt, n_steps, max_state)
+        return _finish(model, controller, p_true, *out)
     fns = casadi_functions(model)
     fused_ok = fns is not None and hasattr(controller, "symbolic_evaluate")
     if backend == "casadi" and not fused_ok:
