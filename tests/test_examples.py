@@ -126,3 +126,19 @@ def test_opti_example(tmp_path):
     if res["model"] == "link1":
         P = dict(zip(m.param_names, p))
         assert u_hold[0] == pytest.approx(P["M"] * P["g0"] * P["L"] * np.sin(q_target[0]), rel=1e-8)
+
+
+def test_c_example_single_precision(tmp_path):
+    """The example also builds with -Dcasadi_real=float and agrees with Python to float accuracy."""
+    if shutil.which("make") is None or shutil.which("gcc") is None:
+        pytest.skip("make/gcc not available")
+    proc = subprocess.run(
+        ["make", "-C", str(EXAMPLES / "c"), f"OUT={tmp_path}", "CC=gcc", "CFLAGS=-O2 -Dcasadi_real=float",
+         "GEN_WARN=-std=c99 -Wall -pedantic"], capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    m = fjm_runtime.load("link1")
+    x = np.array([0.3, 0.1, 0.2, -0.4], dtype=np.float32).astype(float)
+    alpha, beta = _run(tmp_path / "link1_alpha_beta", *x)
+    assert alpha == pytest.approx(m.alpha(x)[0], rel=1e-5)
+    assert beta == pytest.approx(m.beta(x)[0, 0], rel=1e-5)
+    assert alpha != m.alpha(x)[0], "single-precision build gave the double result: casadi_real=float ignored?"
