@@ -124,6 +124,17 @@ def compute_metrics(t, e1, u, s, delta) -> Metrics:
     )
 
 
+def _true_params_array(model, true_params) -> np.ndarray:
+    p = {} if true_params is None else true_params
+    try:
+        return np.asarray(model.params_array(p, arg="true_params"), dtype=float)
+    except TypeError:  # a model whose params_array has no ``arg`` keyword
+        try:
+            return np.asarray(model.params_array(p), dtype=float)
+        except ValueError as exc:
+            raise ValueError(f"true_params: {exc}") from exc
+
+
 def _check_state(x, nx, field):
     a = np.asarray(x, dtype=float)
     if a.shape != (nx,):
@@ -188,10 +199,7 @@ def simulate(model, controller, reference, *, duration: float, dt: float = 1e-3,
         raise ValueError(f"reference.n = {reference.n}: expected {n} joints for this model")
     if getattr(controller, "n", n) != n:
         raise ValueError(f"controller.n = {controller.n}: expected {n} joints for this model")
-    try:
-        p_true = np.asarray(model.params_array({} if true_params is None else true_params), dtype=float)
-    except ValueError as exc:
-        raise ValueError(f"true_params: {exc}") from exc
+    p_true = _true_params_array(model, true_params)
     if not np.all(np.isfinite(p_true)):
         raise ValueError(f"true_params = {p_true.tolist()}: expected finite values")
     r0 = np.asarray(reference(0.0), dtype=float)
