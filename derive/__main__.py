@@ -77,6 +77,7 @@ def diff_trees(expected: Path, actual: Path) -> List[str]:
 
 
 def main(argv=None) -> int:
+    sys.setrecursionlimit(max(sys.getrecursionlimit(), 20000))  # deep program chains at n = 7
     ap = argparse.ArgumentParser(prog="python -m derive", description=__doc__.split("\n\n")[0])
     ap.add_argument("--models", nargs="+", metavar="MODEL",
                     help=f"models to derive (default: all): {' '.join(MODEL_NAMES)}")

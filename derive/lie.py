@@ -99,21 +99,33 @@ class DirectionalDerivative:
     lazy_seeds : mapping sympy.Symbol -> callable, optional
         Seeds computed on first use (for implicit symbols whose rule is
         expensive, such as the entries of D^-1).
+    program : derive.program.Program, optional
+        Defined intermediate symbols. Their derivative is the derivative of
+        their definition, itself defined in the program as a new symbol
+        named after ``tag``, so repeated use costs nothing.
+    tag : str
+        Name of this direction (unique per direction within a program).
     """
 
     def __init__(self, seeds: Mapping[sp.Symbol, sp.Expr],
-                 lazy_seeds: Optional[Mapping[sp.Symbol, Callable[[], sp.Expr]]] = None):
+                 lazy_seeds: Optional[Mapping[sp.Symbol, Callable[[], sp.Expr]]] = None,
+                 program=None, tag: str = ""):
         self._seeds: Dict[sp.Symbol, sp.Expr] = dict(seeds)
         self._lazy = dict(lazy_seeds or {})
         self._memo: Dict[sp.Basic, sp.Expr] = {}
+        self._program = program
+        self._tag = tag
 
     def add_lazy_seed(self, s: sp.Symbol, rule: Callable[[], sp.Expr]) -> None:
         """Register a seed computed on first use (may call this instance)."""
         self._lazy[s] = rule
 
     def _seed(self, s: sp.Symbol) -> sp.Expr:
-        if s not in self._seeds and s in self._lazy:
-            self._seeds[s] = self._lazy.pop(s)()
+        if s not in self._seeds:
+            if s in self._lazy:
+                self._seeds[s] = self._lazy.pop(s)()
+            elif self._program is not None and s in self._program:
+                self._seeds[s] = self._program.derivative(s, self._tag, self._d)
         return self._seeds.get(s, sp.Integer(0))
 
     def __call__(self, e):

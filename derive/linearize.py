@@ -81,11 +81,19 @@ def inverse_symbols(n: int) -> sp.Matrix:
     return sp.Matrix(n, n, lambda i, j: sp.Symbol(f"Dinv_{min(i, j) + 1}_{max(i, j) + 1}", real=True))
 
 
-def brackets_implicit(m: FlexibleJointModel, W: sp.Matrix, k: int = 3) -> sp.Matrix:
+def brackets_implicit(m: FlexibleJointModel, W: sp.Matrix, d_time: DirectionalDerivative,
+                      Y3, k: int = 3) -> sp.Matrix:
     """``[g, ad_f g, ..., ad_f^k g]`` with D^-1 kept as the symbols ``W``.
 
     Uses ``ad_f v = D_v f - D_f v`` (directional derivatives; the paper's
-    sign) with ``D_w W = -W (D_w D) W``.
+    sign) with ``f = [dq; Y3; dq_m; ddq_m]``, where the link acceleration
+    ``Y3 = W r3`` has derivative ``D_v Y3 = W (D_v r3 - (D_v D) Y3)`` and
+    ``D_v W = -W (D_v D) W``.
+
+    Parameters
+    ----------
+    d_time : DirectionalDerivative
+        Derivative along f (shared with :func:`linearize`).
 
     Returns
     -------
@@ -94,37 +102,48 @@ def brackets_implicit(m: FlexibleJointModel, W: sp.Matrix, k: int = 3) -> sp.Mat
     n = m.n
     x = m.state
     q, dq, qm, dqm = (sp.Matrix(b) for b in (m.q, m.dq, m.qm, m.dqm))
-    Kd, Jd, Bd = _diag(m.K), _diag(m.Jm), _diag(m.Bm)
+    Kd, Bd = _diag(m.K), _diag(m.Bm)
     Jinv = _diag([1 / j for j in m.Jm])
     r3 = -(m.h + Kd * (q - qm))
-    f = sp.Matrix.vstack(dq, W * r3, dqm, Jinv * (Kd * (q - qm) - Bd * dqm))
+    f = sp.Matrix.vstack(dq, sp.Matrix(Y3), dqm, Jinv * (Kd * (q - qm) - Bd * dqm))
     g = sp.Matrix.vstack(sp.zeros(3 * n, n), Jinv)
 
-    def along(direction: sp.Matrix) -> DirectionalDerivative:
-        d = DirectionalDerivative({s: direction[i] for i, s in enumerate(x)})
-        dW = {}  # -W (d D) W, formed once per direction on first use
+    def add_inverse_rules(d: DirectionalDerivative, with_y3: bool) -> DirectionalDerivative:
+        cache = {}
 
-        def rule(i: int, j: int):
-            def seed():
-                if "M" not in dW:
-                    dD = d(m.D)
-                    dW["M"] = sp.zeros(n, n) if dD.is_zero_matrix else -(W * (dD * W))
-                return dW["M"][i, j]
-            return seed
+        def dD():
+            if "D" not in cache:
+                cache["D"] = d(m.D)
+            return cache["D"]
+
+        def dW():  # -W (d D) W, formed once per direction on first use
+            if "W" not in cache:
+                cache["W"] = sp.zeros(n, n) if dD().is_zero_matrix else -(W * (dD() * W))
+            return cache["W"]
 
         for i in range(n):
             for j in range(i, n):
-                d.add_lazy_seed(W[i, j], rule(i, j))
+                d.add_lazy_seed(W[i, j], lambda i=i, j=j: dW()[i, j])
+        if with_y3:
+            def dY3():
+                if "Y3" not in cache:
+                    cache["Y3"] = W * (d(r3) - dD() * sp.Matrix(Y3))
+                return cache["Y3"]
+            for i in range(n):
+                d.add_lazy_seed(Y3[i], lambda i=i: dY3()[i])
         return d
 
-    d_f = along(f)
+    add_inverse_rules(d_time, with_y3=False)  # along f, Y3 -> Y4 is already seeded
     blocks = [g]
-    for _ in range(k):
+    for level in range(k):
         v = blocks[-1]
         cols = []
         for c in range(n):
             vc = v[:, c]
-            cols.append(along(vc)(f) - d_f(vc))
+            d_v = DirectionalDerivative({s: vc[i] for i, s in enumerate(x)},
+                                        program=m.program, tag=f"b{level}c{c + 1}")
+            add_inverse_rules(d_v, with_y3=True)
+            cols.append(d_v(f) - d_time(vc))
         blocks.append(sp.Matrix.hstack(*cols))
     return sp.Matrix.hstack(*blocks)
 
@@ -144,34 +163,35 @@ def linearize(m: FlexibleJointModel) -> Linearization:
     q, dq, qm, dqm = (sp.Matrix(b) for b in (m.q, m.dq, m.qm, m.dqm))
     Kd, Jd, Bd = _diag(m.K), _diag(m.Jm), _diag(m.Bm)
     Jinv = _diag([1 / j for j in m.Jm])
-    Y3, Y4, A = _implicit("y3", n), _implicit("y4", n), _implicit("a", n)
+    Y3, Y4 = _implicit("y3", n), _implicit("y4", n)
     acc_m = Jinv * (Kd * (q - qm) - Bd * dqm)  # motor acceleration, explicit
 
-    seeds_x = {}
+    seeds = {}
     for i in range(n):
-        seeds_x.update({m.q[i]: m.dq[i], m.dq[i]: Y3[i], m.qm[i]: m.dqm[i], m.dqm[i]: acc_m[i]})
+        seeds.update({m.q[i]: m.dq[i], m.dq[i]: Y3[i], m.qm[i]: m.dqm[i], m.dqm[i]: acc_m[i],
+                      Y3[i]: Y4[i]})
+    d_time = DirectionalDerivative(seeds, program=m.program, tag="t")  # d/dt along f
 
     r3 = -(m.h + Kd * (q - qm))
-    if any(r3[i].has(*m.dqm) for i in range(n)):
-        raise ValueError(f"{m.name}: link dynamics must not depend on motor velocity")
+    # E0 = D Y3 - r3 = 0.  E1 = d/dt E0 = D Y4 + R1 with R1 = D' Y3 - r3' (r3 has no Y3).
+    R1 = d_time(m.D) * sp.Matrix(Y3) - d_time(r3)
+    # E2 = d/dt E1 = D A + R2 with R2 = D' Y4 + R1' (R1 has no Y4, so no A term hides in R1').
+    R2 = d_time(m.D) * sp.Matrix(Y4) + d_time(R1)
 
-    # E0 = D Y3 - r3. Along f, with Y3 -> Y4 the D Y4 term appears; R1 is the rest.
-    d_rest = DirectionalDerivative(seeds_x)  # Y3 has zero seed here: R1 = dE0 - D Y4
-    R1 = d_rest(m.D) * sp.Matrix(Y3) - d_rest(r3)
-    # E1 = D Y4 + R1; along f (Y3 -> Y4, Y4 -> A), minus the D A term, is R2.
-    d_full = DirectionalDerivative({**seeds_x, **{Y3[i]: Y4[i] for i in range(n)}})
-    R2 = d_full(m.D) * sp.Matrix(Y4) + d_full(R1)
-
-    # b = L_g y4 = D^-1 N with N = -(dR1/d dq_m) J_m^-1 (Y3 does not depend on dq_m).
-    N = (-R1.jacobian(list(m.dqm)) * Jinv).applyfunc(sp.simplify)
-    if not N.is_diagonal():
+    # b = L_g y4 = D^-1 N with N = -(dR1/d dq_m) J_m^-1 (y3 does not depend on dq_m).
+    dR1 = []
+    for j in range(n):
+        d_u = DirectionalDerivative({m.dqm[j]: sp.Integer(1)}, program=m.program, tag=f"u{j + 1}")
+        dR1.append(d_u(R1))
+    N = (-sp.Matrix.hstack(*dR1) * Jinv).applyfunc(sp.simplify)
+    if not N.is_diagonal() or any(N[i, i].has(*[s for s, _ in m.program.definitions]) for i in range(n)):
         raise ValueError(f"{m.name}: expected L_g y4 = D^-1 K J_m^-1 with K diagonal, got N = {N}")
     Ninv = _diag([1 / N[i, i] for i in range(n)])
     beta = Ninv * m.D
     alpha = Ninv * R2
 
     W = inverse_symbols(n)
-    ad = brackets_implicit(m, W, 3)
+    ad = brackets_implicit(m, W, d_time, Y3, 3)
 
     f = sp.Matrix.vstack(dq, sp.Matrix(Y3), dqm, acc_m)
     g = sp.Matrix.vstack(sp.zeros(3 * n, n), Jinv)

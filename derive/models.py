@@ -13,10 +13,12 @@ This module is pure math: no I/O, no printing.
 from __future__ import annotations
 
 import re
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Callable, Dict, List, Tuple
 
 import sympy as sp
+
+from .program import Program
 
 
 @dataclass(frozen=True)
@@ -53,6 +55,9 @@ class FlexibleJointModel:
         Diagonals of the stiffness, motor inertia and motor damping matrices.
     description : str
         One paragraph for the report and manifest.
+    program : Program
+        Named intermediate symbols used by D, h and the potential (empty for
+        small models). Derivations append their own derivative symbols.
     """
 
     name: str
@@ -69,6 +74,7 @@ class FlexibleJointModel:
     Jm: Tuple[sp.Expr, ...]
     Bm: Tuple[sp.Expr, ...]
     description: str
+    program: Program = field(default_factory=Program)
 
     @property
     def state(self) -> Tuple[sp.Symbol, ...]:
@@ -157,11 +163,18 @@ def make_planar(n: int) -> FlexibleJointModel:
     ``m_i``, length ``l_i``, centre of mass at ``r_i`` from its joint and
     inertia ``I_i`` about its centre of mass.
 
-    The inertia matrix is built in closed form (DESIGN.md section 5): with
-    absolute angles ``theta = S q`` (``S`` lower-triangular ones),
-    ``D = S^T M(theta) S`` where
-    ``M_jk = cos(theta_j - theta_k) sum_{i >= max(j,k)} m_i c_ij c_ik + delta_jk I_j``
-    and ``c_ij = l_j`` for ``j < i``, ``r_i`` for ``j = i``.
+    Closed form in absolute angles ``theta = S q`` (``S`` lower-triangular
+    ones), ``omega = S dq`` (DESIGN.md section 5)::
+
+        M_jk  = a_jk cos(theta_j - theta_k),  a_jk = l_k e_j (j > k),
+        a_jj  = m_j r_j^2 + l_j^2 sum_{i>j} m_i + I_j,  e_j = m_j r_j + l_j sum_{i>j} m_i
+        c_j   = sum_k a_jk sin(theta_j - theta_k) omega_k^2       (centrifugal)
+        G_j   = g0 e_j sin(theta_j)                                (gravity)
+        D = S^T M S,   h = S^T (c + G)
+
+    The products with S are suffix sums, kept as named symbols of the
+    model's :class:`Program` so that D and h cost O(n^2) operations and
+    their time derivatives stay just as compact.
     """
     if not 1 <= n <= 7:
         raise ValueError(f"planar<n>: n must be in 1..7, got {n}")
@@ -185,30 +198,60 @@ def make_planar(n: int) -> FlexibleJointModel:
     inertia = [sym[f"I{i}"] for i in idx]
     g0 = sym["g0"]
     q, dq, qm, dqm = _state_symbols(n)
+    prog = Program()
+    d = prog.define
 
-    def rel(j: int, k: int) -> sp.Expr:  # theta_j - theta_k for j >= k (0-based)
-        return sp.Add(*q[k + 1: j + 1])
-
-    def c(i: int, j: int) -> sp.Expr:  # lever of link i's CoM velocity on absolute rate j
-        return l[j] if j < i else (r[i] if j == i else sp.Integer(0))
-
-    Mabs = sp.zeros(n, n)
+    # Mass distribution (parameters only): mass beyond link j, first moment e_j, a_jk.
+    mass_after = [sp.Integer(0)] * (n + 1)
+    for j in reversed(range(n)):
+        mass_after[j] = d(f"mtail{j + 1}", m[j] + mass_after[j + 1])
+    e = [d(f"e{j + 1}", m[j] * r[j] + l[j] * mass_after[j + 1]) for j in range(n)]
+    a = [[None] * n for _ in range(n)]
     for j in range(n):
-        for k in range(j + 1):
-            coeff = sp.Add(*[m[i] * c(i, j) * c(i, k) for i in range(j, n)])
-            Mabs[j, k] = coeff * sp.cos(rel(j, k))
-            Mabs[k, j] = Mabs[j, k]
-        Mabs[j, j] += inertia[j]
-    S = sp.Matrix(n, n, lambda i, j: 1 if j <= i else 0)
-    D = S.T * Mabs * S
+        a[j][j] = d(f"a{j + 1}_{j + 1}", m[j] * r[j] ** 2 + l[j] ** 2 * mass_after[j + 1] + inertia[j])
+        for k in range(j):
+            a[j][k] = a[k][j] = d(f"a{j + 1}_{k + 1}", l[k] * e[j])
 
-    theta = [sp.Add(*q[: i + 1]) for i in range(n)]
-    height = [  # y coordinate of the centre of mass of link i
-        -sp.Add(*[l[j] * sp.cos(theta[j]) for j in range(i)]) - r[i] * sp.cos(theta[i])
-        for i in range(n)
-    ]
-    V = sp.Add(*[m[i] * g0 * height[i] for i in range(n)])
-    h = coriolis_gravity(D, V, q, dq)
+    # Kinematics: absolute angles, their trig, absolute rates.
+    theta, omega = [q[0]], [dq[0]]
+    for i in range(1, n):
+        theta.append(d(f"th{i + 1}", theta[-1] + q[i]))
+        omega.append(d(f"w{i + 1}", omega[-1] + dq[i]))
+    cth = [d(f"c{i + 1}", sp.cos(theta[i])) for i in range(n)]
+    sth = [d(f"s{i + 1}", sp.sin(theta[i])) for i in range(n)]
+    cos_rel = [[None] * n for _ in range(n)]  # cos(theta_j - theta_k)
+    sin_rel = [[None] * n for _ in range(n)]  # sin(theta_j - theta_k)
+    for j in range(n):
+        for k in range(j):
+            cos_rel[j][k] = cos_rel[k][j] = d(f"cr{j + 1}_{k + 1}", cth[j] * cth[k] + sth[j] * sth[k])
+            sin_rel[j][k] = d(f"sr{j + 1}_{k + 1}", sth[j] * cth[k] - cth[j] * sth[k])
+            sin_rel[k][j] = -sin_rel[j][k]
+
+    def M(j: int, k: int) -> sp.Expr:
+        return a[j][j] if j == k else a[j][k] * cos_rel[j][k]
+
+    # D = S^T M S by suffix sums: R_jb = sum_{k >= b} M_jk, D_ab = sum_{j >= a} R_jb.
+    R = [[None] * (n + 1) for _ in range(n)]
+    for j in range(n):
+        R[j][n] = sp.Integer(0)
+        for b in reversed(range(n)):
+            R[j][b] = d(f"Rs{j + 1}_{b + 1}", M(j, b) + R[j][b + 1])
+    D = sp.zeros(n, n)
+    for b in range(n):
+        below = sp.Integer(0)
+        for a_ in reversed(range(b, n)):
+            below = d(f"D{a_ + 1}_{b + 1}", R[a_][b] + below)
+            D[a_, b] = D[b, a_] = below
+
+    # h = S^T (centrifugal + gravity), again a suffix sum.
+    wsq = [d(f"wsq{k + 1}", omega[k] ** 2) for k in range(n)]
+    h = sp.zeros(n, 1)
+    tail = sp.Integer(0)
+    for j in reversed(range(n)):
+        cj = sp.Add(*[a[j][k] * sin_rel[j][k] * wsq[k] for k in range(n) if k != j])
+        tail = d(f"h{j + 1}", cj + g0 * e[j] * sth[j] + tail)
+        h[j] = tail
+    V = -g0 * sp.Add(*[e[j] * cth[j] for j in range(n)])
     return FlexibleJointModel(
         name=f"planar{n}", n=n, params=params, q=q, dq=dq, qm=qm, dqm=dqm,
         D=D, h=h, potential=V,
@@ -219,6 +262,7 @@ def make_planar(n: int) -> FlexibleJointModel:
             f"Planar serial chain of {n} link(s) with flexible joints, relative joint "
             "angles, q = 0 hanging straight down, gravity g0 along -y."
         ),
+        program=prog,
     )
 
 

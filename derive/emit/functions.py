@@ -56,22 +56,30 @@ def build_functions(lin: Linearization) -> Dict[str, ca.Function]:
     p = ca.SX.sym("p", len(m.params))
     bindings = {s: x[i] for i, s in enumerate(m.state)}
     bindings.update({s: p[j] for j, s in enumerate(m.param_symbols)})
-    conv = SympyToSX(bindings)
+    lazy: Dict[str, object] = {}
 
-    D = conv(m.D)
-    L, d = ldl_factor(D)
-    y3 = ldl_solve(L, d, conv(lin.rhs3))
+    def factors():  # one LDL^T of D(q), shared by every solve
+        if "ldl" not in lazy:
+            lazy["ldl"] = ldl_factor(conv(m.D))
+        return lazy["ldl"]
+
+    def solved(key: str, rhs) -> ca.SX:
+        if key not in lazy:
+            lazy[key] = ldl_solve(*factors(), conv(rhs))
+        return lazy[key]
+
+    def inverse() -> ca.SX:
+        if "inv" not in lazy:
+            lazy["inv"] = spd_inverse(*factors())
+        return lazy["inv"]
+
+    implicit = {}
     for i in range(n):
-        conv.bind(lin.Y3[i], y3[i])
-    y4 = ldl_solve(L, d, conv(lin.rhs4))
-    for i in range(n):
-        conv.bind(lin.Y4[i], y4[i])
-    needs_inverse = any(e.has(*set(lin.W)) for e in lin.outputs["ad"])
-    if needs_inverse:
-        Winv = spd_inverse(L, d)
-        for i in range(n):
-            for j in range(i, n):
-                conv.bind(lin.W[i, j], Winv[i, j])
+        implicit[lin.Y3[i]] = lambda i=i: solved("y3", lin.rhs3)[i]
+        implicit[lin.Y4[i]] = lambda i=i: solved("y4", lin.rhs4)[i]
+        for j in range(i, n):
+            implicit[lin.W[i, j]] = lambda i=i, j=j: inverse()[i, j]
+    conv = SympyToSX(bindings, dict(m.program.definitions), implicit)
 
     out = {}
     for name, _ in QUANTITIES:

@@ -7,7 +7,7 @@ produce are accepted; anything else is an error, never a silent guess.
 
 from __future__ import annotations
 
-from typing import Dict, List, Mapping
+from typing import Callable, Dict, List, Mapping
 
 import casadi as ca
 import sympy as sp
@@ -19,12 +19,24 @@ class SympyToSX:
     Parameters
     ----------
     bindings : mapping sympy.Symbol -> casadi.SX (scalar)
-        Every free symbol of every converted expression must be bound here;
-        an unbound symbol raises ``ValueError`` naming it (DESIGN.md section 4).
+        Arguments (state and parameter symbols).
+    definitions : mapping sympy.Symbol -> sympy.Expr, optional
+        Intermediate symbols of a :class:`derive.program.Program`, converted
+        on first use.
+    implicit : mapping sympy.Symbol -> callable () -> casadi.SX, optional
+        Symbols bound to numeric linear algebra (e.g. ``y3 = D^-1 r3``),
+        computed on first use.
+
+    Every free symbol must be resolvable by one of the three; anything else
+    raises ``ValueError`` naming it (DESIGN.md section 4).
     """
 
-    def __init__(self, bindings: Mapping[sp.Symbol, ca.SX]):
+    def __init__(self, bindings: Mapping[sp.Symbol, ca.SX],
+                 definitions: Mapping[sp.Symbol, sp.Expr] = None,
+                 implicit: Mapping[sp.Symbol, Callable[[], ca.SX]] = None):
         self._memo: Dict[sp.Basic, ca.SX] = dict(bindings)
+        self._definitions = dict(definitions or {})
+        self._implicit = dict(implicit or {})
 
     def bind(self, sym: sp.Symbol, value: ca.SX) -> None:
         self._memo[sym] = value
@@ -43,7 +55,14 @@ class SympyToSX:
         if hit is not None:
             return hit
         if e.is_Symbol:
-            raise ValueError(f"free symbol {e} is not bound to any argument")
+            if e in self._definitions:
+                out = self._convert(self._definitions[e])
+            elif e in self._implicit:
+                out = self._implicit[e]()
+            else:
+                raise ValueError(f"free symbol {e} is not bound to any argument")
+            self._memo[e] = out
+            return out
         if e.is_Integer:
             out = ca.SX(float(int(e)))
         elif e.is_Rational:
