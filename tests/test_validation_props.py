@@ -69,7 +69,7 @@ def valid_params(draw, model):
             raise AssertionError(f"test does not know the physical range of parameter {name!r}")
     for name in model.param_names:  # centre of mass on the link: r_i <= l_i
         if re.fullmatch(r"r\d+", name):
-            frac = draw(st.floats(min_value=0.0, max_value=1.0, exclude_min=True))
+            frac = draw(st.floats(min_value=1e-3, max_value=1.0))
             p[name] = p["l" + name[1:]] * frac
     return p
 
