@@ -24,7 +24,7 @@ from typing import Dict, List
 
 from .linearize import linearize
 from .models import MODEL_NAMES, build
-from .emit.writer import swap_in, write_model
+from .emit.writer import recover, swap_in, write_model
 
 REPO = Path(__file__).resolve().parent.parent
 DEFAULT_OUT = REPO / "generated"
@@ -97,6 +97,7 @@ def main(argv=None) -> int:
             fresh = Path(tmp) / "generated"
             fresh.mkdir()
             derive_into(fresh, list(MODEL_NAMES) if not args.models else models)
+            recover(out)
             if not out.exists():
                 print(f"check-generated: {out} does not exist; run `make derive`", file=sys.stderr)
                 return 1
@@ -113,6 +114,7 @@ def main(argv=None) -> int:
         return 0
 
     out.parent.mkdir(parents=True, exist_ok=True)
+    recover(out)
     staging = Path(tempfile.mkdtemp(prefix=f".{out.name}-tmp-", dir=out.parent))
     try:
         t0 = time.perf_counter()
@@ -129,6 +131,8 @@ def main(argv=None) -> int:
         if staging.exists():
             shutil.rmtree(staging, ignore_errors=True)
     print(f"derived {len(models)} model(s) in {total:.2f} s -> {out}")
+    if out != DEFAULT_OUT.resolve():
+        return 0
     try:
         TIMINGS.parent.mkdir(exist_ok=True)
         TIMINGS.write_text(json.dumps({"models": timings, "total_seconds": total}, indent=2) + "\n")

@@ -24,6 +24,9 @@ def as_vector(name: str, value, length: int) -> np.ndarray:
         If the shape differs or any entry is NaN/inf.
     """
     try:
+        if isinstance(value, (str, bytes)) or any(isinstance(v, (str, bytes)) for v in np.ravel(
+                np.asarray(value, dtype=object))):
+            raise TypeError("text is not a number")
         arr = np.asarray(value, dtype=float)
     except (TypeError, ValueError) as exc:
         raise FjmValueError(f"{name}: expected a numeric array of shape ({length},), got {value!r}") from exc
@@ -81,6 +84,8 @@ def params_vector(names: Tuple[str, ...], defaults: Mapping[str, float], p, arg:
         for k in names:
             if k in p and not _is_number(p[k]):
                 raise FjmValueError(f"{arg}[{k!r}] = {p[k]!r}: expected a real number")
+            if k in p and not np.isfinite(float(p[k])):
+                raise FjmValueError(f"{arg}[{k!r}] = {p[k]}: expected a finite value")
         values = [float(p.get(k, defaults[k])) for k in names]
         values = as_vector(arg, values, len(names))
     else:

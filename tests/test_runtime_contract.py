@@ -74,7 +74,7 @@ def test_bad_state_is_named(x, fragment):
 @pytest.mark.parametrize("p, fragment", [
     (np.ones(6), r"p: expected shape \(7,\)"),
     ({"k": 1.0}, "unknown parameter name"),
-    ({"K": float("nan")}, "p: entry 2 is nan"),
+    ({"K": float("nan")}, r"p\['K'\] = nan: expected a finite value"),
     ({"K": -1.0}, r"p\['K'\] = -1.0: expected > 0"),
     ({"J_m": 0.0}, r"p\['J_m'\] = 0.0: expected > 0"),
     ({"B_m": -0.1}, r"p\['B_m'\] = -0.1: expected >= 0"),

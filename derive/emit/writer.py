@@ -18,7 +18,9 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import shutil
+import signal
 import tempfile
 from pathlib import Path
 from typing import Dict, List
@@ -58,13 +60,25 @@ def _layout_lines(lin: Linearization) -> List[str]:
     ]
 
 
+# CasADi's generated bodies do not use every argument of the calling convention
+# (iw, w, mem), which -Wextra -Werror rejects; a (void) cast documents that.
+_BODY = re.compile(r"^(static int casadi_f\d+\(const casadi_real\*\* arg, casadi_real\*\* res, "
+                   r"casadi_int\* iw, casadi_real\* w, int mem\) \{)$", re.M)
+_MEM = re.compile(r"^(CASADI_SYMBOL_EXPORT (?:int|void) \w+_(?:init_mem|free_mem|release)\(int mem\) \{)$",
+                  re.M)
+
+
+def _silence_unused(src: str) -> str:
+    return _MEM.sub(r"\1\n  (void)mem;", _BODY.sub(r"\1\n  (void)iw; (void)w; (void)mem;", src))
+
+
 def _generate_c(model: str, functions: Dict[str, ca.Function], workdir: Path) -> Dict[str, str]:
     cg = ca.CodeGenerator(f"{model}.c", {"with_header": True})
     for name, _ in QUANTITIES:
         cg.add(functions[name])
     cg.generate(str(workdir) + os.sep)
     return {
-        f"{model}.c": (workdir / f"{model}.c").read_text(),
+        f"{model}.c": _silence_unused((workdir / f"{model}.c").read_text()),
         f"{model}.h": (workdir / f"{model}.h").read_text(),
     }
 
@@ -143,18 +157,41 @@ def write_model(lin: Linearization, outdir: Path) -> Dict[str, object]:
     return manifest
 
 
+def recover(target: Path) -> None:
+    """Undo a swap cut between its two renames (e.g. by SIGKILL): restore ``<target>.old``."""
+    old = target.with_name(target.name + ".old")
+    if not target.exists() and old.exists():
+        os.rename(old, target)
+
+
 def swap_in(new_root: Path, target: Path) -> None:
     """Replace directory ``target`` by ``new_root`` with two renames.
 
-    Both live on the same filesystem (siblings), so each rename is atomic;
-    the old tree is removed only after the new one is in place.
+    Both live on the same filesystem (siblings), so each rename is atomic.
+    SIGINT/SIGTERM arriving between the two renames are deferred (their
+    Python handlers only record them; the first one is re-raised once the
+    new tree is in place), and any exception there restores the old tree, so
+    ``target`` is never left missing; :func:`recover` handles SIGKILL.
+    The old tree is removed only after the new one is in place.
     """
     old = target.with_name(target.name + ".old")
     if old.exists():
         shutil.rmtree(old)
-    if target.exists():
-        os.rename(target, old)
-    os.rename(new_root, target)
-    os.chmod(target, 0o755)  # mkdtemp made it 0700
+    pending = []
+    held = (signal.SIGINT, signal.SIGTERM)
+    saved = {s: signal.signal(s, lambda signum, frame: pending.append(signum)) for s in held}
+    try:
+        if target.exists():
+            os.rename(target, old)
+        os.rename(new_root, target)
+        os.chmod(target, 0o755)  # mkdtemp made it 0700
+    except BaseException:
+        recover(target)
+        raise
+    finally:
+        for s, handler in saved.items():
+            signal.signal(s, handler)
     if old.exists():
         shutil.rmtree(old)
+    if pending:
+        signal.raise_signal(pending[0])

@@ -75,6 +75,7 @@ static const casadi_int casadi_s3[3] = {1, 1, 1};
 
 /* link1_f:(x[4],p[7])->(f[4]) */
 static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  (void)iw; (void)w; (void)mem;
   casadi_real a0, a1, a2, a3;
   a0=arg[0]? arg[0][1] : 0;
   if (res[0]!=0) res[0][0]=a0;
@@ -115,10 +116,12 @@ CASADI_SYMBOL_EXPORT int link1_f_alloc_mem(void) {
 }
 
 CASADI_SYMBOL_EXPORT int link1_f_init_mem(int mem) {
+  (void)mem;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT void link1_f_free_mem(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT int link1_f_checkout(void) {
@@ -126,6 +129,7 @@ CASADI_SYMBOL_EXPORT int link1_f_checkout(void) {
 }
 
 CASADI_SYMBOL_EXPORT void link1_f_release(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT void link1_f_incref(void) {
@@ -192,6 +196,7 @@ CASADI_SYMBOL_EXPORT int link1_f_work_bytes(casadi_int *sz_arg, casadi_int* sz_r
 
 /* link1_g:(x[4],p[7])->(g[4]) */
 static int casadi_f1(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  (void)iw; (void)w; (void)mem;
   casadi_real a0;
   a0=0.;
   if (res[0]!=0) res[0][0]=a0;
@@ -212,10 +217,12 @@ CASADI_SYMBOL_EXPORT int link1_g_alloc_mem(void) {
 }
 
 CASADI_SYMBOL_EXPORT int link1_g_init_mem(int mem) {
+  (void)mem;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT void link1_g_free_mem(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT int link1_g_checkout(void) {
@@ -223,6 +230,7 @@ CASADI_SYMBOL_EXPORT int link1_g_checkout(void) {
 }
 
 CASADI_SYMBOL_EXPORT void link1_g_release(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT void link1_g_incref(void) {
@@ -289,6 +297,7 @@ CASADI_SYMBOL_EXPORT int link1_g_work_bytes(casadi_int *sz_arg, casadi_int* sz_r
 
 /* link1_ad:(x[4],p[7])->(ad[4x4]) */
 static int casadi_f2(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  (void)iw; (void)w; (void)mem;
   casadi_real a0, a1, a2, a3, a4, a5, a6, a7;
   a0=0.;
   if (res[0]!=0) res[0][0]=a0;
@@ -344,10 +353,12 @@ CASADI_SYMBOL_EXPORT int link1_ad_alloc_mem(void) {
 }
 
 CASADI_SYMBOL_EXPORT int link1_ad_init_mem(int mem) {
+  (void)mem;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT void link1_ad_free_mem(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT int link1_ad_checkout(void) {
@@ -355,6 +366,7 @@ CASADI_SYMBOL_EXPORT int link1_ad_checkout(void) {
 }
 
 CASADI_SYMBOL_EXPORT void link1_ad_release(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT void link1_ad_incref(void) {
@@ -421,6 +433,7 @@ CASADI_SYMBOL_EXPORT int link1_ad_work_bytes(casadi_int *sz_arg, casadi_int* sz_
 
 /* link1_T:(x[4],p[7])->(T[4]) */
 static int casadi_f3(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  (void)iw; (void)w; (void)mem;
   casadi_real a0, a1, a2, a3, a4, a5, a6, a7;
   a0=arg[0]? arg[0][0] : 0;
   if (res[0]!=0) res[0][0]=a0;
@@ -465,10 +478,12 @@ CASADI_SYMBOL_EXPORT int link1_T_alloc_mem(void) {
 }
 
 CASADI_SYMBOL_EXPORT int link1_T_init_mem(int mem) {
+  (void)mem;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT void link1_T_free_mem(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT int link1_T_checkout(void) {
@@ -476,6 +491,7 @@ CASADI_SYMBOL_EXPORT int link1_T_checkout(void) {
 }
 
 CASADI_SYMBOL_EXPORT void link1_T_release(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT void link1_T_incref(void) {
@@ -542,6 +558,7 @@ CASADI_SYMBOL_EXPORT int link1_T_work_bytes(casadi_int *sz_arg, casadi_int* sz_r
 
 /* link1_alpha:(x[4],p[7])->(alpha) */
 static int casadi_f4(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  (void)iw; (void)w; (void)mem;
   casadi_real a0, a1, a2, a3, a4, a5, a6, a7, a8;
   a0=arg[1]? arg[1][1] : 0;
   a1=arg[1]? arg[1][2] : 0;
@@ -591,10 +608,12 @@ CASADI_SYMBOL_EXPORT int link1_alpha_alloc_mem(void) {
 }
 
 CASADI_SYMBOL_EXPORT int link1_alpha_init_mem(int mem) {
+  (void)mem;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT void link1_alpha_free_mem(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT int link1_alpha_checkout(void) {
@@ -602,6 +621,7 @@ CASADI_SYMBOL_EXPORT int link1_alpha_checkout(void) {
 }
 
 CASADI_SYMBOL_EXPORT void link1_alpha_release(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT void link1_alpha_incref(void) {
@@ -668,6 +688,7 @@ CASADI_SYMBOL_EXPORT int link1_alpha_work_bytes(casadi_int *sz_arg, casadi_int* 
 
 /* link1_beta:(x[4],p[7])->(beta) */
 static int casadi_f5(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  (void)iw; (void)w; (void)mem;
   casadi_real a0, a1;
   a0=arg[1]? arg[1][0] : 0;
   a1=arg[1]? arg[1][1] : 0;
@@ -687,10 +708,12 @@ CASADI_SYMBOL_EXPORT int link1_beta_alloc_mem(void) {
 }
 
 CASADI_SYMBOL_EXPORT int link1_beta_init_mem(int mem) {
+  (void)mem;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT void link1_beta_free_mem(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT int link1_beta_checkout(void) {
@@ -698,6 +721,7 @@ CASADI_SYMBOL_EXPORT int link1_beta_checkout(void) {
 }
 
 CASADI_SYMBOL_EXPORT void link1_beta_release(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT void link1_beta_incref(void) {
@@ -764,6 +788,7 @@ CASADI_SYMBOL_EXPORT int link1_beta_work_bytes(casadi_int *sz_arg, casadi_int* s
 
 /* link1_energy:(x[4],p[7])->(energy) */
 static int casadi_f6(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  (void)iw; (void)w; (void)mem;
   casadi_real a0, a1, a2, a3, a4;
   a0=arg[1]? arg[1][0] : 0;
   a1=arg[0]? arg[0][1] : 0;
@@ -806,10 +831,12 @@ CASADI_SYMBOL_EXPORT int link1_energy_alloc_mem(void) {
 }
 
 CASADI_SYMBOL_EXPORT int link1_energy_init_mem(int mem) {
+  (void)mem;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT void link1_energy_free_mem(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT int link1_energy_checkout(void) {
@@ -817,6 +844,7 @@ CASADI_SYMBOL_EXPORT int link1_energy_checkout(void) {
 }
 
 CASADI_SYMBOL_EXPORT void link1_energy_release(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT void link1_energy_incref(void) {
@@ -883,6 +911,7 @@ CASADI_SYMBOL_EXPORT int link1_energy_work_bytes(casadi_int *sz_arg, casadi_int*
 
 /* link1_inertia:(x[4],p[7])->(inertia) */
 static int casadi_f7(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  (void)iw; (void)w; (void)mem;
   casadi_real a0;
   a0=arg[1]? arg[1][0] : 0;
   if (res[0]!=0) res[0][0]=a0;
@@ -898,10 +927,12 @@ CASADI_SYMBOL_EXPORT int link1_inertia_alloc_mem(void) {
 }
 
 CASADI_SYMBOL_EXPORT int link1_inertia_init_mem(int mem) {
+  (void)mem;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT void link1_inertia_free_mem(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT int link1_inertia_checkout(void) {
@@ -909,6 +940,7 @@ CASADI_SYMBOL_EXPORT int link1_inertia_checkout(void) {
 }
 
 CASADI_SYMBOL_EXPORT void link1_inertia_release(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT void link1_inertia_incref(void) {

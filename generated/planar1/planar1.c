@@ -75,6 +75,7 @@ static const casadi_int casadi_s3[3] = {1, 1, 1};
 
 /* planar1_f:(x[4],p[8])->(f[4]) */
 static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  (void)iw; (void)w; (void)mem;
   casadi_real a0, a1, a2, a3, a4, a5;
   a0=arg[0]? arg[0][1] : 0;
   if (res[0]!=0) res[0][0]=a0;
@@ -118,10 +119,12 @@ CASADI_SYMBOL_EXPORT int planar1_f_alloc_mem(void) {
 }
 
 CASADI_SYMBOL_EXPORT int planar1_f_init_mem(int mem) {
+  (void)mem;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT void planar1_f_free_mem(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT int planar1_f_checkout(void) {
@@ -129,6 +132,7 @@ CASADI_SYMBOL_EXPORT int planar1_f_checkout(void) {
 }
 
 CASADI_SYMBOL_EXPORT void planar1_f_release(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT void planar1_f_incref(void) {
@@ -195,6 +199,7 @@ CASADI_SYMBOL_EXPORT int planar1_f_work_bytes(casadi_int *sz_arg, casadi_int* sz
 
 /* planar1_g:(x[4],p[8])->(g[4]) */
 static int casadi_f1(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  (void)iw; (void)w; (void)mem;
   casadi_real a0;
   a0=0.;
   if (res[0]!=0) res[0][0]=a0;
@@ -215,10 +220,12 @@ CASADI_SYMBOL_EXPORT int planar1_g_alloc_mem(void) {
 }
 
 CASADI_SYMBOL_EXPORT int planar1_g_init_mem(int mem) {
+  (void)mem;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT void planar1_g_free_mem(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT int planar1_g_checkout(void) {
@@ -226,6 +233,7 @@ CASADI_SYMBOL_EXPORT int planar1_g_checkout(void) {
 }
 
 CASADI_SYMBOL_EXPORT void planar1_g_release(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT void planar1_g_incref(void) {
@@ -292,6 +300,7 @@ CASADI_SYMBOL_EXPORT int planar1_g_work_bytes(casadi_int *sz_arg, casadi_int* sz
 
 /* planar1_ad:(x[4],p[8])->(ad[4x4]) */
 static int casadi_f2(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  (void)iw; (void)w; (void)mem;
   casadi_real a0, a1, a2, a3, a4, a5, a6, a7;
   a0=0.;
   if (res[0]!=0) res[0][0]=a0;
@@ -352,10 +361,12 @@ CASADI_SYMBOL_EXPORT int planar1_ad_alloc_mem(void) {
 }
 
 CASADI_SYMBOL_EXPORT int planar1_ad_init_mem(int mem) {
+  (void)mem;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT void planar1_ad_free_mem(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT int planar1_ad_checkout(void) {
@@ -363,6 +374,7 @@ CASADI_SYMBOL_EXPORT int planar1_ad_checkout(void) {
 }
 
 CASADI_SYMBOL_EXPORT void planar1_ad_release(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT void planar1_ad_incref(void) {
@@ -429,6 +441,7 @@ CASADI_SYMBOL_EXPORT int planar1_ad_work_bytes(casadi_int *sz_arg, casadi_int* s
 
 /* planar1_T:(x[4],p[8])->(T[4]) */
 static int casadi_f3(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  (void)iw; (void)w; (void)mem;
   casadi_real a0, a1, a2, a3, a4, a5, a6, a7;
   a0=arg[0]? arg[0][0] : 0;
   if (res[0]!=0) res[0][0]=a0;
@@ -475,10 +488,12 @@ CASADI_SYMBOL_EXPORT int planar1_T_alloc_mem(void) {
 }
 
 CASADI_SYMBOL_EXPORT int planar1_T_init_mem(int mem) {
+  (void)mem;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT void planar1_T_free_mem(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT int planar1_T_checkout(void) {
@@ -486,6 +501,7 @@ CASADI_SYMBOL_EXPORT int planar1_T_checkout(void) {
 }
 
 CASADI_SYMBOL_EXPORT void planar1_T_release(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT void planar1_T_incref(void) {
@@ -552,6 +568,7 @@ CASADI_SYMBOL_EXPORT int planar1_T_work_bytes(casadi_int *sz_arg, casadi_int* sz
 
 /* planar1_alpha:(x[4],p[8])->(alpha) */
 static int casadi_f4(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  (void)iw; (void)w; (void)mem;
   casadi_real a0, a1, a2, a3, a4, a5, a6, a7, a8, a9;
   a0=arg[1]? arg[1][5] : 0;
   a1=arg[1]? arg[1][0] : 0;
@@ -603,10 +620,12 @@ CASADI_SYMBOL_EXPORT int planar1_alpha_alloc_mem(void) {
 }
 
 CASADI_SYMBOL_EXPORT int planar1_alpha_init_mem(int mem) {
+  (void)mem;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT void planar1_alpha_free_mem(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT int planar1_alpha_checkout(void) {
@@ -614,6 +633,7 @@ CASADI_SYMBOL_EXPORT int planar1_alpha_checkout(void) {
 }
 
 CASADI_SYMBOL_EXPORT void planar1_alpha_release(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT void planar1_alpha_incref(void) {
@@ -680,6 +700,7 @@ CASADI_SYMBOL_EXPORT int planar1_alpha_work_bytes(casadi_int *sz_arg, casadi_int
 
 /* planar1_beta:(x[4],p[8])->(beta) */
 static int casadi_f5(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  (void)iw; (void)w; (void)mem;
   casadi_real a0, a1, a2, a3;
   a0=arg[1]? arg[1][5] : 0;
   a1=arg[1]? arg[1][3] : 0;
@@ -704,10 +725,12 @@ CASADI_SYMBOL_EXPORT int planar1_beta_alloc_mem(void) {
 }
 
 CASADI_SYMBOL_EXPORT int planar1_beta_init_mem(int mem) {
+  (void)mem;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT void planar1_beta_free_mem(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT int planar1_beta_checkout(void) {
@@ -715,6 +738,7 @@ CASADI_SYMBOL_EXPORT int planar1_beta_checkout(void) {
 }
 
 CASADI_SYMBOL_EXPORT void planar1_beta_release(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT void planar1_beta_incref(void) {
@@ -781,6 +805,7 @@ CASADI_SYMBOL_EXPORT int planar1_beta_work_bytes(casadi_int *sz_arg, casadi_int*
 
 /* planar1_energy:(x[4],p[8])->(energy) */
 static int casadi_f6(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  (void)iw; (void)w; (void)mem;
   casadi_real a0, a1, a2, a3, a4, a5, a6;
   a0=arg[1]? arg[1][5] : 0;
   a1=arg[0]? arg[0][3] : 0;
@@ -826,10 +851,12 @@ CASADI_SYMBOL_EXPORT int planar1_energy_alloc_mem(void) {
 }
 
 CASADI_SYMBOL_EXPORT int planar1_energy_init_mem(int mem) {
+  (void)mem;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT void planar1_energy_free_mem(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT int planar1_energy_checkout(void) {
@@ -837,6 +864,7 @@ CASADI_SYMBOL_EXPORT int planar1_energy_checkout(void) {
 }
 
 CASADI_SYMBOL_EXPORT void planar1_energy_release(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT void planar1_energy_incref(void) {
@@ -903,6 +931,7 @@ CASADI_SYMBOL_EXPORT int planar1_energy_work_bytes(casadi_int *sz_arg, casadi_in
 
 /* planar1_inertia:(x[4],p[8])->(inertia) */
 static int casadi_f7(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  (void)iw; (void)w; (void)mem;
   casadi_real a0, a1, a2;
   a0=arg[1]? arg[1][3] : 0;
   a1=arg[1]? arg[1][0] : 0;
@@ -923,10 +952,12 @@ CASADI_SYMBOL_EXPORT int planar1_inertia_alloc_mem(void) {
 }
 
 CASADI_SYMBOL_EXPORT int planar1_inertia_init_mem(int mem) {
+  (void)mem;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT void planar1_inertia_free_mem(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT int planar1_inertia_checkout(void) {
@@ -934,6 +965,7 @@ CASADI_SYMBOL_EXPORT int planar1_inertia_checkout(void) {
 }
 
 CASADI_SYMBOL_EXPORT void planar1_inertia_release(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT void planar1_inertia_incref(void) {

@@ -81,6 +81,7 @@ static const casadi_int casadi_s6[3] = {1, 1, 1};
 
 /* planar2_f:(x[8],p[15])->(f[8]) */
 static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  (void)iw; (void)w; (void)mem;
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14, a15, a16, a17, a18;
   a00=arg[0]? arg[0][2] : 0;
@@ -190,10 +191,12 @@ CASADI_SYMBOL_EXPORT int planar2_f_alloc_mem(void) {
 }
 
 CASADI_SYMBOL_EXPORT int planar2_f_init_mem(int mem) {
+  (void)mem;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT void planar2_f_free_mem(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT int planar2_f_checkout(void) {
@@ -201,6 +204,7 @@ CASADI_SYMBOL_EXPORT int planar2_f_checkout(void) {
 }
 
 CASADI_SYMBOL_EXPORT void planar2_f_release(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT void planar2_f_incref(void) {
@@ -267,6 +271,7 @@ CASADI_SYMBOL_EXPORT int planar2_f_work_bytes(casadi_int *sz_arg, casadi_int* sz
 
 /* planar2_g:(x[8],p[15])->(g[8x2]) */
 static int casadi_f1(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  (void)iw; (void)w; (void)mem;
   casadi_real a0, a1;
   a0=0.;
   if (res[0]!=0) res[0][0]=a0;
@@ -301,10 +306,12 @@ CASADI_SYMBOL_EXPORT int planar2_g_alloc_mem(void) {
 }
 
 CASADI_SYMBOL_EXPORT int planar2_g_init_mem(int mem) {
+  (void)mem;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT void planar2_g_free_mem(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT int planar2_g_checkout(void) {
@@ -312,6 +319,7 @@ CASADI_SYMBOL_EXPORT int planar2_g_checkout(void) {
 }
 
 CASADI_SYMBOL_EXPORT void planar2_g_release(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT void planar2_g_incref(void) {
@@ -378,6 +386,7 @@ CASADI_SYMBOL_EXPORT int planar2_g_work_bytes(casadi_int *sz_arg, casadi_int* sz
 
 /* planar2_ad:(x[8],p[15])->(ad[8x8]) */
 static int casadi_f2(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  (void)iw; (void)w; (void)mem;
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14, a15, a16, a17, a18, a19, a20, a21, a22, a23;
   casadi_real a24, a25, a26, a27, a28, a29, a30, a31, a32, a33;
@@ -628,10 +637,12 @@ CASADI_SYMBOL_EXPORT int planar2_ad_alloc_mem(void) {
 }
 
 CASADI_SYMBOL_EXPORT int planar2_ad_init_mem(int mem) {
+  (void)mem;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT void planar2_ad_free_mem(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT int planar2_ad_checkout(void) {
@@ -639,6 +650,7 @@ CASADI_SYMBOL_EXPORT int planar2_ad_checkout(void) {
 }
 
 CASADI_SYMBOL_EXPORT void planar2_ad_release(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT void planar2_ad_incref(void) {
@@ -705,6 +717,7 @@ CASADI_SYMBOL_EXPORT int planar2_ad_work_bytes(casadi_int *sz_arg, casadi_int* s
 
 /* planar2_T:(x[8],p[15])->(T[8]) */
 static int casadi_f3(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  (void)iw; (void)w; (void)mem;
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14, a15, a16, a17, a18, a19, a20, a21, a22, a23;
   casadi_real a24, a25;
@@ -861,10 +874,12 @@ CASADI_SYMBOL_EXPORT int planar2_T_alloc_mem(void) {
 }
 
 CASADI_SYMBOL_EXPORT int planar2_T_init_mem(int mem) {
+  (void)mem;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT void planar2_T_free_mem(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT int planar2_T_checkout(void) {
@@ -872,6 +887,7 @@ CASADI_SYMBOL_EXPORT int planar2_T_checkout(void) {
 }
 
 CASADI_SYMBOL_EXPORT void planar2_T_release(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT void planar2_T_incref(void) {
@@ -938,6 +954,7 @@ CASADI_SYMBOL_EXPORT int planar2_T_work_bytes(casadi_int *sz_arg, casadi_int* sz
 
 /* planar2_alpha:(x[8],p[15])->(alpha[2]) */
 static int casadi_f4(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  (void)iw; (void)w; (void)mem;
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14, a15, a16, a17, a18, a19, a20, a21, a22, a23;
   casadi_real a24, a25, a26, a27, a28, a29, a30, a31, a32, a33, a34, a35;
@@ -1191,10 +1208,12 @@ CASADI_SYMBOL_EXPORT int planar2_alpha_alloc_mem(void) {
 }
 
 CASADI_SYMBOL_EXPORT int planar2_alpha_init_mem(int mem) {
+  (void)mem;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT void planar2_alpha_free_mem(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT int planar2_alpha_checkout(void) {
@@ -1202,6 +1221,7 @@ CASADI_SYMBOL_EXPORT int planar2_alpha_checkout(void) {
 }
 
 CASADI_SYMBOL_EXPORT void planar2_alpha_release(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT void planar2_alpha_incref(void) {
@@ -1268,6 +1288,7 @@ CASADI_SYMBOL_EXPORT int planar2_alpha_work_bytes(casadi_int *sz_arg, casadi_int
 
 /* planar2_beta:(x[8],p[15])->(beta[2x2]) */
 static int casadi_f5(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  (void)iw; (void)w; (void)mem;
   casadi_real a0, a1, a2, a3, a4, a5, a6, a7;
   a0=arg[1]? arg[1][1] : 0;
   a1=arg[1]? arg[1][5] : 0;
@@ -1329,10 +1350,12 @@ CASADI_SYMBOL_EXPORT int planar2_beta_alloc_mem(void) {
 }
 
 CASADI_SYMBOL_EXPORT int planar2_beta_init_mem(int mem) {
+  (void)mem;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT void planar2_beta_free_mem(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT int planar2_beta_checkout(void) {
@@ -1340,6 +1363,7 @@ CASADI_SYMBOL_EXPORT int planar2_beta_checkout(void) {
 }
 
 CASADI_SYMBOL_EXPORT void planar2_beta_release(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT void planar2_beta_incref(void) {
@@ -1406,6 +1430,7 @@ CASADI_SYMBOL_EXPORT int planar2_beta_work_bytes(casadi_int *sz_arg, casadi_int*
 
 /* planar2_energy:(x[8],p[15])->(energy) */
 static int casadi_f6(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  (void)iw; (void)w; (void)mem;
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14;
   a00=arg[1]? arg[1][10] : 0;
@@ -1502,10 +1527,12 @@ CASADI_SYMBOL_EXPORT int planar2_energy_alloc_mem(void) {
 }
 
 CASADI_SYMBOL_EXPORT int planar2_energy_init_mem(int mem) {
+  (void)mem;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT void planar2_energy_free_mem(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT int planar2_energy_checkout(void) {
@@ -1513,6 +1540,7 @@ CASADI_SYMBOL_EXPORT int planar2_energy_checkout(void) {
 }
 
 CASADI_SYMBOL_EXPORT void planar2_energy_release(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT void planar2_energy_incref(void) {
@@ -1579,6 +1607,7 @@ CASADI_SYMBOL_EXPORT int planar2_energy_work_bytes(casadi_int *sz_arg, casadi_in
 
 /* planar2_inertia:(x[8],p[15])->(inertia[2x2]) */
 static int casadi_f7(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  (void)iw; (void)w; (void)mem;
   casadi_real a0, a1, a2, a3, a4, a5, a6, a7;
   a0=arg[1]? arg[1][1] : 0;
   a1=arg[1]? arg[1][5] : 0;
@@ -1628,10 +1657,12 @@ CASADI_SYMBOL_EXPORT int planar2_inertia_alloc_mem(void) {
 }
 
 CASADI_SYMBOL_EXPORT int planar2_inertia_init_mem(int mem) {
+  (void)mem;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT void planar2_inertia_free_mem(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT int planar2_inertia_checkout(void) {
@@ -1639,6 +1670,7 @@ CASADI_SYMBOL_EXPORT int planar2_inertia_checkout(void) {
 }
 
 CASADI_SYMBOL_EXPORT void planar2_inertia_release(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT void planar2_inertia_incref(void) {

@@ -81,6 +81,7 @@ static const casadi_int casadi_s6[3] = {1, 1, 1};
 
 /* planar3_f:(x[12],p[22])->(f[12]) */
 static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  (void)iw; (void)w; (void)mem;
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14, a15, a16, a17, a18, a19, a20, a21, a22, a23;
   casadi_real a24, a25, a26, a27, a28, a29;
@@ -282,10 +283,12 @@ CASADI_SYMBOL_EXPORT int planar3_f_alloc_mem(void) {
 }
 
 CASADI_SYMBOL_EXPORT int planar3_f_init_mem(int mem) {
+  (void)mem;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT void planar3_f_free_mem(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT int planar3_f_checkout(void) {
@@ -293,6 +296,7 @@ CASADI_SYMBOL_EXPORT int planar3_f_checkout(void) {
 }
 
 CASADI_SYMBOL_EXPORT void planar3_f_release(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT void planar3_f_incref(void) {
@@ -359,6 +363,7 @@ CASADI_SYMBOL_EXPORT int planar3_f_work_bytes(casadi_int *sz_arg, casadi_int* sz
 
 /* planar3_g:(x[12],p[22])->(g[12x3]) */
 static int casadi_f1(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  (void)iw; (void)w; (void)mem;
   casadi_real a0, a1;
   a0=0.;
   if (res[0]!=0) res[0][0]=a0;
@@ -415,10 +420,12 @@ CASADI_SYMBOL_EXPORT int planar3_g_alloc_mem(void) {
 }
 
 CASADI_SYMBOL_EXPORT int planar3_g_init_mem(int mem) {
+  (void)mem;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT void planar3_g_free_mem(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT int planar3_g_checkout(void) {
@@ -426,6 +433,7 @@ CASADI_SYMBOL_EXPORT int planar3_g_checkout(void) {
 }
 
 CASADI_SYMBOL_EXPORT void planar3_g_release(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT void planar3_g_incref(void) {
@@ -492,6 +500,7 @@ CASADI_SYMBOL_EXPORT int planar3_g_work_bytes(casadi_int *sz_arg, casadi_int* sz
 
 /* planar3_ad:(x[12],p[22])->(ad[12x12]) */
 static int casadi_f2(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  (void)iw; (void)w; (void)mem;
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14, a15, a16, a17, a18, a19, a20, a21, a22, a23;
   casadi_real a24, a25, a26, a27, a28, a29, a30, a31, a32, a33, a34, a35;
@@ -1084,10 +1093,12 @@ CASADI_SYMBOL_EXPORT int planar3_ad_alloc_mem(void) {
 }
 
 CASADI_SYMBOL_EXPORT int planar3_ad_init_mem(int mem) {
+  (void)mem;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT void planar3_ad_free_mem(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT int planar3_ad_checkout(void) {
@@ -1095,6 +1106,7 @@ CASADI_SYMBOL_EXPORT int planar3_ad_checkout(void) {
 }
 
 CASADI_SYMBOL_EXPORT void planar3_ad_release(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT void planar3_ad_incref(void) {
@@ -1161,6 +1173,7 @@ CASADI_SYMBOL_EXPORT int planar3_ad_work_bytes(casadi_int *sz_arg, casadi_int* s
 
 /* planar3_T:(x[12],p[22])->(T[12]) */
 static int casadi_f3(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  (void)iw; (void)w; (void)mem;
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14, a15, a16, a17, a18, a19, a20, a21, a22, a23;
   casadi_real a24, a25, a26, a27, a28, a29, a30, a31, a32, a33, a34, a35;
@@ -1487,10 +1500,12 @@ CASADI_SYMBOL_EXPORT int planar3_T_alloc_mem(void) {
 }
 
 CASADI_SYMBOL_EXPORT int planar3_T_init_mem(int mem) {
+  (void)mem;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT void planar3_T_free_mem(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT int planar3_T_checkout(void) {
@@ -1498,6 +1513,7 @@ CASADI_SYMBOL_EXPORT int planar3_T_checkout(void) {
 }
 
 CASADI_SYMBOL_EXPORT void planar3_T_release(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT void planar3_T_incref(void) {
@@ -1564,6 +1580,7 @@ CASADI_SYMBOL_EXPORT int planar3_T_work_bytes(casadi_int *sz_arg, casadi_int* sz
 
 /* planar3_alpha:(x[12],p[22])->(alpha[3]) */
 static int casadi_f4(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  (void)iw; (void)w; (void)mem;
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14, a15, a16, a17, a18, a19, a20, a21, a22, a23;
   casadi_real a24, a25, a26, a27, a28, a29, a30, a31, a32, a33, a34, a35;
@@ -2118,10 +2135,12 @@ CASADI_SYMBOL_EXPORT int planar3_alpha_alloc_mem(void) {
 }
 
 CASADI_SYMBOL_EXPORT int planar3_alpha_init_mem(int mem) {
+  (void)mem;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT void planar3_alpha_free_mem(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT int planar3_alpha_checkout(void) {
@@ -2129,6 +2148,7 @@ CASADI_SYMBOL_EXPORT int planar3_alpha_checkout(void) {
 }
 
 CASADI_SYMBOL_EXPORT void planar3_alpha_release(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT void planar3_alpha_incref(void) {
@@ -2195,6 +2215,7 @@ CASADI_SYMBOL_EXPORT int planar3_alpha_work_bytes(casadi_int *sz_arg, casadi_int
 
 /* planar3_beta:(x[12],p[22])->(beta[3x3]) */
 static int casadi_f5(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  (void)iw; (void)w; (void)mem;
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13;
   a00=arg[1]? arg[1][2] : 0;
@@ -2308,10 +2329,12 @@ CASADI_SYMBOL_EXPORT int planar3_beta_alloc_mem(void) {
 }
 
 CASADI_SYMBOL_EXPORT int planar3_beta_init_mem(int mem) {
+  (void)mem;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT void planar3_beta_free_mem(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT int planar3_beta_checkout(void) {
@@ -2319,6 +2342,7 @@ CASADI_SYMBOL_EXPORT int planar3_beta_checkout(void) {
 }
 
 CASADI_SYMBOL_EXPORT void planar3_beta_release(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT void planar3_beta_incref(void) {
@@ -2385,6 +2409,7 @@ CASADI_SYMBOL_EXPORT int planar3_beta_work_bytes(casadi_int *sz_arg, casadi_int*
 
 /* planar3_energy:(x[12],p[22])->(energy) */
 static int casadi_f6(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  (void)iw; (void)w; (void)mem;
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14, a15, a16, a17, a18, a19, a20;
   a00=arg[1]? arg[1][15] : 0;
@@ -2543,10 +2568,12 @@ CASADI_SYMBOL_EXPORT int planar3_energy_alloc_mem(void) {
 }
 
 CASADI_SYMBOL_EXPORT int planar3_energy_init_mem(int mem) {
+  (void)mem;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT void planar3_energy_free_mem(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT int planar3_energy_checkout(void) {
@@ -2554,6 +2581,7 @@ CASADI_SYMBOL_EXPORT int planar3_energy_checkout(void) {
 }
 
 CASADI_SYMBOL_EXPORT void planar3_energy_release(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT void planar3_energy_incref(void) {
@@ -2620,6 +2648,7 @@ CASADI_SYMBOL_EXPORT int planar3_energy_work_bytes(casadi_int *sz_arg, casadi_in
 
 /* planar3_inertia:(x[12],p[22])->(inertia[3x3]) */
 static int casadi_f7(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  (void)iw; (void)w; (void)mem;
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13;
   a00=arg[1]? arg[1][2] : 0;
@@ -2709,10 +2738,12 @@ CASADI_SYMBOL_EXPORT int planar3_inertia_alloc_mem(void) {
 }
 
 CASADI_SYMBOL_EXPORT int planar3_inertia_init_mem(int mem) {
+  (void)mem;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT void planar3_inertia_free_mem(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT int planar3_inertia_checkout(void) {
@@ -2720,6 +2751,7 @@ CASADI_SYMBOL_EXPORT int planar3_inertia_checkout(void) {
 }
 
 CASADI_SYMBOL_EXPORT void planar3_inertia_release(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT void planar3_inertia_incref(void) {

@@ -81,6 +81,7 @@ static const casadi_int casadi_s6[3] = {1, 1, 1};
 
 /* planar4_f:(x[16],p[29])->(f[16]) */
 static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  (void)iw; (void)w; (void)mem;
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14, a15, a16, a17, a18, a19, a20, a21, a22, a23;
   casadi_real a24, a25, a26, a27, a28, a29, a30, a31, a32, a33, a34, a35;
@@ -404,10 +405,12 @@ CASADI_SYMBOL_EXPORT int planar4_f_alloc_mem(void) {
 }
 
 CASADI_SYMBOL_EXPORT int planar4_f_init_mem(int mem) {
+  (void)mem;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT void planar4_f_free_mem(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT int planar4_f_checkout(void) {
@@ -415,6 +418,7 @@ CASADI_SYMBOL_EXPORT int planar4_f_checkout(void) {
 }
 
 CASADI_SYMBOL_EXPORT void planar4_f_release(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT void planar4_f_incref(void) {
@@ -481,6 +485,7 @@ CASADI_SYMBOL_EXPORT int planar4_f_work_bytes(casadi_int *sz_arg, casadi_int* sz
 
 /* planar4_g:(x[16],p[29])->(g[16x4]) */
 static int casadi_f1(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  (void)iw; (void)w; (void)mem;
   casadi_real a0, a1;
   a0=0.;
   if (res[0]!=0) res[0][0]=a0;
@@ -567,10 +572,12 @@ CASADI_SYMBOL_EXPORT int planar4_g_alloc_mem(void) {
 }
 
 CASADI_SYMBOL_EXPORT int planar4_g_init_mem(int mem) {
+  (void)mem;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT void planar4_g_free_mem(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT int planar4_g_checkout(void) {
@@ -578,6 +585,7 @@ CASADI_SYMBOL_EXPORT int planar4_g_checkout(void) {
 }
 
 CASADI_SYMBOL_EXPORT void planar4_g_release(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT void planar4_g_incref(void) {
@@ -644,6 +652,7 @@ CASADI_SYMBOL_EXPORT int planar4_g_work_bytes(casadi_int *sz_arg, casadi_int* sz
 
 /* planar4_ad:(x[16],p[29])->(ad[16x16]) */
 static int casadi_f2(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  (void)iw; (void)w; (void)mem;
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14, a15, a16, a17, a18, a19, a20, a21, a22, a23;
   casadi_real a24, a25, a26, a27, a28, a29, a30, a31, a32, a33, a34, a35;
@@ -1798,10 +1807,12 @@ CASADI_SYMBOL_EXPORT int planar4_ad_alloc_mem(void) {
 }
 
 CASADI_SYMBOL_EXPORT int planar4_ad_init_mem(int mem) {
+  (void)mem;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT void planar4_ad_free_mem(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT int planar4_ad_checkout(void) {
@@ -1809,6 +1820,7 @@ CASADI_SYMBOL_EXPORT int planar4_ad_checkout(void) {
 }
 
 CASADI_SYMBOL_EXPORT void planar4_ad_release(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT void planar4_ad_incref(void) {
@@ -1875,6 +1887,7 @@ CASADI_SYMBOL_EXPORT int planar4_ad_work_bytes(casadi_int *sz_arg, casadi_int* s
 
 /* planar4_T:(x[16],p[29])->(T[16]) */
 static int casadi_f3(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  (void)iw; (void)w; (void)mem;
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14, a15, a16, a17, a18, a19, a20, a21, a22, a23;
   casadi_real a24, a25, a26, a27, a28, a29, a30, a31, a32, a33, a34, a35;
@@ -2436,10 +2449,12 @@ CASADI_SYMBOL_EXPORT int planar4_T_alloc_mem(void) {
 }
 
 CASADI_SYMBOL_EXPORT int planar4_T_init_mem(int mem) {
+  (void)mem;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT void planar4_T_free_mem(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT int planar4_T_checkout(void) {
@@ -2447,6 +2462,7 @@ CASADI_SYMBOL_EXPORT int planar4_T_checkout(void) {
 }
 
 CASADI_SYMBOL_EXPORT void planar4_T_release(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT void planar4_T_incref(void) {
@@ -2513,6 +2529,7 @@ CASADI_SYMBOL_EXPORT int planar4_T_work_bytes(casadi_int *sz_arg, casadi_int* sz
 
 /* planar4_alpha:(x[16],p[29])->(alpha[4]) */
 static int casadi_f4(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  (void)iw; (void)w; (void)mem;
   casadi_real a000, a001, a002, a003, a004, a005, a006, a007, a008, a009, a010, a011;
   casadi_real a012, a013, a014, a015, a016, a017, a018, a019, a020, a021, a022, a023;
   casadi_real a024, a025, a026, a027, a028, a029, a030, a031, a032, a033, a034, a035;
@@ -3486,10 +3503,12 @@ CASADI_SYMBOL_EXPORT int planar4_alpha_alloc_mem(void) {
 }
 
 CASADI_SYMBOL_EXPORT int planar4_alpha_init_mem(int mem) {
+  (void)mem;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT void planar4_alpha_free_mem(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT int planar4_alpha_checkout(void) {
@@ -3497,6 +3516,7 @@ CASADI_SYMBOL_EXPORT int planar4_alpha_checkout(void) {
 }
 
 CASADI_SYMBOL_EXPORT void planar4_alpha_release(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT void planar4_alpha_incref(void) {
@@ -3563,6 +3583,7 @@ CASADI_SYMBOL_EXPORT int planar4_alpha_work_bytes(casadi_int *sz_arg, casadi_int
 
 /* planar4_beta:(x[16],p[29])->(beta[4x4]) */
 static int casadi_f5(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  (void)iw; (void)w; (void)mem;
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14, a15, a16, a17, a18, a19, a20, a21;
   a00=arg[1]? arg[1][3] : 0;
@@ -3741,10 +3762,12 @@ CASADI_SYMBOL_EXPORT int planar4_beta_alloc_mem(void) {
 }
 
 CASADI_SYMBOL_EXPORT int planar4_beta_init_mem(int mem) {
+  (void)mem;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT void planar4_beta_free_mem(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT int planar4_beta_checkout(void) {
@@ -3752,6 +3775,7 @@ CASADI_SYMBOL_EXPORT int planar4_beta_checkout(void) {
 }
 
 CASADI_SYMBOL_EXPORT void planar4_beta_release(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT void planar4_beta_incref(void) {
@@ -3818,6 +3842,7 @@ CASADI_SYMBOL_EXPORT int planar4_beta_work_bytes(casadi_int *sz_arg, casadi_int*
 
 /* planar4_energy:(x[16],p[29])->(energy) */
 static int casadi_f6(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  (void)iw; (void)w; (void)mem;
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14, a15, a16, a17, a18, a19, a20, a21, a22, a23;
   casadi_real a24, a25, a26, a27, a28;
@@ -4051,10 +4076,12 @@ CASADI_SYMBOL_EXPORT int planar4_energy_alloc_mem(void) {
 }
 
 CASADI_SYMBOL_EXPORT int planar4_energy_init_mem(int mem) {
+  (void)mem;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT void planar4_energy_free_mem(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT int planar4_energy_checkout(void) {
@@ -4062,6 +4089,7 @@ CASADI_SYMBOL_EXPORT int planar4_energy_checkout(void) {
 }
 
 CASADI_SYMBOL_EXPORT void planar4_energy_release(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT void planar4_energy_incref(void) {
@@ -4128,6 +4156,7 @@ CASADI_SYMBOL_EXPORT int planar4_energy_work_bytes(casadi_int *sz_arg, casadi_in
 
 /* planar4_inertia:(x[16],p[29])->(inertia[4x4]) */
 static int casadi_f7(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  (void)iw; (void)w; (void)mem;
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14, a15, a16, a17, a18, a19, a20, a21;
   a00=arg[1]? arg[1][3] : 0;
@@ -4266,10 +4295,12 @@ CASADI_SYMBOL_EXPORT int planar4_inertia_alloc_mem(void) {
 }
 
 CASADI_SYMBOL_EXPORT int planar4_inertia_init_mem(int mem) {
+  (void)mem;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT void planar4_inertia_free_mem(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT int planar4_inertia_checkout(void) {
@@ -4277,6 +4308,7 @@ CASADI_SYMBOL_EXPORT int planar4_inertia_checkout(void) {
 }
 
 CASADI_SYMBOL_EXPORT void planar4_inertia_release(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT void planar4_inertia_incref(void) {

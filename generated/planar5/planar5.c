@@ -81,6 +81,7 @@ static const casadi_int casadi_s6[3] = {1, 1, 1};
 
 /* planar5_f:(x[20],p[36])->(f[20]) */
 static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  (void)iw; (void)w; (void)mem;
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14, a15, a16, a17, a18, a19, a20, a21, a22, a23;
   casadi_real a24, a25, a26, a27, a28, a29, a30, a31, a32, a33, a34, a35;
@@ -559,10 +560,12 @@ CASADI_SYMBOL_EXPORT int planar5_f_alloc_mem(void) {
 }
 
 CASADI_SYMBOL_EXPORT int planar5_f_init_mem(int mem) {
+  (void)mem;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT void planar5_f_free_mem(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT int planar5_f_checkout(void) {
@@ -570,6 +573,7 @@ CASADI_SYMBOL_EXPORT int planar5_f_checkout(void) {
 }
 
 CASADI_SYMBOL_EXPORT void planar5_f_release(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT void planar5_f_incref(void) {
@@ -636,6 +640,7 @@ CASADI_SYMBOL_EXPORT int planar5_f_work_bytes(casadi_int *sz_arg, casadi_int* sz
 
 /* planar5_g:(x[20],p[36])->(g[20x5]) */
 static int casadi_f1(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  (void)iw; (void)w; (void)mem;
   casadi_real a0, a1;
   a0=0.;
   if (res[0]!=0) res[0][0]=a0;
@@ -760,10 +765,12 @@ CASADI_SYMBOL_EXPORT int planar5_g_alloc_mem(void) {
 }
 
 CASADI_SYMBOL_EXPORT int planar5_g_init_mem(int mem) {
+  (void)mem;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT void planar5_g_free_mem(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT int planar5_g_checkout(void) {
@@ -771,6 +778,7 @@ CASADI_SYMBOL_EXPORT int planar5_g_checkout(void) {
 }
 
 CASADI_SYMBOL_EXPORT void planar5_g_release(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT void planar5_g_incref(void) {
@@ -837,6 +845,7 @@ CASADI_SYMBOL_EXPORT int planar5_g_work_bytes(casadi_int *sz_arg, casadi_int* sz
 
 /* planar5_ad:(x[20],p[36])->(ad[20x20]) */
 static int casadi_f2(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  (void)iw; (void)w; (void)mem;
   casadi_real a000, a001, a002, a003, a004, a005, a006, a007, a008, a009, a010, a011;
   casadi_real a012, a013, a014, a015, a016, a017, a018, a019, a020, a021, a022, a023;
   casadi_real a024, a025, a026, a027, a028, a029, a030, a031, a032, a033, a034, a035;
@@ -2823,10 +2832,12 @@ CASADI_SYMBOL_EXPORT int planar5_ad_alloc_mem(void) {
 }
 
 CASADI_SYMBOL_EXPORT int planar5_ad_init_mem(int mem) {
+  (void)mem;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT void planar5_ad_free_mem(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT int planar5_ad_checkout(void) {
@@ -2834,6 +2845,7 @@ CASADI_SYMBOL_EXPORT int planar5_ad_checkout(void) {
 }
 
 CASADI_SYMBOL_EXPORT void planar5_ad_release(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT void planar5_ad_incref(void) {
@@ -2900,6 +2912,7 @@ CASADI_SYMBOL_EXPORT int planar5_ad_work_bytes(casadi_int *sz_arg, casadi_int* s
 
 /* planar5_T:(x[20],p[36])->(T[20]) */
 static int casadi_f3(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  (void)iw; (void)w; (void)mem;
   casadi_real a000, a001, a002, a003, a004, a005, a006, a007, a008, a009, a010, a011;
   casadi_real a012, a013, a014, a015, a016, a017, a018, a019, a020, a021, a022, a023;
   casadi_real a024, a025, a026, a027, a028, a029, a030, a031, a032, a033, a034, a035;
@@ -3764,10 +3777,12 @@ CASADI_SYMBOL_EXPORT int planar5_T_alloc_mem(void) {
 }
 
 CASADI_SYMBOL_EXPORT int planar5_T_init_mem(int mem) {
+  (void)mem;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT void planar5_T_free_mem(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT int planar5_T_checkout(void) {
@@ -3775,6 +3790,7 @@ CASADI_SYMBOL_EXPORT int planar5_T_checkout(void) {
 }
 
 CASADI_SYMBOL_EXPORT void planar5_T_release(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT void planar5_T_incref(void) {
@@ -3841,6 +3857,7 @@ CASADI_SYMBOL_EXPORT int planar5_T_work_bytes(casadi_int *sz_arg, casadi_int* sz
 
 /* planar5_alpha:(x[20],p[36])->(alpha[5]) */
 static int casadi_f4(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  (void)iw; (void)w; (void)mem;
   casadi_real a000, a001, a002, a003, a004, a005, a006, a007, a008, a009, a010, a011;
   casadi_real a012, a013, a014, a015, a016, a017, a018, a019, a020, a021, a022, a023;
   casadi_real a024, a025, a026, a027, a028, a029, a030, a031, a032, a033, a034, a035;
@@ -5353,10 +5370,12 @@ CASADI_SYMBOL_EXPORT int planar5_alpha_alloc_mem(void) {
 }
 
 CASADI_SYMBOL_EXPORT int planar5_alpha_init_mem(int mem) {
+  (void)mem;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT void planar5_alpha_free_mem(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT int planar5_alpha_checkout(void) {
@@ -5364,6 +5383,7 @@ CASADI_SYMBOL_EXPORT int planar5_alpha_checkout(void) {
 }
 
 CASADI_SYMBOL_EXPORT void planar5_alpha_release(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT void planar5_alpha_incref(void) {
@@ -5430,6 +5450,7 @@ CASADI_SYMBOL_EXPORT int planar5_alpha_work_bytes(casadi_int *sz_arg, casadi_int
 
 /* planar5_beta:(x[20],p[36])->(beta[5x5]) */
 static int casadi_f5(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  (void)iw; (void)w; (void)mem;
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14, a15, a16, a17, a18, a19, a20, a21, a22, a23;
   casadi_real a24, a25, a26, a27, a28;
@@ -5688,10 +5709,12 @@ CASADI_SYMBOL_EXPORT int planar5_beta_alloc_mem(void) {
 }
 
 CASADI_SYMBOL_EXPORT int planar5_beta_init_mem(int mem) {
+  (void)mem;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT void planar5_beta_free_mem(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT int planar5_beta_checkout(void) {
@@ -5699,6 +5722,7 @@ CASADI_SYMBOL_EXPORT int planar5_beta_checkout(void) {
 }
 
 CASADI_SYMBOL_EXPORT void planar5_beta_release(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT void planar5_beta_incref(void) {
@@ -5765,6 +5789,7 @@ CASADI_SYMBOL_EXPORT int planar5_beta_work_bytes(casadi_int *sz_arg, casadi_int*
 
 /* planar5_energy:(x[20],p[36])->(energy) */
 static int casadi_f6(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  (void)iw; (void)w; (void)mem;
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14, a15, a16, a17, a18, a19, a20, a21, a22, a23;
   casadi_real a24, a25, a26, a27, a28, a29, a30, a31, a32, a33, a34, a35;
@@ -6085,10 +6110,12 @@ CASADI_SYMBOL_EXPORT int planar5_energy_alloc_mem(void) {
 }
 
 CASADI_SYMBOL_EXPORT int planar5_energy_init_mem(int mem) {
+  (void)mem;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT void planar5_energy_free_mem(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT int planar5_energy_checkout(void) {
@@ -6096,6 +6123,7 @@ CASADI_SYMBOL_EXPORT int planar5_energy_checkout(void) {
 }
 
 CASADI_SYMBOL_EXPORT void planar5_energy_release(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT void planar5_energy_incref(void) {
@@ -6162,6 +6190,7 @@ CASADI_SYMBOL_EXPORT int planar5_energy_work_bytes(casadi_int *sz_arg, casadi_in
 
 /* planar5_inertia:(x[20],p[36])->(inertia[5x5]) */
 static int casadi_f7(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  (void)iw; (void)w; (void)mem;
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14, a15, a16, a17, a18, a19, a20, a21, a22, a23;
   casadi_real a24, a25, a26, a27, a28;
@@ -6360,10 +6389,12 @@ CASADI_SYMBOL_EXPORT int planar5_inertia_alloc_mem(void) {
 }
 
 CASADI_SYMBOL_EXPORT int planar5_inertia_init_mem(int mem) {
+  (void)mem;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT void planar5_inertia_free_mem(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT int planar5_inertia_checkout(void) {
@@ -6371,6 +6402,7 @@ CASADI_SYMBOL_EXPORT int planar5_inertia_checkout(void) {
 }
 
 CASADI_SYMBOL_EXPORT void planar5_inertia_release(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT void planar5_inertia_incref(void) {

@@ -81,6 +81,7 @@ static const casadi_int casadi_s6[3] = {1, 1, 1};
 
 /* planar6_f:(x[24],p[43])->(f[24]) */
 static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  (void)iw; (void)w; (void)mem;
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14, a15, a16, a17, a18, a19, a20, a21, a22, a23;
   casadi_real a24, a25, a26, a27, a28, a29, a30, a31, a32, a33, a34, a35;
@@ -751,10 +752,12 @@ CASADI_SYMBOL_EXPORT int planar6_f_alloc_mem(void) {
 }
 
 CASADI_SYMBOL_EXPORT int planar6_f_init_mem(int mem) {
+  (void)mem;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT void planar6_f_free_mem(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT int planar6_f_checkout(void) {
@@ -762,6 +765,7 @@ CASADI_SYMBOL_EXPORT int planar6_f_checkout(void) {
 }
 
 CASADI_SYMBOL_EXPORT void planar6_f_release(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT void planar6_f_incref(void) {
@@ -828,6 +832,7 @@ CASADI_SYMBOL_EXPORT int planar6_f_work_bytes(casadi_int *sz_arg, casadi_int* sz
 
 /* planar6_g:(x[24],p[43])->(g[24x6]) */
 static int casadi_f1(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  (void)iw; (void)w; (void)mem;
   casadi_real a0, a1;
   a0=0.;
   if (res[0]!=0) res[0][0]=a0;
@@ -998,10 +1003,12 @@ CASADI_SYMBOL_EXPORT int planar6_g_alloc_mem(void) {
 }
 
 CASADI_SYMBOL_EXPORT int planar6_g_init_mem(int mem) {
+  (void)mem;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT void planar6_g_free_mem(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT int planar6_g_checkout(void) {
@@ -1009,6 +1016,7 @@ CASADI_SYMBOL_EXPORT int planar6_g_checkout(void) {
 }
 
 CASADI_SYMBOL_EXPORT void planar6_g_release(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT void planar6_g_incref(void) {
@@ -1075,6 +1083,7 @@ CASADI_SYMBOL_EXPORT int planar6_g_work_bytes(casadi_int *sz_arg, casadi_int* sz
 
 /* planar6_ad:(x[24],p[43])->(ad[24x24]) */
 static int casadi_f2(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  (void)iw; (void)w; (void)mem;
   casadi_real a000, a001, a002, a003, a004, a005, a006, a007, a008, a009, a010, a011;
   casadi_real a012, a013, a014, a015, a016, a017, a018, a019, a020, a021, a022, a023;
   casadi_real a024, a025, a026, a027, a028, a029, a030, a031, a032, a033, a034, a035;
@@ -4217,10 +4226,12 @@ CASADI_SYMBOL_EXPORT int planar6_ad_alloc_mem(void) {
 }
 
 CASADI_SYMBOL_EXPORT int planar6_ad_init_mem(int mem) {
+  (void)mem;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT void planar6_ad_free_mem(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT int planar6_ad_checkout(void) {
@@ -4228,6 +4239,7 @@ CASADI_SYMBOL_EXPORT int planar6_ad_checkout(void) {
 }
 
 CASADI_SYMBOL_EXPORT void planar6_ad_release(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT void planar6_ad_incref(void) {
@@ -4294,6 +4306,7 @@ CASADI_SYMBOL_EXPORT int planar6_ad_work_bytes(casadi_int *sz_arg, casadi_int* s
 
 /* planar6_T:(x[24],p[43])->(T[24]) */
 static int casadi_f3(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  (void)iw; (void)w; (void)mem;
   casadi_real a000, a001, a002, a003, a004, a005, a006, a007, a008, a009, a010, a011;
   casadi_real a012, a013, a014, a015, a016, a017, a018, a019, a020, a021, a022, a023;
   casadi_real a024, a025, a026, a027, a028, a029, a030, a031, a032, a033, a034, a035;
@@ -5533,10 +5546,12 @@ CASADI_SYMBOL_EXPORT int planar6_T_alloc_mem(void) {
 }
 
 CASADI_SYMBOL_EXPORT int planar6_T_init_mem(int mem) {
+  (void)mem;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT void planar6_T_free_mem(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT int planar6_T_checkout(void) {
@@ -5544,6 +5559,7 @@ CASADI_SYMBOL_EXPORT int planar6_T_checkout(void) {
 }
 
 CASADI_SYMBOL_EXPORT void planar6_T_release(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT void planar6_T_incref(void) {
@@ -5610,6 +5626,7 @@ CASADI_SYMBOL_EXPORT int planar6_T_work_bytes(casadi_int *sz_arg, casadi_int* sz
 
 /* planar6_alpha:(x[24],p[43])->(alpha[6]) */
 static int casadi_f4(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  (void)iw; (void)w; (void)mem;
   casadi_real a000, a001, a002, a003, a004, a005, a006, a007, a008, a009, a010, a011;
   casadi_real a012, a013, a014, a015, a016, a017, a018, a019, a020, a021, a022, a023;
   casadi_real a024, a025, a026, a027, a028, a029, a030, a031, a032, a033, a034, a035;
@@ -7785,10 +7802,12 @@ CASADI_SYMBOL_EXPORT int planar6_alpha_alloc_mem(void) {
 }
 
 CASADI_SYMBOL_EXPORT int planar6_alpha_init_mem(int mem) {
+  (void)mem;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT void planar6_alpha_free_mem(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT int planar6_alpha_checkout(void) {
@@ -7796,6 +7815,7 @@ CASADI_SYMBOL_EXPORT int planar6_alpha_checkout(void) {
 }
 
 CASADI_SYMBOL_EXPORT void planar6_alpha_release(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT void planar6_alpha_incref(void) {
@@ -7862,6 +7882,7 @@ CASADI_SYMBOL_EXPORT int planar6_alpha_work_bytes(casadi_int *sz_arg, casadi_int
 
 /* planar6_beta:(x[24],p[43])->(beta[6x6]) */
 static int casadi_f5(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  (void)iw; (void)w; (void)mem;
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14, a15, a16, a17, a18, a19, a20, a21, a22, a23;
   casadi_real a24, a25, a26, a27, a28, a29, a30, a31, a32, a33, a34, a35;
@@ -8214,10 +8235,12 @@ CASADI_SYMBOL_EXPORT int planar6_beta_alloc_mem(void) {
 }
 
 CASADI_SYMBOL_EXPORT int planar6_beta_init_mem(int mem) {
+  (void)mem;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT void planar6_beta_free_mem(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT int planar6_beta_checkout(void) {
@@ -8225,6 +8248,7 @@ CASADI_SYMBOL_EXPORT int planar6_beta_checkout(void) {
 }
 
 CASADI_SYMBOL_EXPORT void planar6_beta_release(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT void planar6_beta_incref(void) {
@@ -8291,6 +8315,7 @@ CASADI_SYMBOL_EXPORT int planar6_beta_work_bytes(casadi_int *sz_arg, casadi_int*
 
 /* planar6_energy:(x[24],p[43])->(energy) */
 static int casadi_f6(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  (void)iw; (void)w; (void)mem;
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14, a15, a16, a17, a18, a19, a20, a21, a22, a23;
   casadi_real a24, a25, a26, a27, a28, a29, a30, a31, a32, a33, a34, a35;
@@ -8709,10 +8734,12 @@ CASADI_SYMBOL_EXPORT int planar6_energy_alloc_mem(void) {
 }
 
 CASADI_SYMBOL_EXPORT int planar6_energy_init_mem(int mem) {
+  (void)mem;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT void planar6_energy_free_mem(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT int planar6_energy_checkout(void) {
@@ -8720,6 +8747,7 @@ CASADI_SYMBOL_EXPORT int planar6_energy_checkout(void) {
 }
 
 CASADI_SYMBOL_EXPORT void planar6_energy_release(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT void planar6_energy_incref(void) {
@@ -8786,6 +8814,7 @@ CASADI_SYMBOL_EXPORT int planar6_energy_work_bytes(casadi_int *sz_arg, casadi_in
 
 /* planar6_inertia:(x[24],p[43])->(inertia[6x6]) */
 static int casadi_f7(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  (void)iw; (void)w; (void)mem;
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14, a15, a16, a17, a18, a19, a20, a21, a22, a23;
   casadi_real a24, a25, a26, a27, a28, a29, a30, a31, a32, a33, a34, a35;
@@ -9054,10 +9083,12 @@ CASADI_SYMBOL_EXPORT int planar6_inertia_alloc_mem(void) {
 }
 
 CASADI_SYMBOL_EXPORT int planar6_inertia_init_mem(int mem) {
+  (void)mem;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT void planar6_inertia_free_mem(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT int planar6_inertia_checkout(void) {
@@ -9065,6 +9096,7 @@ CASADI_SYMBOL_EXPORT int planar6_inertia_checkout(void) {
 }
 
 CASADI_SYMBOL_EXPORT void planar6_inertia_release(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT void planar6_inertia_incref(void) {

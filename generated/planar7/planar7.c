@@ -81,6 +81,7 @@ static const casadi_int casadi_s6[3] = {1, 1, 1};
 
 /* planar7_f:(x[28],p[50])->(f[28]) */
 static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  (void)iw; (void)w; (void)mem;
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14, a15, a16, a17, a18, a19, a20, a21, a22, a23;
   casadi_real a24, a25, a26, a27, a28, a29, a30, a31, a32, a33, a34, a35;
@@ -981,10 +982,12 @@ CASADI_SYMBOL_EXPORT int planar7_f_alloc_mem(void) {
 }
 
 CASADI_SYMBOL_EXPORT int planar7_f_init_mem(int mem) {
+  (void)mem;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT void planar7_f_free_mem(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT int planar7_f_checkout(void) {
@@ -992,6 +995,7 @@ CASADI_SYMBOL_EXPORT int planar7_f_checkout(void) {
 }
 
 CASADI_SYMBOL_EXPORT void planar7_f_release(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT void planar7_f_incref(void) {
@@ -1058,6 +1062,7 @@ CASADI_SYMBOL_EXPORT int planar7_f_work_bytes(casadi_int *sz_arg, casadi_int* sz
 
 /* planar7_g:(x[28],p[50])->(g[28x7]) */
 static int casadi_f1(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  (void)iw; (void)w; (void)mem;
   casadi_real a0, a1;
   a0=0.;
   if (res[0]!=0) res[0][0]=a0;
@@ -1282,10 +1287,12 @@ CASADI_SYMBOL_EXPORT int planar7_g_alloc_mem(void) {
 }
 
 CASADI_SYMBOL_EXPORT int planar7_g_init_mem(int mem) {
+  (void)mem;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT void planar7_g_free_mem(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT int planar7_g_checkout(void) {
@@ -1293,6 +1300,7 @@ CASADI_SYMBOL_EXPORT int planar7_g_checkout(void) {
 }
 
 CASADI_SYMBOL_EXPORT void planar7_g_release(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT void planar7_g_incref(void) {
@@ -1359,6 +1367,7 @@ CASADI_SYMBOL_EXPORT int planar7_g_work_bytes(casadi_int *sz_arg, casadi_int* sz
 
 /* planar7_ad:(x[28],p[50])->(ad[28x28]) */
 static int casadi_f2(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  (void)iw; (void)w; (void)mem;
   casadi_real a000, a001, a002, a003, a004, a005, a006, a007, a008, a009, a010, a011;
   casadi_real a012, a013, a014, a015, a016, a017, a018, a019, a020, a021, a022, a023;
   casadi_real a024, a025, a026, a027, a028, a029, a030, a031, a032, a033, a034, a035;
@@ -6033,10 +6042,12 @@ CASADI_SYMBOL_EXPORT int planar7_ad_alloc_mem(void) {
 }
 
 CASADI_SYMBOL_EXPORT int planar7_ad_init_mem(int mem) {
+  (void)mem;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT void planar7_ad_free_mem(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT int planar7_ad_checkout(void) {
@@ -6044,6 +6055,7 @@ CASADI_SYMBOL_EXPORT int planar7_ad_checkout(void) {
 }
 
 CASADI_SYMBOL_EXPORT void planar7_ad_release(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT void planar7_ad_incref(void) {
@@ -6110,6 +6122,7 @@ CASADI_SYMBOL_EXPORT int planar7_ad_work_bytes(casadi_int *sz_arg, casadi_int* s
 
 /* planar7_T:(x[28],p[50])->(T[28]) */
 static int casadi_f3(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  (void)iw; (void)w; (void)mem;
   casadi_real a000, a001, a002, a003, a004, a005, a006, a007, a008, a009, a010, a011;
   casadi_real a012, a013, a014, a015, a016, a017, a018, a019, a020, a021, a022, a023;
   casadi_real a024, a025, a026, a027, a028, a029, a030, a031, a032, a033, a034, a035;
@@ -7798,10 +7811,12 @@ CASADI_SYMBOL_EXPORT int planar7_T_alloc_mem(void) {
 }
 
 CASADI_SYMBOL_EXPORT int planar7_T_init_mem(int mem) {
+  (void)mem;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT void planar7_T_free_mem(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT int planar7_T_checkout(void) {
@@ -7809,6 +7824,7 @@ CASADI_SYMBOL_EXPORT int planar7_T_checkout(void) {
 }
 
 CASADI_SYMBOL_EXPORT void planar7_T_release(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT void planar7_T_incref(void) {
@@ -7875,6 +7891,7 @@ CASADI_SYMBOL_EXPORT int planar7_T_work_bytes(casadi_int *sz_arg, casadi_int* sz
 
 /* planar7_alpha:(x[28],p[50])->(alpha[7]) */
 static int casadi_f4(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  (void)iw; (void)w; (void)mem;
   casadi_real a000, a001, a002, a003, a004, a005, a006, a007, a008, a009, a010, a011;
   casadi_real a012, a013, a014, a015, a016, a017, a018, a019, a020, a021, a022, a023;
   casadi_real a024, a025, a026, a027, a028, a029, a030, a031, a032, a033, a034, a035;
@@ -10839,10 +10856,12 @@ CASADI_SYMBOL_EXPORT int planar7_alpha_alloc_mem(void) {
 }
 
 CASADI_SYMBOL_EXPORT int planar7_alpha_init_mem(int mem) {
+  (void)mem;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT void planar7_alpha_free_mem(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT int planar7_alpha_checkout(void) {
@@ -10850,6 +10869,7 @@ CASADI_SYMBOL_EXPORT int planar7_alpha_checkout(void) {
 }
 
 CASADI_SYMBOL_EXPORT void planar7_alpha_release(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT void planar7_alpha_incref(void) {
@@ -10916,6 +10936,7 @@ CASADI_SYMBOL_EXPORT int planar7_alpha_work_bytes(casadi_int *sz_arg, casadi_int
 
 /* planar7_beta:(x[28],p[50])->(beta[7x7]) */
 static int casadi_f5(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  (void)iw; (void)w; (void)mem;
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14, a15, a16, a17, a18, a19, a20, a21, a22, a23;
   casadi_real a24, a25, a26, a27, a28, a29, a30, a31, a32, a33, a34, a35;
@@ -11375,10 +11396,12 @@ CASADI_SYMBOL_EXPORT int planar7_beta_alloc_mem(void) {
 }
 
 CASADI_SYMBOL_EXPORT int planar7_beta_init_mem(int mem) {
+  (void)mem;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT void planar7_beta_free_mem(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT int planar7_beta_checkout(void) {
@@ -11386,6 +11409,7 @@ CASADI_SYMBOL_EXPORT int planar7_beta_checkout(void) {
 }
 
 CASADI_SYMBOL_EXPORT void planar7_beta_release(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT void planar7_beta_incref(void) {
@@ -11452,6 +11476,7 @@ CASADI_SYMBOL_EXPORT int planar7_beta_work_bytes(casadi_int *sz_arg, casadi_int*
 
 /* planar7_energy:(x[28],p[50])->(energy) */
 static int casadi_f6(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  (void)iw; (void)w; (void)mem;
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14, a15, a16, a17, a18, a19, a20, a21, a22, a23;
   casadi_real a24, a25, a26, a27, a28, a29, a30, a31, a32, a33, a34, a35;
@@ -11981,10 +12006,12 @@ CASADI_SYMBOL_EXPORT int planar7_energy_alloc_mem(void) {
 }
 
 CASADI_SYMBOL_EXPORT int planar7_energy_init_mem(int mem) {
+  (void)mem;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT void planar7_energy_free_mem(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT int planar7_energy_checkout(void) {
@@ -11992,6 +12019,7 @@ CASADI_SYMBOL_EXPORT int planar7_energy_checkout(void) {
 }
 
 CASADI_SYMBOL_EXPORT void planar7_energy_release(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT void planar7_energy_incref(void) {
@@ -12058,6 +12086,7 @@ CASADI_SYMBOL_EXPORT int planar7_energy_work_bytes(casadi_int *sz_arg, casadi_in
 
 /* planar7_inertia:(x[28],p[50])->(inertia[7x7]) */
 static int casadi_f7(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  (void)iw; (void)w; (void)mem;
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14, a15, a16, a17, a18, a19, a20, a21, a22, a23;
   casadi_real a24, a25, a26, a27, a28, a29, a30, a31, a32, a33, a34, a35;
@@ -12405,10 +12434,12 @@ CASADI_SYMBOL_EXPORT int planar7_inertia_alloc_mem(void) {
 }
 
 CASADI_SYMBOL_EXPORT int planar7_inertia_init_mem(int mem) {
+  (void)mem;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT void planar7_inertia_free_mem(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT int planar7_inertia_checkout(void) {
@@ -12416,6 +12447,7 @@ CASADI_SYMBOL_EXPORT int planar7_inertia_checkout(void) {
 }
 
 CASADI_SYMBOL_EXPORT void planar7_inertia_release(int mem) {
+  (void)mem;
 }
 
 CASADI_SYMBOL_EXPORT void planar7_inertia_incref(void) {
