@@ -156,7 +156,8 @@ def make_link1() -> FlexibleJointModel:
     )
 
 
-def make_planar(n: int) -> FlexibleJointModel:
+def make_planar(n: int, name: str = None, defaults: Dict[str, float] = None,
+                description: str = None) -> FlexibleJointModel:
     """Planar serial chain of ``n`` flexible joints with relative angles.
 
     q = 0 hangs straight down, gravity ``g0`` acts along -y. Link i has mass
@@ -175,6 +176,17 @@ def make_planar(n: int) -> FlexibleJointModel:
     The products with S are suffix sums, kept as named symbols of the
     model's :class:`Program` so that D and h cost O(n^2) operations and
     their time derivatives stay just as compact.
+
+    Parameters
+    ----------
+    n : int
+        Number of links, 1..7.
+    name : str, optional
+        Model name (default ``planar<n>``); used for user model files.
+    defaults : dict str -> float, optional
+        Overrides of parameter defaults (names as in the parameter table).
+    description : str, optional
+        Replaces the generated description.
     """
     if not 1 <= n <= 7:
         raise ValueError(f"planar<n>: n must be in 1..7, got {n}")
@@ -191,6 +203,13 @@ def make_planar(n: int) -> FlexibleJointModel:
     params = tuple(
         Param(f"{g}{i}", d, meaning.format(i=i), unit) for g, d, meaning, unit in groups for i in idx
     ) + (Param("g0", 9.8, "gravitational acceleration", "m/s^2"),)
+    overrides = dict(defaults or {})
+    unknown = sorted(set(overrides) - {p.name for p in params})
+    if unknown:
+        raise ValueError(f"unknown parameter(s) {unknown} for a {n}-link planar chain; "
+                         f"expected names among {[p.name for p in params]}")
+    params = tuple(Param(p.name, float(overrides.get(p.name, p.default)), p.meaning, p.unit)
+                   for p in params)
     sym = {p.name: sp.Symbol(p.name, real=True) for p in params}
     m = [sym[f"m{i}"] for i in idx]
     l = [sym[f"l{i}"] for i in idx]
@@ -253,12 +272,12 @@ def make_planar(n: int) -> FlexibleJointModel:
         h[j] = tail
     V = -g0 * sp.Add(*[e[j] * cth[j] for j in range(n)])
     return FlexibleJointModel(
-        name=f"planar{n}", n=n, params=params, q=q, dq=dq, qm=qm, dqm=dqm,
+        name=name or f"planar{n}", n=n, params=params, q=q, dq=dq, qm=qm, dqm=dqm,
         D=D, h=h, potential=V,
         K=tuple(sym[f"K{i}"] for i in idx),
         Jm=tuple(sym[f"Jm{i}"] for i in idx),
         Bm=tuple(sym[f"Bm{i}"] for i in idx),
-        description=(
+        description=description or (
             f"Planar serial chain of {n} link(s) with flexible joints, relative joint "
             "angles, q = 0 hanging straight down, gravity g0 along -y."
         ),
