@@ -75,7 +75,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     fig = sub.add_parser("figures", help="reproduce the paper's figures and the comparisons (make demo)")
     fig.add_argument("--out", type=Path, default=Path("out"), help="output directory (default out)")
-    fig.add_argument("--samples", type=int, default=24, help="Monte Carlo samples (default 24)")
+    fig.add_argument("--samples", type=int, default=40, help="Monte Carlo samples (default 40)")
     return parser
 
 
