@@ -5,6 +5,7 @@ Examples
 ``fjm simulate link1 --K 120 --reference sine --duration 10 --plot out/run.png``
 ``fjm simulate planar2 --controller ismc --param K1=120 --param K2=180 --reference sine``
 ``fjm figures --out out``
+``fjm derive --model-file arm.toml --out DIR`` (needs ``pip install '.[derive]'``)
 """
 from __future__ import annotations
 
@@ -72,6 +73,10 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_argument("--u-max", type=float, default=None, help="torque limit, N m (default none)")
     sim.add_argument("--plot", type=Path, default=None, help="write a PNG of angles, error, torque and s")
     sim.add_argument("--quiet", action="store_true", help="no progress on stderr")
+
+    # `fjm derive ...` is handed to `python -m derive` as is (see main); listed here for --help.
+    sub.add_parser("derive", add_help=False,
+                   help="derive and emit models, e.g. --model-file arm.toml --out DIR (needs .[derive])")
 
     fig = sub.add_parser("figures", help="reproduce the paper's figures and the comparisons (make demo)")
     fig.add_argument("--out", type=Path, default=Path("out"), help="output directory (default out)")
@@ -170,7 +175,23 @@ def _plot_run(res, args, path: Path) -> None:
     plt.close(fig)
 
 
+def _cmd_derive(argv: List[str]) -> int:
+    """``fjm derive ...`` = ``python -m derive ...``; SymPy is imported only here."""
+    try:
+        from derive.__main__ import main as derive_main
+    except ModuleNotFoundError as exc:
+        if exc.name in ("sympy", "derive", "tomli"):
+            print(f"fjm derive: error: the derivation needs the build-time extra ({exc.name} is missing); "
+                  "install it with: pip install '.[derive]'  (or: pip install 'fjm[derive]')", file=sys.stderr)
+            return 2
+        raise
+    return derive_main(argv, prog="fjm derive")
+
+
 def main(argv: Optional[List[str]] = None) -> int:
+    argv = sys.argv[1:] if argv is None else list(argv)
+    if argv[:1] == ["derive"]:
+        return _cmd_derive(argv[1:])
     parser = build_parser()
     args = parser.parse_args(argv)
     if args.command is None:
