@@ -1,4 +1,4 @@
-"""``python -m derive [--models M ...] [--out DIR] [--check]``.
+"""``python -m derive [--models M ...] [--model-file FILE.toml ...] [--out DIR] [--check]``.
 
 Derives the requested models (default: all) and writes them into
 ``generated/`` atomically: everything is first written to a sibling temp
@@ -7,6 +7,10 @@ directory, which then replaces ``generated/`` by rename. An interrupted run
 
 ``--check`` regenerates every model into a temp dir and compares with
 ``generated/`` byte for byte; it exits 1 with a summary of what differs.
+
+``--model-file arm.toml --out DIR`` derives a user's planar chain described
+in a TOML file (see :mod:`derive.model_file`) into ``DIR/<name>/``, exactly
+like a built-in model.
 """
 
 from __future__ import annotations
@@ -20,10 +24,10 @@ import sys
 import tempfile
 import time
 from pathlib import Path
-from typing import Dict, List
+from typing import Callable, Dict, List, Optional
 
 from .linearize import linearize
-from .models import MODEL_NAMES, build
+from .models import MODEL_NAMES, FlexibleJointModel, build
 from .emit.writer import recover, swap_in, write_model
 
 REPO = Path(__file__).resolve().parent.parent
@@ -35,13 +39,20 @@ def _sigterm_to_exit(signum, frame):  # pragma: no cover - exercised by the inte
     raise SystemExit(128 + signum)
 
 
-def derive_into(root: Path, models: List[str], log=print) -> Dict[str, Dict[str, float]]:
-    """Derive and emit ``models`` into ``root/<model>/``; returns per-model timings (s)."""
+def derive_into(root: Path, models: List[str], log=print,
+                builders: Optional[Dict[str, Callable[[], FlexibleJointModel]]] = None,
+                ) -> Dict[str, Dict[str, float]]:
+    """Derive and emit ``models`` into ``root/<model>/``; returns per-model timings (s).
+
+    ``builders`` maps extra (user, e.g. model-file) names to functions that
+    build them; other names come from the registry (:func:`derive.models.build`).
+    """
     timings: Dict[str, Dict[str, float]] = {}
+    builders = builders or {}
     for i, name in enumerate(models, 1):
         log(f"[{i}/{len(models)}] {name}: deriving ...", end="", flush=True)
         t0 = time.perf_counter()
-        lin = linearize(build(name))
+        lin = linearize(builders[name]() if name in builders else build(name))
         t1 = time.perf_counter()
         manifest = write_model(lin, root / name)
         t2 = time.perf_counter()
@@ -76,27 +87,45 @@ def diff_trees(expected: Path, actual: Path) -> List[str]:
     return problems
 
 
-def main(argv=None) -> int:
+def main(argv=None, prog: str = "python -m derive") -> int:
     sys.setrecursionlimit(max(sys.getrecursionlimit(), 20000))  # deep program chains at n = 7
-    ap = argparse.ArgumentParser(prog="python -m derive", description=__doc__.split("\n\n")[0])
+    ap = argparse.ArgumentParser(prog=prog, description=__doc__.split("\n\n")[0])
     ap.add_argument("--models", nargs="+", metavar="MODEL",
                     help=f"models to derive (default: all): {' '.join(MODEL_NAMES)}")
-    ap.add_argument("--out", type=Path, default=DEFAULT_OUT, help="output root (default: generated/)")
+    ap.add_argument("--model-file", action="append", type=Path, default=[], metavar="FILE.toml",
+                    help="derive a planar chain described in a TOML model file into --out/<name>/ "
+                         "(repeatable; requires --out; see examples/arm.toml)")
+    ap.add_argument("--out", type=Path, default=None, help="output root (default: generated/)")
     ap.add_argument("--check", action="store_true",
                     help="regenerate into a temp dir and fail if --out differs")
     args = ap.parse_args(argv)
+    builders: Dict[str, Callable[[], FlexibleJointModel]] = {}
+    if args.model_file:
+        if args.out is None:
+            ap.error("--model-file needs --out DIR (user models are not written into generated/)")
+        from .model_file import ModelFileError, load_model_file
+        for path in args.model_file:
+            try:
+                spec = load_model_file(path)
+            except (ModelFileError, OSError) as exc:
+                print(f"{ap.prog}: error: {exc}", file=sys.stderr)
+                return 2
+            if spec.name in builders:
+                ap.error(f"two model files define the model name {spec.name!r}")
+            builders[spec.name] = spec.build
+        args.models = (args.models or []) + list(builders)
     models = args.models or list(MODEL_NAMES)
-    unknown = [m for m in models if m not in MODEL_NAMES]
+    unknown = [m for m in models if m not in MODEL_NAMES and m not in builders]
     if unknown:
         ap.error(f"unknown model(s) {', '.join(unknown)}; available models: {', '.join(MODEL_NAMES)}")
     signal.signal(signal.SIGTERM, _sigterm_to_exit)
-    out: Path = args.out.resolve()
+    out: Path = (args.out if args.out is not None else DEFAULT_OUT).resolve()
 
     if args.check:
         with tempfile.TemporaryDirectory(prefix="fjm-check-") as tmp:
             fresh = Path(tmp) / "generated"
             fresh.mkdir()
-            derive_into(fresh, list(MODEL_NAMES) if not args.models else models)
+            derive_into(fresh, list(MODEL_NAMES) if not args.models else models, builders=builders)
             recover(out)
             if not out.exists():
                 print(f"check-generated: {out} does not exist; run `make derive`", file=sys.stderr)
@@ -124,7 +153,7 @@ def main(argv=None) -> int:
                     shutil.copytree(old, staging / old.name)
                 elif old.is_file():
                     shutil.copy2(old, staging / old.name)
-        timings = derive_into(staging, models)
+        timings = derive_into(staging, models, builders=builders)
         total = time.perf_counter() - t0
         swap_in(staging, out)
     finally:
