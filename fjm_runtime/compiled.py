@@ -114,6 +114,23 @@ def _build(source: str, key: str, flags: Sequence[str], root: Path, name: str) -
     return so
 
 
+def compile_library(source: str, name: str, flags: Sequence[str] = DEFAULT_FLAGS,
+                    cache: Optional[Path] = None) -> Path:
+    """Compile C ``source`` to a shared object in the cache (or reuse a verified entry).
+
+    Returns the path of the ``.so``; the caller loads it (``ctypes`` or
+    ``casadi.external``). Same cache rules as :func:`compile_function`.
+    """
+    key = cache_key(source, flags)
+    root = Path(cache) if cache is not None else cache_dir()
+    root.mkdir(parents=True, exist_ok=True)
+    with _lock:
+        so, meta = root / f"{key}.so", root / f"{key}.json"
+        if _entry_valid(so, meta, key):
+            return so
+        return _build(source, key, flags, root, name)
+
+
 def compile_function(fn: ca.Function, flags: Sequence[str] = DEFAULT_FLAGS,
                      cache: Optional[Path] = None) -> ca.Function:
     """Code-generate ``fn``, compile it (or reuse a verified cache entry), load it.

@@ -1,0 +1,277 @@
+"""Batch closed-loop runs: many TRUE plants, one controller, one compiled call.
+
+:func:`simulate_batch` folds the closed-loop step of :mod:`fjm_runtime.compiled`
+over all samples while accumulating the per-run metrics of
+:func:`fjm_runtime.simulate.compute_metrics` (so no trajectory is stored), maps
+that over the runs (OpenMP when the compiler supports it) and compiles the
+whole thing once (cached like the single-run backend).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Dict, List, Optional, Sequence
+
+import casadi as ca
+import numpy as np
+
+from .compiled import DEFAULT_FLAGS, CompileError, compile_library, generate_source
+
+METRIC_NAMES = ("final_error", "rms_error", "rms_error_second_half", "max_abs_u",
+                "reaching_time", "total_variation_u")
+
+
+@dataclass
+class BatchResult:
+    """Per-run results of :func:`simulate_batch` (``B`` runs).
+
+    Attributes
+    ----------
+    params : ndarray, shape (B, n_params)
+        TRUE parameters of each run (``param_names`` order).
+    metrics : dict str -> ndarray, shape (B,)
+        The fields of :class:`fjm_runtime.simulate.Metrics`; NaN for diverged runs.
+    diverged : ndarray of bool, shape (B,)
+    divergence_time : ndarray, shape (B,)
+        First time the state was non-finite or beyond ``max_state`` (NaN if never).
+    x_final : ndarray, shape (B, 4n)
+    results : list of SimulationResult or None
+        Full trajectories, only with ``trajectories=True``.
+    """
+
+    params: np.ndarray
+    metrics: Dict[str, np.ndarray]
+    diverged: np.ndarray
+    divergence_time: np.ndarray
+    x_final: np.ndarray
+    results: Optional[list] = None
+    info: dict = field(default_factory=dict)
+
+    def table(self) -> List[dict]:
+        """One dict per run: parameters by name are not known here; index, metrics, diverged."""
+        return [dict(run=i, diverged=bool(self.diverged[i]),
+                     **{k: float(v[i]) for k, v in self.metrics.items()})
+                for i in range(self.diverged.size)]
+
+
+def _metric_step(model, controller, dt: float, max_state: float) -> ca.Function:
+    """``(acc, r0, rh, r1, flags) -> acc_next`` for one sample (SX).
+
+    ``acc = [w; u_prev; sum_e2; sum_e2_half; max_u; last_outside_k; tv; first_bad_k; p]``
+    (the TRUE parameters ``p`` ride along unchanged, so a fold maps only the references);
+    ``flags = [in_second_half, k, is_first, is_last]``.
+    """
+    from .simulate import casadi_functions
+    fns = casadi_functions(model)
+    if fns is None or not hasattr(controller, "symbolic_evaluate"):
+        raise ValueError("simulate_batch: needs a model with CasADi Functions and a controller "
+                         "with symbolic_evaluate")
+    n, nx = int(model.n), int(model.nx)
+    nz = int(getattr(controller, "n_states", 0))
+    nw = nx + nz
+    n_par = len(model.param_names)
+    acc = ca.SX.sym("acc", nw + n + 6 + n_par)
+    r0, rh, r1 = (ca.SX.sym(nm, 5 * n) for nm in ("r0", "rh", "r1"))
+    fl = ca.SX.sym("flags", 4)
+    p = acc[nw + n + 6:]
+    w, u_prev = acc[:nw], acc[nw:nw + n]
+    sum_e2, sum_e2_half, max_u, last_out, tv, first_bad = (acc[nw + n + i] for i in range(6))
+    half, k, first, last = fl[0], fl[1], fl[2], fl[3]
+    x, z = w[:nx], w[nx:]
+    out = controller.symbolic_evaluate(x, z, r0, fns)
+    u, s = out["u"], out["s"]
+
+    def rhs(wk, rk):
+        xk, zk = wk[:nx], wk[nx:]
+        dx = fns["f"](xk, p) + ca.mtimes(ca.reshape(fns["g"](xk, p), nx, n), u)
+        if nz == 0:
+            return dx
+        return ca.vertcat(dx, controller.symbolic_state_derivative(xk, zk, rk, out))
+
+    k1 = rhs(w, r0)
+    k2 = rhs(w + 0.5 * dt * k1, rh)
+    k3 = rhs(w + 0.5 * dt * k2, rh)
+    k4 = rhs(w + dt * k3, r1)
+    w_step = w + (dt / 6.0) * (k1 + 2 * k2 + 2 * k3 + k4)
+    w_next = ca.if_else(last, w, w_step)
+    e1 = x[:n] - r0[:n]
+    e2 = ca.sumsqr(e1)
+    delta = ca.DM(np.asarray(getattr(controller, "delta", np.full(n, np.inf)), dtype=float))
+    outside = ca.mmax(ca.fabs(s) - delta) > 0
+    absw = ca.fabs(w_next)
+    ok = (ca.mmax(absw) <= max_state) * (ca.sum1(absw) <= 1e308)  # NaN compares false
+    acc_next = ca.vertcat(
+        w_next, u,
+        sum_e2 + e2, sum_e2_half + half * e2,
+        ca.fmax(max_u, ca.mmax(ca.fabs(u))),
+        ca.if_else(outside, k, last_out),
+        tv + (1 - first) * ca.sum1(ca.fabs(u - u_prev)),
+        ca.if_else((1 - ok) * (first_bad < 0) * (1 - last), k + 1, first_bad),
+        p,
+    )
+    f = ca.Function("fjm_metric_step", [acc, r0, rh, r1, fl], [acc_next])
+    return f
+
+
+_DRIVER = r"""
+/* fjm batch driver: for each run, fold fjm_metric_step over the samples. */
+#include <stdlib.h>
+#include <string.h>
+int fjm_batch(int n_runs, int n_samples, int nacc, int nr, double* acc,
+              const double* R0, const double* RH, const double* R1, const double* FL) {
+  casadi_int sz_arg, sz_res, sz_iw, sz_w;
+  fjm_metric_step_work(&sz_arg, &sz_res, &sz_iw, &sz_w);
+  int failed = 0;
+  #pragma omp parallel for schedule(dynamic, 4) reduction(|:failed)
+  for (int b = 0; b < n_runs; ++b) {
+    double* buf = (double*)malloc(sizeof(double) * (2 * nacc + sz_w + 1));
+    casadi_int* iw = (casadi_int*)malloc(sizeof(casadi_int) * (sz_iw + 1));
+    double *cur = buf, *nxt = buf + nacc, *w = buf + 2 * nacc;
+    memcpy(cur, acc + (size_t)b * nacc, sizeof(double) * nacc);
+    const double* arg[8];
+    double* res[2];
+    for (int k = 0; k < n_samples; ++k) {
+      arg[0] = cur; arg[1] = R0 + (size_t)k * nr; arg[2] = RH + (size_t)k * nr;
+      arg[3] = R1 + (size_t)k * nr; arg[4] = FL + (size_t)k * 4;
+      res[0] = nxt;
+      failed |= fjm_metric_step(arg, res, iw, w, 0);
+      double* t = cur; cur = nxt; nxt = t;
+    }
+    memcpy(acc + (size_t)b * nacc, cur, sizeof(double) * nacc);
+    free(buf); free(iw);
+  }
+  return failed;
+}
+"""
+
+
+class BatchRunner:
+    """ctypes handle on the compiled batch loop (step + driver, cached by source hash)."""
+
+    def __init__(self, so_path, nacc: int, nr: int):
+        import ctypes
+        self.lib = ctypes.CDLL(str(so_path))
+        dp = ctypes.POINTER(ctypes.c_double)
+        self.lib.fjm_batch.argtypes = [ctypes.c_int] * 4 + [dp] * 5
+        self.lib.fjm_batch.restype = ctypes.c_int
+        self.nacc, self.nr, self.path = nacc, nr, so_path
+
+    def __call__(self, ACC0, R0, RH, R1, FL) -> np.ndarray:
+        """``ACC0`` (B, nacc); ``R*`` (S, 5n) and ``FL`` (S, 4) row-major; returns (B, nacc)."""
+        import ctypes
+        acc = np.ascontiguousarray(ACC0, dtype=float).copy()
+        arrs = [np.ascontiguousarray(a, dtype=float) for a in (R0, RH, R1, FL)]
+        S = arrs[0].shape[0]
+        if any(a.shape[0] != S for a in arrs) or acc.shape[1] != self.nacc:
+            raise ValueError("BatchRunner: inconsistent argument shapes")
+        ptr = lambda a: a.ctypes.data_as(ctypes.POINTER(ctypes.c_double))
+        flag = self.lib.fjm_batch(acc.shape[0], S, self.nacc, self.nr, ptr(acc), *map(ptr, arrs))
+        if flag:
+            raise RuntimeError("compiled batch step returned an error flag")
+        return acc
+
+
+def batch_runner(model, controller, dt: float, max_state: float = 1e6,
+                 flags: Sequence[str] = DEFAULT_FLAGS, parallel: bool = True) -> BatchRunner:
+    """Compile (once, cached) the metric step plus a C loop over runs and samples.
+
+    The number of runs and steps is a run-time argument: one build serves
+    every batch size and duration. Runs are spread over cores with OpenMP
+    when ``parallel`` and ``-fopenmp`` works (falls back to serial).
+    """
+    step = _metric_step(model, controller, float(dt), float(max_state))
+    nacc = step.size1_in(0)
+    nr = step.size1_in(1)
+    source = generate_source(step) + _DRIVER
+    if parallel:
+        try:
+            so = compile_library(source, "fjm_batch", tuple(flags) + ("-fopenmp",))
+            return BatchRunner(so, nacc, nr)
+        except CompileError:
+            pass
+    return BatchRunner(compile_library(source, "fjm_batch", flags), nacc, nr)
+
+
+def simulate_batch(model, controller, reference, params_true_array, *, duration: float,
+                   dt: float = 1e-3, x0=None, max_state: float = 1e6, trajectories: bool = False,
+                   parallel: bool = True) -> BatchResult:
+    """Run ``B`` closed loops (one per row of ``params_true_array``) in one compiled call.
+
+    Parameters
+    ----------
+    model, controller, reference
+        As for :func:`fjm_runtime.simulate.simulate`; the controller (nominal
+        parameters) and the reference are shared by all runs.
+    params_true_array : array_like, shape (B, n_params)
+        TRUE plant parameters per run, columns in ``model.param_names`` order.
+    duration, dt, x0, max_state
+        As for :func:`simulate` (``x0`` shared by all runs).
+    trajectories : bool
+        Also return every run's :class:`SimulationResult` (compiled backend, one
+        run at a time; memory grows with ``B * duration / dt``).
+    parallel : bool
+        Map the runs with OpenMP (falls back to serial if ``-fopenmp`` fails).
+
+    Returns
+    -------
+    BatchResult
+    """
+    from .simulate import simulate
+    n, nx = int(model.n), int(model.nx)
+    P = np.asarray(params_true_array, dtype=float)
+    if P.ndim == 1 and P.size == len(model.param_names):
+        P = P[None, :]
+    if P.ndim != 2 or P.shape[1] != len(model.param_names) or P.shape[0] < 1:
+        raise ValueError(f"params_true_array with shape {np.shape(params_true_array)}: expected "
+                         f"(B, {len(model.param_names)}) with columns {', '.join(model.param_names)}")
+    if not np.all(np.isfinite(P)):
+        raise ValueError("params_true_array: expected finite values")
+    if not (np.isfinite(duration) and duration > 0):
+        raise ValueError(f"duration = {duration!r}: expected a finite value > 0 s")
+    if not (np.isfinite(dt) and 0 < dt <= duration):
+        raise ValueError(f"dt = {dt!r}: expected a finite step with 0 < dt <= duration")
+    B = P.shape[0]
+    n_steps = int(round(duration / dt))
+    r_half = reference.sample(0.5 * dt * np.arange(2 * n_steps + 3)).reshape(-1, 5 * n)
+    R = r_half[0::2]
+    if x0 is None:
+        x0 = np.zeros(nx)
+        x0[0:n] = R[0, :n]
+        x0[2 * n:3 * n] = R[0, :n]
+    x0 = np.asarray(x0, dtype=float)
+    if x0.shape != (nx,) or not np.all(np.isfinite(x0)):
+        raise ValueError(f"x0 with shape {x0.shape}: expected finite ({nx},) = [q_l; dq_l; q_m; dq_m]")
+    z0 = np.asarray(controller.initial_state(0.0, x0, R[0].reshape(5, n)), dtype=float)
+    acc0 = np.concatenate([x0, z0, np.zeros(n), [0.0, 0.0, 0.0, -1.0, 0.0, -1.0]])
+    ACC0 = np.hstack([np.tile(acc0, (B, 1)), P]).T
+    t = dt * np.arange(n_steps + 1)
+    half = (t >= 0.5 * t[-1]).astype(float)
+    FL = np.vstack([half, np.arange(n_steps + 1, dtype=float),
+                    (np.arange(n_steps + 1) == 0).astype(float),
+                    (np.arange(n_steps + 1) == n_steps).astype(float)])
+    runner = batch_runner(model, controller, dt, max_state, parallel=parallel)
+    acc = runner(ACC0.T, R[:n_steps + 1], r_half[1:2 * n_steps + 2:2], R[1:n_steps + 2], FL.T)
+    nw = nx + z0.size
+    sum_e2, sum_half, max_u, last_out, tv, first_bad = (acc[:, nw + n + i] for i in range(6))
+    x_fin = acc[:, :nx]
+    final_error = np.max(np.abs(x_fin[:, :n] - R[n_steps, :n]), axis=1)
+    reaching = np.where(last_out >= n_steps, np.inf,
+                        np.where(last_out < 0, t[0], t[np.minimum(last_out + 1, n_steps).astype(int)]))
+    metrics = {
+        "final_error": final_error,
+        "rms_error": np.sqrt(sum_e2 / ((n_steps + 1) * n)),
+        "rms_error_second_half": np.sqrt(sum_half / (half.sum() * n)),
+        "max_abs_u": max_u,
+        "reaching_time": reaching,
+        "total_variation_u": tv,
+    }
+    diverged = first_bad >= 0
+    for v in metrics.values():
+        v[diverged] = np.nan
+    results = None
+    if trajectories:
+        results = [simulate(model, controller, reference, duration=duration, dt=dt, true_params=P[i],
+                            x0=x0, max_state=max_state, backend="compiled") if not diverged[i] else None
+                   for i in range(B)]
+    return BatchResult(params=P, metrics=metrics, diverged=diverged,
+                       divergence_time=np.where(diverged, first_bad * dt, np.nan),
+                       x_final=x_fin, results=results)
