@@ -375,3 +375,53 @@ def predict_regulation_offset(model, controller, q_d: float, true_params, search
     c1, c3 = controller.c[0], controller.c[2]
     first = -(c3 / c1) * (p_nom["K"] / p_true["K"] - 1.0) * mgl * np.sin(q_d) / p_true["J_l"]
     return OffsetPrediction(q_ss=float(q_ss), offset=float(q_ss - q_d), first_order=float(first), s_ss=s_ss)
+
+
+def closed_loop_eigenvalues(model, controller, true_params, x_eq=None, r=None, h: float = 1e-6) -> np.ndarray:
+    """Eigenvalues of the continuous-time closed loop linearized at a rest point.
+
+    The loop is ``x' = f(x; p_true) + g(x; p_true) u(x)`` with ``u`` the
+    controller's law (nominal parameters, no sampling), differentiated by
+    central differences. Only for controllers without internal state.
+
+    Parameters
+    ----------
+    model : Model
+    controller : SlidingModeController
+        Non-integral controller.
+    true_params : dict or array_like
+    x_eq : array_like, shape (4n,), optional
+        Rest point (default 0: planar chains hanging straight down, link1 at q = 0).
+    r : array_like, shape (5, n), optional
+        Reference held at ``x_eq`` (default: ``q_d = q_l`` of ``x_eq``, derivatives 0).
+    h : float
+        Difference step.
+
+    Returns
+    -------
+    ndarray, shape (4n,), complex
+        Sorted by decreasing real part (the first one decides stability).
+    """
+    if getattr(controller, "integral", False):
+        raise ValueError("controller: integral controllers carry a state; linearize the augmented loop instead")
+    n, nx = int(model.n), int(model.nx)
+    x_eq = np.zeros(nx) if x_eq is None else np.asarray(x_eq, dtype=float)
+    if x_eq.shape != (nx,):
+        raise ValueError(f"x_eq with shape {x_eq.shape}: expected ({nx},)")
+    if r is None:
+        r = np.zeros((5, n))
+        r[0] = x_eq[:n]
+    p = model.params_array(true_params)
+    z = np.zeros(0)
+
+    def field(x):
+        u = controller.evaluate(0.0, x, z, r).u
+        return model.f(x, p) + model.g(x, p) @ u
+
+    J = np.empty((nx, nx))
+    for i in range(nx):
+        dx = np.zeros(nx)
+        dx[i] = h
+        J[:, i] = (field(x_eq + dx) - field(x_eq - dx)) / (2 * h)
+    ev = np.linalg.eigvals(J)
+    return ev[np.argsort(-ev.real)]
