@@ -176,6 +176,12 @@ def plot_controller_comparison(results: Dict[str, Dict[float, SimulationResult]]
                 ax[1, j].plot(r.t, r.u[:, i], color=CTRL_COLORS.get(kind), ls=ls, lw=1.0, label=lab)
         ax[0, j].set(title=f"error, true {case}", ylabel=r"$e_1 = q_l - q_d$ (rad)")
         ax[1, j].set(title=f"torque, true {case}", ylabel="u (N m)", xlabel="time (s)")
+        late = [np.max(np.abs(per[case].u[per[case].t >= 0.5])) for per in results.values()]
+        peak = max(np.max(np.abs(per[case].u)) for per in results.values())
+        if peak > 3 * max(late):
+            ax[1, j].set_ylim(-1.3 * max(late), 1.3 * max(late))
+            ax[1, j].annotate(f"peak |u| = {peak:.0f} N m in the first 0.5 s (off scale)",
+                              xy=(0.03, 0.04), xycoords="axes fraction", fontsize=8)
     handles, labels = ax[0, 0].get_legend_handles_labels()
     fig.suptitle(title, fontsize=11)
     fig.tight_layout(rect=(0, 0.07 if len(labels) > 3 else 0.05, 1, 1))
