@@ -1,0 +1,578 @@
+"""User model files: a planar flexible-joint chain described in TOML.
+
+``fjm derive --model-file arm.toml --out DIR`` (or ``python -m derive ...``)
+derives and emits the chain into ``DIR/<name>/`` exactly like a built-in
+``planar<n>`` model (same derivation, same emitter, same atomic swap)::
+
+    [model]
+    name = "arm3"                 # C identifier; becomes DIR/arm3/ and arm3_alpha() etc.
+    links = 3                     # 1..7
+    description = "..."           # optional, one line
+
+    [parameters]                  # optional; omitted parameters keep the planar<n> defaults
+    m1 = 2.0                      # a bare number is in fjm's SI unit for that parameter
+    l1 = { default = 0.5, unit = "m" }   # or a table with default and (optional) unit
+
+    [parameters.K1]               # table headers and dotted keys work too
+    default = 180.0
+    unit = "N m/rad"
+
+Parameter names are those of ``planar<n>``: ``m1..mn, l1..ln, r1..rn,
+I1..In, K1..Kn, Jm1..Jmn, Bm1..Bmn, g0``. Units must be fjm's SI units (a few
+spellings accepted, e.g. ``"kg m^2"``, ``"kg*m^2"``, ``"kg·m²"``).
+
+The file is parsed with :mod:`tomllib` (Python >= 3.11) or ``tomli`` and then
+checked against an explicit schema: allowed tables and keys, types, ranges and
+physical plausibility. Nothing from the file is evaluated or sympified: it
+only supplies a name, an integer, a description and floats. Every problem
+raises :class:`ModelFileError` (a ``ValueError``) whose message reads
+``<file>:<line>: <key>: <what is wrong and what is expected>``; TOML syntax
+errors read ``<file>:<line>:<column>: TOML syntax error: ...``. TOML parsers
+do not report where keys are, so :func:`locate_keys` finds them in the raw
+text (table headers, dotted keys, quoted keys, inline tables, multi-line
+strings and arrays).
+"""
+
+from __future__ import annotations
+
+import bisect
+import difflib
+import json
+import math
+import re
+import sys
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Dict, List, Optional, Tuple, Union
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover - exercised on Python < 3.11 only
+    import tomli as tomllib
+
+from .models import MODEL_NAMES, FlexibleJointModel, make_planar
+
+__all__ = ["ModelFileError", "ModelSpec", "load_model_file", "parse_model_text", "locate_keys",
+           "SI_UNITS", "MAX_LINKS"]
+
+MAX_LINKS = 7
+NAME_RE = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
+MAX_NAME = 64
+MAX_DESCRIPTION = 500
+
+#: Parameter groups of a planar chain: prefix -> (SI unit, lower bound kind, meaning).
+#: ``">0"``: strictly positive; ``">=0"``: non-negative.
+_GROUPS: Dict[str, Tuple[str, str, str]] = {
+    "m": ("kg", ">0", "link mass"),
+    "l": ("m", ">0", "link length"),
+    "r": ("m", ">0", "joint -> centre of mass distance"),
+    "I": ("kg m^2", ">0", "link inertia about its centre of mass"),
+    "K": ("N m/rad", ">0", "joint stiffness"),
+    "Jm": ("kg m^2", ">0", "motor inertia"),
+    "Bm": ("N m s/rad", ">=0", "motor viscous damping"),
+}
+_GRAVITY = ("m/s^2", ">=0", "gravitational acceleration")
+
+#: SI unit of every parameter prefix (and ``g0``), as written in manifests.
+SI_UNITS: Dict[str, str] = {**{g: u for g, (u, _, _) in _GROUPS.items()}, "g0": _GRAVITY[0]}
+
+_MODEL_KEYS = ("name", "links", "description")
+_PARAM_TABLE_KEYS = ("default", "unit")
+
+Path_ = Union[str, Path]
+KeyPath = Tuple[str, ...]
+
+
+class ModelFileError(ValueError):
+    """A model file that cannot be used. ``str(err)`` names the file, line and key.
+
+    Attributes
+    ----------
+    source : str
+        File name (or ``"<model file>"`` for text).
+    line : int or None
+        1-based line of the offending key (or of the syntax error).
+    column : int or None
+        1-based column, for TOML syntax errors only.
+    key : str or None
+        Dotted key, e.g. ``"parameters.m1"``; None for syntax errors.
+    """
+
+    def __init__(self, message: str, source: str, line: Optional[int], key: Optional[str] = None,
+                 column: Optional[int] = None):
+        self.source, self.line, self.key, self.column = source, line, key, column
+        where = source if line is None else f"{source}:{line}" + (f":{column}" if column else "")
+        super().__init__(f"{where}: {key}: {message}" if key else f"{where}: {message}")
+
+
+@dataclass(frozen=True)
+class ModelSpec:
+    """A validated model file: everything :func:`derive.models.make_planar` needs."""
+
+    name: str
+    links: int
+    description: Optional[str]
+    defaults: Dict[str, float] = field(default_factory=dict)
+    units: Dict[str, str] = field(default_factory=dict)  # parameter name -> SI unit (all params)
+    source: str = "<model file>"
+
+    def build(self) -> FlexibleJointModel:
+        """The symbolic model (a planar chain with this name, defaults and description)."""
+        return make_planar(self.links, name=self.name, defaults=dict(self.defaults),
+                           description=self.description)
+
+
+# --------------------------------------------------------------------------------------------
+# Key locations in the raw text
+# --------------------------------------------------------------------------------------------
+
+_BARE = re.compile(r"[A-Za-z0-9_-]+")
+_SCALAR = re.compile(r"[^,\]}\n#]*")  # numbers, booleans, dates: up to a delimiter
+_BASIC_ESCAPE = re.compile(r'\\(?:u[0-9A-Fa-f]{4}|U[0-9A-Fa-f]{8}|.)', re.S)
+
+
+def _unescape_basic(raw: str) -> str:
+    def one(m: "re.Match[str]") -> str:
+        s = m.group(0)
+        if s[1] in "uU":
+            try:
+                return chr(int(s[2:], 16))
+            except ValueError:
+                return s
+        return {"b": "\b", "t": "\t", "n": "\n", "f": "\f", "r": "\r", "e": "\x1b",
+                '"': '"', "\\": "\\"}.get(s[1], s)
+    return _BASIC_ESCAPE.sub(one, raw)
+
+
+class _Scanner:
+    """Finds the line of every key of a (syntactically valid) TOML document."""
+
+    def __init__(self, text: str):
+        self.s = text
+        self.i = 0
+        self.newlines = [k for k, c in enumerate(text) if c == "\n"]
+        self.found: Dict[KeyPath, int] = {}
+
+    def line(self, pos: int) -> int:
+        return bisect.bisect_right(self.newlines, pos - 1) + 1
+
+    def peek(self, k: int = 1) -> str:
+        return self.s[self.i:self.i + k]
+
+    def skip_ws(self, newlines: bool = False) -> None:
+        s = self.s
+        while self.i < len(s):
+            c = s[self.i]
+            if c in " \t\r" or (newlines and c == "\n"):
+                self.i += 1
+            elif c == "#" and newlines:
+                while self.i < len(s) and s[self.i] != "\n":
+                    self.i += 1
+            else:
+                break
+
+    def record(self, path: KeyPath, pos: int) -> None:
+        ln = self.line(pos)
+        for k in range(1, len(path) + 1):
+            self.found.setdefault(path[:k], ln)
+
+    def string(self) -> str:
+        """Consume a string of any of TOML's four kinds; return its (approximate) value."""
+        s = self.s
+        for delim in ('"""', "'''"):
+            if s.startswith(delim, self.i):
+                start = self.i + 3
+                j = start
+                while True:
+                    j = s.find(delim, j)
+                    if j < 0:
+                        self.i = len(s)
+                        return s[start:]
+                    backslashes = 0
+                    while delim == '"""' and s[j - 1 - backslashes] == "\\" and j - 1 - backslashes >= start:
+                        backslashes += 1
+                    if backslashes % 2 == 0:
+                        break
+                    j += 1
+                run = j
+                while run < len(s) and s[run] == delim[0]:
+                    run += 1
+                extra = min(run - j, 5) - 3  # up to two quotes right before the closing ones are content
+                self.i = j + 3 + extra
+                return s[start:j + extra]
+        q = s[self.i]
+        j = self.i + 1
+        while j < len(s) and s[j] != q and s[j] != "\n":
+            if q == '"' and s[j] == "\\":
+                j += 1
+            j += 1
+        raw = s[self.i + 1:j]
+        self.i = j + 1
+        return _unescape_basic(raw) if q == '"' else raw
+
+    def key(self) -> Tuple[KeyPath, int]:
+        parts: List[str] = []
+        self.skip_ws()
+        start = self.i
+        while True:
+            self.skip_ws()
+            if self.peek() in ('"', "'"):
+                parts.append(self.string())
+            else:
+                m = _BARE.match(self.s, self.i)
+                if not m:
+                    break
+                parts.append(m.group(0))
+                self.i = m.end()
+            self.skip_ws()
+            if self.peek() == ".":
+                self.i += 1
+                continue
+            break
+        return tuple(parts), start
+
+    def value(self, path: Optional[KeyPath]) -> None:
+        self.skip_ws()
+        c = self.peek()
+        if c in ('"', "'"):
+            self.string()
+        elif c == "[":
+            self.i += 1
+            while True:
+                self.skip_ws(newlines=True)
+                if self.peek() in ("]", ""):
+                    self.i += 1
+                    return
+                self.value(None)
+                self.skip_ws(newlines=True)
+                if self.peek() == ",":
+                    self.i += 1
+        elif c == "{":
+            self.i += 1
+            while True:
+                self.skip_ws()
+                if self.peek() in ("}", "", "\n"):
+                    self.i += 1
+                    return
+                parts, start = self.key()
+                if not parts:  # not valid TOML; bail out of the table
+                    self.i += 1
+                    continue
+                if path is not None:
+                    self.record(path + parts, start)
+                self.skip_ws()
+                if self.peek() == "=":
+                    self.i += 1
+                self.value(None if path is None else path + parts)
+                self.skip_ws()
+                if self.peek() == ",":
+                    self.i += 1
+        else:
+            m = _SCALAR.match(self.s, self.i)
+            self.i = m.end()
+
+    def run(self) -> Dict[KeyPath, int]:
+        s = self.s
+        table: KeyPath = ()
+        while True:
+            self.skip_ws(newlines=True)
+            if self.i >= len(s):
+                return self.found
+            if s.startswith("[[", self.i):
+                self.i += 2
+                table, start = self.key()
+                self.record(table, start)
+                self.i = s.find("]]", self.i) + 2 if "]]" in s[self.i:] else len(s)
+            elif s[self.i] == "[":
+                self.i += 1
+                table, start = self.key()
+                self.record(table, start)
+                self.skip_ws()
+                if self.peek() == "]":
+                    self.i += 1
+            else:
+                parts, start = self.key()
+                if not parts:  # not valid TOML: skip the line
+                    nl = s.find("\n", self.i)
+                    self.i = len(s) if nl < 0 else nl + 1
+                    continue
+                self.record(table + parts, start)
+                self.skip_ws()
+                if self.peek() == "=":
+                    self.i += 1
+                self.value(table + parts)
+
+
+def locate_keys(text: str) -> Dict[KeyPath, int]:
+    """Line (1-based) where each key path is first defined, e.g. ``("parameters", "m1") -> 7``.
+
+    Handles table headers (``[parameters.m1]``), arrays of tables, dotted and
+    quoted keys (``parameters."m1".default``), inline tables (their keys get
+    the line of the inline table) and skips the content of strings (including
+    multi-line ones), arrays and comments. Super-tables that are only implied
+    (``a`` in ``[a.b]`` or ``a.b = 1``) get the line of their first mention.
+    """
+    return _Scanner(text).run()
+
+
+# --------------------------------------------------------------------------------------------
+# Parsing and schema
+# --------------------------------------------------------------------------------------------
+
+_SYNTAX = re.compile(r"^(?P<msg>.*?)\s*\(at line (?P<line>\d+), column (?P<col>\d+)\)\s*$", re.S)
+
+
+def _normalize_unit(unit: str) -> str:
+    u = unit.strip().replace("²", "^2").replace("**", "^")
+    u = re.sub(r"[\s*·.]+", "", u)
+    u = u.replace("^2", "2").replace("^-2", "-2").replace("^-1", "-1")
+    aliases = {"ms-2": "m/s2", "Nmrad-1": "Nm/rad", "Nmsrad-1": "Nms/rad"}
+    return aliases.get(u, u)
+
+
+def _type_name(v) -> str:
+    if isinstance(v, bool):
+        return "boolean"
+    if isinstance(v, int):
+        return "integer"
+    if isinstance(v, float):
+        return "float"
+    if isinstance(v, str):
+        return "string"
+    if isinstance(v, dict):
+        return "table"
+    if isinstance(v, list):
+        return "array"
+    return type(v).__name__  # dates and times
+
+
+def _show(v) -> str:
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, str):
+        return json.dumps(v, ensure_ascii=False)
+    if isinstance(v, (dict, list)):
+        return _type_name(v)
+    return repr(v) if not isinstance(v, float) else format(v, "g") if math.isfinite(v) else str(v)
+
+
+def _param_names(n: int) -> List[str]:
+    return [f"{g}{i}" for g in _GROUPS for i in range(1, n + 1)] + ["g0"]
+
+
+def _group_of(name: str) -> str:
+    return "g0" if name == "g0" else name.rstrip("0123456789")
+
+
+def _describe_names(n: int) -> str:
+    if n == 1:
+        return ", ".join(_param_names(1))
+    return ", ".join(f"{g}1..{g}{n}" for g in _GROUPS) + ", g0"
+
+
+class _Checker:
+    def __init__(self, text: str, source: str):
+        self.source = source
+        self.lines = locate_keys(text)
+
+    def line_of(self, path: KeyPath) -> int:
+        for k in range(len(path), 0, -1):
+            if path[:k] in self.lines:
+                return self.lines[path[:k]]
+        return 1
+
+    def fail(self, path: KeyPath, message: str, line_path: Optional[KeyPath] = None) -> ModelFileError:
+        return ModelFileError(message, self.source, self.line_of(line_path or path),
+                              ".".join(_quote_key(p) for p in path))
+
+
+def _quote_key(part: str) -> str:
+    return part if _BARE.fullmatch(part) else json.dumps(part, ensure_ascii=False)
+
+
+def _suggest(word: str, options) -> str:
+    close = difflib.get_close_matches(word, list(options), n=1, cutoff=0.6)
+    lower = [o for o in options if o.lower() == word.lower()]
+    best = lower or close
+    return f" (did you mean {best[0]!r}?)" if best else ""
+
+
+def parse_model_text(text: str, source: str = "<model file>") -> ModelSpec:
+    """Parse and validate the text of a model file.
+
+    Raises
+    ------
+    ModelFileError
+        TOML syntax error, unknown table or key, wrong type, value out of range,
+        non-physical default, unit that is not fjm's SI unit, missing required key.
+    """
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        msg = str(exc)
+        m = _SYNTAX.match(msg)
+        if m:
+            line, col = int(m.group("line")), int(m.group("col"))
+            src_lines = text.splitlines()
+            near = src_lines[line - 1].strip() if 0 < line <= len(src_lines) else ""
+            raise ModelFileError(f"TOML syntax error: {m.group('msg')}" + (f" in `{near}`" if near else ""),
+                                 source, line, column=col) from None
+        end = text.count("\n") + 1
+        raise ModelFileError(f"TOML syntax error: {msg}", source, end) from None
+    chk = _Checker(text, source)
+
+    # ---- top level -----------------------------------------------------------------------
+    for key in data:
+        if key not in ("model", "parameters"):
+            hint = (f" (did you mean `{key} = ...` under [model]?)" if key in _MODEL_KEYS
+                    else " (parameters go under [parameters])" if _group_of(key) in SI_UNITS
+                    else _suggest(key, ("model", "parameters")))
+            raise chk.fail((key,), f"unknown key; a model file has the tables [model] and "
+                                   f"[parameters] only{hint}")
+    if "model" not in data:
+        raise ModelFileError("missing required table [model] (with name = \"...\" and links = 1..7)",
+                             source, 1, "model")
+    model = data["model"]
+    if not isinstance(model, dict):
+        raise chk.fail(("model",), f"expected a table ([model] with name and links), "
+                                   f"got {_type_name(model)} {_show(model)}")
+    for key in model:
+        if key not in _MODEL_KEYS:
+            raise chk.fail(("model", key), f"unknown key; [model] allows {', '.join(_MODEL_KEYS)}"
+                                           + _suggest(key, _MODEL_KEYS))
+    for key in ("name", "links"):
+        if key not in model:
+            what = ('the model name, e.g. name = "arm3"' if key == "name"
+                    else f"the number of links, e.g. links = 3 (1..{MAX_LINKS})")
+            raise chk.fail(("model", key), f"missing required key: {what}", line_path=("model",))
+
+    name = model["name"]
+    if not isinstance(name, str):
+        raise chk.fail(("model", "name"), f"expected a string, got {_type_name(name)} {_show(name)}")
+    if not NAME_RE.fullmatch(name) or len(name) > MAX_NAME:
+        raise chk.fail(("model", "name"), f"{_show(name)} is not a valid model name: expected a C identifier "
+                                          f"[A-Za-z_][A-Za-z0-9_]* of at most {MAX_NAME} characters "
+                                          "(it names the output directory and the C functions)")
+    if name.startswith("__") or re.match(r"_[A-Z]", name) or name.lower().startswith("casadi"):
+        raise chk.fail(("model", "name"), f"{_show(name)} is reserved (C reserves __x and _X names; "
+                                          "casadi* names collide with CasADi's generated code)")
+    clash = [b for b in MODEL_NAMES if b.lower() == name.lower()]
+    if clash:
+        raise chk.fail(("model", "name"), f"{_show(name)} is a built-in model name ({clash[0]}); "
+                                          "choose another name so `fjm_runtime.load` stays unambiguous")
+
+    links = model["links"]
+    if isinstance(links, bool) or not isinstance(links, int):
+        raise chk.fail(("model", "links"), f"expected an integer 1..{MAX_LINKS}, "
+                                           f"got {_type_name(links)} {_show(links)}")
+    if not 1 <= links <= MAX_LINKS:
+        raise chk.fail(("model", "links"), f"{links} is out of range: expected 1..{MAX_LINKS}")
+
+    description = model.get("description")
+    if description is not None:
+        if not isinstance(description, str):
+            raise chk.fail(("model", "description"),
+                           f"expected a string, got {_type_name(description)} {_show(description)}")
+        bad = next((c for c in description if not (" " <= c <= "~")), None)
+        if bad is not None or not description.strip():
+            raise chk.fail(("model", "description"),
+                           "expected one non-empty line of printable ASCII text"
+                           + (f" (found {bad!r})" if bad is not None else ""))
+        for seq in ("*/", "/*", "\\", "??"):
+            if seq in description:
+                raise chk.fail(("model", "description"),
+                               f"must not contain {seq!r} (the description goes into C comments)")
+        if len(description) > MAX_DESCRIPTION:
+            raise chk.fail(("model", "description"),
+                           f"{len(description)} characters; at most {MAX_DESCRIPTION} allowed")
+
+    # ---- parameters ----------------------------------------------------------------------
+    params = data.get("parameters", {})
+    if not isinstance(params, dict):
+        raise chk.fail(("parameters",), f"expected a table ([parameters] with name = value lines), "
+                                        f"got {_type_name(params)} {_show(params)}")
+    names = _param_names(links)
+    defaults: Dict[str, float] = {}
+    value_path: Dict[str, KeyPath] = {}
+    for key, entry in params.items():
+        path: KeyPath = ("parameters", key)
+        if key not in names:
+            grp = _group_of(key)
+            if grp in _GROUPS and key[len(grp):].isdigit():
+                why = f"a {links}-link chain has no parameter {key!r}"
+            else:
+                why = f"{key!r} is not a parameter of a planar chain" + _suggest(key, names)
+            raise chk.fail(path, f"unknown parameter: {why}; expected names among "
+                                 f"{_describe_names(links)}")
+        si = SI_UNITS[_group_of(key)]
+        if isinstance(entry, dict):
+            for k in entry:
+                if k not in _PARAM_TABLE_KEYS:
+                    raise chk.fail(path + (k,), f"unknown key; a parameter table allows "
+                                                f"{', '.join(_PARAM_TABLE_KEYS)}" + _suggest(k, _PARAM_TABLE_KEYS))
+            if "default" not in entry:
+                raise chk.fail(path + ("default",), f"missing required key: the default value in {si}",
+                               line_path=path)
+            vpath = path + ("default",)
+            value = entry["default"]
+            if "unit" in entry:
+                unit = entry["unit"]
+                if not isinstance(unit, str):
+                    raise chk.fail(path + ("unit",), f"expected a string (e.g. {si!r}), "
+                                                     f"got {_type_name(unit)} {_show(unit)}")
+                if _normalize_unit(unit) != _normalize_unit(si):
+                    raise chk.fail(path + ("unit",),
+                                   f"unit {_show(unit)} is not fjm's unit for {key}: fjm uses SI units, "
+                                   f"{key} must be given in {si!r}; convert the value")
+        else:
+            vpath, value = path, entry
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise chk.fail(vpath, f"expected a number in {si}, got {_type_name(value)} {_show(value)}")
+        value = float(value)
+        if not math.isfinite(value):
+            raise chk.fail(vpath, f"{value} is not finite: expected a finite number in {si}")
+        kind, meaning = ((_GROUPS[_group_of(key)][1], _GROUPS[_group_of(key)][2]) if key != "g0"
+                         else (_GRAVITY[1], _GRAVITY[2]))
+        if kind == ">0" and not value > 0:
+            raise chk.fail(vpath, f"{_show(value)} {si} is not physical: a {meaning} must be > 0")
+        if kind == ">=0" and not value >= 0:
+            raise chk.fail(vpath, f"{_show(value)} {si} is not physical: a {meaning} must be >= 0")
+        defaults[key] = value
+        value_path[key] = vpath
+
+    # r_i <= l_i on the effective defaults (file values over planar<n> defaults).
+    base = {p.name: p.default for p in make_planar(links).params}
+    for i in range(1, links + 1):
+        r, l = f"r{i}", f"l{i}"
+        rv, lv = defaults.get(r, base[r]), defaults.get(l, base[l])
+        if rv > lv:
+            if r in defaults:
+                origin = "" if l in defaults else " (default)"
+                raise chk.fail(value_path[r], f"{_show(rv)} m > {l} = {_show(lv)} m{origin}: the centre of "
+                                              f"mass must lie on the link (expected {r} <= {l})")
+            raise chk.fail(value_path[l], f"{_show(lv)} m < {r} = {_show(rv)} m (default): the centre of mass "
+                                          f"must lie on the link (expected {l} >= {r}; set {r} too)")
+
+    units = {n_: SI_UNITS[_group_of(n_)] for n_ in names}
+    return ModelSpec(name=name, links=links, description=description,
+                     defaults={k: defaults[k] for k in names if k in defaults}, units=units, source=source)
+
+
+def load_model_file(path: Path_) -> ModelSpec:
+    """Read, parse and validate a model file (see the module docstring for the format).
+
+    Raises
+    ------
+    ModelFileError
+        For every problem with the file's content (message: ``<file>:<line>: <key>: ...``).
+    OSError
+        If the file cannot be read.
+    """
+    path = Path(path)
+    raw = path.read_bytes()
+    try:
+        text = raw.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        raise ModelFileError(f"not UTF-8 text (byte {exc.start}); TOML files are UTF-8",
+                             str(path), raw.count(b"\n", 0, exc.start) + 1) from None
+    return parse_model_text(text, source=str(path))
