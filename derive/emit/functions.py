@@ -38,12 +38,15 @@ def operation_count(fn: ca.Function) -> int:
 
 
 
-def build_functions(lin: Linearization) -> Dict[str, ca.Function]:
+def build_functions(lin: Linearization, cse: bool = True) -> Dict[str, ca.Function]:
     """SX Functions ``<model>_<quantity>`` for every entry of :data:`QUANTITIES`.
 
     Parameters
     ----------
     lin : Linearization
+    cse : bool
+        Run CasADi's common-subexpression elimination on each output (the
+        emitted default; ``False`` exists so tests can check CSE == no-CSE).
 
     Returns
     -------
@@ -87,6 +90,7 @@ def build_functions(lin: Linearization) -> Dict[str, ca.Function]:
         value = conv(expr)
         if expr.shape[1] == 1 and name != "energy":
             value = ca.vec(value)
-        value = ca.cse(value)
+        if cse:
+            value = ca.cse(value)
         out[name] = ca.Function(f"{m.name}_{name}", [x, p], [value], ["x", "p"], [name])
     return out
