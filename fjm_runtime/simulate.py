@@ -7,7 +7,7 @@ state are integrated together by classical RK4.
 from __future__ import annotations
 
 import sys
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Callable, Optional
 
 import numpy as np
@@ -95,7 +95,6 @@ class SimulationResult:
     e1: np.ndarray
     delta: np.ndarray
     metrics: Metrics
-    info: dict = field(default_factory=dict)
 
 
 def compute_metrics(t, e1, u, s, delta) -> Metrics:

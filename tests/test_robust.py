@@ -61,3 +61,18 @@ def test_lemma1_gain_structure():
     assert g1.k_s == pytest.approx(g1.W + g1.H / g1.beta_hat + g1.eta)
     assert g1.k_s_tight < g1.k_s and g1.k_s > g0.k_s
     assert g1.reaching_time_bound(100.0, 5.0) == pytest.approx(95.0 * 0.02 / (0.015 * 10.0))
+
+
+def test_closed_loop_eigenvalues_exact_parameters_give_designed_poles(link1):
+    from fjm_runtime.controllers import make_controller
+    from fjm_runtime.robust import closed_loop_eigenvalues
+    fl = make_controller("fl", link1, {}, lam=8.0)
+    ev = closed_loop_eigenvalues(link1, fl, {})
+    # quadruple pole at -8: a repeated root is ill-conditioned, so compare the characteristic polynomial
+    assert np.real(np.poly(ev)) == pytest.approx([1, 32, 384, 2048, 4096], rel=1e-5)
+    smc = make_controller("smc", link1, {}, lam=8.0, k_s=1000.0, delta=5.0)
+    ev = closed_loop_eigenvalues(link1, smc, {})
+    # inside the layer: triple pole at -8 and the s-pole at -k_s/delta = -200
+    assert np.real(np.poly(ev)) == pytest.approx(np.poly([-8, -8, -8, -200]), rel=1e-5)
+    # wrong stiffness moves the poles (and the chains can go unstable, see the demo)
+    assert closed_loop_eigenvalues(link1, fl, {"K": 100.0})[0].real > -8.0 + 0.5
