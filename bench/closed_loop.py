@@ -1,0 +1,195 @@
+"""Closed-loop peers for link1 (paper's tracking case, 10 s at 1 kHz, RK4 + SMC).
+
+* generated: :func:`fjm_runtime.compiled.closed_loop_runner` (CasADi mapaccum -> C, cached);
+* hand C: ``bench/hand_loop.c``, the same loop written by hand, same flags;
+* Python loop: ``simulate(..., backend="python")`` (numpy RK4 calling the CasADi Functions);
+* scipy: ``solve_ivp`` (RK45) of the same closed loop with the control law evaluated
+  continuously (no zero-order hold), rtol 1e-6, atol 1e-9;
+* numpy batch: RK4 vectorized over the runs (closed forms, same metrics as simulate_batch).
+"""
+from __future__ import annotations
+
+import ctypes
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+import fjm_runtime
+from fjm_runtime.compiled import closed_loop_runner
+from fjm_runtime.controllers import make_controller
+from fjm_runtime.references import Sinusoid
+
+from .ccutil import compile_object, link_shared
+
+HERE = Path(__file__).resolve().parent
+
+# The paper's link1 tracking case (fjm_runtime.figures: LAM = 8, Lemma 1 gain for
+# 0.5 sin t with K in [100, 200], layer k_s / 200, beta_hat = (beta_min + beta_max) / 2).
+LAM, K_S, DELTA, BETA_HAT, K_NOM = 8.0, 1008.0304231403442, 5.040152115701721, 0.015, 150.0
+
+
+@dataclass
+class Case:
+    model: object
+    controller: object
+    reference: object
+    p_true: np.ndarray
+    p_nom: np.ndarray
+    duration: float
+    dt: float
+
+    @property
+    def n_steps(self) -> int:
+        return int(round(self.duration / self.dt))
+
+    def reference_arrays(self):
+        N, dt = self.n_steps, self.dt
+        rh = self.reference.sample(0.5 * dt * np.arange(2 * N + 1)).reshape(2 * N + 1, 5)
+        return rh[0:-1:2].copy(), rh[1::2].copy(), rh[2::2].copy()
+
+    def x0(self):
+        r0 = self.reference(0.0)
+        return np.array([r0[0, 0], 0.0, r0[0, 0], 0.0])
+
+
+def link1_case(K_true: float = 120.0, duration: float = 10.0, dt: float = 1e-3) -> Case:
+    m = fjm_runtime.load("link1")
+    ctrl = make_controller("smc", m, {"K": K_NOM}, lam=LAM, k_s=K_S, delta=DELTA, beta_hat=BETA_HAT)
+    return Case(m, ctrl, Sinusoid(0.5, 1.0), m.params_array({"K": K_true}),
+                m.params_array({"K": K_NOM}), duration, dt)
+
+
+class GeneratedLoop:
+    """The compiled mapaccum runner with the reference pre-sampled (timing excludes sampling)."""
+
+    def __init__(self, case: Case):
+        self.case = case
+        self.runner = closed_loop_runner(case.model, case.controller, case.dt, case.n_steps)
+        self.R0, self.RH, self.R1 = (a.T.copy() for a in case.reference_arrays())
+        self.w0 = case.x0()
+
+    def __call__(self):
+        W, A = self.runner(self.w0, self.R0, self.RH, self.R1, self.case.p_true)
+        return np.asarray(W).T, np.asarray(A).T
+
+
+class HandLoop:
+    """``bench/hand_loop.c`` compiled with the bench flags, called through ctypes."""
+
+    def __init__(self, case: Case, workdir: Path):
+        workdir.mkdir(parents=True, exist_ok=True)
+        obj = workdir / "hand_loop.o"
+        compile_object(HERE / "hand_loop.c", obj)
+        self.lib = ctypes.CDLL(str(link_shared([obj], workdir / "hand_loop.so")))
+        dp = ctypes.POINTER(ctypes.c_double)
+        self.lib.hand_loop.argtypes = [ctypes.c_int, ctypes.c_double, dp, dp, dp, ctypes.c_double,
+                                       ctypes.c_double, ctypes.c_double, dp, dp, dp, dp, dp, dp]
+        self.case = case
+        self.R0, self.RH, self.R1 = case.reference_arrays()
+        self.w0 = case.x0()
+        self.c = np.ascontiguousarray(case.controller.c)
+        N = case.n_steps
+        self.W = np.zeros((N, 4))
+        self.A = np.zeros((N, 6))
+
+    def __call__(self):
+        c = self.case
+        ptr = lambda a: a.ctypes.data_as(ctypes.POINTER(ctypes.c_double))
+        bh = float(c.controller.beta_hat[0, 0]) if c.controller.beta_hat is not None else -1.0
+        self.lib.hand_loop(c.n_steps, c.dt, ptr(c.p_true), ptr(c.p_nom), ptr(self.c),
+                           float(c.controller.k_s[0]), float(c.controller.delta[0]), bh,
+                           ptr(self.R0), ptr(self.RH), ptr(self.R1), ptr(self.w0),
+                           ptr(self.W), ptr(self.A))
+        return self.W, self.A
+
+
+def python_loop(case: Case):
+    from fjm_runtime.simulate import simulate
+    return simulate(case.model, case.controller, case.reference, duration=case.duration, dt=case.dt,
+                    true_params=case.p_true, x0=case.x0(), backend="python")
+
+
+def solve_ivp_loop(case: Case, rtol: float = 1e-6, atol: float = 1e-9):
+    """scipy RK45 of the closed loop (control law evaluated at every RHS call)."""
+    from scipy.integrate import solve_ivp
+    m, ctrl, ref, p = case.model, case.controller, case.reference, case.p_true
+
+    def rhs(t, x):
+        u = ctrl.evaluate(t, x, np.zeros(0), ref(t)).u
+        return m.f(x, p) + m.g(x, p) @ u
+
+    t_eval = case.dt * np.arange(case.n_steps + 1)
+    return solve_ivp(rhs, (0.0, case.duration), case.x0(), method="RK45", rtol=rtol, atol=atol,
+                     t_eval=t_eval)
+
+
+def numpy_batch(case: Case, K_values: np.ndarray) -> dict:
+    """RK4 closed loop vectorized over runs (link1, plant K per run), same metrics as simulate_batch."""
+    B = K_values.size
+    dt, N = case.dt, case.n_steps
+    pt = case.p_true
+    Jl, Jm, MgL, Bm = pt[0], pt[1], pt[3] * pt[4] * pt[5], pt[6]
+    K = np.asarray(K_values, dtype=float)
+    pn = case.p_nom
+    nJl, nJm, nK, nMgL, nBm = pn[0], pn[1], pn[2], pn[3] * pn[4] * pn[5], pn[6]
+    c1, c2, c3 = case.controller.c
+    k_s, delta = float(case.controller.k_s[0]), float(case.controller.delta[0])
+    bh = case.controller.beta_hat
+    beta_hat = float(bh[0, 0]) if bh is not None else None
+    R0, _, _ = case.reference_arrays()
+    R = case.reference.sample(dt * np.arange(N + 1)).reshape(N + 1, 5)
+    x0 = case.x0()
+    q, dq, qm, dqm = (np.full(B, v) for v in x0)
+    t = dt * np.arange(N + 1)
+    half = t >= 0.5 * t[-1]
+    sum_e2 = np.zeros(B); sum_half = np.zeros(B); max_u = np.zeros(B); tv = np.zeros(B)
+    last_out = np.full(B, -1.0); u_prev = np.zeros(B)
+    h = 0.5 * dt
+
+    def f(q, dq, qm, dqm, u):
+        spring = K * (q - qm)
+        return dq, -(MgL * np.sin(q) + spring) / Jl, dqm, (spring - Bm * dqm + u) / Jm
+
+    for k in range(N + 1):
+        r = R[k]
+        sq, cq = np.sin(q), np.cos(q)
+        spring = nK * (q - qm)
+        y3 = -(nMgL * sq + spring) / nJl
+        y4 = -(nMgL * cq * dq + nK * (dq - dqm)) / nJl
+        a = -(-nMgL * sq * dq * dq + nMgL * cq * y3 + nK * (y3 - (spring - nBm * dqm) / nJm)) / nJl
+        beta = nJl * nJm / nK
+        e1, e2, e3, e4 = q - r[0], dq - r[1], y3 - r[2], y4 - r[3]
+        s = c1 * e1 + c2 * e2 + c3 * e3 + e4
+        nu = r[4] - (c1 * e2 + c2 * e3 + c3 * e4) - k_s * np.clip(s / delta, -1.0, 1.0)
+        u = -beta * a + (beta_hat if beta_hat is not None else beta) * nu
+        e2sq = e1 * e1
+        sum_e2 += e2sq
+        if half[k]:
+            sum_half += e2sq
+        np.maximum(max_u, np.abs(u), out=max_u)
+        if k:
+            tv += np.abs(u - u_prev)
+        u_prev = u
+        last_out = np.where(np.abs(s) > delta, float(k), last_out)
+        if k == N:
+            break
+        a1 = f(q, dq, qm, dqm, u)
+        a2 = f(q + h * a1[0], dq + h * a1[1], qm + h * a1[2], dqm + h * a1[3], u)
+        a3 = f(q + h * a2[0], dq + h * a2[1], qm + h * a2[2], dqm + h * a2[3], u)
+        a4 = f(q + dt * a3[0], dq + dt * a3[1], qm + dt * a3[2], dqm + dt * a3[3], u)
+        q = q + dt / 6 * (a1[0] + 2 * a2[0] + 2 * a3[0] + a4[0])
+        dq = dq + dt / 6 * (a1[1] + 2 * a2[1] + 2 * a3[1] + a4[1])
+        qm = qm + dt / 6 * (a1[2] + 2 * a2[2] + 2 * a3[2] + a4[2])
+        dqm = dqm + dt / 6 * (a1[3] + 2 * a2[3] + 2 * a3[3] + a4[3])
+    reaching = np.where(last_out >= N, np.inf,
+                        np.where(last_out < 0, 0.0, t[np.minimum(last_out + 1, N).astype(int)]))
+    return {
+        "final_error": np.abs(q - R[N, 0]),
+        "rms_error": np.sqrt(sum_e2 / (N + 1)),
+        "rms_error_second_half": np.sqrt(sum_half / half.sum()),
+        "max_abs_u": max_u,
+        "reaching_time": reaching,
+        "total_variation_u": tv,
+        "x_final": np.stack([q, dq, qm, dqm], axis=1),
+    }

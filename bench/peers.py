@@ -1,0 +1,71 @@
+"""The honest peer of the generated alpha/beta: CasADi SX + algorithmic differentiation.
+
+Built from the SAME dynamics (the derive models' D(q), h(q, dq), K, J_m, B_m,
+converted to SX with :class:`derive.emit.sx.SympyToSX`), with the link
+acceleration ``y3 = D^-1 r3`` from the same kind of unpivoted LDL^T solve the
+generated code uses, and every Lie derivative by CasADi AD
+(Jacobian-vector products along ``f`` and ``g``)::
+
+    y4 = jtimes(y3, x, f)        a = L_f y4 = jtimes(y4, x, f)
+    b  = L_g y4 = jtimes(y4, x, g)
+    generic:    [beta, -alpha] = b^-1 [I, a]  (one symbolic solve)
+    structured: beta = J_m K^-1 D(q), alpha = -beta a   (b known in closed form)
+
+The structured variant is what a CasADi user who read the paper would write;
+both are measured and the faster one is the reported peer.
+Build-time tool (needs SymPy): used by ``python -m bench`` and the tests only.
+"""
+from __future__ import annotations
+
+from typing import Dict
+
+import casadi as ca
+
+
+def peer_expressions(model_name: str):
+    """SX ``(x, p, exprs)`` with ``exprs`` = dict of alpha/beta variants and y3, y4."""
+    from derive.models import build
+    from derive.emit.sx import SympyToSX, ldl_factor, ldl_solve
+
+    m = build(model_name)
+    n = m.n
+    x = ca.SX.sym("x", 4 * n)
+    p = ca.SX.sym("p", len(m.params))
+    bind = {s: x[i] for i, s in enumerate(m.state)}
+    bind.update({s: p[j] for j, s in enumerate(m.param_symbols)})
+    conv = SympyToSX(bind)
+    D = conv(m.D)
+    h = conv(m.h)
+    K = ca.vertcat(*[conv(k) for k in m.K])
+    Jm = ca.vertcat(*[conv(j) for j in m.Jm])
+    Bm = ca.vertcat(*[conv(b) for b in m.Bm])
+    q, dq, qm, dqm = (x[i * n:(i + 1) * n] for i in range(4))
+    r3 = -(h + K * (q - qm))
+    L, d = ldl_factor(D)
+    y3 = ldl_solve(L, d, r3)
+    f = ca.vertcat(dq, y3, dqm, (K * (q - qm) - Bm * dqm) / Jm)
+    g = ca.vertcat(ca.SX(3 * n, n), ca.diag(1.0 / Jm))
+    y4 = ca.jtimes(y3, x, f)
+    a = ca.jtimes(y4, x, f)
+    b = ca.jtimes(y4, x, g)
+    sol = ca.solve(b, ca.horzcat(ca.SX.eye(n), a))
+    exprs = {
+        "y3": y3, "y4": y4,
+        "generic_alpha": -sol[:, n], "generic_beta": sol[:, :n],
+    }
+    beta_s = ca.mtimes(ca.diag(Jm / K), D)
+    exprs["structured_alpha"] = -ca.mtimes(beta_s, a)
+    exprs["structured_beta"] = beta_s
+    return x, p, exprs
+
+
+def peer_functions(model_name: str, variant: str = "structured") -> Dict[str, ca.Function]:
+    """SX Functions ``peer_<variant>_alpha/_beta(x, p)`` (CSE'd like the generated ones)."""
+    x, p, e = peer_expressions(model_name)
+    out = {}
+    for q in ("alpha", "beta"):
+        val = e[f"{variant}_{q}"]
+        if q == "alpha":
+            val = ca.vec(val)
+        out[q] = ca.Function(f"peer_{variant}_{q}", [x, p], [ca.cse(val)], ["x", "p"], [q])
+    return out
