@@ -353,7 +353,14 @@ def _show(v) -> str:
         return json.dumps(v, ensure_ascii=False)
     if isinstance(v, (dict, list)):
         return _type_name(v)
-    return repr(v) if not isinstance(v, float) else format(v, "g") if math.isfinite(v) else str(v)
+    return repr(v)
+
+
+def _got(v) -> str:
+    """``got string "3"``, ``got float 3.0``, ``got an array``."""
+    if isinstance(v, (dict, list)):
+        return f"got {'a table' if isinstance(v, dict) else 'an array'}"
+    return f"got {_type_name(v)} {_show(v)}"
 
 
 def _param_names(n: int) -> List[str]:
@@ -435,7 +442,7 @@ def parse_model_text(text: str, source: str = "<model file>") -> ModelSpec:
     model = data["model"]
     if not isinstance(model, dict):
         raise chk.fail(("model",), f"expected a table ([model] with name and links), "
-                                   f"got {_type_name(model)} {_show(model)}")
+                                   f"{_got(model)}")
     for key in model:
         if key not in _MODEL_KEYS:
             raise chk.fail(("model", key), f"unknown key; [model] allows {', '.join(_MODEL_KEYS)}"
@@ -448,7 +455,7 @@ def parse_model_text(text: str, source: str = "<model file>") -> ModelSpec:
 
     name = model["name"]
     if not isinstance(name, str):
-        raise chk.fail(("model", "name"), f"expected a string, got {_type_name(name)} {_show(name)}")
+        raise chk.fail(("model", "name"), f"expected a string, {_got(name)}")
     if not NAME_RE.fullmatch(name) or len(name) > MAX_NAME:
         raise chk.fail(("model", "name"), f"{_show(name)} is not a valid model name: expected a C identifier "
                                           f"[A-Za-z_][A-Za-z0-9_]* of at most {MAX_NAME} characters "
@@ -464,7 +471,7 @@ def parse_model_text(text: str, source: str = "<model file>") -> ModelSpec:
     links = model["links"]
     if isinstance(links, bool) or not isinstance(links, int):
         raise chk.fail(("model", "links"), f"expected an integer 1..{MAX_LINKS}, "
-                                           f"got {_type_name(links)} {_show(links)}")
+                                           f"{_got(links)}")
     if not 1 <= links <= MAX_LINKS:
         raise chk.fail(("model", "links"), f"{links} is out of range: expected 1..{MAX_LINKS}")
 
@@ -472,7 +479,7 @@ def parse_model_text(text: str, source: str = "<model file>") -> ModelSpec:
     if description is not None:
         if not isinstance(description, str):
             raise chk.fail(("model", "description"),
-                           f"expected a string, got {_type_name(description)} {_show(description)}")
+                           f"expected a string, {_got(description)}")
         bad = next((c for c in description if not (" " <= c <= "~")), None)
         if bad is not None or not description.strip():
             raise chk.fail(("model", "description"),
@@ -490,7 +497,7 @@ def parse_model_text(text: str, source: str = "<model file>") -> ModelSpec:
     params = data.get("parameters", {})
     if not isinstance(params, dict):
         raise chk.fail(("parameters",), f"expected a table ([parameters] with name = value lines), "
-                                        f"got {_type_name(params)} {_show(params)}")
+                                        f"{_got(params)}")
     names = _param_names(links)
     defaults: Dict[str, float] = {}
     value_path: Dict[str, KeyPath] = {}
@@ -519,7 +526,7 @@ def parse_model_text(text: str, source: str = "<model file>") -> ModelSpec:
                 unit = entry["unit"]
                 if not isinstance(unit, str):
                     raise chk.fail(path + ("unit",), f"expected a string (e.g. {si!r}), "
-                                                     f"got {_type_name(unit)} {_show(unit)}")
+                                                     f"{_got(unit)}")
                 if _normalize_unit(unit) != _normalize_unit(si):
                     raise chk.fail(path + ("unit",),
                                    f"unit {_show(unit)} is not fjm's unit for {key}: fjm uses SI units, "
@@ -527,16 +534,16 @@ def parse_model_text(text: str, source: str = "<model file>") -> ModelSpec:
         else:
             vpath, value = path, entry
         if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise chk.fail(vpath, f"expected a number in {si}, got {_type_name(value)} {_show(value)}")
+            raise chk.fail(vpath, f"expected a number in {si}, {_got(value)}")
         value = float(value)
         if not math.isfinite(value):
             raise chk.fail(vpath, f"{value} is not finite: expected a finite number in {si}")
         kind, meaning = ((_GROUPS[_group_of(key)][1], _GROUPS[_group_of(key)][2]) if key != "g0"
                          else (_GRAVITY[1], _GRAVITY[2]))
         if kind == ">0" and not value > 0:
-            raise chk.fail(vpath, f"{_show(value)} {si} is not physical: a {meaning} must be > 0")
+            raise chk.fail(vpath, f"{_show(value)} {si} is not physical: {meaning} must be > 0")
         if kind == ">=0" and not value >= 0:
-            raise chk.fail(vpath, f"{_show(value)} {si} is not physical: a {meaning} must be >= 0")
+            raise chk.fail(vpath, f"{_show(value)} {si} is not physical: {meaning} must be >= 0")
         defaults[key] = value
         value_path[key] = vpath
 
