@@ -103,7 +103,10 @@ def main(argv=None, prog: str = "python -m derive") -> int:
     if args.model_file:
         if args.out is None:
             ap.error("--model-file needs --out DIR (user models are not written into generated/)")
-        from .model_file import ModelFileError, load_model_file
+        try:
+            from .model_file import ModelFileError, load_model_file
+        except ModuleNotFoundError as exc:  # Python < 3.11 without tomli
+            ap.error(f"--model-file needs a TOML parser ({exc.name} is missing): pip install '.[derive]'")
         for path in args.model_file:
             try:
                 spec = load_model_file(path)
