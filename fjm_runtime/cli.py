@@ -5,6 +5,7 @@ Examples
 ``fjm simulate link1 --K 120 --reference sine --duration 10 --plot out/run.png``
 ``fjm simulate planar2 --controller ismc --param K1=120 --param K2=180 --reference sine``
 ``fjm figures --out out``
+``fjm sweep link1 --samples 1000 --chunk 250 --out out/sweep.csv`` (Dask; ``--scheduler ADDRESS``)
 ``fjm derive --model-file arm.toml --out DIR`` (needs ``pip install '.[derive]'``)
 """
 from __future__ import annotations
@@ -77,6 +78,29 @@ def build_parser() -> argparse.ArgumentParser:
     # `fjm derive ...` is handed to `python -m derive` as is (see main); listed here for --help.
     sub.add_parser("derive", add_help=False,
                    help="derive and emit models, e.g. --model-file arm.toml --out DIR (needs .[derive])")
+
+    sw = sub.add_parser("sweep", help="Monte Carlo sweep of the closed loop on Dask (chunks of compiled batches)",
+                        description="Sample TRUE plants (stiffness uniform in [--k-min, --k-max], link and "
+                                    "motor inertias +-20 %%), run them in chunks of compiled batch "
+                                    "simulations on Dask (a local cluster, or --scheduler ADDRESS), and "
+                                    "write one row per run (parameters and metrics) as CSV.")
+    sw.add_argument("model", help="model name, e.g. link1")
+    sw.add_argument("--samples", type=int, default=1000, help="number of runs (default 1000)")
+    sw.add_argument("--chunk", type=int, default=250, help="runs per Dask task (default 250)")
+    sw.add_argument("--seed", type=int, default=0, help="sampling seed (default 0)")
+    sw.add_argument("--k-min", type=float, default=100.0, help="stiffness lower bound, N m/rad (default 100)")
+    sw.add_argument("--k-max", type=float, default=200.0, help="stiffness upper bound, N m/rad (default 200)")
+    sw.add_argument("--controller", default="smc", choices=CONTROLLER_KINDS, help="controller (default smc)")
+    sw.add_argument("--lam", type=float, default=8.0, help="pole magnitude lambda, 1/s (default 8)")
+    sw.add_argument("--k-s", type=float, default=1000.0, help="switching gain, rad/s^4 (default 1000)")
+    sw.add_argument("--delta", type=float, default=None, help="boundary layer (default k_s / 200)")
+    sw.add_argument("--reference", default="sine", help=f"one of {', '.join(REFERENCE_KINDS)} (default sine)")
+    sw.add_argument("--duration", type=float, default=10.0, help="simulated time, s (default 10)")
+    sw.add_argument("--dt", type=float, default=1e-3, help="RK4 step, s (default 1e-3)")
+    sw.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                    help="existing dask.distributed scheduler, e.g. tcp://127.0.0.1:8786 (default: local cluster)")
+    sw.add_argument("--workers", type=int, default=2, help="workers of the local cluster (default 2)")
+    sw.add_argument("--out", type=Path, default=Path("out/sweep.csv"), help="CSV output (default out/sweep.csv)")
 
     fig = sub.add_parser("figures", help="reproduce the paper's figures and the comparisons (make demo)")
     fig.add_argument("--out", type=Path, default=Path("out"), help="output directory (default out)")
@@ -175,6 +199,33 @@ def _plot_run(res, args, path: Path) -> None:
     plt.close(fig)
 
 
+def _cmd_sweep(args) -> int:
+    """``fjm sweep``: sample, run on Dask, write the CSV table and a one-line summary."""
+    import time
+    from . import load
+    from .sweep import SweepSpec, sample_parameters, sweep, write_table
+    m = load(args.model)
+    delta = args.delta if args.delta is not None else args.k_s / 200.0
+    options = {"lam": args.lam, "delta": delta}
+    if args.controller != "fl":
+        options["k_s"] = args.k_s
+    spec = SweepSpec(model=args.model, controller=args.controller, controller_options=options,
+                     reference=args.reference, duration=args.duration, dt=args.dt)
+    P = sample_parameters(m, args.samples, seed=args.seed, k_range=(args.k_min, args.k_max))
+    t0 = time.perf_counter()
+    metrics = sweep(spec, P, chunk_size=args.chunk, scheduler=args.scheduler, n_workers=args.workers,
+                    progress=lambda d, t: print(f"\rfjm sweep: {d}/{t} chunks", end="", file=sys.stderr,
+                                                flush=True))
+    print(file=sys.stderr)
+    path = write_table(args.out, m, P, metrics)
+    ok = metrics["diverged"] == 0
+    print(json.dumps({"runs": int(len(P)), "diverged": int((~ok).sum()), "seconds": time.perf_counter() - t0,
+                      "rms_error_second_half_max": float(np.nanmax(metrics["rms_error_second_half"])),
+                      "rms_error_second_half_median": float(np.nanmedian(metrics["rms_error_second_half"])),
+                      "table": str(path)}, indent=2))
+    return 0
+
+
 def _cmd_derive(argv: List[str]) -> int:
     """``fjm derive ...`` = ``python -m derive ...``; SymPy is imported only here."""
     try:
@@ -200,6 +251,8 @@ def main(argv: Optional[List[str]] = None) -> int:
     try:
         if args.command == "simulate":
             return _cmd_simulate(args)
+        if args.command == "sweep":
+            return _cmd_sweep(args)
         if args.command == "figures":
             if args.samples < 1:
                 raise ValueError(f"--samples = {args.samples}: expected an integer >= 1")

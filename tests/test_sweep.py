@@ -41,3 +41,13 @@ def test_dask_sweep_equals_simulate_batch(tmp_path):
     path = write_table(tmp_path / "sweep.csv", model, P, got)
     lines = path.read_text().splitlines()
     assert len(lines) == 7 and lines[0].startswith("run,J_l,J_m,K")
+
+
+def test_cli_sweep_writes_the_table(tmp_path, capsys):
+    from fjm_runtime.cli import main
+    out = tmp_path / "s.csv"
+    rc = main(["sweep", "link1", "--samples", "4", "--chunk", "2", "--duration", "0.5", "--out", str(out)])
+    assert rc == 0
+    rows = out.read_text().splitlines()
+    assert len(rows) == 5 and "rms_error_second_half" in rows[0]
+    assert '"runs": 4' in capsys.readouterr().out
