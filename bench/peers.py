@@ -33,7 +33,8 @@ def peer_expressions(model_name: str):
     p = ca.SX.sym("p", len(m.params))
     bind = {s: x[i] for i, s in enumerate(m.state)}
     bind.update({s: p[j] for j, s in enumerate(m.param_symbols)})
-    conv = SympyToSX(bind)
+    program = getattr(m, "program", None)  # named intermediates of D, h (if the model has them)
+    conv = SympyToSX(bind, dict(program.definitions)) if program is not None else SympyToSX(bind)
     D = conv(m.D)
     h = conv(m.h)
     K = ca.vertcat(*[conv(k) for k in m.K])

@@ -108,8 +108,8 @@ def _metric_step(model, controller, dt: float, max_state: float) -> ca.Function:
         ca.if_else((1 - ok) * (first_bad < 0) * (1 - last), k + 1, first_bad),
         p,
     )
-    f = ca.Function("fjm_metric_step", [acc, r0, rh, r1, fl], [acc_next])
-    return f
+    # cse: T and alpha share sin(q), cos(q) etc. once the model Functions are inlined
+    return ca.Function("fjm_metric_step", [acc, r0, rh, r1, fl], [ca.cse(acc_next)])
 
 
 _DRIVER = r"""
