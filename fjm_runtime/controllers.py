@@ -354,7 +354,7 @@ def _params_array(model, p, field: str) -> np.ndarray:
     return a
 
 
-CONTROLLER_KINDS = ("smc", "ismc", "fl", "sign")
+CONTROLLER_KINDS = ("smc", "ismc", "fl", "sign", "adaptive")
 
 
 def make_controller(kind: str, model, nominal_params, **kwargs) -> SlidingModeController:
@@ -362,10 +362,13 @@ def make_controller(kind: str, model, nominal_params, **kwargs) -> SlidingModeCo
 
     Parameters
     ----------
-    kind : {'smc', 'ismc', 'fl', 'sign'}
+    kind : {'smc', 'ismc', 'fl', 'sign', 'adaptive'}
         ``'smc'``: paper's surface with ``sat``; ``'sign'``: the paper's
         discontinuous law; ``'ismc'``: integral surface with ``sat``; ``'fl'``:
-        plain feedback linearization (no switching term, quadruple pole).
+        plain feedback linearization (no switching term, quadruple pole);
+        ``'adaptive'``: online stiffness estimate in ``T``, ``alpha``, ``beta``
+        (:class:`fjm_runtime.adaptive.AdaptiveStiffnessController`; keywords
+        ``K_bounds``, ``filter_rate``, ``ls_gain``, ``integral``).
     model, nominal_params, **kwargs
         Passed to :class:`SlidingModeController`.
     """
@@ -379,4 +382,7 @@ def make_controller(kind: str, model, nominal_params, **kwargs) -> SlidingModeCo
     if kind == "fl":
         kwargs.pop("k_s", None)
         return SlidingModeController(model, nominal_params, mode="fl", **kwargs)
+    if kind == "adaptive":
+        from .adaptive import make_adaptive
+        return make_adaptive(model, nominal_params, **kwargs)
     raise ValueError(f"controller = {kind!r}: expected one of {', '.join(CONTROLLER_KINDS)}")

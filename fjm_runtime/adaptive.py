@@ -1,0 +1,308 @@
+"""Sliding-mode control with an online joint-stiffness estimate (issue 7 item 3, research grade).
+
+Why
+---
+With nominal parameters only, ``T_hat``, ``alpha_hat`` and ``beta_hat`` are built
+from ``K_nom``; the error of ``y3_hat``/``y4_hat`` (the spring torque seen
+through the wrong stiffness) is what leaves the paper's controller with a
+regulation offset and both sliding controllers with a tracking error. The
+stiffness is the one parameter that the motor side measures almost directly,
+so it can be estimated online and put back into ``T``, ``alpha`` and ``beta``.
+
+Scheme (per joint ``i``, certainty equivalence)
+-----------------------------------------------
+The motor equation (DESIGN.md section 2) is linear in the stiffness::
+
+    J_m ddq_m + B_m dq_m + K phi = u,        phi = q_m - q_l   (deflection)
+
+Measured: the full state ``x = [q_l; dq_l; q_m; dq_m]`` and the torque ``u``
+the controller applied (held over the sample); ``J_m`` and ``B_m`` are NOMINAL.
+No acceleration is differentiated: every term goes through the same stable
+first-order filter ``H(s) = a / (s + a)`` (``a = filter_rate``), with the
+controller states ``u_f, phi_f, w_f``::
+
+    u_f'   = a (u - u_f)             u_f(0) = 0
+    phi_f' = a (phi - phi_f)         phi_f(0) = 0
+    w_f'   = a (dq_m - w_f)          w_f(0) = dq_m(0)
+
+``H[ddq_m] = a (dq_m - w_f)`` exactly (``s H(s) = a - a H(s)``), so the
+filtered motor equation is a static linear regression with no derivative::
+
+    y_f = u_f - J_m a (dq_m - w_f) - B_m w_f = K phi_f  (+ B_m dq_m(0) e^{-a t})
+
+The estimate ``K_hat`` follows continuous least squares on the prediction
+error ``eps = y_f - K_hat phi_f``, with the scalar covariance ``P``::
+
+    K_hat' = Proj(P phi_f eps),      P' = -P^2 phi_f^2,      P(0) = ls_gain
+
+``Proj`` zeroes the update when ``K_hat`` is at a bound of ``[K_min, K_max]``
+and the update points outward, and the value USED (and reported by
+:meth:`AdaptiveStiffnessController.stiffness_estimate`) is
+``clip(K_hat, K_min, K_max)``, so the controller never uses a stiffness outside
+the bounds even between RK4 stages. Without projection and with exact
+``J_m, B_m`` the error has the closed form
+``K - K_hat(t) = (K - K_hat(0)) / (1 + P(0) int_0^t phi_f^2)``: it shrinks with
+the accumulated squared filtered deflection.
+
+The controller then uses ``p_hat = p_nom`` with the stiffness entries replaced
+by ``K_hat``: ``y_hat = T(x; p_hat)``, ``alpha(x; p_hat)`` and (unless a
+constant ``beta_hat`` is given) ``beta(x; p_hat)``, with the paper's surface
+(``integral=False``) or the integral surface (``integral=True``) of
+:class:`fjm_runtime.controllers.SlidingModeController`. The time variation of
+``K_hat`` is ignored in ``y4_hat'`` (certainty equivalence); the switching term
+absorbs it while the estimate moves.
+
+Assumptions and limits (state them when quoting results)
+--------------------------------------------------------
+* Persistence of excitation: ``K`` is observable only through the deflection.
+  At rest with zero deflection (link1 hanging at ``q = 0``, no load) nothing is
+  learned and ``K_hat`` stays where it is; gravity away from the hanging
+  position (``M g0 L sin q``) and link acceleration provide the deflection.
+  The convergence speed scales with ``int phi_f^2`` (for link1 at 1 rad,
+  ``phi`` is about 0.05-0.08 rad).
+* ``J_m`` and ``B_m`` are nominal; an error in them biases ``K_hat``
+  (``(J_m - J_m,nom) ddq_m`` is read as spring torque). Friction not in the
+  model (Coulomb, stiction) biases it too.
+* The torque entering the regression is the one applied to the motor (after
+  the limit ``u_max``), assumed to be delivered exactly.
+* Noise-free simulation: no measurement noise, so least squares without
+  forgetting is used (the gain ``P`` decays; a slowly drifting ``K`` would need
+  forgetting with a bounded ``P``, not implemented).
+* The stiffness enters ``T``, ``alpha``, ``beta`` of every generated model in
+  the same place; the estimator works per joint for ``link1`` (``K``, ``J_m``,
+  ``B_m``) and ``planar<n>`` (``K_i``, ``Jm_i``, ``Bm_i``).
+
+Controller state ``z`` (``n`` joints), integrated with the plant in RK4::
+
+    [z_int (n, only with integral=True), K_hat (n), u_f (n), phi_f (n), w_f (n), P (n)]
+"""
+from __future__ import annotations
+
+from typing import Optional
+
+import numpy as np
+
+from .controllers import ControlSample, SlidingModeController
+
+#: Names of the blocks of the estimator part of ``z``, in order.
+ESTIMATOR_BLOCKS = ("K_hat", "u_f", "phi_f", "w_f", "P")
+
+
+def _param_indices(model):
+    """Indices of the stiffness, motor inertia and motor damping of each joint in ``param_names``."""
+    names = list(model.param_names)
+    n = int(model.n)
+    if n == 1 and "K" in names:
+        groups = (["K"], ["J_m"], ["B_m"])
+    else:
+        groups = ([f"K{i + 1}" for i in range(n)], [f"Jm{i + 1}" for i in range(n)],
+                  [f"Bm{i + 1}" for i in range(n)])
+    try:
+        return tuple(np.array([names.index(nm) for nm in g], dtype=int) for g in groups)
+    except ValueError:
+        raise ValueError(f"model {getattr(model, 'name', '?')!r}: adaptive stiffness needs parameters "
+                         f"{groups[0]}, {groups[1]}, {groups[2]} (found {names})") from None
+
+
+def _bounds(K_bounds, n: int):
+    try:
+        lo, hi = K_bounds
+    except (TypeError, ValueError):
+        raise ValueError(f"K_bounds = {K_bounds!r}: expected (K_min, K_max) in N m/rad") from None
+    lo = np.broadcast_to(np.asarray(lo, dtype=float), (n,)).copy() if np.ndim(lo) == 0 else np.asarray(lo, float)
+    hi = np.broadcast_to(np.asarray(hi, dtype=float), (n,)).copy() if np.ndim(hi) == 0 else np.asarray(hi, float)
+    if lo.shape != (n,) or hi.shape != (n,):
+        raise ValueError(f"K_bounds with shapes {lo.shape}, {hi.shape}: expected scalars or shape ({n},)")
+    if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi)) and np.all(lo > 0) and np.all(hi > lo)):
+        raise ValueError(f"K_bounds = ({lo.tolist()}, {hi.tolist()}): expected finite 0 < K_min < K_max "
+                         "(N m/rad)")
+    return lo, hi
+
+
+def _positive(value, field: str) -> float:
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{field} = {value!r}: expected a number > 0") from None
+    if not (np.isfinite(v) and v > 0):
+        raise ValueError(f"{field} = {value!r}: expected a finite value > 0")
+    return v
+
+
+class AdaptiveStiffnessController(SlidingModeController):
+    """Sliding-mode controller using an online least-squares estimate of the joint stiffness.
+
+    See the module docstring for the scheme and its assumptions.
+
+    Parameters
+    ----------
+    model, nominal_params
+        As :class:`~fjm_runtime.controllers.SlidingModeController`; the nominal
+        stiffness is the initial estimate and must lie inside ``K_bounds``.
+    K_bounds : (K_min, K_max)
+        Stiffness bounds in N m/rad (scalars or one per joint), ``0 < K_min < K_max``;
+        the estimate is projected onto them.
+    filter_rate : float
+        Bandwidth ``a`` of the regressor filter ``a / (s + a)``, 1/s, > 0 (default 20).
+    ls_gain : float
+        Initial least-squares covariance ``P(0)`` in 1/(rad^2 s), > 0 (default 1e5):
+        the initial adaptation rate is ``P(0) phi_f^2`` (250 1/s at 0.05 rad).
+    integral : bool
+        Integral sliding surface (default True) or the paper's surface.
+    beta_hat : optional
+        Constant ``beta_hat``; default ``beta(x; p_hat)`` with the estimated stiffness.
+    **kwargs
+        ``lam``/``c``, ``k_s``, ``delta``, ``mode``, ``k_lin``, ``u_max``, ``anti_windup``
+        as for the base class.
+    """
+
+    def __init__(self, model, nominal_params, *, K_bounds, filter_rate: float = 20.0,
+                 ls_gain: float = 1e5, integral: bool = True, beta_hat=None, **kwargs):
+        super().__init__(model, nominal_params, integral=integral, beta_hat=beta_hat, **kwargs)
+        n = self.n
+        self.K_min, self.K_max = _bounds(K_bounds, n)
+        self.filter_rate = _positive(filter_rate, "filter_rate")
+        self.ls_gain = _positive(ls_gain, "ls_gain")
+        self.idx_K, self.idx_Jm, self.idx_Bm = _param_indices(model)
+        K0 = self.p_nom[self.idx_K]
+        if np.any(K0 < self.K_min) or np.any(K0 > self.K_max):
+            raise ValueError(f"K_bounds = ({self.K_min.tolist()}, {self.K_max.tolist()}): the nominal stiffness "
+                             f"{K0.tolist()} (initial estimate) must lie inside")
+        self.J_m = self.p_nom[self.idx_Jm]
+        self.B_m = self.p_nom[self.idx_Bm]
+        self.n_int = n if self.integral else 0
+        self.n_states = self.n_int + len(ESTIMATOR_BLOCKS) * n
+
+    # -- state layout --------------------------------------------------------
+    def _split(self, z):
+        n, k = self.n, self.n_int
+        blocks = [z[k + j * n:k + (j + 1) * n] for j in range(len(ESTIMATOR_BLOCKS))]
+        return z[:k], dict(zip(ESTIMATOR_BLOCKS, blocks))
+
+    def stiffness_estimate(self, z) -> np.ndarray:
+        """The stiffness the controller uses, ``clip(K_hat, K_min, K_max)``; ``z`` of shape
+        ``(n_states,)`` or ``(N, n_states)`` (e.g. ``SimulationResult.z``) -> ``(n,)`` or ``(N, n)``."""
+        z = np.asarray(z, dtype=float)
+        k = self.n_int
+        return np.clip(z[..., k:k + self.n], self.K_min, self.K_max)
+
+    def params_hat(self, z) -> np.ndarray:
+        """Nominal parameters with the stiffness replaced by the estimate, shape ``(n_par,)``."""
+        p = self.p_nom.copy()
+        p[self.idx_K] = self.stiffness_estimate(z)
+        return p
+
+    def initial_state(self, t0: float, x0: np.ndarray, r0: np.ndarray) -> np.ndarray:
+        n = self.n
+        x0 = np.asarray(x0, dtype=float)
+        est = {"K_hat": self.p_nom[self.idx_K], "u_f": np.zeros(n), "phi_f": np.zeros(n),
+               "w_f": x0[3 * n:4 * n], "P": np.full(n, self.ls_gain)}
+        return np.concatenate([np.zeros(self.n_int)] + [est[b] for b in ESTIMATOR_BLOCKS])
+
+    # -- control law ---------------------------------------------------------
+    def evaluate(self, t: float, x: np.ndarray, z: np.ndarray, r: np.ndarray) -> ControlSample:
+        n = self.n
+        z = np.asarray(z, dtype=float)
+        p = self.params_hat(z)
+        y_hat = np.asarray(self.model.T(x, p), dtype=float).reshape(4, n)
+        e = y_hat - r[:4]
+        s, linear = self.surface(e, z[:self.n_int])
+        nu = r[4] - linear - self.k_s * self.switching(s) - self.k_lin * s
+        alpha = np.asarray(self.model.alpha(x, p), dtype=float).reshape(n)
+        beta = self.beta_hat if self.beta_hat is not None else \
+            np.asarray(self.model.beta(x, p), dtype=float).reshape(n, n)
+        u_cmd = alpha + beta @ nu
+        if self.u_max is None:
+            u, saturated = u_cmd, np.zeros(n, dtype=bool)
+        else:
+            u = np.clip(u_cmd, -self.u_max, self.u_max)
+            saturated = np.abs(u_cmd) > self.u_max
+        return ControlSample(u, u_cmd, s, y_hat, e, saturated)
+
+    def _estimator_rates(self, x, est, u, xp, J_m, B_m):
+        """Derivatives of the estimator blocks (numpy or casadi: ``xp`` holds ``clip`` and ``outward``)."""
+        n, a = self.n, self.filter_rate
+        q_l, dq_m, q_m = x[0:n], x[3 * n:4 * n], x[2 * n:3 * n]
+        phi = q_m - q_l
+        y_f = est["u_f"] - J_m * a * (dq_m - est["w_f"]) - B_m * est["w_f"]
+        eps = y_f - xp["clip"](est["K_hat"]) * est["phi_f"]
+        upd = est["P"] * est["phi_f"] * eps
+        outward = xp["outward"](est["K_hat"], upd)
+        return {"K_hat": upd * (1 - outward),
+                "u_f": a * (u - est["u_f"]),
+                "phi_f": a * (phi - est["phi_f"]),
+                "w_f": a * (dq_m - est["w_f"]),
+                "P": -est["P"] ** 2 * est["phi_f"] ** 2}
+
+    def state_derivative(self, t, x, z, r, sample) -> np.ndarray:
+        z = np.asarray(z, dtype=float)
+        zi, est = self._split(z)
+        dzi = super().state_derivative(t, x, zi, r, sample) if self.integral else np.zeros(0)
+        xp = {"clip": lambda k: np.clip(k, self.K_min, self.K_max),
+              "outward": lambda k, d: (((k >= self.K_max) & (d > 0)) | ((k <= self.K_min) & (d < 0))).astype(float)}
+        d = self._estimator_rates(np.asarray(x, dtype=float), est, np.asarray(sample.u, dtype=float), xp,
+                                  self.J_m, self.B_m)
+        return np.concatenate([dzi] + [d[b] for b in ESTIMATOR_BLOCKS])
+
+    # -- CasADi mirror -------------------------------------------------------
+    def _symbolic_params(self, z):
+        import casadi as ca
+        k = self.n_int
+        K_hat = ca.fmin(ca.fmax(z[k:k + self.n], ca.DM(self.K_min)), ca.DM(self.K_max))
+        E = np.zeros((self.p_nom.size, self.n))
+        E[self.idx_K, np.arange(self.n)] = 1.0
+        return ca.DM(self.p_nom) + ca.mtimes(ca.DM(E), K_hat - ca.DM(self.p_nom[self.idx_K]))
+
+    def symbolic_evaluate(self, x, z, r, fns):
+        """CasADi mirror of :meth:`evaluate` (same contract as the base class)."""
+        import casadi as ca
+        n = self.n
+        blk = lambda v, i: v[i * n:(i + 1) * n]
+        p = self._symbolic_params(z)
+        y_hat = fns["T"](x, p)
+        e = [blk(y_hat, i) - blk(r, i) for i in range(4)]
+        chain = ([z[:self.n_int]] if self.integral else []) + e
+        m = self.c.size
+        s = chain[m]
+        linear = 0
+        for j in range(m):
+            s = s + float(self.c[j]) * chain[j]
+            linear = linear + float(self.c[j]) * chain[j + 1]
+        if self.mode == "sat":
+            psi = ca.fmin(ca.fmax(s / ca.DM(self.delta), -1.0), 1.0)
+        elif self.mode == "sign":
+            psi = ca.sign(s)
+        else:
+            psi = ca.DM.zeros(n, 1)
+        nu = blk(r, 4) - linear - ca.DM(self.k_s) * psi - ca.DM(self.k_lin) * s
+        beta = ca.DM(self.beta_hat) if self.beta_hat is not None else ca.reshape(fns["beta"](x, p), n, n)
+        u_cmd = fns["alpha"](x, p) + ca.mtimes(beta, nu)
+        if self.u_max is None:
+            u = u_cmd
+        else:
+            um = ca.DM(self.u_max)
+            u = ca.fmin(ca.fmax(u_cmd, -um), um)
+        return {"u": u, "u_cmd": u_cmd, "s": s, "y_hat": y_hat}
+
+    def symbolic_state_derivative(self, x, z, r, sample):
+        """CasADi mirror of :meth:`state_derivative`."""
+        import casadi as ca
+        n, k = self.n, self.n_int
+        dzi = super().symbolic_state_derivative(x, z[:k], r, sample) if self.integral else None
+        est = {b: z[k + j * n:k + (j + 1) * n] for j, b in enumerate(ESTIMATOR_BLOCKS)}
+        lo, hi = ca.DM(self.K_min), ca.DM(self.K_max)
+        xp = {"clip": lambda kk: ca.fmin(ca.fmax(kk, lo), hi),
+              "outward": lambda kk, d: (kk >= hi) * (d > 0) + (kk <= lo) * (d < 0)}
+        d = self._estimator_rates(x, est, sample["u"], xp, ca.DM(self.J_m), ca.DM(self.B_m))
+        parts = ([dzi] if dzi is not None else []) + [d[b] for b in ESTIMATOR_BLOCKS]
+        return ca.vertcat(*parts)
+
+
+def make_adaptive(model, nominal_params, *, K_bounds=None, **kwargs) -> AdaptiveStiffnessController:
+    """``make_controller('adaptive', ...)``: ``K_bounds`` defaults to ``nominal +- 1/3`` (100-200 at 150)."""
+    if K_bounds is None:
+        p = np.asarray(model.params_array(nominal_params), dtype=float)
+        K0 = p[_param_indices(model)[0]]
+        K_bounds = (K0 * 2.0 / 3.0, K0 * 4.0 / 3.0)
+    kwargs.setdefault("mode", "sat")
+    return AdaptiveStiffnessController(model, nominal_params, K_bounds=K_bounds, **kwargs)
