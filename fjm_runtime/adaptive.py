@@ -28,7 +28,7 @@ controller states ``u_f, phi_f, w_f``::
 ``H[ddq_m] = a (dq_m - w_f)`` exactly (``s H(s) = a - a H(s)``), so the
 filtered motor equation is a static linear regression with no derivative::
 
-    y_f = u_f - J_m a (dq_m - w_f) - B_m w_f = K phi_f  (+ B_m dq_m(0) e^{-a t})
+    y_f = u_f - J_m a (dq_m - w_f) - B_m w_f = K phi_f - B_m dq_m(0) e^{-a t}
 
 The estimate ``K_hat`` follows continuous least squares on the prediction
 error ``eps = y_f - K_hat phi_f``, with the scalar covariance ``P``::

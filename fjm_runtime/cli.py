@@ -48,7 +48,9 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_argument("model", help="model name, e.g. link1, planar2")
     sim.add_argument("--controller", default="smc", choices=CONTROLLER_KINDS,
                      help="smc: paper's law with sat; sign: paper's discontinuous law; ismc: integral "
-                          "sliding surface; fl: plain feedback linearization (default smc)")
+                          "sliding surface; fl: plain feedback linearization; adaptive: integral surface "
+                          "with an online stiffness estimate projected onto [--k-min, --k-max] "
+                          "(default smc)")
     sim.add_argument("--reference", default="sine", help=f"one of {', '.join(REFERENCE_KINDS)} (default sine)")
     sim.add_argument("--q-d", type=float, default=1.0, help="set point for step/constant, rad (default 1)")
     sim.add_argument("--rise-time", type=float, default=2.0, help="smooth step duration, s (default 2)")
@@ -143,6 +145,13 @@ def _cmd_simulate(args) -> int:
         else:
             k_s = 1000.0
     delta = args.delta if args.delta is not None else max(k_s, 1.0) / 200.0
+    if args.controller == "adaptive":
+        # beta from the estimated stiffness (not the paper's constant); the bounds project K_hat
+        extra.pop("beta_hat", None)
+        if not (0 < args.k_min < args.k_max):
+            raise ValueError(f"--k-min/--k-max = {args.k_min}/{args.k_max}: expected 0 < k_min < k_max "
+                             "for the adaptive controller")
+        extra["K_bounds"] = (args.k_min, args.k_max)
     ctrl = make_controller(args.controller, m, nominal, lam=args.lam, k_s=k_s, delta=delta,
                            u_max=args.u_max, **extra)
     progress = None if args.quiet else stderr_progress(f"simulating {args.model} ({args.duration:g} s)")
@@ -158,6 +167,8 @@ def _cmd_simulate(args) -> int:
               "lemma1": None if gain is None else {"k_s": gain.k_s, "k_s_tight": gain.k_s_tight, "W": gain.W,
                                                    "H": gain.H, "beta_hat": gain.beta_hat},
               "metrics": {k: (v if np.isfinite(v) else str(v)) for k, v in res.metrics.as_dict().items()}}
+    if hasattr(ctrl, "stiffness_estimate"):
+        report["K_hat_final"] = ctrl.stiffness_estimate(res.z[-1]).tolist()
     print(json.dumps(report, indent=2))
     if args.plot is not None:
         _plot_run(res, args, args.plot)
