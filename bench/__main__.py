@@ -103,7 +103,7 @@ def bench_derive(work: Path, reps: int) -> dict:
 # -- alpha + beta ---------------------------------------------------------------------------
 def bench_alpha_beta(work: Path, reps: int, models=AB_MODELS) -> dict:
     import fjm_runtime
-    from .alpha_beta import build_generated, build_peer, time_median
+    from .alpha_beta import build_generated, build_peer, time_interleaved
     res = {}
     for name in models:
         m = fjm_runtime.load(name)
@@ -113,15 +113,18 @@ def bench_alpha_beta(work: Path, reps: int, models=AB_MODELS) -> dict:
         log(f"alpha+beta {name}: compiling generated and peers ...")
         gen = build_generated(m, work / "ab")
         a_ref, b_ref = m.alpha(x, p), m.beta(x, p)
-        entry = {"generated_us": time_median(gen, x, p, reps)}
-        peers = {}
+        peers, libs = {}, []
         for variant in ("structured", "generic"):
             peer, gcc_s, c_bytes = build_peer(name, variant, work / "ab", m.n, m.nx)
             a, b = peer(x, p)
             err = max(float(np.max(np.abs(a - a_ref)) / max(1.0, float(np.max(np.abs(a_ref))))),
                       float(np.max(np.abs(b - b_ref))))
-            peers[variant] = {"us": time_median(peer, x, p, reps), "gcc_seconds": gcc_s,
-                              "c_bytes": c_bytes, "max_rel_diff_vs_generated": err}
+            peers[variant] = {"gcc_seconds": gcc_s, "c_bytes": c_bytes, "max_rel_diff_vs_generated": err}
+            libs.append(peer)
+        us = time_interleaved([gen, *libs], x, p, reps=3 * reps)
+        entry = {"generated_us": us[0]}
+        for variant, t in zip(("structured", "generic"), us[1:]):
+            peers[variant]["us"] = t
         best = min(peers, key=lambda v: peers[v]["us"])
         entry["peer_us"] = peers[best]["us"]
         entry["peer_variant"] = best
@@ -145,8 +148,13 @@ def bench_closed_loop(work: Path, reps: int, slow_reps: int) -> dict:
     out = (np.empty_like(W), np.empty_like(A))
     hand = HandLoop(case, work / "hand")
     Wh, _ = hand()
-    gen_s = median_time(lambda: lib(w0, R0, RH, R1, case.p_true, out=out), reps * 3)
-    hand_s = median_time(hand, reps * 3)
+    gen_call = lambda: lib(w0, R0, RH, R1, case.p_true, out=out)  # noqa: E731
+    gen_call(), hand()
+    gen_t, hand_t = [], []
+    for _ in range(reps * 3):  # alternate, so a busy neighbour hits both sides alike
+        t0 = time.perf_counter(); gen_call(); gen_t.append(time.perf_counter() - t0)  # noqa: E702
+        t0 = time.perf_counter(); hand(); hand_t.append(time.perf_counter() - t0)  # noqa: E702
+    gen_s, hand_s = statistics.median(gen_t), statistics.median(hand_t)
     log("closed loop: Python loop ...")
     py_s = median_time(lambda: python_loop(case), slow_reps, warmup=0)
     py = python_loop(case)
@@ -179,14 +187,26 @@ def bench_batch(reps: int, slow_reps: int, n_runs: int = 1000) -> dict:
     log(f"batch {n_runs} x 10 s: compiling ...")
     res_gen = run()
     gen_s = median_time(run, reps, warmup=0)
+    t0 = time.process_time()
+    run()
+    cpu_s = time.process_time() - t0
+    scalar = lambda: simulate_batch(case.model, case.controller, case.reference, P,  # noqa: E731
+                                    duration=case.duration, dt=case.dt, x0=case.x0(), simd=False)
+    scalar()
+    scalar_s = median_time(scalar, max(1, reps // 2), warmup=0)
     log(f"batch {n_runs} x 10 s: numpy-vectorized RK4 ...")
     nb = numpy_batch(case, Ks)
     np_s = median_time(lambda: numpy_batch(case, Ks), slow_reps, warmup=0)
     diff = max(float(np.nanmax(np.abs(res_gen.metrics[k] - nb[k]) / np.maximum(1e-12, np.abs(nb[k]))))
                for k in ("final_error", "rms_error", "max_abs_u", "total_variation_u"))
+    try:
+        load = os.getloadavg()[0]
+    except OSError:
+        load = float("nan")
     return {"n": n_runs, "generated_s": gen_s, "numpy_s": np_s, "speedup_vs_numpy": np_s / gen_s,
-            "threads": os.cpu_count(), "max_rel_metric_diff_vs_numpy": diff,
-            "diverged": int(np.sum(res_gen.diverged))}
+            "generated_cpu_s": cpu_s, "generated_scalar_s": scalar_s,
+            "threads": os.cpu_count(), "load_average_1min": load,
+            "max_rel_metric_diff_vs_numpy": diff, "diverged": int(np.sum(res_gen.diverged))}
 
 
 # -- report -----------------------------------------------------------------------------------

@@ -93,3 +93,21 @@ def time_median(fn: CompiledAlphaBeta, x, p, reps: int = 7, target_s: float = 0.
     iters = max(100, int(target_s / max(per, 1e-9)))
     fn.seconds_per_call(x, p, iters)  # warm-up
     return 1e6 * statistics.median(fn.seconds_per_call(x, p, iters) for _ in range(reps))
+
+
+def time_interleaved(fns, x, p, reps: int = 15, target_s: float = 0.02):
+    """Median us per call of each of ``fns``, measured in alternation (A B C A B C ...).
+
+    Alternating keeps a busy neighbour on a shared machine from landing on one
+    side of the comparison only.
+    """
+    iters = []
+    for fn in fns:
+        per = fn.seconds_per_call(x, p, 100)
+        iters.append(max(100, int(target_s / max(per, 1e-9))))
+        fn.seconds_per_call(x, p, iters[-1])  # warm-up
+    samples = [[] for _ in fns]
+    for _ in range(reps):
+        for i, fn in enumerate(fns):
+            samples[i].append(fn.seconds_per_call(x, p, iters[i]))
+    return [1e6 * statistics.median(s) for s in samples]
