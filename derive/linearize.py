@@ -186,7 +186,8 @@ def linearize(m: FlexibleJointModel) -> Linearization:
     N = (-sp.Matrix.hstack(*dR1) * Jinv).applyfunc(sp.simplify)
     if not N.is_diagonal() or any(N[i, i].has(*[s for s, _ in m.program.definitions]) for i in range(n)):
         raise ValueError(f"{m.name}: expected L_g y4 = D^-1 K J_m^-1 with K diagonal, got N = {N}")
-    Ninv = _diag([1 / N[i, i] for i in range(n)])
+    # Named, so beta = Ninv D costs one product per entry (not a division each).
+    Ninv = _diag([m.program.define(f"Ninv{i + 1}", 1 / N[i, i]) for i in range(n)])
     beta = Ninv * m.D
     alpha = Ninv * R2
 

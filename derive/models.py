@@ -240,10 +240,15 @@ def make_planar(n: int, name: str = None, defaults: Dict[str, float] = None,
     sth = [d(f"s{i + 1}", sp.sin(theta[i])) for i in range(n)]
     cos_rel = [[None] * n for _ in range(n)]  # cos(theta_j - theta_k)
     sin_rel = [[None] * n for _ in range(n)]  # sin(theta_j - theta_k)
+    # Their derivatives are stated directly, d cos(a) = -sin(a) da and d sin(a) = cos(a) da with
+    # da = d theta_j - d theta_k: 1-2 products instead of the 4 of the product formula.
     for j in range(n):
         for k in range(j):
-            cos_rel[j][k] = cos_rel[k][j] = d(f"cr{j + 1}_{k + 1}", cth[j] * cth[k] + sth[j] * sth[k])
-            sin_rel[j][k] = d(f"sr{j + 1}_{k + 1}", sth[j] * cth[k] - cth[j] * sth[k])
+            rate = lambda dd, j=j, k=k: dd(theta[j]) - dd(theta[k])
+            cos_rel[j][k] = cos_rel[k][j] = d(f"cr{j + 1}_{k + 1}", cth[j] * cth[k] + sth[j] * sth[k],
+                                              rule=lambda dd, j=j, k=k: -sin_rel[j][k] * rate(dd, j, k))
+            sin_rel[j][k] = d(f"sr{j + 1}_{k + 1}", sth[j] * cth[k] - cth[j] * sth[k],
+                              rule=lambda dd, j=j, k=k: cos_rel[j][k] * rate(dd, j, k))
             sin_rel[k][j] = -sin_rel[j][k]
 
     def M(j: int, k: int) -> sp.Expr:

@@ -20,15 +20,33 @@ import sympy as sp
 
 
 class Program:
-    """Ordered definitions ``symbol := expression`` (expressions may use earlier symbols)."""
+    """Ordered definitions ``symbol := expression`` (expressions may use earlier symbols).
+
+    Attributes
+    ----------
+    use_rules : bool
+        Use the derivative shortcuts given to :meth:`define` (default True;
+        False differentiates every definition, for cross-checks).
+    """
+
+    use_rules = True
 
     def __init__(self) -> None:
         self._defs: Dict[sp.Symbol, sp.Expr] = {}
         self._order: List[sp.Symbol] = []
         self._derivs: Dict[Tuple[sp.Symbol, str], sp.Expr] = {}
+        self._rules: Dict[sp.Symbol, Callable] = {}
 
-    def define(self, name: str, expr) -> sp.Expr:
-        """Define ``name := expr``; returns the symbol (or ``expr`` itself if it is atomic)."""
+    def define(self, name: str, expr, rule: Callable = None) -> sp.Expr:
+        """Define ``name := expr``; returns the symbol (or ``expr`` itself if it is atomic).
+
+        ``rule``, if given, states the derivative more cheaply than
+        differentiating ``expr`` would: ``rule(d)`` receives the directional
+        derivative (a callable on expressions) and returns the derivative of
+        the symbol along it. Example: for ``cr := c1 c2 + s1 s2`` (that is
+        ``cos(theta1 - theta2)``), ``rule = lambda d: -sr * (d(theta1) - d(theta2))``.
+        Tests compare every such shortcut against plain differentiation.
+        """
         expr = sp.sympify(expr)
         if expr.is_Atom:  # a number or an existing symbol: nothing to name
             return expr
@@ -37,6 +55,8 @@ class Program:
             raise ValueError(f"program symbol {name} defined twice")
         self._defs[sym] = expr
         self._order.append(sym)
+        if rule is not None:
+            self._rules[sym] = rule
         return sym
 
     def __contains__(self, sym) -> bool:
@@ -58,7 +78,8 @@ class Program:
         """
         key = (sym, tag)
         if key not in self._derivs:
-            d = compute(self._defs[sym])
+            rule = self._rules.get(sym) if self.use_rules else None
+            d = rule(compute) if rule is not None else compute(self._defs[sym])
             self._derivs[key] = self.define(f"{sym.name}__d{tag}", d)
         return self._derivs[key]
 

@@ -140,26 +140,31 @@ def ldl_factor(A: ca.SX):
     -------
     L : list of list of casadi.SX
         Unit lower-triangular factor, ``L[i][j]`` for ``j < i``.
-    d : list of casadi.SX, length n
-        Diagonal of D (all > 0 for SPD input). No pivoting is needed for SPD.
+    inv_d : list of casadi.SX, length n
+        Reciprocals of the diagonal of D (all > 0 for SPD input). No pivoting
+        is needed for SPD.
     """
     n = A.shape[0]
     L = [[None] * n for _ in range(n)]
     d: List[ca.SX] = []
+    inv_d: List[ca.SX] = []  # one division per pivot; the rest are products
+    Ld = [[None] * n for _ in range(n)]  # L[j][k] * d[k], formed once
     for j in range(n):
         dj = A[j, j]
         for k in range(j):
-            dj = dj - L[j][k] * L[j][k] * d[k]
+            Ld[j][k] = L[j][k] * d[k]
+            dj = dj - L[j][k] * Ld[j][k]
         d.append(dj)
+        inv_d.append(1.0 / dj)
         for i in range(j + 1, n):
             lij = A[i, j]
             for k in range(j):
-                lij = lij - L[i][k] * L[j][k] * d[k]
-            L[i][j] = lij / dj
-    return L, d
+                lij = lij - L[i][k] * Ld[j][k]
+            L[i][j] = lij * inv_d[j]
+    return L, inv_d
 
 
-def ldl_solve(L, d, b: ca.SX) -> ca.SX:
+def ldl_solve(L, inv_d, b: ca.SX) -> ca.SX:
     """Solve ``A x = b`` given :func:`ldl_factor` of A.
 
     Parameters
@@ -170,14 +175,14 @@ def ldl_solve(L, d, b: ca.SX) -> ca.SX:
     -------
     casadi.SX, shape (n, 1)
     """
-    n = len(d)
+    n = len(inv_d)
     z = [None] * n
     for i in range(n):
         zi = b[i]
         for k in range(i):
             zi = zi - L[i][k] * z[k]
         z[i] = zi
-    y = [z[i] / d[i] for i in range(n)]
+    y = [z[i] * inv_d[i] for i in range(n)]
     x = [None] * n
     for i in reversed(range(n)):
         xi = y[i]
@@ -187,8 +192,8 @@ def ldl_solve(L, d, b: ca.SX) -> ca.SX:
     return ca.vertcat(*x)
 
 
-def spd_inverse(L, d) -> ca.SX:
+def spd_inverse(L, inv_d) -> ca.SX:
     """``A^-1`` from :func:`ldl_factor` of A, column by column (SX, (n, n))."""
-    n = len(d)
-    cols = [ldl_solve(L, d, ca.SX(ca.DM.eye(n)[:, j])) for j in range(n)]
+    n = len(inv_d)
+    cols = [ldl_solve(L, inv_d, ca.SX(ca.DM.eye(n)[:, j])) for j in range(n)]
     return ca.horzcat(*cols)

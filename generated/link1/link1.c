@@ -559,43 +559,43 @@ CASADI_SYMBOL_EXPORT int link1_T_work_bytes(casadi_int *sz_arg, casadi_int* sz_r
 /* link1_alpha:(x[4],p[7])->(alpha) */
 static int casadi_f4(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)iw; (void)w; (void)mem;
-  casadi_real a0, a1, a2, a3, a4, a5, a6, a7, a8;
+  casadi_real a0, a1, a2, a3, a4, a5, a6, a7, a8, a9;
   a0=arg[1]? arg[1][1] : 0;
   a1=arg[1]? arg[1][2] : 0;
-  a2=arg[0]? arg[0][0] : 0;
-  a3=arg[0]? arg[0][2] : 0;
-  a3=(a2-a3);
-  a3=(a1*a3);
-  a4=arg[1]? arg[1][5] : 0;
-  a5=arg[1]? arg[1][3] : 0;
-  a4=(a4*a5);
-  a5=arg[1]? arg[1][4] : 0;
-  a4=(a4*a5);
-  a5=sin(a2);
-  a6=(a4*a5);
-  a6=(a3+a6);
-  a7=arg[1]? arg[1][0] : 0;
-  a6=(a6/a7);
-  a7=arg[1]? arg[1][6] : 0;
-  a8=arg[0]? arg[0][3] : 0;
-  a7=(a7*a8);
-  a3=(a3-a7);
-  a3=(a3/a0);
-  a3=(a6+a3);
-  a3=(a1*a3);
-  a6=(a4*a6);
-  a2=cos(a2);
-  a6=(a6*a2);
-  a3=(a3+a6);
-  a6=arg[0]? arg[0][1] : 0;
-  a6=casadi_sq(a6);
-  a4=(a4*a6);
-  a4=(a4*a5);
-  a3=(a3+a4);
-  a0=(a0*a3);
-  a0=(a0/a1);
-  a0=(-a0);
-  if (res[0]!=0) res[0][0]=a0;
+  a2=(a0/a1);
+  a3=arg[0]? arg[0][0] : 0;
+  a4=arg[0]? arg[0][2] : 0;
+  a4=(a3-a4);
+  a4=(a1*a4);
+  a5=arg[1]? arg[1][5] : 0;
+  a6=arg[1]? arg[1][3] : 0;
+  a5=(a5*a6);
+  a6=arg[1]? arg[1][4] : 0;
+  a5=(a5*a6);
+  a6=sin(a3);
+  a7=(a5*a6);
+  a7=(a4+a7);
+  a8=arg[1]? arg[1][0] : 0;
+  a7=(a7/a8);
+  a8=arg[1]? arg[1][6] : 0;
+  a9=arg[0]? arg[0][3] : 0;
+  a8=(a8*a9);
+  a4=(a4-a8);
+  a4=(a4/a0);
+  a4=(a7+a4);
+  a1=(a1*a4);
+  a7=(a5*a7);
+  a3=cos(a3);
+  a7=(a7*a3);
+  a1=(a1+a7);
+  a7=arg[0]? arg[0][1] : 0;
+  a7=casadi_sq(a7);
+  a5=(a5*a7);
+  a5=(a5*a6);
+  a1=(a1+a5);
+  a2=(a2*a1);
+  a2=(-a2);
+  if (res[0]!=0) res[0][0]=a2;
   return 0;
 }
 
@@ -689,12 +689,12 @@ CASADI_SYMBOL_EXPORT int link1_alpha_work_bytes(casadi_int *sz_arg, casadi_int* 
 /* link1_beta:(x[4],p[7])->(beta) */
 static int casadi_f5(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)iw; (void)w; (void)mem;
-  casadi_real a0, a1;
+  casadi_real a0, a1, a2;
   a0=arg[1]? arg[1][0] : 0;
   a1=arg[1]? arg[1][1] : 0;
+  a2=arg[1]? arg[1][2] : 0;
+  a1=(a1/a2);
   a0=(a0*a1);
-  a1=arg[1]? arg[1][2] : 0;
-  a0=(a0/a1);
   if (res[0]!=0) res[0][0]=a0;
   return 0;
 }
