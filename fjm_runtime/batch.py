@@ -211,9 +211,11 @@ def simulate_batch(model, controller, reference, params_true_array, *, duration:
     parallel : bool
         Spread the runs over cores with OpenMP (serial if ``-fopenmp`` fails).
     simd : bool
-        Evaluate 4 (AVX2) or 2 runs per instruction with vector math (glibc
-        libmvec sin/cos); agrees with the scalar code to rounding. Falls back to
-        the scalar loop when the compiler or the model's operations do not allow it.
+        Evaluate 8 runs per instruction with vector instructions (AVX-512, AVX2
+        or SSE2, whatever this CPU has) and vector sin/cos (glibc libmvec); the
+        per-run constants (TRUE parameters) are hoisted out of the time loop.
+        Agrees with the scalar code to rounding. Falls back to the scalar loop
+        when the compiler or the model's operations do not allow it.
 
     Returns
     -------
@@ -291,8 +293,9 @@ def simulate_batch(model, controller, reference, params_true_array, *, duration:
 # -- SIMD across runs ------------------------------------------------------------------------
 # The metric step is re-emitted "structure of arrays": every scalar instruction of the SX
 # Function becomes a loop over LANES runs, which the compiler turns into vector
-# instructions; sin/cos go to glibc's vector math library (libmvec). Results agree with the
-# scalar code to rounding (libmvec sin/cos: < 4 ulp), not bit for bit.
+# instructions; sin/cos go to glibc's vector math library (libmvec); instructions that
+# depend on the per-run parameters only are evaluated once per run. Results agree with the
+# scalar code to rounding (libmvec sin/cos: < 4 ulp; x / p -> x * (1 / p)), not bit for bit.
 
 def _op_table():
     O = ca
@@ -317,32 +320,74 @@ def _op_table():
     return unary, binary
 
 
-def soa_source(step: ca.Function, lanes: int, varying=(0,)) -> str:
+def soa_source(step: ca.Function, lanes: int, varying=(0,), invariant_from: int = None) -> str:
     """C source of ``step`` evaluated on ``lanes`` runs at once (inputs in ``varying`` per lane).
 
-    Defines ``static void fjm_step_soa(double (*w)[LANES], const double** arg, double** res)``
-    where varying inputs and every output are laid out ``[nz][lane]``.
+    Defines ``fjm_prologue(acc, inv)`` and ``fjm_step_soa(inv, w, arg, res)``; varying
+    inputs and every output are laid out ``[nz][lane]``. Entries ``>= invariant_from`` of
+    input 0 are constant along a run (the TRUE parameters riding in the accumulator):
+    every instruction that depends on them and constants only is hoisted into the
+    prologue (evaluated once per run group, not once per step), and a division by such a
+    value becomes a multiplication by its reciprocal (rounding may differ by one ulp).
     """
     unary, binary = _op_table()
     L = int(lanes)
-    body = []
+    body, pro = [], []
     lane = "for (l = 0; l < LANES; ++l) "
+    src = {}          # work slot -> ("inv", j) or ("w", slot)
+    n_inv = [0]
+
+    def new_inv():
+        n_inv[0] += 1
+        return n_inv[0] - 1
+
+    def ref(slot):
+        kind, j = src[slot]
+        return f"inv[{j}][l]" if kind == "inv" else f"w[{j}][l]"
+
+    def is_inv(slot):
+        return src[slot][0] == "inv"
+
+    recip = {}        # inv index -> inv index of its reciprocal
     for k in range(step.n_instructions()):
         op = step.instruction_id(k)
         i = step.instruction_input(k)
         o = step.instruction_output(k)
         if op == ca.OP_CONST:
-            body.append(f"{lane}w[{o[0]}][l] = {float(step.instruction_constant(k))!r};")
+            j = new_inv()
+            pro.append(f"{lane}inv[{j}][l] = {float(step.instruction_constant(k))!r};")
+            src[o[0]] = ("inv", j)
         elif op == ca.OP_INPUT:
-            src = f"arg[{i[0]}][{i[1]}*LANES + l]" if i[0] in varying else f"arg[{i[0]}][{i[1]}]"
-            body.append(f"{lane}w[{o[0]}][l] = {src};")
+            if invariant_from is not None and i[0] == 0 and i[1] >= invariant_from:
+                j = new_inv()
+                pro.append(f"{lane}inv[{j}][l] = acc[{i[1]}*LANES + l];")
+                src[o[0]] = ("inv", j)
+            else:
+                a = f"arg[{i[0]}][{i[1]}*LANES + l]" if i[0] in varying else f"arg[{i[0]}][{i[1]}]"
+                body.append(f"{lane}w[{o[0]}][l] = {a};")
+                src[o[0]] = ("w", o[0])
         elif op == ca.OP_OUTPUT:
-            body.append(f"{lane}res[{o[0]}][{o[1]}*LANES + l] = w[{i[0]}][l];")
-        elif op in unary:
-            body.append(f"{lane}w[{o[0]}][l] = " + unary[op].format(a=f"w[{i[0]}][l]") + ";")
-        elif op in binary:
-            body.append(f"{lane}w[{o[0]}][l] = " +
-                        binary[op].format(a=f"w[{i[0]}][l]", b=f"w[{i[1]}][l]") + ";")
+            body.append(f"{lane}res[{o[0]}][{o[1]}*LANES + l] = {ref(i[0])};")
+        elif op in unary or op in binary:
+            args = list(i[:1]) if op in unary else list(i[:2])
+            if all(is_inv(a) for a in args):
+                j = new_inv()
+                fmt = unary[op] if op in unary else binary[op]
+                pro.append(f"{lane}inv[{j}][l] = " +
+                           fmt.format(a=ref(args[0]), b=ref(args[-1])) + ";")
+                src[o[0]] = ("inv", j)
+                continue
+            if op == ca.OP_DIV and is_inv(args[1]):
+                d = src[args[1]][1]
+                if d not in recip:
+                    recip[d] = new_inv()
+                    pro.append(f"{lane}inv[{recip[d]}][l] = 1./inv[{d}][l];")
+                expr = f"({ref(args[0])})*inv[{recip[d]}][l]"
+            else:
+                fmt = unary[op] if op in unary else binary[op]
+                expr = fmt.format(a=ref(args[0]), b=ref(args[-1]))
+            body.append(f"{lane}w[{o[0]}][l] = {expr};")
+            src[o[0]] = ("w", o[0])
         elif op == ca.OP_PARAMETER:
             raise ValueError("soa_source: free parameters are not supported")
         else:
@@ -357,7 +402,13 @@ def soa_source(step: ca.Function, lanes: int, varying=(0,)) -> str:
         "#include <string.h>",
         f"#define LANES {L}",
         f"#define SZ_W {sz_w}",
-        "static void fjm_step_soa(double (*restrict w)[LANES], const double** arg, double** res) {",
+        f"#define SZ_INV {max(1, n_inv[0])}",
+        "static void fjm_prologue(const double* restrict acc, double (*restrict inv)[LANES]) {",
+        "  int l;",
+        *("  " + ln for ln in pro),
+        "}",
+        "static void fjm_step_soa(const double (*restrict inv)[LANES], double (*restrict w)[LANES],",
+        "                         const double** arg, double** res) {",
         "  int l;",
         *("  " + ln for ln in body),
         "}",
@@ -367,32 +418,51 @@ int fjm_batch_soa(int n_groups, int n_samples, int nacc, int nr, double* acc,
   #pragma omp parallel for schedule(dynamic, 1)
   for (int g = 0; g < n_groups; ++g) {
     double (*w)[LANES] = malloc(sizeof(double) * SZ_W * LANES);
+    double (*inv)[LANES] = malloc(sizeof(double) * SZ_INV * LANES);
     double* buf = malloc(sizeof(double) * 2 * nacc * LANES);
     double *cur = buf, *nxt = buf + nacc * LANES;
     memcpy(cur, acc + (size_t)g * nacc * LANES, sizeof(double) * nacc * LANES);
+    fjm_prologue(cur, inv);
     const double* arg[5];
     double* res[1];
     for (int k = 0; k < n_samples; ++k) {
       arg[0] = cur; arg[1] = R0 + (size_t)k * nr; arg[2] = RH + (size_t)k * nr;
       arg[3] = R1 + (size_t)k * nr; arg[4] = FL + (size_t)k * 4;
       res[0] = nxt;
-      fjm_step_soa(w, arg, res);
+      fjm_step_soa((const double (*)[LANES])inv, w, arg, res);
       double* t = cur; cur = nxt; nxt = t;
     }
     memcpy(acc + (size_t)g * nacc * LANES, cur, sizeof(double) * nacc * LANES);
-    free(w); free(buf);
+    free(w); free(inv); free(buf);
   }
   return 0;
 }
 """])
 
 
-def _has_avx2() -> bool:
+def _cpu_flags() -> set:
     try:
         with open("/proc/cpuinfo") as fh:
-            return any(" avx2" in ln for ln in fh if ln.startswith("flags"))
+            for ln in fh:
+                if ln.startswith("flags"):
+                    return set(ln.split(":", 1)[1].split())
     except OSError:
-        return False
+        pass
+    return set()
+
+
+def _vector_flags() -> tuple:
+    """Instruction-set flags for the SIMD batch, chosen from THIS machine's CPU.
+
+    They are part of the cache key, so a machine with another instruction set
+    never loads a library built for this one.
+    """
+    cpu = _cpu_flags()
+    if {"avx512f", "avx512dq"} <= cpu:
+        return ("-mavx512f", "-mavx512dq", "-mprefer-vector-width=512")
+    if "avx2" in cpu:
+        return ("-mavx2",)
+    return ()
 
 
 class SimdBatchRunner:
@@ -421,11 +491,16 @@ class SimdBatchRunner:
 
 def simd_batch_runner(model, controller, dt: float, max_state: float = 1e6,
                       flags: Sequence[str] = DEFAULT_FLAGS, lanes: Optional[int] = None) -> SimdBatchRunner:
-    """Compile (cached) the SIMD-across-runs batch loop (``lanes`` runs per instruction;
-    default 8 with AVX2 (two 4-wide vectors per operation), else 4 with SSE2)."""
+    """Compile (cached) the SIMD-across-runs batch loop (``lanes`` runs per instruction,
+    default 8: one AVX-512 vector, two AVX2 vectors or four SSE2 vectors per operation).
+
+    ``-ffp-contract=off`` keeps the arithmetic identical to the scalar code (no FMA
+    contraction); only sin/cos (libmvec) may differ by a few ulp.
+    """
     step = _metric_step(model, controller, float(dt), float(max_state))
-    avx2 = _has_avx2()
-    lanes = int(lanes) if lanes else (8 if avx2 else 4)
-    extra = ("-fno-math-errno", "-ffp-contract=off", "-fopenmp") + (("-mavx2",) if avx2 else ())
-    so = compile_library(soa_source(step, lanes), "fjm_batch_soa", tuple(flags) + extra)
+    lanes = int(lanes) if lanes else 8
+    extra = ("-fno-math-errno", "-ffp-contract=off", "-fopenmp") + _vector_flags()
+    n_par = len(model.param_names)
+    source = soa_source(step, lanes, invariant_from=step.size1_in(0) - n_par)
+    so = compile_library(source, "fjm_batch_soa", tuple(flags) + extra)
     return SimdBatchRunner(so, step.size1_in(0), step.size1_in(1), lanes)
