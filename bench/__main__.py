@@ -54,6 +54,22 @@ def median_time(fn, reps: int, warmup: int = 1) -> float:
 
 
 # -- derive -------------------------------------------------------------------------------
+def parse_derive_log(text: str) -> dict:
+    """Per-model seconds and ops from ``python -m derive``'s progress lines.
+
+    ``[i/N] <model>: deriving ... <s> s (symbolic ..., emit ...), <ops> ops`` and
+    ``derived N model(s) in <s> s``.
+    """
+    import re
+    models = {}
+    for m in re.finditer(r"\]\s+(\S+): deriving \.\.\.\s*([0-9.]+) s .*?(\d+) ops", text):
+        models[m.group(1)] = {"seconds": float(m.group(2)), "operations": int(m.group(3))}
+    tot = re.search(r"derived \d+ model\(s\) in ([0-9.]+) s", text)
+    if not models or not tot:
+        raise RuntimeError(f"cannot parse the derive log:\n{text[-2000:]}")
+    return {"models": models, "total_seconds": float(tot.group(1))}
+
+
 def bench_derive(work: Path, reps: int) -> dict:
     from .ccutil import compile_object
     runs = []
@@ -62,11 +78,18 @@ def bench_derive(work: Path, reps: int) -> dict:
     env = dict(os.environ, PYTHONPATH=str(REPO) + os.pathsep + os.environ.get("PYTHONPATH", ""))
     for i in range(reps):
         log(f"derive: run {i + 1}/{reps} (python -m derive --out {out}) ...")
-        t0 = time.perf_counter()
-        subprocess.run([sys.executable, "-m", "derive", "--out", str(out)], cwd=str(REPO), env=env,
-                       check=True, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
-        wall = time.perf_counter() - t0
-        data = json.loads(timings_file.read_text())
+        t0 = time.time()
+        proc = subprocess.run([sys.executable, "-m", "derive", "--out", str(out)], cwd=str(REPO), env=env,
+                              check=True, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        wall = time.time() - t0
+        data = parse_derive_log(proc.stdout)
+        try:  # full-precision timings, if this derive wrote them (it does for the default --out only)
+            if timings_file.stat().st_mtime >= t0:
+                fresh = json.loads(timings_file.read_text())
+                if set(fresh["models"]) == set(data["models"]):
+                    data = fresh
+        except (OSError, ValueError, KeyError):
+            pass
         data["wall_seconds"] = wall
         runs.append(data)
     res = {"total_seconds": statistics.median(r["total_seconds"] for r in runs),
@@ -88,11 +111,15 @@ def bench_derive(work: Path, reps: int) -> dict:
             log(f"gcc -O2 planar7.c: run {i + 1}/{reps} ...")
             ts.append(compile_object(src, work / "planar7_gcc.o"))
         res["planar7"]["gcc_seconds"] = statistics.median(ts)
-    # op-count growth exponent over planar1..7 (least squares on log ops vs log n)
+    # op-count growth exponent over planar3..7 (least-squares slope of log ops vs log n)
     ns = [n for n in range(1, 8) if f"planar{n}" in res]
     if len(ns) >= 3:
         ops = [res[f"planar{n}"]["ops"] for n in ns]
         res["ops_growth_exponent_planar"] = float(np.polyfit(np.log(ns[2:]), np.log(ops[2:]), 1)[0])
+        res["ops_growth_exponent_by_function"] = {
+            q: float(np.polyfit(np.log(ns[2:]), np.log([max(1, res[f"planar{n}"]["ops_by_function"][q])
+                                                         for n in ns[2:]]), 1)[0])
+            for q in res[f"planar{ns[-1]}"]["ops_by_function"]}
     # is the committed generated/ what derive produces now?
     same = all((out / m / f"{m}.c").read_bytes() == (REPO / "generated" / m / f"{m}.c").read_bytes()
                for m in runs[0]["models"] if (REPO / "generated" / m / f"{m}.c").exists())
