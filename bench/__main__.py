@@ -182,6 +182,17 @@ def bench_closed_loop(work: Path, reps: int, slow_reps: int) -> dict:
         t0 = time.perf_counter(); gen_call(); gen_t.append(time.perf_counter() - t0)  # noqa: E702
         t0 = time.perf_counter(); hand(); hand_t.append(time.perf_counter() - t0)  # noqa: E702
     gen_s, hand_s = statistics.median(gen_t), statistics.median(hand_t)
+    # context: the whole simulate() call (reference sampling, outputs, metrics) and the
+    # mapaccum form of the same step loaded with casadi.external
+    from fjm_runtime.simulate import simulate
+    from .closed_loop import GeneratedLoop
+    import casadi as ca
+    sim_s = median_time(lambda: simulate(case.model, case.controller, case.reference,
+                                         duration=case.duration, dt=case.dt, true_params=case.p_true,
+                                         x0=w0, backend="compiled"), reps)
+    gl = GeneratedLoop(case)
+    dm_args = [ca.DM(gl.w0), ca.DM(gl.R0), ca.DM(gl.RH), ca.DM(gl.R1), ca.DM(case.p_true)]
+    mapaccum_s = median_time(lambda: gl.runner.call(dm_args), reps)
     log("closed loop: Python loop ...")
     py_s = median_time(lambda: python_loop(case), slow_reps, warmup=0)
     py = python_loop(case)
@@ -193,6 +204,7 @@ def bench_closed_loop(work: Path, reps: int, slow_reps: int) -> dict:
         "solve_ivp_ms": 1e3 * ivp_s,
         "ratio_to_hand_c": gen_s / hand_s, "speedup_vs_python": py_s / gen_s,
         "speedup_vs_solve_ivp": ivp_s / gen_s,
+        "generated_simulate_call_ms": 1e3 * sim_s, "generated_mapaccum_external_ms": 1e3 * mapaccum_s,
         "steps": case.n_steps,
         "max_state_diff_generated_vs_hand_c": float(np.max(np.abs(W - Wh))),
         "max_state_diff_generated_vs_python": float(np.max(np.abs(W - py.x[1:]))),
