@@ -215,7 +215,9 @@ def simulate_batch(model, controller, reference, params_true_array, *, duration:
         or SSE2, whatever this CPU has) and vector sin/cos (glibc libmvec); the
         per-run constants (TRUE parameters) are hoisted out of the time loop.
         Agrees with the scalar code to rounding. Falls back to the scalar loop
-        when the compiler or the model's operations do not allow it.
+        when the compiler or the model's operations do not allow it, and for steps
+        above :data:`SIMD_MAX_INSTRUCTIONS` (compile time; link1, planar1 and
+        planar2 are below).
 
     Returns
     -------
@@ -255,7 +257,7 @@ def simulate_batch(model, controller, reference, params_true_array, *, duration:
                     (np.arange(n_steps + 1) == 0).astype(float),
                     (np.arange(n_steps + 1) == n_steps).astype(float)])
     runner = None
-    if simd and parallel:
+    if simd and parallel and _simd_worthwhile(model, controller, dt, max_state):
         try:
             runner = simd_batch_runner(model, controller, dt, max_state)
         except (CompileError, ValueError):
@@ -487,6 +489,17 @@ class SimdBatchRunner:
         ptr = lambda a: a.ctypes.data_as(ctypes.POINTER(ctypes.c_double))
         self.lib.fjm_batch_soa(G, arrs[0].shape[0], self.nacc, self.nr, ptr(soa), *map(ptr, arrs))
         return soa.transpose(0, 2, 1).reshape(G * L, self.nacc)[:B].copy()
+
+
+#: Largest step (SX instructions) emitted in SIMD form: gcc's time on the structure-of-arrays
+#: code grows superlinearly (253 instructions, link1: 1 s; 681, planar2: 6 s; 1276,
+#: planar3: 21 s), so bigger models use the scalar loop (compiles in < 1 s).
+SIMD_MAX_INSTRUCTIONS = 800
+
+
+def _simd_worthwhile(model, controller, dt, max_state) -> bool:
+    return _metric_step(model, controller, float(dt), float(max_state)).n_instructions() \
+        <= SIMD_MAX_INSTRUCTIONS
 
 
 def simd_batch_runner(model, controller, dt: float, max_state: float = 1e6,
