@@ -215,9 +215,7 @@ def simulate_batch(model, controller, reference, params_true_array, *, duration:
         or SSE2, whatever this CPU has) and vector sin/cos (glibc libmvec); the
         per-run constants (TRUE parameters) are hoisted out of the time loop.
         Agrees with the scalar code to rounding. Falls back to the scalar loop
-        when the compiler or the model's operations do not allow it, and for steps
-        above :data:`SIMD_MAX_INSTRUCTIONS` (compile time; link1, planar1 and
-        planar2 are below).
+        when the compiler or the model's operations do not allow it.
 
     Returns
     -------
@@ -299,45 +297,45 @@ def simulate_batch(model, controller, reference, params_true_array, *, duration:
 # depend on the per-run parameters only are evaluated once per run. Results agree with the
 # scalar code to rounding (libmvec sin/cos: < 4 ulp; x / p -> x * (1 / p)), not bit for bit.
 
-def _op_table():
-    O = ca
-    unary = {
-        O.OP_NEG: "-({a})", O.OP_SQ: "({a})*({a})", O.OP_TWICE: "2.*({a})", O.OP_INV: "1./({a})",
-        O.OP_SIN: "sin({a})", O.OP_COS: "cos({a})", O.OP_TAN: "tan({a})", O.OP_EXP: "exp({a})",
-        O.OP_LOG: "log({a})", O.OP_SQRT: "sqrt({a})", O.OP_FABS: "fabs({a})",
-        O.OP_NOT: "(double)(!({a}))", O.OP_ASSIGN: "({a})", O.OP_TANH: "tanh({a})",
-        O.OP_ATAN: "atan({a})", O.OP_ASIN: "asin({a})", O.OP_ACOS: "acos({a})",
-        O.OP_SIGN: "(({a})<0 ? -1. : (({a})>0 ? 1. : ({a})))",
-    }
-    binary = {
-        O.OP_ADD: "({a})+({b})", O.OP_SUB: "({a})-({b})", O.OP_MUL: "({a})*({b})",
-        O.OP_DIV: "({a})/({b})", O.OP_POW: "pow({a},{b})", O.OP_CONSTPOW: "pow({a},{b})",
-        O.OP_FMIN: "(({a})<({b}) ? ({a}) : ({b}))", O.OP_FMAX: "(({a})>({b}) ? ({a}) : ({b}))",
-        O.OP_LT: "(double)(({a})<({b}))", O.OP_LE: "(double)(({a})<=({b}))",
-        O.OP_EQ: "(double)(({a})==({b}))", O.OP_NE: "(double)(({a})!=({b}))",
-        O.OP_AND: "(double)(({a}) && ({b}))", O.OP_OR: "(double)(({a}) || ({b}))",
-        O.OP_IF_ELSE_ZERO: "(({a}) ? ({b}) : 0.)", O.OP_ATAN2: "atan2({a},{b})",
-        O.OP_COPYSIGN: "copysign({a},{b})",
-    }
-    return unary, binary
-
-
 def soa_source(step: ca.Function, lanes: int, varying=(0,), invariant_from: int = None) -> str:
     """C source of ``step`` evaluated on ``lanes`` runs at once (inputs in ``varying`` per lane).
 
-    Defines ``fjm_prologue(acc, inv)`` and ``fjm_step_soa(inv, w, arg, res)``; varying
-    inputs and every output are laid out ``[nz][lane]``. Entries ``>= invariant_from`` of
-    input 0 are constant along a run (the TRUE parameters riding in the accumulator):
-    every instruction that depends on them and constants only is hoisted into the
-    prologue (evaluated once per run group, not once per step), and a division by such a
-    value becomes a multiplication by its reciprocal (rounding may differ by one ulp).
+    GCC vector extensions: every SX instruction becomes one statement on a vector of
+    ``lanes`` doubles (compiled to AVX-512/AVX2/SSE2 instructions); sin/cos and friends
+    go through short lane loops that gcc maps to glibc's vector math (libmvec).
+    Defines ``fjm_prologue(acc, inv)``, ``fjm_step_soa(inv, arg, res)`` and the driver
+    ``fjm_batch_soa``; varying inputs and every output are laid out ``[nz][lane]``.
+    Entries ``>= invariant_from`` of input 0 are constant along a run (the TRUE
+    parameters riding in the accumulator): every instruction that depends on them and
+    constants only is hoisted into the prologue (once per run group, not once per
+    step), and a division by such a value becomes a multiplication by its reciprocal
+    (rounding may differ by one ulp).
     """
-    unary, binary = _op_table()
+    O = ca
     L = int(lanes)
+    unary = {
+        O.OP_NEG: "-({a})", O.OP_SQ: "({a})*({a})", O.OP_TWICE: "2.*({a})", O.OP_INV: "1./({a})",
+        O.OP_SIN: "v_sin({a})", O.OP_COS: "v_cos({a})", O.OP_TAN: "v_tan({a})", O.OP_EXP: "v_exp({a})",
+        O.OP_LOG: "v_log({a})", O.OP_SQRT: "v_sqrt({a})", O.OP_TANH: "v_tanh({a})",
+        O.OP_ATAN: "v_atan({a})", O.OP_ASIN: "v_asin({a})", O.OP_ACOS: "v_acos({a})",
+        O.OP_FABS: "(vd)((vl)({a}) & 0x7fffffffffffffffLL)",
+        O.OP_NOT: "v_b(({a}) == 0.)", O.OP_ASSIGN: "({a})",
+        O.OP_SIGN: "v_sign({a})",
+    }
+    binary = {
+        O.OP_ADD: "({a})+({b})", O.OP_SUB: "({a})-({b})", O.OP_MUL: "({a})*({b})",
+        O.OP_DIV: "({a})/({b})", O.OP_POW: "v_pow({a},{b})", O.OP_CONSTPOW: "v_pow({a},{b})",
+        O.OP_FMIN: "v_sel(({a})<({b}), {a}, {b})", O.OP_FMAX: "v_sel(({a})>({b}), {a}, {b})",
+        O.OP_LT: "v_b(({a})<({b}))", O.OP_LE: "v_b(({a})<=({b}))",
+        O.OP_EQ: "v_b(({a})==({b}))", O.OP_NE: "v_b(({a})!=({b}))",
+        O.OP_AND: "v_b((({a})!=0.) & (({b})!=0.))", O.OP_OR: "v_b((({a})!=0.) | (({b})!=0.))",
+        O.OP_IF_ELSE_ZERO: "(vd)((vl)({b}) & (({a}) != 0.))", O.OP_ATAN2: "v_atan2({a},{b})",
+        O.OP_COPYSIGN: "v_copysign({a},{b})",
+    }
     body, pro = [], []
-    lane = "for (l = 0; l < LANES; ++l) "
-    src = {}          # work slot -> ("inv", j) or ("w", slot)
+    src = {}
     n_inv = [0]
+    recip = {}
 
     def new_inv():
         n_inv[0] += 1
@@ -345,73 +343,80 @@ def soa_source(step: ca.Function, lanes: int, varying=(0,), invariant_from: int 
 
     def ref(slot):
         kind, j = src[slot]
-        return f"inv[{j}][l]" if kind == "inv" else f"w[{j}][l]"
+        return f"inv[{j}]" if kind == "inv" else f"w{j}"
 
-    def is_inv(slot):
-        return src[slot][0] == "inv"
-
-    recip = {}        # inv index -> inv index of its reciprocal
+    used = set()
     for k in range(step.n_instructions()):
         op = step.instruction_id(k)
         i = step.instruction_input(k)
         o = step.instruction_output(k)
         if op == ca.OP_CONST:
             j = new_inv()
-            pro.append(f"{lane}inv[{j}][l] = {float(step.instruction_constant(k))!r};")
+            pro.append(f"inv[{j}] = V0 + {float(step.instruction_constant(k))!r};")
             src[o[0]] = ("inv", j)
         elif op == ca.OP_INPUT:
             if invariant_from is not None and i[0] == 0 and i[1] >= invariant_from:
                 j = new_inv()
-                pro.append(f"{lane}inv[{j}][l] = acc[{i[1]}*LANES + l];")
+                pro.append(f"memcpy(&inv[{j}], acc + {i[1]}*LANES, sizeof(vd));")
                 src[o[0]] = ("inv", j)
             else:
-                a = f"arg[{i[0]}][{i[1]}*LANES + l]" if i[0] in varying else f"arg[{i[0]}][{i[1]}]"
-                body.append(f"{lane}w[{o[0]}][l] = {a};")
-                src[o[0]] = ("w", o[0])
+                if i[0] in varying:
+                    body.append(f"memcpy(&w{o[0]}, arg[{i[0]}] + {i[1]}*LANES, sizeof(vd));")
+                else:
+                    body.append(f"w{o[0]} = V0 + arg[{i[0]}][{i[1]}];")
+                src[o[0]] = ("w", o[0]); used.add(o[0])
         elif op == ca.OP_OUTPUT:
-            body.append(f"{lane}res[{o[0]}][{o[1]}*LANES + l] = {ref(i[0])};")
+            body.append(f"{{ vd t = {ref(i[0])}; memcpy(res[{o[0]}] + {o[1]}*LANES, &t, sizeof(vd)); }}")
         elif op in unary or op in binary:
             args = list(i[:1]) if op in unary else list(i[:2])
-            if all(is_inv(a) for a in args):
+            fmt = unary[op] if op in unary else binary[op]
+            if all(src[a][0] == "inv" for a in args):
                 j = new_inv()
-                fmt = unary[op] if op in unary else binary[op]
-                pro.append(f"{lane}inv[{j}][l] = " +
-                           fmt.format(a=ref(args[0]), b=ref(args[-1])) + ";")
+                pro.append(f"inv[{j}] = " + fmt.format(a=ref(args[0]), b=ref(args[-1])) + ";")
                 src[o[0]] = ("inv", j)
                 continue
-            if op == ca.OP_DIV and is_inv(args[1]):
+            if op == ca.OP_DIV and src[args[1]][0] == "inv":
                 d = src[args[1]][1]
                 if d not in recip:
                     recip[d] = new_inv()
-                    pro.append(f"{lane}inv[{recip[d]}][l] = 1./inv[{d}][l];")
-                expr = f"({ref(args[0])})*inv[{recip[d]}][l]"
+                    pro.append(f"inv[{recip[d]}] = 1./inv[{d}];")
+                expr = f"({ref(args[0])})*inv[{recip[d]}]"
             else:
-                fmt = unary[op] if op in unary else binary[op]
                 expr = fmt.format(a=ref(args[0]), b=ref(args[-1]))
-            body.append(f"{lane}w[{o[0]}][l] = {expr};")
-            src[o[0]] = ("w", o[0])
-        elif op == ca.OP_PARAMETER:
-            raise ValueError("soa_source: free parameters are not supported")
+            body.append(f"w{o[0]} = {expr};")
+            src[o[0]] = ("w", o[0]); used.add(o[0])
         else:
             raise ValueError(f"soa_source: operation {op} not supported")
-    sz_w = max(1, step.sz_w())
+    decl = ", ".join(f"w{j}" for j in sorted(used)) or "w_unused"
+    lane_fns = []
+    for fn in ("sin", "cos", "tan", "exp", "log", "sqrt", "tanh", "atan", "asin", "acos"):
+        lane_fns.append(f"static inline vd v_{fn}(vd x) {{ double a[LANES], r[LANES]; memcpy(a, &x, sizeof x); "
+                        f"for (int l = 0; l < LANES; ++l) r[l] = {fn}(a[l]); memcpy(&x, r, sizeof x); return x; }}")
+    for fn in ("pow", "atan2", "copysign"):
+        lane_fns.append(f"static inline vd v_{fn}(vd x, vd y) {{ double a[LANES], b[LANES], r[LANES]; "
+                        f"memcpy(a, &x, sizeof x); memcpy(b, &y, sizeof y); "
+                        f"for (int l = 0; l < LANES; ++l) r[l] = {fn}(a[l], b[l]); memcpy(&x, r, sizeof x); return x; }}")
     return "\n".join([
         "/* fjm: SIMD-across-runs form of the closed-loop metric step (generated, do not edit). */",
-        "#define __FAST_MATH__ 1  /* only to expose glibc's vector sin/cos declarations (libmvec) */",
+        "#define __FAST_MATH__ 1  /* only to expose glibc's vector math declarations (libmvec) */",
         "#include <math.h>",
         "#undef __FAST_MATH__",
         "#include <stdlib.h>",
         "#include <string.h>",
         f"#define LANES {L}",
-        f"#define SZ_W {sz_w}",
+        "typedef double vd __attribute__((vector_size(8 * LANES)));",
+        "typedef long long vl __attribute__((vector_size(8 * LANES)));",
+        "static const vd V0 = {0};",
+        "static inline vd v_b(vl m) { return __builtin_convertvector(-m, vd); }",
+        "static inline vd v_sel(vl m, vd a, vd b) { return (vd)(((vl)a & m) | ((vl)b & ~m)); }",
+        "static inline vd v_sign(vd x) { return v_sel(x < 0., V0 - 1., v_sel(x > 0., V0 + 1., x)); }",
+        *lane_fns,
         f"#define SZ_INV {max(1, n_inv[0])}",
-        "static void fjm_prologue(const double* restrict acc, double (*restrict inv)[LANES]) {",
-        "  int l;",
+        "static void fjm_prologue(const double* restrict acc, vd* restrict inv) {",
         *("  " + ln for ln in pro),
         "}",
-        "static void fjm_step_soa(const double (*restrict inv)[LANES], double (*restrict w)[LANES],",
-        "                         const double** arg, double** res) {",
-        "  int l;",
+        "static void fjm_step_soa(const vd* restrict inv, const double** arg, double** res) {",
+        f"  vd {decl};",
         *("  " + ln for ln in body),
         "}",
         r"""
@@ -419,8 +424,7 @@ int fjm_batch_soa(int n_groups, int n_samples, int nacc, int nr, double* acc,
                   const double* R0, const double* RH, const double* R1, const double* FL) {
   #pragma omp parallel for schedule(dynamic, 1)
   for (int g = 0; g < n_groups; ++g) {
-    double (*w)[LANES] = malloc(sizeof(double) * SZ_W * LANES);
-    double (*inv)[LANES] = malloc(sizeof(double) * SZ_INV * LANES);
+    vd* inv = aligned_alloc(64, sizeof(vd) * SZ_INV);
     double* buf = malloc(sizeof(double) * 2 * nacc * LANES);
     double *cur = buf, *nxt = buf + nacc * LANES;
     memcpy(cur, acc + (size_t)g * nacc * LANES, sizeof(double) * nacc * LANES);
@@ -431,11 +435,11 @@ int fjm_batch_soa(int n_groups, int n_samples, int nacc, int nr, double* acc,
       arg[0] = cur; arg[1] = R0 + (size_t)k * nr; arg[2] = RH + (size_t)k * nr;
       arg[3] = R1 + (size_t)k * nr; arg[4] = FL + (size_t)k * 4;
       res[0] = nxt;
-      fjm_step_soa((const double (*)[LANES])inv, w, arg, res);
+      fjm_step_soa(inv, arg, res);
       double* t = cur; cur = nxt; nxt = t;
     }
     memcpy(acc + (size_t)g * nacc * LANES, cur, sizeof(double) * nacc * LANES);
-    free(w); free(inv); free(buf);
+    free(inv); free(buf);
   }
   return 0;
 }
@@ -491,10 +495,10 @@ class SimdBatchRunner:
         return soa.transpose(0, 2, 1).reshape(G * L, self.nacc)[:B].copy()
 
 
-#: Largest step (SX instructions) emitted in SIMD form: gcc's time on the structure-of-arrays
-#: code grows superlinearly (253 instructions, link1: 1 s; 681, planar2: 6 s; 1276,
-#: planar3: 21 s), so bigger models use the scalar loop (compiles in < 1 s).
-SIMD_MAX_INSTRUCTIONS = 800
+#: Largest step (SX instructions) emitted in SIMD form (a guard against pathological
+#: compile times; gcc handles the vector-extension code in about linear time:
+#: link1 0.2 s, planar3 0.3 s).
+SIMD_MAX_INSTRUCTIONS = 200000
 
 
 def _simd_worthwhile(model, controller, dt, max_state) -> bool:
