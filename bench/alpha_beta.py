@@ -9,7 +9,6 @@ from __future__ import annotations
 import ctypes
 import statistics
 from pathlib import Path
-from typing import Dict
 
 import casadi as ca
 import numpy as np

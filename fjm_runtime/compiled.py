@@ -281,7 +281,7 @@ def closed_loop_library(model, controller, dt: float,
 def run_compiled(model, controller, reference, p_true, x0, z0, dt, n_steps, max_state):
     """Run the compiled closed loop; returns ``t, X, Z, U, S, Yh, R`` like the other backends."""
     from .simulate import SimulationDivergedError
-    nx, n, nz = int(model.nx), int(model.n), int(np.asarray(z0).size)
+    nx, n = int(model.nx), int(model.n)
     loop = closed_loop_library(model, controller, dt)
     t = dt * np.arange(n_steps + 1)
     r_half = reference.sample(0.5 * dt * np.arange(2 * n_steps + 1)).reshape(2 * n_steps + 1, 5 * n)
