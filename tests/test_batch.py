@@ -8,6 +8,12 @@ from fjm_runtime.controllers import make_controller
 from fjm_runtime.references import Sinusoid, SmoothStep
 from fjm_runtime.simulate import simulate
 
+import os as _os
+import shutil as _shutil
+
+pytestmark = pytest.mark.skipif(not (_os.environ.get("CC") or _shutil.which("gcc") or _shutil.which("cc")),
+                                reason="needs a C compiler")
+
 
 @pytest.fixture(autouse=True)
 def private_cache(tmp_path, monkeypatch):

@@ -9,6 +9,12 @@ import fjm_runtime
 
 pytest.importorskip("sympy")
 
+import os as _os
+import shutil as _shutil
+
+pytestmark = pytest.mark.skipif(not (_os.environ.get("CC") or _shutil.which("gcc") or _shutil.which("cc")),
+                                reason="needs a C compiler")
+
 
 @pytest.fixture(autouse=True)
 def private_cache(tmp_path, monkeypatch):
