@@ -74,16 +74,17 @@ def bench_derive(work: Path, reps: int) -> dict:
     from .ccutil import compile_object
     runs = []
     out = work / "generated"
-    timings_file = REPO / "build" / "derive-timings.json"
+    timings_file = work / "derive-timings.json"
     env = dict(os.environ, PYTHONPATH=str(REPO) + os.pathsep + os.environ.get("PYTHONPATH", ""))
     for i in range(reps):
         log(f"derive: run {i + 1}/{reps} (python -m derive --out {out}) ...")
         t0 = time.time()
-        proc = subprocess.run([sys.executable, "-m", "derive", "--out", str(out)], cwd=str(REPO), env=env,
+        proc = subprocess.run([sys.executable, "-m", "derive", "--out", str(out), "--timings", str(timings_file)],
+                              cwd=str(REPO), env=env,
                               check=True, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
         wall = time.time() - t0
         data = parse_derive_log(proc.stdout)
-        try:  # full-precision timings, if this derive wrote them (it does for the default --out only)
+        try:  # full-precision timings written by derive --timings
             if timings_file.stat().st_mtime >= t0:
                 fresh = json.loads(timings_file.read_text())
                 if set(fresh["models"]) == set(data["models"]):

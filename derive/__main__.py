@@ -96,6 +96,9 @@ def main(argv=None, prog: str = "python -m derive") -> int:
                     help="derive a planar chain described in a TOML model file into --out/<name>/ "
                          "(repeatable; requires --out; see examples/arm.toml)")
     ap.add_argument("--out", type=Path, default=None, help="output root (default: generated/)")
+    ap.add_argument("--timings", type=Path, default=None, metavar="FILE.json",
+                    help="write per-model wall-clock seconds here (default: build/derive-timings.json "
+                         "when writing generated/; they are kept out of generated/ for byte-identity)")
     ap.add_argument("--check", action="store_true",
                     help="regenerate into a temp dir and fail if --out differs")
     args = ap.parse_args(argv)
@@ -163,13 +166,13 @@ def main(argv=None, prog: str = "python -m derive") -> int:
         if staging.exists():
             shutil.rmtree(staging, ignore_errors=True)
     print(f"derived {len(models)} model(s) in {total:.2f} s -> {out}")
-    if out != DEFAULT_OUT.resolve():
-        return 0
-    try:
-        TIMINGS.parent.mkdir(exist_ok=True)
-        TIMINGS.write_text(json.dumps({"models": timings, "total_seconds": total}, indent=2) + "\n")
-    except OSError:
-        pass
+    timings_path = args.timings or (TIMINGS if out == DEFAULT_OUT.resolve() else None)
+    if timings_path is not None:
+        try:
+            timings_path.parent.mkdir(parents=True, exist_ok=True)
+            timings_path.write_text(json.dumps({"models": timings, "total_seconds": total}, indent=2) + "\n")
+        except OSError as exc:
+            print(f"warning: could not write timings to {timings_path}: {exc}", file=sys.stderr)
     return 0
 
 
