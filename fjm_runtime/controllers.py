@@ -36,6 +36,8 @@ from typing import NamedTuple, Optional
 
 import numpy as np
 
+from .validation import joint_vector
+
 MODES = ("sat", "sign", "fl")
 
 
@@ -98,18 +100,8 @@ def _check_hurwitz(c: np.ndarray, field: str) -> None:
 
 
 def _joint_gain(value, n: int, field: str, positive: bool) -> np.ndarray:
-    a = np.asarray(value, dtype=float)
-    if a.ndim == 0:
-        a = np.full(n, float(a))
-    if a.shape != (n,):
-        raise ValueError(f"{field} with shape {a.shape}: expected a scalar or shape ({n},)")
-    if not np.all(np.isfinite(a)):
-        raise ValueError(f"{field} = {a.tolist()}: expected finite values")
-    if positive and np.any(a <= 0):
-        raise ValueError(f"{field} = {a.tolist()}: expected values > 0")
-    if not positive and np.any(a < 0):
-        raise ValueError(f"{field} = {a.tolist()}: expected values >= 0")
-    return a
+    """Per-joint gain: > 0 if ``positive`` else >= 0 (see :func:`validation.joint_vector`)."""
+    return joint_vector(value, n, field, minimum=0.0, strict=positive)
 
 
 class SlidingModeController:

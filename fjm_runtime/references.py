@@ -11,22 +11,13 @@ import math
 
 import numpy as np
 
+from .validation import joint_vector
+
 REFERENCE_KINDS = ("step", "sine", "constant")
 
 # 9th-order "smootherstep": sigma(0) = 0, sigma(1) = 1, derivatives 1..4 vanish at both ends.
 _SIGMA = np.polynomial.Polynomial([0, 0, 0, 0, 0, 126, -420, 540, -315, 70])
 _SIGMA_DERIVS = [_SIGMA.deriv(k) for k in range(5)]
-
-
-def _as_joint_vector(value, n: int, field: str) -> np.ndarray:
-    a = np.asarray(value, dtype=float)
-    if a.ndim == 0:
-        a = np.full(n, float(a))
-    if a.shape != (n,):
-        raise ValueError(f"{field} with shape {a.shape}: expected a scalar or shape ({n},)")
-    if not np.all(np.isfinite(a)):
-        raise ValueError(f"{field} = {a.tolist()}: expected finite values")
-    return a
 
 
 class Reference:
@@ -86,7 +77,7 @@ class Constant(Reference):
 
     def __init__(self, q_d, n: int = 1):
         self.n = n
-        self.q_d = _as_joint_vector(q_d, n, "q_d")
+        self.q_d = joint_vector(q_d, n, "q_d")
 
     def __call__(self, t):
         r = np.zeros((5, self.n))
@@ -119,8 +110,8 @@ class SmoothStep(Reference):
 
     def __init__(self, q_d, n: int = 1, q0=0.0, rise_time: float = 1.0, t0: float = 0.0):
         self.n = n
-        self.q_d = _as_joint_vector(q_d, n, "q_d")
-        self.q0 = _as_joint_vector(q0, n, "q0")
+        self.q_d = joint_vector(q_d, n, "q_d")
+        self.q0 = joint_vector(q0, n, "q0")
         if not (np.isfinite(rise_time) and rise_time > 0):
             raise ValueError(f"rise_time = {rise_time!r}: expected a finite value > 0 s")
         if not (np.isfinite(t0) and t0 >= 0):
@@ -176,12 +167,12 @@ class Sinusoid(Reference):
 
     def __init__(self, amplitude=0.5, omega=1.0, n: int = 1, offset=0.0, phase=0.0):
         self.n = n
-        self.amplitude = _as_joint_vector(amplitude, n, "amplitude")
-        self.omega = _as_joint_vector(omega, n, "omega")
+        self.amplitude = joint_vector(amplitude, n, "amplitude")
+        self.omega = joint_vector(omega, n, "omega")
         if np.any(self.omega < 0):
             raise ValueError(f"omega = {self.omega.tolist()}: expected values >= 0 rad/s")
-        self.offset = _as_joint_vector(offset, n, "offset")
-        self.phase = _as_joint_vector(phase, n, "phase")
+        self.offset = joint_vector(offset, n, "offset")
+        self.phase = joint_vector(phase, n, "phase")
 
     def __call__(self, t):
         r = np.empty((5, self.n))

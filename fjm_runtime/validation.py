@@ -100,3 +100,35 @@ def _is_number(v) -> bool:
     except (TypeError, ValueError):
         return False
     return not isinstance(v, (str, bytes))
+
+
+def joint_vector(value, n: int, field: str, minimum: float = None, strict: bool = False) -> np.ndarray:
+    """A per-joint setting as shape ``(n,)``: a scalar is broadcast to every joint.
+
+    Parameters
+    ----------
+    value : float or array_like, shape (n,)
+    n : int
+        Number of joints.
+    field : str
+        Name used in error messages.
+    minimum : float, optional
+        Lower bound: values must be ``>= minimum`` (``> minimum`` if ``strict``).
+
+    Raises
+    ------
+    ValueError
+        Wrong shape, non-finite values, or values below the bound.
+    """
+    a = np.asarray(value, dtype=float)
+    if a.ndim == 0:
+        a = np.full(n, float(a))
+    if a.shape != (n,):
+        raise ValueError(f"{field} with shape {a.shape}: expected a scalar or shape ({n},)")
+    if not np.all(np.isfinite(a)):
+        raise ValueError(f"{field} = {a.tolist()}: expected finite values")
+    if minimum is not None:
+        bad = a <= minimum if strict else a < minimum
+        if np.any(bad):
+            raise ValueError(f"{field} = {a.tolist()}: expected values {'>' if strict else '>='} {minimum:g}")
+    return a
