@@ -253,36 +253,10 @@ class AdaptiveStiffnessController(SlidingModeController):
         E[self.idx_K, np.arange(self.n)] = 1.0
         return ca.DM(self.p_nom) + ca.mtimes(ca.DM(E), K_hat - ca.DM(self.p_nom[self.idx_K]))
 
-    def symbolic_evaluate(self, x, z, r, fns):
-        """CasADi mirror of :meth:`evaluate` (same contract as the base class)."""
-        import casadi as ca
-        n = self.n
-        blk = lambda v, i: v[i * n:(i + 1) * n]
-        p = self._symbolic_params(z)
-        y_hat = fns["T"](x, p)
-        e = [blk(y_hat, i) - blk(r, i) for i in range(4)]
-        chain = ([z[:self.n_int]] if self.integral else []) + e
-        m = self.c.size
-        s = chain[m]
-        linear = 0
-        for j in range(m):
-            s = s + float(self.c[j]) * chain[j]
-            linear = linear + float(self.c[j]) * chain[j + 1]
-        if self.mode == "sat":
-            psi = ca.fmin(ca.fmax(s / ca.DM(self.delta), -1.0), 1.0)
-        elif self.mode == "sign":
-            psi = ca.sign(s)
-        else:
-            psi = ca.DM.zeros(n, 1)
-        nu = blk(r, 4) - linear - ca.DM(self.k_s) * psi - ca.DM(self.k_lin) * s
-        beta = ca.DM(self.beta_hat) if self.beta_hat is not None else ca.reshape(fns["beta"](x, p), n, n)
-        u_cmd = fns["alpha"](x, p) + ca.mtimes(beta, nu)
-        if self.u_max is None:
-            u = u_cmd
-        else:
-            um = ca.DM(self.u_max)
-            u = ca.fmin(ca.fmax(u_cmd, -um), um)
-        return {"u": u, "u_cmd": u_cmd, "s": s, "y_hat": y_hat}
+    def _symbolic_integrator(self, z):
+        return z[:self.n_int]
+
+    # symbolic_evaluate: the base class's, evaluated at _symbolic_params(z) (K replaced by K_hat).
 
     def symbolic_state_derivative(self, x, z, r, sample):
         """CasADi mirror of :meth:`state_derivative`."""

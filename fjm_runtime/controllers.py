@@ -273,6 +273,19 @@ class SlidingModeController:
 
 
     # -- CasADi mirror (used by the fused simulator; must match evaluate) ----
+    def _symbolic_params(self, z):
+        """Parameters the law is evaluated with (CasADi): the nominal ones here.
+
+        Subclasses that estimate parameters online override this (and
+        :meth:`_symbolic_integrator` if their state holds more than ``z'= e1``).
+        """
+        import casadi as ca
+        return ca.DM(self.p_nom)
+
+    def _symbolic_integrator(self, z):
+        """The integral-surface state within the controller state ``z``."""
+        return z
+
     def symbolic_evaluate(self, x, z, r, fns):
         """CasADi mirror of :meth:`evaluate` for the fused simulator.
 
@@ -292,10 +305,10 @@ class SlidingModeController:
         import casadi as ca
         n = self.n
         blk = lambda v, i: v[i * n:(i + 1) * n]
-        p = ca.DM(self.p_nom)
+        p = self._symbolic_params(z)
         y_hat = fns["T"](x, p)
         e = [blk(y_hat, i) - blk(r, i) for i in range(4)]
-        chain = ([z] if self.integral else []) + e
+        chain = ([self._symbolic_integrator(z)] if self.integral else []) + e
         m = self.c.size
         s = chain[m]
         linear = 0
