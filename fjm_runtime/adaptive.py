@@ -78,7 +78,6 @@ Controller state ``z`` (``n`` joints), integrated with the plant in RK4::
 """
 from __future__ import annotations
 
-from typing import Optional
 
 import numpy as np
 

@@ -60,7 +60,7 @@ def _metric_step(model, controller, dt: float, max_state: float) -> ca.Function:
     (the TRUE parameters ``p`` ride along unchanged, so a fold maps only the references);
     ``flags = [in_second_half, k, is_first, is_last]``.
     """
-    from .simulate import casadi_functions
+    from .simulate import casadi_functions, symbolic_closed_loop_rk4
     fns = casadi_functions(model)
     if fns is None or not hasattr(controller, "symbolic_evaluate"):
         raise ValueError("simulate_batch: needs a model with CasADi Functions and a controller "
@@ -76,22 +76,9 @@ def _metric_step(model, controller, dt: float, max_state: float) -> ca.Function:
     w, u_prev = acc[:nw], acc[nw:nw + n]
     sum_e2, sum_e2_half, max_u, last_out, tv, first_bad = (acc[nw + n + i] for i in range(6))
     half, k, first, last = fl[0], fl[1], fl[2], fl[3]
-    x, z = w[:nx], w[nx:]
-    out = controller.symbolic_evaluate(x, z, r0, fns)
+    x = w[:nx]
+    w_step, out = symbolic_closed_loop_rk4(fns, controller, w, r0, rh, r1, p, nx, n, dt)
     u, s = out["u"], out["s"]
-
-    def rhs(wk, rk):
-        xk, zk = wk[:nx], wk[nx:]
-        dx = fns["f"](xk, p) + ca.mtimes(ca.reshape(fns["g"](xk, p), nx, n), u)
-        if nz == 0:
-            return dx
-        return ca.vertcat(dx, controller.symbolic_state_derivative(xk, zk, rk, out))
-
-    k1 = rhs(w, r0)
-    k2 = rhs(w + 0.5 * dt * k1, rh)
-    k3 = rhs(w + 0.5 * dt * k2, rh)
-    k4 = rhs(w + dt * k3, r1)
-    w_step = w + (dt / 6.0) * (k1 + 2 * k2 + 2 * k3 + k4)
     w_next = ca.if_else(last, w, w_step)
     e1 = x[:n] - r0[:n]
     e2 = ca.sumsqr(e1)

@@ -318,12 +318,28 @@ def _true_outputs(model, p_true, X):
     return np.stack([np.asarray(model.T(xk, p_true), dtype=float).reshape(4, n) for xk in X])
 
 
-def _build_fused_step(fns, controller, nx, n, nz, n_par, dt):
-    """One closed-loop step (controller sample + RK4 of [x; z] under held u) as a CasADi Function."""
+def symbolic_closed_loop_rk4(fns, controller, w, r0, rh, r1, p, nx: int, n: int, dt: float):
+    """One closed-loop step in CasADi (SX or MX): sample the controller, RK4 of ``[x; z]`` under held u.
+
+    Parameters
+    ----------
+    fns : dict
+        CasADi Functions ``f``, ``g``, ``T``, ``alpha``, ``beta`` of ``(x, p)``.
+    w : casadi SX/MX, shape (nx + nz, 1)
+        Plant state and controller state.
+    r0, rh, r1 : shape (5n, 1)
+        Reference rows at t, t + dt/2, t + dt.
+    p : shape (n_params, 1)
+        TRUE plant parameters.
+
+    Returns
+    -------
+    w_next : shape (nx + nz, 1)
+    out : dict
+        The controller sample of :meth:`symbolic_evaluate` (``u``, ``u_cmd``, ``s``, ``y_hat``).
+    """
     import casadi as ca
-    w = ca.MX.sym("w", nx + nz)
-    r0, rh, r1 = (ca.MX.sym(nm, 5 * n) for nm in ("r0", "rh", "r1"))
-    p = ca.MX.sym("p", n_par)
+    nz = int(w.shape[0]) - nx
     x, z = w[:nx], w[nx:]
     out = controller.symbolic_evaluate(x, z, r0, fns)
     u = out["u"]
@@ -339,7 +355,17 @@ def _build_fused_step(fns, controller, nx, n, nz, n_par, dt):
     k2 = rhs(w + 0.5 * dt * k1, rh)
     k3 = rhs(w + 0.5 * dt * k2, rh)
     k4 = rhs(w + dt * k3, r1)
-    w_next = w + (dt / 6.0) * (k1 + 2 * k2 + 2 * k3 + k4)
+    return w + (dt / 6.0) * (k1 + 2 * k2 + 2 * k3 + k4), out
+
+
+def _build_fused_step(fns, controller, nx, n, nz, n_par, dt):
+    """One closed-loop step (controller sample + RK4 of [x; z] under held u) as a CasADi Function."""
+    import casadi as ca
+    w = ca.MX.sym("w", nx + nz)
+    r0, rh, r1 = (ca.MX.sym(nm, 5 * n) for nm in ("r0", "rh", "r1"))
+    p = ca.MX.sym("p", n_par)
+    w_next, out = symbolic_closed_loop_rk4(fns, controller, w, r0, rh, r1, p, nx, n, dt)
+    u = out["u"]
     step = ca.Function("closed_loop_step", [w, r0, rh, r1, p],
                        [w_next, ca.vertcat(u, out["s"], out["y_hat"])])
     try:

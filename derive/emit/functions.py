@@ -12,7 +12,6 @@ from __future__ import annotations
 from typing import Dict, Tuple
 
 import casadi as ca
-import sympy as sp
 
 from ..linearize import Linearization
 from .sx import SympyToSX, ldl_factor, ldl_solve, spd_inverse
