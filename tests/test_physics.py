@@ -116,3 +116,41 @@ def test_structured_derivation_equals_brute_force(name):
             want = np.array(fn(*x), dtype=float)
             got = getattr(m, k)(x, p)
             np.testing.assert_allclose(got.ravel(), want.ravel(), rtol=1e-10, atol=1e-10, err_msg=k)
+
+
+def test_rigid_limit_as_stiffness_grows():
+    """K -> infinity: the flexible arm moves like the rigid one with the motor inertias added.
+
+    The rigid reference (D(q) + J_m) ddq = -h(q, dq) is integrated separately; h is
+    read off the generated f with the spring unloaded. The deviation of the link
+    trajectory must shrink markedly as K grows.
+    """
+    m = fjm_runtime.load("planar2")
+    n = m.n
+    rng = np.random.default_rng(8)
+    x0 = random_state(m, rng)
+    x0[2 * n:3 * n] = x0[:n]          # spring unloaded ...
+    x0[3 * n:] = x0[n:2 * n]          # ... and motors moving with the links
+    base = random_params(m, rng, damping=False)
+    Jm = np.array([base[m.param_names.index(f"Jm{i + 1}")] for i in range(n)])
+
+    def rigid_rhs(w):
+        q, dq = w[:n], w[n:]
+        xs = np.concatenate([q, dq, q, dq])
+        D = m.inertia(xs, base)
+        h = -D @ m.f(xs, base)[n:2 * n]
+        return np.concatenate([dq, np.linalg.solve(D + np.diag(Jm), -h)])
+
+    T_end, dt = 0.3, 5e-5
+    steps = int(round(T_end / dt))
+    rigid = rk4(rigid_rhs, x0[:2 * n], dt, steps)[-1]
+    errs = []
+    for K in (1e3, 1e5):
+        p = base.copy()
+        for i in range(n):
+            p[m.param_names.index(f"K{i + 1}")] = K
+        flex = rk4(lambda x: m.f(x, p), x0, dt, steps)[-1]
+        errs.append(np.max(np.abs(flex[:n] - rigid[:n])))
+    print("max |q_flex - q_rigid| at K = 1e3, 1e5:", errs)
+    assert errs[1] < errs[0] / 20, errs
+    assert errs[1] < 1e-3, errs
