@@ -81,7 +81,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .controllers import ControlSample, SlidingModeController
+from .controllers import SlidingModeController
 
 #: Names of the blocks of the estimator part of ``z``, in order.
 ESTIMATOR_BLOCKS = ("K_hat", "u_f", "phi_f", "w_f", "P")
@@ -199,24 +199,12 @@ class AdaptiveStiffnessController(SlidingModeController):
         return np.concatenate([np.zeros(self.n_int)] + [est[b] for b in ESTIMATOR_BLOCKS])
 
     # -- control law ---------------------------------------------------------
-    def evaluate(self, t: float, x: np.ndarray, z: np.ndarray, r: np.ndarray) -> ControlSample:
-        n = self.n
-        z = np.asarray(z, dtype=float)
-        p = self.params_hat(z)
-        y_hat = np.asarray(self.model.T(x, p), dtype=float).reshape(4, n)
-        e = y_hat - r[:4]
-        s, linear = self.surface(e, z[:self.n_int])
-        nu = r[4] - linear - self.k_s * self.switching(s) - self.k_lin * s
-        alpha = np.asarray(self.model.alpha(x, p), dtype=float).reshape(n)
-        beta = self.beta_hat if self.beta_hat is not None else \
-            np.asarray(self.model.beta(x, p), dtype=float).reshape(n, n)
-        u_cmd = alpha + beta @ nu
-        if self.u_max is None:
-            u, saturated = u_cmd, np.zeros(n, dtype=bool)
-        else:
-            u = np.clip(u_cmd, -self.u_max, self.u_max)
-            saturated = np.abs(u_cmd) > self.u_max
-        return ControlSample(u, u_cmd, s, y_hat, e, saturated)
+    # evaluate: the base class's law, at _params(z) (K replaced by K_hat).
+    def _params(self, z) -> np.ndarray:
+        return self.params_hat(z)
+
+    def _integrator(self, z):
+        return z[:self.n_int]
 
     def _estimator_rates(self, x, est, u, xp, J_m, B_m):
         """Derivatives of the estimator blocks (numpy or casadi: ``xp`` holds ``clip`` and ``outward``)."""

@@ -241,13 +241,15 @@ class SlidingModeController:
             Reference and its derivatives (see :mod:`fjm_runtime.references`).
         """
         n = self.n
-        y_hat = np.asarray(self.model.T(x, self.p_nom), dtype=float).reshape(4, n)
+        z = np.asarray(z, dtype=float)
+        p = self._params(z)
+        y_hat = np.asarray(self.model.T(x, p), dtype=float).reshape(4, n)
         e = y_hat - r[:4]
-        s, linear = self.surface(e, z)
+        s, linear = self.surface(e, self._integrator(z))
         nu = r[4] - linear - self.k_s * self.switching(s) - self.k_lin * s
-        alpha = np.asarray(self.model.alpha(x, self.p_nom), dtype=float).reshape(n)
+        alpha = np.asarray(self.model.alpha(x, p), dtype=float).reshape(n)
         beta = self.beta_hat if self.beta_hat is not None else \
-            np.asarray(self.model.beta(x, self.p_nom), dtype=float).reshape(n, n)
+            np.asarray(self.model.beta(x, p), dtype=float).reshape(n, n)
         u_cmd = alpha + beta @ nu
         if self.u_max is None:
             u, saturated = u_cmd, np.zeros(n, dtype=bool)
@@ -271,6 +273,18 @@ class SlidingModeController:
             e1 = np.where(winding, 0.0, e1)
         return e1
 
+
+    def _params(self, z) -> np.ndarray:
+        """Parameters the law is evaluated with: the nominal ones here.
+
+        Subclasses that estimate parameters online override this and
+        :meth:`_integrator` (and their CasADi mirrors below).
+        """
+        return self.p_nom
+
+    def _integrator(self, z):
+        """The integral-surface state within the controller state ``z``."""
+        return z
 
     # -- CasADi mirror (used by the fused simulator; must match evaluate) ----
     def _symbolic_params(self, z):
