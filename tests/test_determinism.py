@@ -11,8 +11,6 @@ from typing import Dict
 
 import pytest
 
-pytest.importorskip("sympy")
-
 REPO = Path(__file__).resolve().parent.parent
 MODELS = ("link1", "planar2")
 SEEDS = ("0", "2718281")

@@ -13,8 +13,6 @@ from typing import Dict
 import numpy as np
 import pytest
 
-pytest.importorskip("sympy")
-
 from derive.__main__ import derive_into, main as derive_main  # noqa: E402
 from derive.model_file import (ModelFileError, load_model_file, locate_keys,  # noqa: E402
                                parse_model_text)

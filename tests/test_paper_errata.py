@@ -1,4 +1,4 @@
-"""link1 against the paper's closed forms (B_m = 0), one test per erratum of DESIGN.md section 3."""
+"""link1 against the paper's closed forms (B_m = 0), one test per erratum listed in the README."""
 
 import numpy as np
 import pytest

@@ -1,4 +1,4 @@
-"""The runtime contract of DESIGN.md section 2: load(), shapes, p as array or dict, errors."""
+"""The runtime contract of the README's Python API section: load(), shapes, p as array or dict, errors."""
 
 import subprocess
 import sys

@@ -3,8 +3,6 @@
 import numpy as np
 import pytest
 
-pytest.importorskip("dask.distributed")
-
 import fjm_runtime
 from fjm_runtime.batch import simulate_batch
 from fjm_runtime.sweep import SweepSpec, _build, sample_parameters, sweep, write_table
