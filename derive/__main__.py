@@ -2,7 +2,10 @@
 
 Derives the requested models (default: all) and writes them into
 ``generated/`` atomically: everything is first written to a sibling temp
-directory, which then replaces ``generated/`` by rename. An interrupted run
+directory, which then replaces ``generated/`` by rename. ``generated/`` is
+the default ``--out`` only in a source checkout; from an installed package
+``--out DIR`` is required (a usage error says so), and
+``FJM_GENERATED=DIR`` makes ``fjm_runtime.load()`` read the result. An interrupted run
 (Ctrl-C, SIGTERM, crash) leaves the previous ``generated/`` untouched.
 
 ``--check`` regenerates every model into a temp dir and compares with
@@ -31,8 +34,61 @@ from .models import MODEL_NAMES, FlexibleJointModel, build
 from .emit.writer import recover, swap_in, write_model
 
 REPO = Path(__file__).resolve().parent.parent
-DEFAULT_OUT = REPO / "generated"
 TIMINGS = REPO / "build" / "derive-timings.json"
+
+
+def source_checkout(repo: Path) -> bool:
+    """Whether ``repo`` (the parent of the ``derive`` package) is an fjm source checkout.
+
+    Only then does the default ``--out`` (``<repo>/generated``) make sense:
+    from an installed wheel ``repo`` is ``site-packages``, and
+    ``site-packages/generated`` is a directory ``fjm_runtime.load()`` never
+    reads (it reads ``$FJM_GENERATED``, then the models shipped in the package).
+
+    Parameters
+    ----------
+    repo : Path
+        Candidate repository root.
+
+    Returns
+    -------
+    bool
+        True if ``repo/pyproject.toml`` declares the project ``fjm`` and
+        ``repo/derive/__main__.py`` exists.
+    """
+    pyproject = Path(repo) / "pyproject.toml"
+    if not (pyproject.is_file() and (Path(repo) / "derive" / "__main__.py").is_file()):
+        return False
+    try:
+        text = pyproject.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError):
+        return False
+    return any(line.replace(" ", "") == 'name="fjm"' for line in text.splitlines())
+
+
+def default_out(repo: Optional[Path] = None) -> Optional[Path]:
+    """The output root used without ``--out``: ``<repo>/generated`` in a source checkout, else None.
+
+    Parameters
+    ----------
+    repo : Path, optional
+        Repository root to test (default: the parent of this package).
+
+    Returns
+    -------
+    Path or None
+        None means "no sensible default": the caller must pass ``--out DIR``.
+    """
+    repo = REPO if repo is None else Path(repo)
+    return repo / "generated" if source_checkout(repo) else None
+
+
+def no_default_out_message(repo: Path) -> str:
+    """The usage error for a missing ``--out`` outside a source checkout."""
+    return (f"--out DIR is required here: {repo} is not an fjm source checkout (derive/ is installed, "
+            "e.g. from a wheel), so there is no generated/ to write into. Pass --out DIR, e.g. "
+            "--out ~/fjm-models, and set FJM_GENERATED=DIR so that fjm_runtime.load() reads the models "
+            "from there")
 
 
 def _sigterm_to_exit(signum, frame):  # pragma: no cover - exercised by the interrupt test
@@ -95,7 +151,9 @@ def main(argv=None, prog: str = "python -m derive") -> int:
     ap.add_argument("--model-file", action="append", type=Path, default=[], metavar="FILE.toml",
                     help="derive a planar chain described in a TOML model file into --out/<name>/ "
                          "(repeatable; requires --out; see examples/arm.toml)")
-    ap.add_argument("--out", type=Path, default=None, help="output root (default: generated/)")
+    ap.add_argument("--out", type=Path, default=None, metavar="DIR",
+                    help="output root (default: generated/ of the source checkout; required when derive is "
+                         "installed from a wheel: then set FJM_GENERATED=DIR for fjm_runtime.load())")
     ap.add_argument("--timings", type=Path, default=None, metavar="FILE.json",
                     help="write per-model wall-clock seconds here (default: build/derive-timings.json "
                          "when writing generated/; they are kept out of generated/ for byte-identity)")
@@ -124,8 +182,13 @@ def main(argv=None, prog: str = "python -m derive") -> int:
     unknown = [m for m in models if m not in MODEL_NAMES and m not in builders]
     if unknown:
         ap.error(f"unknown model(s) {', '.join(unknown)}; available models: {', '.join(MODEL_NAMES)}")
+    if args.out is None:
+        fallback = default_out()
+        if fallback is None:
+            ap.error(no_default_out_message(REPO))
+        args.out = fallback
     signal.signal(signal.SIGTERM, _sigterm_to_exit)
-    out: Path = (args.out if args.out is not None else DEFAULT_OUT).resolve()
+    out: Path = args.out.resolve()
 
     if args.check:
         with tempfile.TemporaryDirectory(prefix="fjm-check-") as tmp:
@@ -166,7 +229,7 @@ def main(argv=None, prog: str = "python -m derive") -> int:
         if staging.exists():
             shutil.rmtree(staging, ignore_errors=True)
     print(f"derived {len(models)} model(s) in {total:.2f} s -> {out}")
-    timings_path = args.timings or (TIMINGS if out == DEFAULT_OUT.resolve() else None)
+    timings_path = args.timings or (TIMINGS if out == (REPO / "generated").resolve() else None)
     if timings_path is not None:
         try:
             timings_path.parent.mkdir(parents=True, exist_ok=True)
