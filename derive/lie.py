@@ -1,6 +1,6 @@
 """Lie derivatives and Lie brackets, with the paper's sign convention.
 
-Convention (the paper's, DESIGN.md section 2)::
+Convention (the paper's, docs/design.md "Lie brackets")::
 
     ad_f v = [f, v] = (df/dx) v - (dv/dx) f
 

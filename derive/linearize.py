@@ -6,8 +6,8 @@ For ``x = [q; dq; q_m; dq_m]`` and the model of :mod:`derive.models`::
     T    = [y1; y2; y3; y4] = [q; dq; L_f y2; L_f y3]
 
 where ``y3 = D^-1 r3`` with ``r3 = -(h + K (q - q_m))`` is the link
-acceleration. Inverting D symbolically explodes from n = 3 on (DESIGN.md
-section 5), so we never do it. Instead we differentiate the *identity*
+acceleration. Inverting D symbolically explodes from n = 3 on (docs/derivation.md,
+"Why not invert D"), so we never do it. Instead we differentiate the *identity*
 ``E0 = D y3 - r3 = 0`` along f, treating y3 and its time derivatives as
 implicit symbols ``Y3, Y4, A``:
 

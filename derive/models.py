@@ -1,6 +1,6 @@
 """Model registry: symbolic dynamics of flexible-joint arms.
 
-Every model is the flexible-joint system of DESIGN.md section 2::
+Every model is the flexible-joint system of docs/design.md ("The model")::
 
     D(q) ddq + h(q, dq) + K (q - q_m) = 0,        h = C(q, dq) dq + G(q)
     J_m ddq_m + B_m dq_m - K (q - q_m) = u         (K, J_m, B_m diagonal)
@@ -165,7 +165,7 @@ def make_planar(n: int, name: str = None, defaults: Dict[str, float] = None,
     inertia ``I_i`` about its centre of mass.
 
     Closed form in absolute angles ``theta = S q`` (``S`` lower-triangular
-    ones), ``omega = S dq`` (DESIGN.md section 5)::
+    ones), ``omega = S dq`` (docs/derivation.md, "Equations of motion")::
 
         M_jk  = a_jk cos(theta_j - theta_k),  a_jk = l_k e_j (j > k),
         a_jj  = m_j r_j^2 + l_j^2 sum_{i>j} m_i + I_j,  e_j = m_j r_j + l_j sum_{i>j} m_i

@@ -11,7 +11,7 @@ so it can be estimated online and put back into ``T``, ``alpha`` and ``beta``.
 
 Scheme (per joint ``i``, certainty equivalence)
 -----------------------------------------------
-The motor equation (DESIGN.md section 2) is linear in the stiffness::
+The motor equation (docs/design.md, "The model") is linear in the stiffness::
 
     J_m ddq_m + B_m dq_m + K phi = u,        phi = q_m - q_l   (deflection)
 

@@ -1,7 +1,7 @@
 """Sliding-mode, integral sliding-mode and feedback-linearizing controllers.
 
-All controllers act per joint on the linearizing coordinates of DESIGN.md
-section 2, computed with NOMINAL parameters only (the controller never sees the
+All controllers act per joint on the linearizing coordinates of docs/design.md
+("The model"), computed with NOMINAL parameters only (the controller never sees the
 true plant)::
 
     y_hat = T(x; p_nom)                    four blocks of n: y1..y4

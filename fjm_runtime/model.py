@@ -1,4 +1,4 @@
-"""Load generated models: ``load(name) -> Model`` (the contract of DESIGN.md section 2).
+"""Load generated models: ``load(name) -> Model`` (the contract of docs/design.md, "Runtime contract").
 
 The runtime only deserializes the CasADi Functions written by ``make derive``;
 it never imports SymPy.

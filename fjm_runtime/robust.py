@@ -32,7 +32,7 @@ the reference bounds ``|y_d^(k)| <= R_k``, so that::
     k_s (paper, eq 16)   = W + H / beta_hat + eta
     k_s_tight            = rho W + H / beta_hat + eta
 
-``beta = J_l J_m / K`` (corrected, DESIGN errata 2), so with ``K in [K_min, K_max]``
+``beta = J_l J_m / K`` (corrected, docs/errata.md erratum 2), so with ``K in [K_min, K_max]``
 (and optionally ``J_l, J_m`` intervals) ``beta_min = J_l,min J_m,min / K_max``,
 ``beta_max = J_l,max J_m,max / K_min`` and ``beta_hat = (beta_max + beta_min) / 2``
 (the paper's choice, which makes eq (14) hold with ``rho = (beta_max - beta_min)

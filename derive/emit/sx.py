@@ -28,7 +28,7 @@ class SympyToSX:
         computed on first use.
 
     Every free symbol must be resolvable by one of the three; anything else
-    raises ``ValueError`` naming it (DESIGN.md section 4).
+    raises ``ValueError`` naming it (docs/design.md, "Emission").
     """
 
     def __init__(self, bindings: Mapping[sp.Symbol, ca.SX],
