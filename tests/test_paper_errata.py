@@ -71,21 +71,76 @@ def test_erratum2_T3_T4_use_K_over_Jl_and_beta_is_JlJm_over_K(m):
         assert m.alpha(x, P)[0] == pytest.approx(-beta * a, rel=1e-12, abs=1e-12)
 
 
-def test_erratum3_switching_gain_and_stiffness_are_distinct_names(m):
+def test_erratum3_switching_gain_and_stiffness_are_distinct_quantities(m):
     """Erratum 3: the paper calls both the switching gain and the stiffness K.
 
-    In fjm the stiffness is the model parameter ``K``; the switching gain of
-    the sliding-mode controller is ``k_s`` and is not a model parameter, so
-    changing one cannot change the other.
+    Numerically, with the paper's law ``u = alpha_hat + beta_hat nu``,
+    ``nu = y4d' - (c1 e2 + c2 e3 + c3 e4) - k_s sat(s / delta)``:
+
+    * changing only ``k_s`` leaves ``s``, ``alpha_hat``, ``beta_hat`` alone and moves
+      ``nu`` by exactly ``-(k_s2 - k_s1) sat(s / delta)``;
+    * the plant's (true) ``K`` does not enter the controller: the first torque of two
+      runs that differ only in the plant stiffness is the same;
+    * the nominal stiffness enters through ``T`` (``y3``, ``y4`` carry ``K / J_l``),
+      ``alpha`` and ``beta = J_l J_m / K``, never through the switching term.
     """
+    from fjm_runtime.controllers import SlidingModeController
+    from fjm_runtime.references import Sinusoid
+    from fjm_runtime.simulate import simulate
+
     assert "K" in m.param_names and "k_s" not in m.param_names
-    from fjm_runtime import controllers
-    import inspect
-    src = inspect.getsource(controllers)
-    assert "k_s" in src
+    Jl, Jm, MgL = P["J_l"], P["J_m"], P["M"] * P["g0"] * P["L"]
+    lam, delta = 6.0, 3.0
+    c1, c2, c3 = lam ** 3, 3 * lam ** 2, 3 * lam  # triple pole at -lam
+    r = np.array([[0.2], [0.1], [-0.3], [0.05], [0.4]])  # y_d and its four derivatives
+    k1, k2 = 40.0, 700.0
+    inside = outside = 0
+    # A state on the reference (e1 = e2 = e3 = 0) with e4 = 1: s = 1 lies inside the layer.
+    x1, x2 = r[0, 0], r[1, 0]
+    x_in = np.array([x1, x2, x1 + Jl / P["K"] * (r[2, 0] + MgL / Jl * np.sin(x1)),
+                     x2 + Jl / P["K"] * (r[3, 0] + 1.0 + MgL / Jl * np.cos(x1) * x2)])
+    for x in [*STATES, x_in]:
+        samples = {}
+        for k_s in (k1, k2):
+            ctrl = SlidingModeController(m, P, lam=lam, k_s=k_s, delta=delta)
+            cs = ctrl.evaluate(0.0, x, np.zeros(0), r)
+            nu = (cs.u - m.alpha(x, P)) / m.beta(x, P)[0, 0]
+            samples[k_s] = (cs, nu)
+        (a, nu1), (b, nu2) = samples[k1], samples[k2]
+        np.testing.assert_array_equal(a.s, b.s)          # k_s is not in the surface
+        np.testing.assert_array_equal(a.y_hat, b.y_hat)  # nor in T
+        s = a.s[0]
+        sat = min(1.0, max(-1.0, s / delta))
+        assert nu2[0] - nu1[0] == pytest.approx(-(k2 - k1) * sat, rel=1e-9, abs=1e-9)
+        # and nu itself is the paper's formula with the errors written out here
+        e = np.array([x[0], x[1], *paper_T(x, Jl, P["K"], MgL, factor=Jl)[2:]]) - r[:4, 0]
+        assert s == pytest.approx(c1 * e[0] + c2 * e[1] + c3 * e[2] + e[3], rel=1e-9, abs=1e-9)
+        w = r[4, 0] - (c1 * e[1] + c2 * e[2] + c3 * e[3])
+        assert nu1[0] == pytest.approx(w - k1 * sat, rel=1e-9, abs=1e-9)
+        inside += abs(s) < delta
+        outside += abs(s) >= delta
+    assert inside >= 1 and outside >= 1  # both the boundary layer and the saturated branch are exercised
+
+    # The plant stiffness never reaches the controller: same first torque for K = 100 and K = 200.
+    ctrl = SlidingModeController(m, P, lam=lam, k_s=k1, delta=delta)
+    runs = [simulate(m, ctrl, Sinusoid(0.5, 1.0), duration=0.01, true_params={**P, "K": K}, backend="python")
+            for K in (100.0, 200.0)]
+    assert runs[0].u[0, 0] == runs[1].u[0, 0]
+    assert runs[0].x[-1, 1] != runs[1].x[-1, 1]  # while the plants do differ
+
+    # The nominal stiffness enters T, alpha and beta (closed forms of erratum 2), not the switching term.
     x = STATES[0]
-    # Stiffness changes the plant (the bracket entry K/(J_l J_m)) ...
-    assert m.ad(x, {**P, "K": 100.0})[0, 3] != m.ad(x, {**P, "K": 200.0})[0, 3]
+    for K in (100.0, 200.0):
+        p = {**P, "K": K}
+        ctrl = SlidingModeController(m, p, lam=lam, k_s=k1, delta=delta)
+        cs = ctrl.evaluate(0.0, x, np.zeros(0), r)
+        np.testing.assert_allclose(cs.y_hat[:, 0], paper_T(x, Jl, K, MgL, factor=Jl), rtol=1e-12, atol=1e-12)
+        assert m.beta(x, p)[0, 0] == pytest.approx(Jl * Jm / K, rel=1e-14)
+        assert m.alpha(x, p)[0] == pytest.approx(-(Jl * Jm / K) * paper_a(x, Jl, Jm, K, MgL), rel=1e-12)
+        nu = (cs.u[0] - m.alpha(x, p)[0]) / m.beta(x, p)[0, 0]
+        e = cs.y_hat[:, 0] - r[:4, 0]
+        w = r[4, 0] - (c1 * e[1] + c2 * e[2] + c3 * e[3])
+        assert nu == pytest.approx(w - k1 * min(1.0, max(-1.0, cs.s[0] / delta)), rel=1e-9, abs=1e-9)
 
 
 def test_erratum4_motor_equation_uses_motor_inertia(m):
