@@ -5,9 +5,14 @@ over all samples while accumulating the per-run metrics of
 :func:`fjm_runtime.simulate.compute_metrics` (so no trajectory is stored), maps
 that over the runs (OpenMP when the compiler supports it) and compiles the
 whole thing once (cached like the single-run backend).
+
+Which code ran is recorded in :attr:`BatchResult.info` (``info["path"]`` is one
+of :data:`PATHS`); a requested SIMD form that cannot be used falls back to the
+scalar loop only with a :class:`SimdFallbackWarning` naming the reason.
 """
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass, field
 from typing import Dict, List, Optional, Sequence
 
@@ -18,6 +23,15 @@ from .compiled import DEFAULT_FLAGS, CompileError, compile_library, generate_sou
 
 METRIC_NAMES = ("final_error", "rms_error", "rms_error_second_half", "max_abs_u",
                 "reaching_time", "total_variation_u")
+
+#: Values of ``BatchResult.info["path"]``: the SIMD form for the instruction set it was
+#: built for (``simd-generic``: no x86 vector flags known, lanes left to the compiler),
+#: or the scalar C loop.
+PATHS = ("simd-avx512", "simd-avx2", "simd-sse2", "simd-generic", "scalar")
+
+
+class SimdFallbackWarning(RuntimeWarning):
+    """``simd=True`` was requested but the scalar loop ran (the message names why)."""
 
 
 @dataclass
@@ -36,6 +50,12 @@ class BatchResult:
     x_final : ndarray, shape (B, 4n)
     results : list of SimulationResult or None
         Full trajectories, only with ``trajectories=True``.
+    info : dict
+        How the batch ran: ``path`` (one of :data:`PATHS`), ``reason`` (why the
+        scalar loop ran; ``None`` on a SIMD path), ``threads`` (OpenMP threads
+        used), ``lanes`` (runs per vector statement, 1 for scalar),
+        ``instructions`` (SX instructions of one step) and ``library`` (the
+        compiled shared object).
     """
 
     params: np.ndarray
@@ -103,84 +123,152 @@ _DRIVER = r"""
 /* fjm batch driver: for each run, fold fjm_metric_step over the samples. */
 #include <stdlib.h>
 #include <string.h>
+#ifdef _OPENMP
+#include <omp.h>
+#endif
 int fjm_batch(int n_runs, int n_samples, int nacc, int nr, double* acc,
-              const double* R0, const double* RH, const double* R1, const double* FL) {
+              const double* R0, const double* RH, const double* R1, const double* FL,
+              int n_threads, int* threads_used) {
   casadi_int sz_arg, sz_res, sz_iw, sz_w;
   fjm_metric_step_work(&sz_arg, &sz_res, &sz_iw, &sz_w);
-  int failed = 0;
-  #pragma omp parallel for schedule(dynamic, 4) reduction(|:failed)
-  for (int b = 0; b < n_runs; ++b) {
-    double* buf = (double*)malloc(sizeof(double) * (2 * nacc + sz_w + 1));
-    casadi_int* iw = (casadi_int*)malloc(sizeof(casadi_int) * (sz_iw + 1));
-    double *cur = buf, *nxt = buf + nacc, *w = buf + 2 * nacc;
-    memcpy(cur, acc + (size_t)b * nacc, sizeof(double) * nacc);
-    const double* arg[8];
-    double* res[2];
-    for (int k = 0; k < n_samples; ++k) {
-      arg[0] = cur; arg[1] = R0 + (size_t)k * nr; arg[2] = RH + (size_t)k * nr;
-      arg[3] = R1 + (size_t)k * nr; arg[4] = FL + (size_t)k * 4;
-      res[0] = nxt;
-      failed |= fjm_metric_step(arg, res, iw, w, 0);
-      double* t = cur; cur = nxt; nxt = t;
+  int failed = 0, used = 1, nt = 1;
+#ifdef _OPENMP
+  nt = n_threads > 0 ? n_threads : omp_get_max_threads();
+#endif
+  (void)nt; (void)n_threads;
+  #pragma omp parallel num_threads(nt)
+  {
+#ifdef _OPENMP
+    #pragma omp single
+    used = omp_get_num_threads();
+#endif
+    #pragma omp for schedule(dynamic, 4) reduction(|:failed)
+    for (int b = 0; b < n_runs; ++b) {
+      double* buf = (double*)malloc(sizeof(double) * (2 * nacc + sz_w + 1));
+      casadi_int* iw = (casadi_int*)malloc(sizeof(casadi_int) * (sz_iw + 1));
+      double *cur = buf, *nxt = buf + nacc, *w = buf + 2 * nacc;
+      memcpy(cur, acc + (size_t)b * nacc, sizeof(double) * nacc);
+      const double* arg[8];
+      double* res[2];
+      for (int k = 0; k < n_samples; ++k) {
+        arg[0] = cur; arg[1] = R0 + (size_t)k * nr; arg[2] = RH + (size_t)k * nr;
+        arg[3] = R1 + (size_t)k * nr; arg[4] = FL + (size_t)k * 4;
+        res[0] = nxt;
+        failed |= fjm_metric_step(arg, res, iw, w, 0);
+        double* t = cur; cur = nxt; nxt = t;
+      }
+      memcpy(acc + (size_t)b * nacc, cur, sizeof(double) * nacc);
+      free(buf); free(iw);
     }
-    memcpy(acc + (size_t)b * nacc, cur, sizeof(double) * nacc);
-    free(buf); free(iw);
   }
+  *threads_used = used;
   return failed;
 }
 """
 
 
-class BatchRunner:
-    """ctypes handle on the compiled batch loop (step + driver, cached by source hash)."""
+def _threads_arg(threads: Optional[int]) -> int:
+    """``threads`` for the C drivers: 0 = OpenMP's default (``OMP_NUM_THREADS`` or all cores)."""
+    if threads is None:
+        return 0
+    t = int(threads)
+    if t < 1:
+        raise ValueError(f"threads = {threads!r}: expected None (all cores) or an integer >= 1")
+    return t
 
-    def __init__(self, so_path, nacc: int, nr: int):
+
+class BatchRunner:
+    """ctypes handle on the compiled batch loop (step + driver, cached by source hash).
+
+    Attributes
+    ----------
+    path : Path
+        The shared object.
+    lanes : int
+        Runs per statement (1: scalar loop).
+    openmp : bool
+        Built with ``-fopenmp`` (runs spread over threads).
+    """
+
+    lanes = 1
+    isa = None
+    _entry = "fjm_batch"
+
+    def __init__(self, so_path, nacc: int, nr: int, openmp: bool = False):
         import ctypes
         self.lib = ctypes.CDLL(str(so_path))
+        fn = getattr(self.lib, self._entry)
         dp = ctypes.POINTER(ctypes.c_double)
-        self.lib.fjm_batch.argtypes = [ctypes.c_int] * 4 + [dp] * 5
-        self.lib.fjm_batch.restype = ctypes.c_int
-        self.nacc, self.nr, self.path = nacc, nr, so_path
+        fn.argtypes = [ctypes.c_int] * 4 + [dp] * 5 + [ctypes.c_int, ctypes.POINTER(ctypes.c_int)]
+        fn.restype = ctypes.c_int
+        self._fn = fn
+        self.nacc, self.nr, self.path, self.openmp = nacc, nr, so_path, bool(openmp)
 
-    def __call__(self, ACC0, R0, RH, R1, FL) -> np.ndarray:
-        """``ACC0`` (B, nacc); ``R*`` (S, 5n) and ``FL`` (S, 4) row-major; returns (B, nacc)."""
-        import ctypes
-        acc = np.ascontiguousarray(ACC0, dtype=float).copy()
-        arrs = [np.ascontiguousarray(a, dtype=float) for a in (R0, RH, R1, FL)]
-        S = arrs[0].shape[0]
-        if any(a.shape[0] != S for a in arrs) or acc.shape[1] != self.nacc:
-            raise ValueError("BatchRunner: inconsistent argument shapes")
-        ptr = lambda a: a.ctypes.data_as(ctypes.POINTER(ctypes.c_double))
-        flag = self.lib.fjm_batch(acc.shape[0], S, self.nacc, self.nr, ptr(acc), *map(ptr, arrs))
-        if flag:
-            raise RuntimeError("compiled batch step returned an error flag")
+    @property
+    def path_name(self) -> str:
+        """The ``BatchResult.info["path"]`` of this runner (one of :data:`PATHS`)."""
+        return "scalar"
+
+    def _pack(self, ACC0):
+        return np.ascontiguousarray(ACC0, dtype=float).copy(), ACC0.shape[0]
+
+    def _unpack(self, acc, B):
         return acc
 
+    def run(self, ACC0, R0, RH, R1, FL, threads: Optional[int] = None):
+        """``ACC0`` (B, nacc); ``R*`` (S, 5n) and ``FL`` (S, 4) row-major.
 
-def batch_runner(model, controller, dt: float, max_state: float = 1e6,
-                 flags: Sequence[str] = DEFAULT_FLAGS, parallel: bool = True) -> BatchRunner:
-    """Compile (once, cached) the metric step plus a C loop over runs and samples.
+        Returns ``(acc, threads_used)`` with ``acc`` of shape (B, nacc).
+        """
+        import ctypes
+        ACC0 = np.asarray(ACC0, dtype=float)
+        if ACC0.ndim != 2 or ACC0.shape[1] != self.nacc:
+            raise ValueError("BatchRunner: inconsistent argument shapes")
+        arrs = [np.ascontiguousarray(a, dtype=float) for a in (R0, RH, R1, FL)]
+        S = arrs[0].shape[0]
+        if any(a.shape[0] != S for a in arrs):
+            raise ValueError("BatchRunner: inconsistent argument shapes")
+        acc, count = self._pack(ACC0)
+        ptr = lambda a: a.ctypes.data_as(ctypes.POINTER(ctypes.c_double))  # noqa: E731
+        used = ctypes.c_int(0)
+        flag = self._fn(count, S, self.nacc, self.nr, ptr(acc), *map(ptr, arrs),
+                        _threads_arg(threads), ctypes.byref(used))
+        if flag:
+            raise RuntimeError("compiled batch step returned an error flag")
+        return self._unpack(acc, ACC0.shape[0]), int(used.value)
 
-    The number of runs and steps is a run-time argument: one build serves
-    every batch size and duration. Runs are spread over cores with OpenMP
-    when ``parallel`` and ``-fopenmp`` works (falls back to serial).
-    """
-    step = _metric_step(model, controller, float(dt), float(max_state))
-    nacc = step.size1_in(0)
-    nr = step.size1_in(1)
+    def __call__(self, ACC0, R0, RH, R1, FL, threads: Optional[int] = None) -> np.ndarray:
+        """:meth:`run` without the thread count: the final accumulators (B, nacc)."""
+        return self.run(ACC0, R0, RH, R1, FL, threads)[0]
+
+
+def _scalar_runner(step: ca.Function, flags: Sequence[str], parallel: bool) -> BatchRunner:
+    nacc, nr = step.size1_in(0), step.size1_in(1)
     source = generate_source(step) + _DRIVER
     if parallel:
         try:
             so = compile_library(source, "fjm_batch", tuple(flags) + ("-fopenmp",))
-            return BatchRunner(so, nacc, nr)
+            return BatchRunner(so, nacc, nr, openmp=True)
         except CompileError:
             pass
     return BatchRunner(compile_library(source, "fjm_batch", flags), nacc, nr)
 
 
+def batch_runner(model, controller, dt: float, max_state: float = 1e6,
+                 flags: Sequence[str] = DEFAULT_FLAGS, parallel: bool = True) -> BatchRunner:
+    """Compile (once, cached) the metric step plus a scalar C loop over runs and samples.
+
+    The number of runs and steps is a run-time argument: one build serves
+    every batch size and duration. Runs are spread over cores with OpenMP
+    when ``parallel`` and ``-fopenmp`` works (falls back to serial).
+    """
+    return _scalar_runner(_metric_step(model, controller, float(dt), float(max_state)), flags, parallel)
+
+
 def simulate_batch(model, controller, reference, params_true_array, *, duration: float,
                    dt: float = 1e-3, x0=None, max_state: float = 1e6, trajectories: bool = False,
-                   parallel: bool = True, simd: bool = True) -> BatchResult:
+                   parallel: bool = True, simd: bool = True,
+                   threads: Optional[int] = None) -> BatchResult:
     """Run ``B`` closed loops (one per row of ``params_true_array``) in one compiled call.
 
     Parameters
@@ -201,12 +289,20 @@ def simulate_batch(model, controller, reference, params_true_array, *, duration:
         Evaluate 8 runs per instruction with vector instructions (AVX-512, AVX2
         or SSE2, whatever this CPU has) and vector sin/cos (glibc libmvec); the
         per-run constants (TRUE parameters) are hoisted out of the time loop.
-        Agrees with the scalar code to rounding. Falls back to the scalar loop
-        when the compiler or the model's operations do not allow it.
+        Agrees with the scalar code to rounding. ``False``: the scalar C loop.
+        If the SIMD form cannot be used (the step is larger than
+        :data:`SIMD_MAX_INSTRUCTIONS`, an operation it does not support, a
+        failed build) the scalar loop runs and a :class:`SimdFallbackWarning`
+        names the reason (also in ``info["reason"]``).
+    threads : int, optional
+        OpenMP threads for this call (default: ``OMP_NUM_THREADS`` or all
+        cores); ignored when ``parallel`` is false. ``info["threads"]`` is the
+        number actually used.
 
     Returns
     -------
     BatchResult
+        ``info["path"]`` says which code ran (one of :data:`PATHS`).
     """
     from .simulate import simulate
     n, nx = int(model.n), int(model.nx)
@@ -241,15 +337,29 @@ def simulate_batch(model, controller, reference, params_true_array, *, duration:
     FL = np.vstack([half, np.arange(n_steps + 1, dtype=float),
                     (np.arange(n_steps + 1) == 0).astype(float),
                     (np.arange(n_steps + 1) == n_steps).astype(float)])
-    runner = None
-    if simd and parallel and _simd_worthwhile(model, controller, dt, max_state):
-        try:
-            runner = simd_batch_runner(model, controller, dt, max_state)
-        except (CompileError, ValueError):
-            runner = None
+    _threads_arg(threads)  # validate before compiling anything
+    step = _metric_step(model, controller, float(dt), float(max_state))
+    runner, reason = None, "simd=False requested"
+    if simd:
+        if step.n_instructions() > SIMD_MAX_INSTRUCTIONS:
+            reason = (f"the step has {step.n_instructions()} SX instructions > "
+                      f"SIMD_MAX_INSTRUCTIONS = {SIMD_MAX_INSTRUCTIONS}")
+        else:
+            try:
+                runner = _simd_runner(step, len(model.param_names), DEFAULT_FLAGS, None, parallel)
+                reason = None
+            except (CompileError, ValueError) as exc:
+                reason = f"SIMD build failed: {type(exc).__name__}: {str(exc)[:2000]}"
+        if runner is None:
+            warnings.warn(f"simulate_batch: scalar loop instead of SIMD: {reason}",
+                          SimdFallbackWarning, stacklevel=2)
     if runner is None:
-        runner = batch_runner(model, controller, dt, max_state, parallel=parallel)
-    acc = runner(ACC0.T, R[:n_steps + 1], r_half[1:2 * n_steps + 2:2], R[1:n_steps + 2], FL.T)
+        runner = _scalar_runner(step, DEFAULT_FLAGS, parallel)
+    acc, used = runner.run(ACC0.T, R[:n_steps + 1], r_half[1:2 * n_steps + 2:2], R[1:n_steps + 2],
+                           FL.T, threads if parallel else 1)
+    info = {"path": runner.path_name, "reason": reason, "threads": used, "lanes": runner.lanes,
+            "openmp": runner.openmp, "instructions": int(step.n_instructions()),
+            "library": str(runner.path)}
     nw = nx + z0.size
     sum_e2, sum_half, max_u, last_out, tv, first_bad = (acc[:, nw + n + i] for i in range(6))
     x_fin = acc[:, :nx]
@@ -274,7 +384,7 @@ def simulate_batch(model, controller, reference, params_true_array, *, duration:
                    for i in range(B)]
     return BatchResult(params=P, metrics=metrics, diverged=diverged,
                        divergence_time=np.where(diverged, first_bad * dt, np.nan),
-                       x_final=x_fin, results=results)
+                       x_final=x_fin, results=results, info=info)
 
 
 # -- SIMD across runs ------------------------------------------------------------------------
@@ -407,27 +517,44 @@ def soa_source(step: ca.Function, lanes: int, varying=(0,), invariant_from: int 
         *("  " + ln for ln in body),
         "}",
         r"""
+#ifdef _OPENMP
+#include <omp.h>
+#endif
 int fjm_batch_soa(int n_groups, int n_samples, int nacc, int nr, double* acc,
-                  const double* R0, const double* RH, const double* R1, const double* FL) {
-  #pragma omp parallel for schedule(dynamic, 1)
-  for (int g = 0; g < n_groups; ++g) {
-    vd* inv = aligned_alloc(64, sizeof(vd) * SZ_INV);
-    double* buf = malloc(sizeof(double) * 2 * nacc * LANES);
-    double *cur = buf, *nxt = buf + nacc * LANES;
-    memcpy(cur, acc + (size_t)g * nacc * LANES, sizeof(double) * nacc * LANES);
-    fjm_prologue(cur, inv);
-    const double* arg[5];
-    double* res[1];
-    for (int k = 0; k < n_samples; ++k) {
-      arg[0] = cur; arg[1] = R0 + (size_t)k * nr; arg[2] = RH + (size_t)k * nr;
-      arg[3] = R1 + (size_t)k * nr; arg[4] = FL + (size_t)k * 4;
-      res[0] = nxt;
-      fjm_step_soa(inv, arg, res);
-      double* t = cur; cur = nxt; nxt = t;
+                  const double* R0, const double* RH, const double* R1, const double* FL,
+                  int n_threads, int* threads_used) {
+  int used = 1, nt = 1;
+#ifdef _OPENMP
+  nt = n_threads > 0 ? n_threads : omp_get_max_threads();
+#endif
+  (void)nt; (void)n_threads;
+  #pragma omp parallel num_threads(nt)
+  {
+#ifdef _OPENMP
+    #pragma omp single
+    used = omp_get_num_threads();
+#endif
+    #pragma omp for schedule(dynamic, 1)
+    for (int g = 0; g < n_groups; ++g) {
+      vd* inv = aligned_alloc(64, sizeof(vd) * SZ_INV);
+      double* buf = malloc(sizeof(double) * 2 * nacc * LANES);
+      double *cur = buf, *nxt = buf + nacc * LANES;
+      memcpy(cur, acc + (size_t)g * nacc * LANES, sizeof(double) * nacc * LANES);
+      fjm_prologue(cur, inv);
+      const double* arg[5];
+      double* res[1];
+      for (int k = 0; k < n_samples; ++k) {
+        arg[0] = cur; arg[1] = R0 + (size_t)k * nr; arg[2] = RH + (size_t)k * nr;
+        arg[3] = R1 + (size_t)k * nr; arg[4] = FL + (size_t)k * 4;
+        res[0] = nxt;
+        fjm_step_soa(inv, arg, res);
+        double* t = cur; cur = nxt; nxt = t;
+      }
+      memcpy(acc + (size_t)g * nacc * LANES, cur, sizeof(double) * nacc * LANES);
+      free(inv); free(buf);
     }
-    memcpy(acc + (size_t)g * nacc * LANES, cur, sizeof(double) * nacc * LANES);
-    free(inv); free(buf);
   }
+  *threads_used = used;
   return 0;
 }
 """])
@@ -444,42 +571,54 @@ def _cpu_flags() -> set:
     return set()
 
 
-def _vector_flags() -> tuple:
-    """Instruction-set flags for the SIMD batch, chosen from THIS machine's CPU.
+def _vector_isa() -> tuple:
+    """``(name, flags)``: the instruction set of the SIMD batch, chosen from THIS machine's CPU.
 
-    They are part of the cache key, so a machine with another instruction set
-    never loads a library built for this one.
+    ``name`` is ``avx512``, ``avx2``, ``sse2`` or ``generic``; the flags are part of
+    the cache key, so a machine with another instruction set never loads a library
+    built for this one.
     """
     cpu = _cpu_flags()
     if {"avx512f", "avx512dq"} <= cpu:
-        return ("-mavx512f", "-mavx512dq", "-mprefer-vector-width=512")
+        return "avx512", ("-mavx512f", "-mavx512dq", "-mprefer-vector-width=512")
     if "avx2" in cpu:
-        return ("-mavx2",)
-    return ()
+        return "avx2", ("-mavx2",)
+    if "sse2" in cpu:
+        return "sse2", ()
+    return "generic", ()
 
 
-class SimdBatchRunner:
-    """ctypes handle on the SIMD batch loop; same call signature as :class:`BatchRunner`."""
+def _vector_flags() -> tuple:
+    """Compiler flags of :func:`_vector_isa`."""
+    return _vector_isa()[1]
 
-    def __init__(self, so_path, nacc: int, nr: int, lanes: int):
-        import ctypes
-        self.lib = ctypes.CDLL(str(so_path))
-        dp = ctypes.POINTER(ctypes.c_double)
-        self.lib.fjm_batch_soa.argtypes = [ctypes.c_int] * 4 + [dp] * 5
-        self.lib.fjm_batch_soa.restype = ctypes.c_int
-        self.nacc, self.nr, self.lanes, self.path = nacc, nr, lanes, so_path
 
-    def __call__(self, ACC0, R0, RH, R1, FL) -> np.ndarray:
-        import ctypes
-        A = np.asarray(ACC0, dtype=float)
+class SimdBatchRunner(BatchRunner):
+    """ctypes handle on the SIMD batch loop; same calls as :class:`BatchRunner`.
+
+    Runs are packed ``lanes`` at a time ("structure of arrays"); the last group
+    is filled with copies of the last run.
+    """
+
+    _entry = "fjm_batch_soa"
+
+    def __init__(self, so_path, nacc: int, nr: int, lanes: int, isa: str = "generic",
+                 openmp: bool = True):
+        super().__init__(so_path, nacc, nr, openmp=openmp)
+        self.lanes, self.isa = int(lanes), isa
+
+    @property
+    def path_name(self) -> str:
+        return f"simd-{self.isa}"
+
+    def _pack(self, A):
         B, L = A.shape[0], self.lanes
         G = -(-B // L)
         pad = np.vstack([A, np.repeat(A[-1:], G * L - B, axis=0)])   # fill the last group
-        soa = np.ascontiguousarray(pad.reshape(G, L, self.nacc).transpose(0, 2, 1))
-        arrs = [np.ascontiguousarray(a, dtype=float) for a in (R0, RH, R1, FL)]
-        ptr = lambda a: a.ctypes.data_as(ctypes.POINTER(ctypes.c_double))
-        self.lib.fjm_batch_soa(G, arrs[0].shape[0], self.nacc, self.nr, ptr(soa), *map(ptr, arrs))
-        return soa.transpose(0, 2, 1).reshape(G * L, self.nacc)[:B].copy()
+        return np.ascontiguousarray(pad.reshape(G, L, self.nacc).transpose(0, 2, 1)), G
+
+    def _unpack(self, soa, B):
+        return soa.transpose(0, 2, 1).reshape(-1, self.nacc)[:B].copy()
 
 
 #: Largest step (SX instructions) emitted in SIMD form (a guard against pathological
@@ -488,23 +627,26 @@ class SimdBatchRunner:
 SIMD_MAX_INSTRUCTIONS = 200000
 
 
-def _simd_worthwhile(model, controller, dt, max_state) -> bool:
-    return _metric_step(model, controller, float(dt), float(max_state)).n_instructions() \
-        <= SIMD_MAX_INSTRUCTIONS
+def _simd_runner(step: ca.Function, n_par: int, flags: Sequence[str], lanes: Optional[int],
+                 parallel: bool = True) -> SimdBatchRunner:
+    lanes = int(lanes) if lanes else 8
+    isa, vflags = _vector_isa()
+    extra = ("-fno-math-errno", "-ffp-contract=off") + (("-fopenmp",) if parallel else ()) + vflags
+    source = soa_source(step, lanes, invariant_from=step.size1_in(0) - n_par)
+    so = compile_library(source, "fjm_batch_soa", tuple(flags) + extra)
+    return SimdBatchRunner(so, step.size1_in(0), step.size1_in(1), lanes, isa, openmp=parallel)
 
 
 def simd_batch_runner(model, controller, dt: float, max_state: float = 1e6,
-                      flags: Sequence[str] = DEFAULT_FLAGS, lanes: Optional[int] = None) -> SimdBatchRunner:
+                      flags: Sequence[str] = DEFAULT_FLAGS, lanes: Optional[int] = None,
+                      parallel: bool = True) -> SimdBatchRunner:
     """Compile (cached) the SIMD-across-runs batch loop (``lanes`` runs per instruction,
     default 8: one AVX-512 vector, two AVX2 vectors or four SSE2 vectors per operation).
 
     ``-ffp-contract=off`` keeps the arithmetic identical to the scalar code (no FMA
-    contraction); only sin/cos (libmvec) may differ by a few ulp.
+    contraction); only sin/cos (libmvec) may differ by a few ulp. Raises
+    :class:`~fjm_runtime.compiled.CompileError` or ``ValueError`` (an operation
+    :func:`soa_source` does not support) instead of falling back.
     """
     step = _metric_step(model, controller, float(dt), float(max_state))
-    lanes = int(lanes) if lanes else 8
-    extra = ("-fno-math-errno", "-ffp-contract=off", "-fopenmp") + _vector_flags()
-    n_par = len(model.param_names)
-    source = soa_source(step, lanes, invariant_from=step.size1_in(0) - n_par)
-    so = compile_library(source, "fjm_batch_soa", tuple(flags) + extra)
-    return SimdBatchRunner(so, step.size1_in(0), step.size1_in(1), lanes)
+    return _simd_runner(step, len(model.param_names), flags, lanes, parallel)

@@ -1,18 +1,17 @@
-"""simulate_batch: a batch of one equals a single run; each row is its own plant."""
+"""simulate_batch: a batch of one equals a single run; each row is its own plant; the
+SIMD path runs where the CPU has it, equals the scalar path, and never fails silently."""
+import warnings
+
 import numpy as np
 import pytest
 
 import fjm_runtime
-from fjm_runtime.batch import METRIC_NAMES, simulate_batch
+import fjm_runtime.batch as batch_mod
+from fjm_runtime.batch import METRIC_NAMES, SimdFallbackWarning, simulate_batch
+from fjm_runtime.compiled import CompileError
 from fjm_runtime.controllers import make_controller
 from fjm_runtime.references import Sinusoid, SmoothStep
 from fjm_runtime.simulate import simulate
-
-import os as _os
-import shutil as _shutil
-
-pytestmark = pytest.mark.skipif(not (_os.environ.get("CC") or _shutil.which("gcc") or _shutil.which("cc")),
-                                reason="needs a C compiler")
 
 
 @pytest.fixture(autouse=True)
@@ -44,14 +43,18 @@ def test_batch_of_one_equals_single_run():
     assert not batch.diverged[0]
 
 
-@pytest.mark.parametrize("parallel,simd", [(True, True), (True, False), (False, False)])
+@pytest.mark.parametrize("parallel,simd", [(True, True), (True, False), (False, True), (False, False)])
 def test_each_row_is_its_own_plant(parallel, simd):
     m = fjm_runtime.load("link1")
     ctrl = _link1_ctrl(m, kind="ismc", u_max=20.0)
     ref = SmoothStep(1.0, rise_time=0.5)
     Ks = [100.0, 150.0, 200.0, 130.0, 170.0]
     P = np.array([m.params_array({"K": k}) for k in Ks])
-    batch = simulate_batch(m, ctrl, ref, P, duration=1.0, parallel=parallel, simd=simd)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", SimdFallbackWarning)
+        batch = simulate_batch(m, ctrl, ref, P, duration=1.0, parallel=parallel, simd=simd)
+    assert (batch.info["path"] != "scalar") == simd
+    assert batch.info["threads"] == 1 or parallel
     for i, k in enumerate(Ks):
         single = simulate(m, ctrl, ref, duration=1.0, true_params={"K": k}, backend="compiled")
         _assert_same_metrics(single, batch, i)
@@ -85,14 +88,94 @@ def test_bad_params_shape_is_a_clear_error():
         simulate_batch(m, _link1_ctrl(m), Sinusoid(0.5, 1.0), np.zeros((3, 2)), duration=1.0)
 
 
-def test_simd_lanes_and_padding_agree_with_scalar():
-    """11 runs: not a multiple of the lane count, so the last group is padded."""
+def _expected_simd_path():
+    """The SIMD path this CPU should get, from /proc/cpuinfo read here (not by the code under test)."""
+    flags = set()
+    with open("/proc/cpuinfo") as fh:
+        for ln in fh:
+            if ln.startswith("flags"):
+                flags = set(ln.split(":", 1)[1].split())
+                break
+    if {"avx512f", "avx512dq"} <= flags:
+        return "simd-avx512"
+    if "avx2" in flags:
+        return "simd-avx2"
+    if "sse2" in flags:
+        return "simd-sse2"
+    return "simd-generic"
+
+
+def _padded_case():
+    """11 runs: not a multiple of the lane count, so the last SIMD group is padded."""
     m = fjm_runtime.load("link1")
-    ctrl = _link1_ctrl(m)
-    ref = Sinusoid(0.5, 1.0)
     P = np.array([m.params_array({"K": k}) for k in np.linspace(100.0, 200.0, 11)])
+    return m, _link1_ctrl(m), Sinusoid(0.5, 1.0), P
+
+
+def test_simd_path_runs_where_the_cpu_supports_it():
+    m, ctrl, ref, P = _padded_case()
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", SimdFallbackWarning)   # a fallback fails this test
+        b = simulate_batch(m, ctrl, ref, P, duration=0.2)
+    assert b.info["path"] == _expected_simd_path()
+    assert b.info["reason"] is None and b.info["lanes"] == 8
+
+
+def test_simd_lanes_and_padding_agree_with_scalar():
+    """Each path forced explicitly (and checked in ``info``), then compared."""
+    m, ctrl, ref, P = _padded_case()
     a = simulate_batch(m, ctrl, ref, P, duration=0.5, simd=False)
-    b = simulate_batch(m, ctrl, ref, P, duration=0.5, simd=True)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", SimdFallbackWarning)
+        b = simulate_batch(m, ctrl, ref, P, duration=0.5, simd=True)
+    assert a.info["path"] == "scalar" and a.info["lanes"] == 1
+    assert b.info["path"] == _expected_simd_path() and b.info["lanes"] == 8
+    assert a.info["library"] != b.info["library"]
     for k in METRIC_NAMES:
         assert np.allclose(a.metrics[k], b.metrics[k], rtol=1e-9, atol=1e-12), k
     assert np.allclose(a.x_final, b.x_final, rtol=1e-9, atol=1e-12)
+    assert len(set(np.round(b.metrics["rms_error"], 12))) == P.shape[0]   # no lane copied another
+
+
+def _raise_unsupported(*args, **kwargs):
+    raise ValueError("soa_source: operation 999 not supported (injected)")
+
+
+def _broken_c(*args, **kwargs):
+    return "this is not C (injected);\n"
+
+
+@pytest.mark.parametrize("broken,exc,match", [(_raise_unsupported, ValueError, "operation 999"),
+                                              (_broken_c, CompileError, "CompileError")])
+def test_a_failing_simd_build_warns_names_the_reason_and_runs_scalar(monkeypatch, broken, exc, match):
+    m, ctrl, ref, P = _padded_case()
+    monkeypatch.setattr(batch_mod, "soa_source", broken)
+    with pytest.raises(exc):                       # the explicit builder never falls back
+        batch_mod.simd_batch_runner(m, ctrl, 1e-3)
+    with pytest.warns(SimdFallbackWarning, match=match):
+        b = simulate_batch(m, ctrl, ref, P, duration=0.2)
+    assert b.info["path"] == "scalar"
+    assert "SIMD build failed" in b.info["reason"] and match in b.info["reason"]
+    ref_b = simulate_batch(m, ctrl, ref, P, duration=0.2, simd=False)
+    assert np.array_equal(b.metrics["rms_error"], ref_b.metrics["rms_error"])
+
+
+def test_a_step_beyond_the_simd_limit_warns(monkeypatch):
+    m, ctrl, ref, P = _padded_case()
+    monkeypatch.setattr(batch_mod, "SIMD_MAX_INSTRUCTIONS", 10)
+    with pytest.warns(SimdFallbackWarning, match="SIMD_MAX_INSTRUCTIONS = 10"):
+        b = simulate_batch(m, ctrl, ref, P[:2], duration=0.1)
+    assert b.info["path"] == "scalar" and b.info["instructions"] > 10
+
+
+@pytest.mark.parametrize("simd", [True, False])
+def test_thread_count_is_honoured_and_recorded(simd):
+    m, ctrl, ref, P = _padded_case()
+    one = simulate_batch(m, ctrl, ref, P, duration=0.2, simd=simd, threads=1)
+    two = simulate_batch(m, ctrl, ref, P, duration=0.2, simd=simd, threads=2)
+    assert one.info["threads"] == 1 and two.info["threads"] == 2
+    assert one.info["openmp"] and two.info["openmp"]
+    for k in METRIC_NAMES:
+        assert np.array_equal(one.metrics[k], two.metrics[k]), k
+    with pytest.raises(ValueError, match="threads"):
+        simulate_batch(m, ctrl, ref, P, duration=0.2, threads=0)
