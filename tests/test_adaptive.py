@@ -55,7 +55,11 @@ def test_adaptive_tracking_accuracy(tracking_runs, K):
     # measured RMS e1 over 5-10 s: 1.95e-5 (K = 100), 3.8e-5 (K = 200); integral SMC 1.14e-2, 5.9e-3
     assert res.metrics.rms_error_second_half < 5e-5
     assert res.metrics.final_error < 5e-5
-    assert ismc.metrics.rms_error_second_half > 100 * res.metrics.rms_error_second_half
+    # README: "150-600x lower tracking RMS than ismc"; measured 585x (K = 100), 155x (K = 200).
+    # Margin: about 10 % outside the claimed range.
+    ratio = ismc.metrics.rms_error_second_half / res.metrics.rms_error_second_half
+    assert 135 < ratio < 660
+    assert ratio > {100.0: 500, 200.0: 135}[K]
 
 
 def test_least_squares_closed_form_and_exact_regression(link1):

@@ -40,7 +40,8 @@ def test_integral_smc_removes_regulation_offset(link1, K_true):
     bh = beta_hat_link1({}, K_BOUNDS)
     ismc = make_controller("ismc", link1, {}, beta_hat=bh, **DESIGN)
     res = simulate(link1, ismc, ref, duration=10.0, true_params={"K": K_true})
-    assert abs(res.e1[-1, 0]) < 1e-4
+    # README: |e1| < 1e-11 after 10 s (measured 2.7e-12, 4e-15, 1.5e-14 at K = 100, 150, 200)
+    assert abs(res.e1[-1, 0]) < 1e-11
     smc = make_controller("smc", link1, {}, beta_hat=bh, **DESIGN)
     pred = predict_regulation_offset(link1, smc, 1.0, {"K": K_true})
     res_smc = simulate(link1, smc, ref, duration=10.0, true_params={"K": K_true})
@@ -51,7 +52,7 @@ def test_integral_smc_removes_regulation_offset(link1, K_true):
 
 
 @pytest.mark.parametrize("K_true", [100.0, 200.0])
-def test_integral_smc_tracks_sine_three_times_better(link1, K_true):
+def test_integral_smc_tracks_sine_five_to_six_times_better(link1, K_true):
     ref = Sinusoid(0.5, 1.0)
     bh = beta_hat_link1({}, K_BOUNDS)
     rms = {}
@@ -59,7 +60,10 @@ def test_integral_smc_tracks_sine_three_times_better(link1, K_true):
         ctrl = make_controller(kind, link1, {}, beta_hat=bh, **DESIGN)
         rms[kind] = simulate(link1, ctrl, ref, duration=10.0,
                              true_params={"K": K_true}).metrics.rms_error_second_half
-    assert rms["smc"] > 3.0 * rms["ismc"], rms  # measured ~5x (K=100) and ~6x (K=200)
+    # README: "cuts the tracking RMS error 5-6x"; measured 4.97x (K = 100) and 6.29x (K = 200).
+    # Margin: 10 % below 5x, 10 % above 6.3x.
+    ratio = rms["smc"] / rms["ismc"]
+    assert 4.5 < ratio < 7.0, rms
 
 
 @pytest.mark.parametrize("K_true", [100.0, 200.0])
@@ -74,7 +78,7 @@ def test_anti_windup_under_torque_limit(link1, K_true):
         out[aw] = (np.max(res.e1[:, 0]), abs(res.e1[-1, 0]), np.max(np.abs(res.z)))
     overshoot, final, zmax = out[True]
     assert overshoot < 0.2  # stated bound (measured 0.075 at K=100, 0.186 at K=200)
-    assert final < 1e-4
+    assert final < 1e-10  # measured 5.9e-12 (K = 100) and 0 (K = 200) at 10 s
     assert zmax < out[False][2] and overshoot <= out[False][0]
 
 
