@@ -102,13 +102,21 @@ print(json.dumps(out))
 """
 
 
-def test_wheel_installs_and_runs_without_sympy(wheel, tmp_path):
-    venv = tmp_path / "venv"
+@pytest.fixture(scope="module")
+def venv(wheel, tmp_path_factory) -> Path:
+    """A fresh venv with casadi, numpy and the wheel only (no SymPy)."""
+    venv = tmp_path_factory.mktemp("wheel_venv") / "venv"
     env = _clean_env()
     _run([sys.executable, "-m", "venv", str(venv)], env=env)
     py = venv / "bin" / "python"
     _run([py, "-m", "pip", "install", "-q", "--no-deps", "casadi==3.7.2", f"numpy=={np.__version__}"], env=env)
     _run([py, "-m", "pip", "install", "-q", "--no-deps", str(wheel)], env=env)
+    return venv
+
+
+def test_wheel_installs_and_runs_without_sympy(venv, tmp_path):
+    env = _clean_env()
+    py = venv / "bin" / "python"
     run_dir = tmp_path / "elsewhere"  # not the repository: nothing may come from the source tree
     run_dir.mkdir()
     proc = _run([py, "-c", CHECK], cwd=run_dir, env=env)
@@ -124,3 +132,42 @@ def test_wheel_installs_and_runs_without_sympy(wheel, tmp_path):
     np.testing.assert_allclose(res["alpha"], m.alpha(x, m.default_params), rtol=1e-12, atol=0)
     np.testing.assert_allclose(res["beta"], m.beta(x, m.default_params), rtol=1e-12, atol=0)
     np.testing.assert_allclose(res["f7"], fjm_runtime.load("planar7").f(np.full(28, 0.1)), rtol=1e-12, atol=1e-300)
+
+
+def test_installed_derive_needs_out_and_fjm_generated(venv, tmp_path):
+    """``fjm derive`` from the installed wheel: without SymPy it names the extra; with SymPy but
+    without ``--out`` it is a usage error (no ``site-packages/generated``); with ``--out DIR`` and
+    ``FJM_GENERATED=DIR`` load() reads the derived model. SymPy goes into a separate ``--target``
+    directory on PYTHONPATH, so the venv itself stays SymPy-free for the test above."""
+    env = _clean_env()
+    fjm, py = venv / "bin" / "fjm", venv / "bin" / "python"
+    run_dir = tmp_path / "elsewhere"
+    run_dir.mkdir()
+
+    proc = subprocess.run([str(fjm), "derive", "--models", "link1"], cwd=run_dir, env=env,
+                          capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 2 and "pip install" in proc.stderr and "sympy" in proc.stderr, proc.stderr
+
+    extra = tmp_path / "derive-extra"
+    _run([py, "-m", "pip", "install", "-q", "--no-deps", "--target", str(extra), "sympy==1.14.0", "mpmath"],
+         env=env)
+    env_sympy = dict(env, PYTHONPATH=str(extra))
+    site = Path(_run([py, "-c", "import derive, pathlib; print(pathlib.Path(derive.__file__).parent.parent)"],
+                     env=env_sympy, cwd=run_dir).stdout.strip())
+    assert str(venv) in str(site), site
+    proc = subprocess.run([str(fjm), "derive", "--models", "link1"], cwd=run_dir, env=env_sympy,
+                          capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 2, proc.stdout + proc.stderr
+    assert "--out DIR" in proc.stderr and "FJM_GENERATED=DIR" in proc.stderr, proc.stderr
+    assert not (site / "generated").exists() and not (site / "build").exists()
+
+    out = tmp_path / "models"
+    _run([fjm, "derive", "--models", "link1", "--out", out], cwd=run_dir, env=env_sympy)
+    assert (out / "link1" / "manifest.json").is_file()
+    for f in sorted((REPO / "generated" / "link1").iterdir()):
+        assert (out / "link1" / f.name).read_bytes() == f.read_bytes(), f"{f.name} differs from generated/link1"
+    check = ("import json, fjm_runtime; m = fjm_runtime.load('link1'); "
+             "print(json.dumps([str(m.directory), fjm_runtime.available_models()]))")
+    directory, models = json.loads(_run([py, "-c", check], cwd=run_dir,
+                                        env=dict(env, FJM_GENERATED=str(out))).stdout.strip().splitlines()[-1])
+    assert directory == str(out / "link1") and models == ["link1"]
