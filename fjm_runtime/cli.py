@@ -79,7 +79,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     # `fjm derive ...` is handed to `python -m derive` as is (see main); listed here for --help.
     sub.add_parser("derive", add_help=False,
-                   help="derive and emit models, e.g. --model-file arm.toml --out DIR (needs .[derive])")
+                   help="derive and emit models (needs .[derive]); --out DIR, default generated/ only in "
+                        "a source checkout; see `fjm derive --help`")
 
     sw = sub.add_parser("sweep", help="Monte Carlo sweep of the closed loop on Dask (chunks of compiled batches)",
                         description="Sample TRUE plants (stiffness uniform in [--k-min, --k-max], link and "
