@@ -46,11 +46,21 @@ class CompiledAlphaBeta:
             raise RuntimeError("compiled alpha/beta returned an error flag")
         return a, b.reshape(self.n, self.n, order="F")
 
-    def seconds_per_call(self, x, p, iters: int) -> float:
+    def timed_run(self, x, p, iters: int):
+        """``(seconds per call, checksum)`` of the timing loop.
+
+        The loop evaluates alpha and beta at ``x`` with ``x[0] + 1e-9 (k mod 8)``
+        on call ``k`` and sums ``alpha[0] + beta[0, 0]`` into the checksum.
+        """
         x = np.ascontiguousarray(x, dtype=float)
         p = np.ascontiguousarray(p, dtype=float)
         chk = np.zeros(1)
-        return self.lib.time_alpha_beta(iters, self.nx, self._ptr(x), self._ptr(p), self._ptr(chk))
+        s = self.lib.time_alpha_beta(iters, self.nx, self._ptr(x), self._ptr(p), self._ptr(chk))
+        return s, float(chk[0])
+
+    def seconds_per_call(self, x, p, iters: int) -> float:
+        """Seconds per (alpha, beta) pair over ``iters`` calls (see :meth:`timed_run`)."""
+        return self.timed_run(x, p, iters)[0]
 
 
 def build_generated(model, workdir: Path, obj: Path = None) -> CompiledAlphaBeta:

@@ -1,8 +1,10 @@
 """Closed-loop peers for link1 (paper's tracking case, 10 s at 1 kHz, RK4 + SMC).
 
-* generated: :func:`fjm_runtime.compiled.closed_loop_runner` (CasADi mapaccum -> C, cached);
+* generated: :func:`fjm_runtime.compiled.closed_loop_library` (the fused step + a C loop,
+  cached), and the whole ``simulate(..., backend="compiled")`` call;
 * hand C: ``bench/hand_loop.c``, the same loop written by hand, same flags;
-* Python loop: ``simulate(..., backend="python")`` (numpy RK4 calling the CasADi Functions);
+* Python loop: ``simulate(..., backend="python")`` (numpy RK4 calling the CasADi Functions),
+  timed against the whole compiled ``simulate()`` call (same arguments);
 * scipy: ``solve_ivp`` (RK45) of the same closed loop with the control law evaluated
   continuously (no zero-order hold), rtol 1e-6, atol 1e-9;
 * numpy batch: RK4 vectorized over the runs (closed forms, same metrics as simulate_batch).
@@ -24,9 +26,24 @@ from .ccutil import compile_object, link_shared
 
 HERE = Path(__file__).resolve().parent
 
-# The paper's link1 tracking case (fjm_runtime.figures: LAM = 8, Lemma 1 gain for
-# 0.5 sin t with K in [100, 200], layer k_s / 200, beta_hat = (beta_min + beta_max) / 2).
-LAM, K_S, DELTA, BETA_HAT, K_NOM = 8.0, 1008.0304231403442, 5.040152115701721, 0.015, 150.0
+
+
+def tracking_design():
+    """The paper's link1 tracking design, computed by the functions that define it.
+
+    :meth:`fjm_runtime.figures.Design.for_task` (``'tracking'``): Lemma 1 gain
+    (:func:`fjm_runtime.robust.lemma1_gain`) for ``0.5 sin t`` with ``K`` in
+    [100, 200], boundary layer ``k_s / LAYER_RATE``, ``beta_hat = (beta_min +
+    beta_max) / 2`` (:func:`fjm_runtime.robust.beta_bounds_link1`); triple pole at
+    ``-LAM``, nominal ``K_NOM``.
+
+    Returns
+    -------
+    design : fjm_runtime.figures.Design
+    lam, k_nom : float
+    """
+    from fjm_runtime.figures import K_NOM, LAM, Design
+    return Design.for_task("tracking"), float(LAM), float(K_NOM)
 
 
 @dataclass
@@ -55,9 +72,11 @@ class Case:
 
 def link1_case(K_true: float = 120.0, duration: float = 10.0, dt: float = 1e-3) -> Case:
     m = fjm_runtime.load("link1")
-    ctrl = make_controller("smc", m, {"K": K_NOM}, lam=LAM, k_s=K_S, delta=DELTA, beta_hat=BETA_HAT)
+    design, lam, k_nom = tracking_design()
+    ctrl = make_controller("smc", m, {"K": k_nom}, lam=lam, k_s=design.k_s, delta=design.delta,
+                           beta_hat=design.beta_hat)
     return Case(m, ctrl, Sinusoid(0.5, 1.0), m.params_array({"K": K_true}),
-                m.params_array({"K": K_NOM}), duration, dt)
+                m.params_array({"K": k_nom}), duration, dt)
 
 
 class GeneratedLoop:
@@ -104,10 +123,16 @@ class HandLoop:
         return self.W, self.A
 
 
-def python_loop(case: Case):
+def simulate_call(case: Case, backend: str):
+    """The whole ``simulate(..., backend=backend)`` call of the case (references, outputs, metrics)."""
     from fjm_runtime.simulate import simulate
     return simulate(case.model, case.controller, case.reference, duration=case.duration, dt=case.dt,
-                    true_params=case.p_true, x0=case.x0(), backend="python")
+                    true_params=case.p_true, x0=case.x0(), backend=backend)
+
+
+def python_loop(case: Case):
+    """``simulate(..., backend="python")``: numpy RK4 calling the CasADi Functions."""
+    return simulate_call(case, "python")
 
 
 def solve_ivp_loop(case: Case, rtol: float = 1e-6, atol: float = 1e-9):

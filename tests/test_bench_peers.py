@@ -1,19 +1,15 @@
-"""The bench's peers compute the same numbers as the generated code (so the timings compare like with like).
+"""The bench's peers compute the same numbers as the generated code (so the timings compare like with like);
+the bench fails when one does not; its README tables are the report of the committed results.
 
 Small sizes only; the timings themselves live in `make bench`, never in tests.
 """
+import json
+import shutil
+
 import numpy as np
 import pytest
 
 import fjm_runtime
-
-pytest.importorskip("sympy")
-
-import os as _os
-import shutil as _shutil
-
-pytestmark = pytest.mark.skipif(not (_os.environ.get("CC") or _shutil.which("gcc") or _shutil.which("cc")),
-                                reason="needs a C compiler")
 
 
 @pytest.fixture(autouse=True)
@@ -59,11 +55,15 @@ def test_compiled_alpha_beta_drivers_agree(tmp_path, name):
     p = m.params_array()
     gen = build_generated(m, tmp_path)
     peer, _, _ = build_peer(name, "structured", tmp_path, m.n, m.nx)
+    iters = 11   # the timed loop perturbs x[0] by 1e-9 (k mod 8) on call k
+    want = sum(float(m.alpha(xk, p)[0]) + float(m.beta(xk, p)[0, 0])
+               for xk in (np.concatenate([[x[0] + 1e-9 * (k % 8)], x[1:]]) for k in range(iters)))
     for fn in (gen, peer):
         a, b = fn(x, p)
         assert np.allclose(a, m.alpha(x, p), rtol=1e-10, atol=1e-10)
         assert np.allclose(b, m.beta(x, p), rtol=1e-12, atol=1e-12)
-    assert gen.seconds_per_call(x, p, 10) > 0 and peer.seconds_per_call(x, p, 10) > 0
+        _, checksum = fn.timed_run(x, p, iters)     # the timed loop computes alpha and beta
+        assert checksum == pytest.approx(want, rel=1e-10, abs=1e-12)
 
 
 def test_hand_c_loop_equals_generated_loop(tmp_path):
@@ -87,7 +87,6 @@ def test_python_and_solve_ivp_peers_track_the_same_loop():
     lib = closed_loop_library(case.model, case.controller, case.dt)
     W, _ = lib(case.x0(), *case.reference_arrays(), case.p_true)
     assert np.max(np.abs(python_loop(case).x[1:] - W)) < 1e-9
-    pytest.importorskip("scipy")
     ivp = solve_ivp_loop(case)
     assert ivp.success
     assert np.max(np.abs(ivp.y.T[1:] - W)) < 5e-3   # continuous law vs zero-order hold
@@ -105,3 +104,97 @@ def test_numpy_batch_peer_equals_simulate_batch():
     for k in METRIC_NAMES:
         assert np.allclose(b.metrics[k], nb[k], rtol=1e-9, atol=1e-12), k
     assert np.allclose(b.x_final, nb["x_final"], rtol=1e-9, atol=1e-12)
+
+
+def test_closed_loop_design_is_computed_not_pasted(monkeypatch):
+    """k_s, delta, beta_hat come from Lemma 1 in the run: change its margin and they follow."""
+    import fjm_runtime.figures as figures
+    from bench.closed_loop import link1_case
+    from fjm_runtime.controllers import coefficients_from_pole
+    from fjm_runtime.robust import beta_bounds_link1, lemma1_gain
+    ref, E, _ = figures.TASKS["tracking"]
+    gain = lemma1_gain(coefficients_from_pole(figures.LAM), ref().derivative_bounds()[:, 0],
+                       nominal={"K": figures.K_NOM}, bounds=figures.K_BOUNDS, error_bounds=E, eta=figures.ETA)
+    ctrl = link1_case(duration=0.1).controller
+    assert float(ctrl.k_s[0]) == pytest.approx(gain.k_s, rel=1e-12)
+    assert float(ctrl.delta[0]) == pytest.approx(gain.k_s / figures.LAYER_RATE, rel=1e-12)
+    assert float(ctrl.beta_hat[0, 0]) == pytest.approx(
+        beta_bounds_link1({"K": figures.K_NOM}, figures.K_BOUNDS)[2], rel=1e-12)
+    monkeypatch.setattr(figures, "ETA", figures.ETA + 7.0)
+    assert float(link1_case(duration=0.1).controller.k_s[0]) == pytest.approx(gain.k_s + 7.0, rel=1e-12)
+
+
+# -- the bench fails when a peer disagrees ------------------------------------------------------
+
+def test_check_records_and_fails_beyond_tolerance():
+    from bench.__main__ import check, metric_diff
+    checks = []
+    check(checks, "a", "within", 1e-12, 1e-9)
+    check(checks, "b", "beyond", 2e-9, 1e-9)
+    check(checks, "c", "nan", float("nan"), 1e-9)
+    assert [c["ok"] for c in checks] == [True, False, False]
+    a = {"m": np.array([1.0, np.inf, 2.0])}
+    assert metric_diff(a, {"m": np.array([1.0, np.inf, 2.0 + 2e-9])}, ["m"]) == pytest.approx(1e-9, rel=1e-6)
+    assert metric_diff(a, {"m": np.array([1.0, 5.0, 2.0])}, ["m"]) == np.inf   # inf vs finite
+
+
+@pytest.mark.parametrize("measured,status", [(0.0, 0), (1.0, 1)])
+def test_bench_exit_status_follows_the_peer_checks(tmp_path, monkeypatch, measured, status):
+    import bench.__main__ as bm
+
+    def fake_batch(reps, slow, checks, n_runs=1000):
+        bm.check(checks, "batch.fake", "a peer vs the generated code", measured, 0.5)
+        return {"n": 1}
+
+    monkeypatch.setattr(bm, "bench_batch", fake_batch)
+    monkeypatch.setattr(bm.report, "write_all", lambda r: pytest.fail("a partial run rewrote the READMEs"))
+    out = tmp_path / "r.json"
+    assert bm.main(["--only", "batch", "--out", str(out)]) == status
+    res = json.loads(out.read_text())
+    assert [c["ok"] for c in res["checks"]] == [not status]
+
+
+def test_differing_files_finds_one_changed_byte(tmp_path):
+    from bench.__main__ import differing_files
+    from fjm_runtime.model import generated_root
+    src = generated_root()
+    a, b = tmp_path / "a", tmp_path / "b"
+    shutil.copytree(src / "link1", a / "link1")
+    shutil.copytree(src / "link1", b / "link1")
+    assert differing_files(a, b, ["link1"]) == []
+    c = b / "link1" / "link1.c"
+    text = c.read_bytes()
+    i = text.index(b"9.8") if b"9.8" in text else text.rindex(b"1.")
+    c.write_bytes(text[:i] + b"8" + text[i + 1:])
+    assert differing_files(a, b, ["link1"]) == ["link1/link1.c"]
+    (b / "link1" / "alpha.casadi").unlink()
+    assert differing_files(a, b, ["link1"]) == ["link1/alpha.casadi", "link1/link1.c"]
+
+
+# -- the README tables are the report of the committed results --------------------------------
+
+def test_readme_tables_equal_the_report_of_the_committed_results():
+    from bench import report
+    r = report.load()
+    assert r.get("quick") is False and r.get("checks"), "bench/results.json must come from a full run"
+    assert all(c["ok"] for c in r["checks"])
+    for path, block in report.targets(r).items():
+        assert report.current_block(path.read_text()) == block, f"{path}: run python -m bench.report"
+    assert report.main(["--check"]) == 0
+
+
+def test_report_uses_the_results_and_flags_missed_targets():
+    from bench import report
+    r = report.load()
+    block = report.render_readme(r)
+    speed = report.get(r, "closed_loop.speedup_vs_python")
+    assert f"{speed:.0f}x faster" in block
+    worse = json.loads(json.dumps(r))
+    worse["batch"]["speedup_vs_numpy"] = 1.5
+    worse["checks"][0]["ok"] = False
+    text = report.render_readme(worse)
+    assert "1.5x faster" in text and "**missed**" in text and "peer checks failed" in text
+    with pytest.raises(ValueError, match="bench:begin"):
+        report.replace_block("no markers here", block)
+    doc = f"a\n{report.BEGIN}\nold\n{report.END}\nb\n"
+    assert report.current_block(report.replace_block(doc, block)) == block

@@ -1,0 +1,247 @@
+"""The bench tables of README.md and bench/README.md, written from ``bench/results.json``.
+
+``python -m bench`` calls :func:`write_all` after a full run; by hand::
+
+    .venv/bin/python -m bench.report            # rewrite both tables from bench/results.json
+    .venv/bin/python -m bench.report --check    # exit 1 if a table differs from the results
+
+Only the text between ``<!-- bench:begin -->`` and ``<!-- bench:end -->`` is
+replaced, so the tables cannot drift from the results they quote.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+from pathlib import Path
+from typing import Dict, List, Optional, Sequence
+
+HERE = Path(__file__).resolve().parent
+REPO = HERE.parent
+RESULTS = HERE / "results.json"
+README = REPO / "README.md"
+BENCH_README = HERE / "README.md"
+BEGIN, END = "<!-- bench:begin -->", "<!-- bench:end -->"
+
+#: Targets (issue 5): dotted key in the results, comparison, bound.
+TARGETS = {
+    "derive.total_seconds": ("<=", 20.0),
+    "derive.planar7.seconds": ("<=", 10.0),
+    "alpha_beta.planar7.ratio": ("<=", 0.7),
+    "derive.planar7.c_bytes": ("<=", 0.5e6),
+    "derive.planar7.gcc_seconds": ("<=", 5.0),
+    "closed_loop.ratio_to_hand_c": ("<=", 1.5),
+    "closed_loop.speedup_vs_python": (">=", 50.0),
+    "batch.speedup_vs_numpy": (">=", 9.0),
+    "batch.generated_s": ("<=", 0.3),
+}
+
+
+def load(path: Path = RESULTS) -> dict:
+    """The results of a bench run (``bench/results.json`` by default)."""
+    return json.loads(Path(path).read_text())
+
+
+def get(results: dict, key: str):
+    """Value of a dotted key (``derive.planar7.seconds``), ``None`` if absent or not a number."""
+    v = results
+    for part in key.split("."):
+        if not isinstance(v, dict) or part not in v:
+            return None
+        v = v[part]
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+        return None
+    return v
+
+
+def target_met(results: dict, key: str) -> Optional[bool]:
+    """Whether the measured ``key`` meets its target (``None``: not measured)."""
+    v = get(results, key)
+    if v is None:
+        return None
+    op, bound = TARGETS[key]
+    return v <= bound if op == "<=" else v >= bound
+
+
+def _status(results: dict, keys: Sequence[str]) -> str:
+    met = [target_met(results, k) for k in keys]
+    if any(m is None for m in met):
+        return "not measured"
+    return "met" if all(met) else "**missed**"
+
+
+def _f(results: dict, key: str, fmt: str, scale: float = 1.0) -> str:
+    v = get(results, key)
+    return "-" if v is None else format(v * scale, fmt)
+
+
+def main_table(r: dict) -> List[str]:
+    """The comparison table shared by both READMEs (markdown lines)."""
+    g = lambda k, f, s=1.0: _f(r, k, f, s)  # noqa: E731
+    thr = get(r, "batch.threads")
+    thr_s = "-" if thr is None else f"{int(thr)}"
+    rows = [
+        ("`make derive`, all 8 models", "-",
+         f"{g('derive.total_seconds', '.1f')} s (planar7 {g('derive.planar7.seconds', '.2f')} s)", "-", "-",
+         "<= 20 s, planar7 <= 10 s", ["derive.total_seconds", "derive.planar7.seconds"]),
+        ("alpha + beta compiled, planar7",
+         "CasADi SX of the same dynamics, Lie derivatives by CasADi AD (`jtimes`), same codegen and flags",
+         f"{g('alpha_beta.planar7.generated_us', '.3f')} us", f"{g('alpha_beta.planar7.peer_us', '.3f')} us",
+         f"ratio {g('alpha_beta.planar7.ratio', '.2f')}", "<= 0.7", ["alpha_beta.planar7.ratio"]),
+        ("generated C, planar7", "-",
+         f"{g('derive.planar7.c_bytes', '.0f', 1e-3)} kB, gcc -O2 {g('derive.planar7.gcc_seconds', '.1f')} s",
+         "-", "-", "<= 0.5 MB, <= 5 s", ["derive.planar7.c_bytes", "derive.planar7.gcc_seconds"]),
+        ("closed loop link1, 10 s at 1 kHz, RK4 + SMC: the bare compiled loop (outputs preallocated)",
+         "hand-written C of the same loop (`bench/hand_loop.c`, -O2)",
+         f"{g('closed_loop.generated_ms', '.2f')} ms", f"{g('closed_loop.hand_c_ms', '.2f')} ms",
+         f"ratio {g('closed_loop.ratio_to_hand_c', '.2f')}", "<= 1.5", ["closed_loop.ratio_to_hand_c"]),
+        ("same case, the whole `simulate()` call (reference sampling, outputs, metrics), "
+         '`backend="compiled"`',
+         'the same call with `backend="python"` (NumPy RK4 calling the CasADi Functions)',
+         f"{g('closed_loop.simulate_compiled_ms', '.1f')} ms", f"{g('closed_loop.simulate_python_ms', '.2f', 1e-3)} s",
+         f"{g('closed_loop.speedup_vs_python', '.0f')}x faster", ">= 50x", ["closed_loop.speedup_vs_python"]),
+        ("same call", "scipy `solve_ivp` RK45 of the same loop (law at every RHS call; context)",
+         f"{g('closed_loop.simulate_compiled_ms', '.1f')} ms", f"{g('closed_loop.solve_ivp_ms', '.2f', 1e-3)} s",
+         f"{g('closed_loop.solve_ivp_over_simulate_compiled', '.0f')}x faster", "-", []),
+        ("batch: 1000 closed loops, K ~ U[100, 200], 10 s each, **1 thread**",
+         "NumPy RK4 vectorized over the batch (1 thread)",
+         f"{g('batch.generated_1thread_s', '.3f')} s", f"{g('batch.numpy_s', '.2f')} s",
+         f"{g('batch.speedup_vs_numpy', '.1f')}x faster", ">= 9x", ["batch.speedup_vs_numpy"]),
+        (f"same batch, **{thr_s} threads** (OpenMP)", "the same NumPy run (1 thread)",
+         f"{g('batch.generated_s', '.3f')} s", f"{g('batch.numpy_s', '.2f')} s",
+         f"{g('batch.speedup_vs_numpy_all_threads', '.1f')}x in total, "
+         f"{g('batch.speedup_per_core_all_threads', '.1f')}x per core", "<= 0.3 s", ["batch.generated_s"]),
+    ]
+    lines = ["| metric | peer, measured in the same run | fjm | peer | fjm vs peer | target | |",
+             "|---|---|---|---|---|---|---|"]
+    for label, peer, fjm, pv, cmp, target, keys in rows:
+        lines.append(f"| {label} | {peer} | {fjm} | {pv} | {cmp} | {target} | "
+                     f"{_status(r, keys) if keys else ''} |")
+    return lines
+
+
+def machine_line(r: dict) -> str:
+    m = r.get("machine", {})
+    load = m.get("load_average_start")
+    load_s = f"{load:.1f}" if isinstance(load, (int, float)) and math.isfinite(load) else "?"
+    when = r.get("finished_utc", "?")
+    quick = ", `--quick`" if r.get("quick") else ""
+    return (f"Run finished {when}{quick}: {m.get('cpu_count', '?')}-core {m.get('cpu_model', '?')} "
+            f"({m.get('simd_isa', '?')}; batch path `{r.get('batch', {}).get('path', '?')}`), "
+            f"load average {load_s} at the start, shared machine.")
+
+
+def checks_line(r: dict) -> str:
+    checks = r.get("checks", [])
+    bad = [c for c in checks if not c.get("ok")]
+    if not checks:
+        return "No peer checks were run."
+    if bad:
+        return (f"**{len(bad)} of {len(checks)} peer checks failed** "
+                f"({', '.join(c['key'] for c in bad)}): the timings above compare unequal code.")
+    return (f"All {len(checks)} peer checks passed: every peer computed the same numbers as the "
+            f"generated code in this run, within the stated tolerances.")
+
+
+def _ab_line(r: dict) -> str:
+    parts = []
+    for m in ("link1", "planar2", "planar4", "planar7"):
+        if get(r, f"alpha_beta.{m}.generated_us") is not None:
+            parts.append(f"{m} {_f(r, f'alpha_beta.{m}.generated_us', '.3f')} / "
+                         f"{_f(r, f'alpha_beta.{m}.peer_us', '.3f')}")
+    return "alpha + beta per call (generated / AD peer, us): " + ", ".join(parts) + "."
+
+
+def _ops_line(r: dict) -> str:
+    by = r.get("derive", {}).get("ops_growth_exponent_by_function", {})
+    tot = get(r, "derive.ops_growth_exponent_planar")
+    if not by or tot is None:
+        return ""
+    per = ", ".join(f"{q} {v:.1f}" for q, v in sorted(by.items()))
+    ops = get(r, "derive.planar7.ops")
+    return (f"Operation counts after CSE grow polynomially with the number of links: least-squares "
+            f"slope of log(ops) vs log(n) over planar3..7 is {tot:.1f} in total ({per}); "
+            f"planar7 has {ops:.0f} operations.")
+
+
+def render_readme(r: dict) -> str:
+    """The block of README.md's "Performance" section."""
+    lines = [machine_line(r), "", *main_table(r), "", checks_line(r), "", _ab_line(r)]
+    ops = _ops_line(r)
+    if ops:
+        lines += ["", ops]
+    return "\n".join(lines) + "\n"
+
+
+def render_bench_readme(r: dict) -> str:
+    """The block of bench/README.md's "Latest run" section (table, context, peer checks)."""
+    g = lambda k, f, s=1.0: _f(r, k, f, s)  # noqa: E731
+    lines = [machine_line(r), "", *main_table(r), "", _ab_line(r), "",
+             f"Context: the bare compiled loop takes {g('closed_loop.generated_ms', '.2f')} ms of the "
+             f"{g('closed_loop.simulate_compiled_ms', '.1f')} ms `simulate()` call; the same step as a CasADi "
+             f"`mapaccum` through `casadi.external` {g('closed_loop.generated_mapaccum_external_ms', '.1f')} ms. "
+             f"Batch on 1 thread: scalar C loop {g('batch.generated_scalar_1thread_s', '.3f')} s, SIMD "
+             f"{g('batch.generated_1thread_s', '.3f')} s ({g('batch.simd_over_scalar_1thread', '.1f')}x); "
+             f"controller k_s = {g('closed_loop.k_s', '.1f')}, delta = {g('closed_loop.delta', '.3f')}, "
+             f"beta_hat = {g('closed_loop.beta_hat', '.4f')} (computed by `fjm_runtime.figures.Design`).",
+             ]
+    ops = _ops_line(r)
+    if ops:
+        lines += ["", ops]
+    lines += ["", checks_line(r), "", "| peer check | measured | tolerance | |", "|---|---|---|---|"]
+    for c in r.get("checks", []):
+        lines.append(f"| {c['what']} | {c['measured']:.2g} | {c['tolerance']:.0g} | "
+                     f"{'ok' if c['ok'] else '**FAILED**'} |")
+    return "\n".join(lines) + "\n"
+
+
+def replace_block(text: str, block: str, name: str = "file") -> str:
+    """``text`` with the lines between the two markers replaced by ``block``."""
+    if text.count(BEGIN) != 1 or text.count(END) != 1 or text.index(BEGIN) > text.index(END):
+        raise ValueError(f"{name}: expected one {BEGIN} followed by one {END}")
+    a = text.index(BEGIN) + len(BEGIN)
+    b = text.index(END)
+    return text[:a] + "\n" + block + text[b:]
+
+
+def current_block(text: str) -> str:
+    """The text between the markers (as :func:`replace_block` writes it)."""
+    a = text.index(BEGIN) + len(BEGIN)
+    return text[a:text.index(END)].lstrip("\n")
+
+
+def targets(r: dict) -> Dict[Path, str]:
+    return {README: render_readme(r), BENCH_README: render_bench_readme(r)}
+
+
+def write_all(r: dict, files: Optional[Dict[Path, str]] = None) -> List[Path]:
+    """Rewrite the marked blocks from the results ``r``; returns the files that changed."""
+    changed = []
+    for path, block in (files or targets(r)).items():
+        old = path.read_text()
+        new = replace_block(old, block, str(path))
+        if new != old:
+            path.write_text(new)
+            changed.append(path)
+    return changed
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m bench.report", description=__doc__.split("\n\n")[0])
+    ap.add_argument("--check", action="store_true", help="exit 1 if a table differs from the results")
+    ap.add_argument("--results", type=Path, default=RESULTS)
+    args = ap.parse_args(argv)
+    r = load(args.results)
+    if args.check:
+        stale = [p for p, block in targets(r).items() if current_block(p.read_text()) != block]
+        for p in stale:
+            print(f"{p}: the bench table differs from {args.results}", file=sys.stderr)
+        return 1 if stale else 0
+    for p in write_all(r):
+        print(f"rewrote {p}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
