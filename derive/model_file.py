@@ -53,7 +53,7 @@ else:  # pragma: no cover - exercised on Python < 3.11 only
 from .models import MODEL_NAMES, FlexibleJointModel, make_planar
 
 __all__ = ["ModelFileError", "ModelSpec", "load_model_file", "parse_model_text", "locate_keys",
-           "SI_UNITS", "MAX_LINKS"]
+           "SI_UNITS", "MAX_LINKS", "UrdfModelSpec"]
 
 MAX_LINKS = 7
 NAME_RE = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
@@ -404,8 +404,62 @@ def _suggest(word: str, options) -> str:
     return f" (did you mean {best[0]!r}?)" if best else ""
 
 
-def parse_model_text(text: str, source: str = "<model file>") -> ModelSpec:
+def _check_name(chk: "_Checker", name, builtin: bool) -> None:
+    """A C identifier, not reserved, not a built-in model's name (unless ``builtin``)."""
+    if not isinstance(name, str):
+        raise chk.fail(("model", "name"), f"expected a string, {_got(name)}")
+    if not NAME_RE.fullmatch(name) or len(name) > MAX_NAME:
+        raise chk.fail(("model", "name"), f"{_show(name)} is not a valid model name: expected a C identifier "
+                                          f"[A-Za-z_][A-Za-z0-9_]* of at most {MAX_NAME} characters "
+                                          "(it names the output directory and the C functions)")
+    if name.startswith("__") or re.match(r"_[A-Z]", name) or name.lower().startswith("casadi"):
+        raise chk.fail(("model", "name"), f"{_show(name)} is reserved (C reserves __x and _X names; "
+                                          "casadi* names collide with CasADi's generated code)")
+    clash = [b for b in MODEL_NAMES if b.lower() == name.lower()]
+    if clash and not builtin:
+        raise chk.fail(("model", "name"), f"{_show(name)} is a built-in model name ({clash[0]}); "
+                                          "choose another name so `fjm_runtime.load` stays unambiguous")
+
+
+def _check_description(chk: "_Checker", description, path: KeyPath = ("model", "description")) -> None:
+    """One printable ASCII line, safe inside C comments (the description goes there)."""
+    if description is None:
+        return
+    if not isinstance(description, str):
+        raise chk.fail(path,
+                       f"expected a string, {_got(description)}")
+    bad = next((c for c in description if not (" " <= c <= "~")), None)
+    if bad is not None or not description.strip():
+        raise chk.fail(path,
+                       "expected one non-empty line of printable ASCII text"
+                       + (f" (found {bad!r})" if bad is not None else ""))
+    for seq in ("*/", "/*", "\\", "??"):
+        if seq in description:
+            raise chk.fail(path,
+                           f"must not contain {seq!r} (the description goes into C comments)")
+    if len(description) > MAX_DESCRIPTION:
+        raise chk.fail(path,
+                       f"{len(description)} characters; at most {MAX_DESCRIPTION} allowed")
+
+
+def parse_model_text(text: str, source: str = "<model file>", base_dir: Path_ = None,
+                     builtin: bool = False):
     """Parse and validate the text of a model file.
+
+    Parameters
+    ----------
+    text : str
+    source : str
+        File name for messages.
+    base_dir : path, optional
+        Directory the URDF form's ``urdf`` path is relative to (default: the
+        current directory).
+    builtin : bool
+        True for fjm's own robots (``derive/robots``), which may use built-in names.
+
+    Returns
+    -------
+    ModelSpec or UrdfModelSpec
 
     Raises
     ------
@@ -427,6 +481,8 @@ def parse_model_text(text: str, source: str = "<model file>") -> ModelSpec:
         end = text.count("\n") + 1
         raise ModelFileError(f"TOML syntax error: {msg}", source, end) from None
     chk = _Checker(text, source)
+    if isinstance(data.get("model"), dict) and "urdf" in data["model"]:
+        return _parse_urdf_form(data, chk, Path(base_dir) if base_dir is not None else Path("."), builtin)
 
     # ---- top level -----------------------------------------------------------------------
     for key in data:
@@ -454,19 +510,7 @@ def parse_model_text(text: str, source: str = "<model file>") -> ModelSpec:
             raise chk.fail(("model", key), f"missing required key: {what}", line_path=("model",))
 
     name = model["name"]
-    if not isinstance(name, str):
-        raise chk.fail(("model", "name"), f"expected a string, {_got(name)}")
-    if not NAME_RE.fullmatch(name) or len(name) > MAX_NAME:
-        raise chk.fail(("model", "name"), f"{_show(name)} is not a valid model name: expected a C identifier "
-                                          f"[A-Za-z_][A-Za-z0-9_]* of at most {MAX_NAME} characters "
-                                          "(it names the output directory and the C functions)")
-    if name.startswith("__") or re.match(r"_[A-Z]", name) or name.lower().startswith("casadi"):
-        raise chk.fail(("model", "name"), f"{_show(name)} is reserved (C reserves __x and _X names; "
-                                          "casadi* names collide with CasADi's generated code)")
-    clash = [b for b in MODEL_NAMES if b.lower() == name.lower()]
-    if clash:
-        raise chk.fail(("model", "name"), f"{_show(name)} is a built-in model name ({clash[0]}); "
-                                          "choose another name so `fjm_runtime.load` stays unambiguous")
+    _check_name(chk, name, builtin)
 
     links = model["links"]
     if isinstance(links, bool) or not isinstance(links, int):
@@ -476,22 +520,7 @@ def parse_model_text(text: str, source: str = "<model file>") -> ModelSpec:
         raise chk.fail(("model", "links"), f"{links} is out of range: expected 1..{MAX_LINKS}")
 
     description = model.get("description")
-    if description is not None:
-        if not isinstance(description, str):
-            raise chk.fail(("model", "description"),
-                           f"expected a string, {_got(description)}")
-        bad = next((c for c in description if not (" " <= c <= "~")), None)
-        if bad is not None or not description.strip():
-            raise chk.fail(("model", "description"),
-                           "expected one non-empty line of printable ASCII text"
-                           + (f" (found {bad!r})" if bad is not None else ""))
-        for seq in ("*/", "/*", "\\", "??"):
-            if seq in description:
-                raise chk.fail(("model", "description"),
-                               f"must not contain {seq!r} (the description goes into C comments)")
-        if len(description) > MAX_DESCRIPTION:
-            raise chk.fail(("model", "description"),
-                           f"{len(description)} characters; at most {MAX_DESCRIPTION} allowed")
+    _check_description(chk, description)
 
     # ---- parameters ----------------------------------------------------------------------
     params = data.get("parameters", {})
@@ -565,7 +594,7 @@ def parse_model_text(text: str, source: str = "<model file>") -> ModelSpec:
                      defaults={k: defaults[k] for k in names if k in defaults}, units=units, source=source)
 
 
-def load_model_file(path: Path_) -> ModelSpec:
+def load_model_file(path: Path_, builtin: bool = False):
     """Read, parse and validate a model file (see the module docstring for the format).
 
     Raises
@@ -582,4 +611,196 @@ def load_model_file(path: Path_) -> ModelSpec:
     except UnicodeDecodeError as exc:
         raise ModelFileError(f"not UTF-8 text (byte {exc.start}); TOML files are UTF-8",
                              str(path), raw.count(b"\n", 0, exc.start) + 1) from None
-    return parse_model_text(text, source=str(path))
+    return parse_model_text(text, source=str(path), base_dir=path.parent, builtin=builtin)
+
+
+# --------------------------------------------------------------------------------------------
+# URDF form
+# --------------------------------------------------------------------------------------------
+
+REPO = Path(__file__).resolve().parent.parent
+_URDF_MODEL_KEYS = ("name", "urdf", "base", "tip", "description")
+_URDF_TOP = ("model", "joints", "parameters", "notes")
+#: Elastic parameters per joint: key -> (SI unit, bound kind, meaning, default or None = required).
+_ELASTIC: Dict[str, Tuple[str, str, str, Optional[float]]] = {
+    "K": ("N m/rad", ">0", "joint stiffness", None),
+    "Jm": ("kg m^2", ">0", "reflected motor inertia", None),
+    "Bm": ("N m s/rad", ">=0", "motor viscous damping", 0.0),
+}
+DEFAULT_G0 = 9.81
+
+
+@dataclass(frozen=True)
+class UrdfModelSpec:
+    """A validated URDF model file: a spatial chain with elastic joints.
+
+    Attributes
+    ----------
+    name : str
+    urdf : pathlib.Path
+        The URDF file (resolved).
+    base, tip : str
+    joints : tuple of str
+        URDF joint names in q order.
+    K, Jm, Bm : tuple of float
+        Per-joint defaults, in q order.
+    g0 : float
+    description : str or None
+    notes : dict str -> str
+        Text appended to the meaning of ``K``, ``Jm``, ``Bm`` (sources of illustrative values).
+    source : str
+    """
+
+    name: str
+    urdf: Path
+    base: str
+    tip: str
+    joints: Tuple[str, ...]
+    K: Tuple[float, ...]
+    Jm: Tuple[float, ...]
+    Bm: Tuple[float, ...]
+    g0: float
+    description: Optional[str]
+    notes: Dict[str, str] = field(default_factory=dict)
+    source: str = "<model file>"
+
+    def build(self) -> FlexibleJointModel:
+        """The symbolic model (:func:`derive.spatial.make_spatial` of the URDF chain)."""
+        from .spatial import elastic_params, make_spatial
+        from .urdf import load_urdf
+
+        chain = load_urdf(self.urdf, self.base, self.tip, source=_repo_relative(self.urdf))
+        n = len(chain.joints)
+        params = elastic_params(n, self.K, self.Jm, self.Bm, self.g0, chain.joints,
+                                {k: f"; {v}" for k, v in self.notes.items()})
+        description = self.description or (
+            f"Spatial serial chain of {n} revolute joints from the URDF {_repo_relative(self.urdf)} "
+            f"(robot {chain.robot}, {self.base} -> {self.tip}), flexible joints, gravity g0 along -z "
+            f"of {self.base}.")
+        model = make_spatial(chain.description, self.name, params, description)
+        src = {"urdf": _repo_relative(self.urdf), "sha256": chain.sha256, "base": self.base,
+               "tip": self.tip, "joints": list(chain.joints)}
+        if chain.ignored:
+            src["ignored_links"] = list(chain.ignored)
+        from dataclasses import replace
+        return replace(model, source=src)
+
+
+def _repo_relative(path: Path) -> str:
+    """``path`` relative to the repository root (POSIX), or its file name if outside it."""
+    resolved = Path(path).resolve()
+    try:
+        return resolved.relative_to(REPO).as_posix()
+    except ValueError:
+        return resolved.name
+
+
+def _number(chk: "_Checker", path: KeyPath, value, unit: str, kind: str, meaning: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise chk.fail(path, f"expected a number in {unit}, {_got(value)}")
+    value = float(value)
+    if not math.isfinite(value):
+        raise chk.fail(path, f"{value} is not finite: expected a finite number in {unit}")
+    if kind == ">0" and not value > 0:
+        raise chk.fail(path, f"{_show(value)} {unit} is not physical: {meaning} must be > 0")
+    if kind == ">=0" and not value >= 0:
+        raise chk.fail(path, f"{_show(value)} {unit} is not physical: {meaning} must be >= 0")
+    return value
+
+
+def _parse_urdf_form(data: dict, chk: "_Checker", base_dir: Path, builtin: bool) -> UrdfModelSpec:
+    """The URDF form of a model file (see docs/spatial.md)::
+
+        [model]
+        name = "arm"
+        urdf = "arm.urdf"          # relative to the model file
+        base = "base_link"
+        tip = "tool0"
+        [joints.default]           # every chain joint, unless overridden
+        K = 5000.0                 # N m/rad
+        Jm = 0.2                   # kg m^2
+        Bm = 0.0                   # N m s/rad (optional, default 0)
+        [joints.elbow]             # a URDF joint name on the chain
+        K = 2000.0
+        [parameters]
+        g0 = 9.81                  # optional
+        [notes]                    # optional text appended to the parameter meanings
+        K = "illustrative, see ..."
+    """
+    from .urdf import UrdfError, load_urdf
+
+    for key in data:
+        if key not in _URDF_TOP:
+            raise chk.fail((key,), "unknown key; a URDF model file has the tables "
+                                   f"{', '.join('[' + t + ']' for t in _URDF_TOP)} only" + _suggest(key, _URDF_TOP))
+    model = data["model"]
+    for key in model:
+        if key not in _URDF_MODEL_KEYS:
+            raise chk.fail(("model", key), f"unknown key; [model] of the URDF form allows "
+                                           f"{', '.join(_URDF_MODEL_KEYS)}" + _suggest(key, _URDF_MODEL_KEYS))
+    for key in ("name", "urdf", "base", "tip"):
+        if key not in model:
+            raise chk.fail(("model", key), f"missing required key: {key} = \"...\" (a string)",
+                           line_path=("model",))
+        if not isinstance(model[key], str) or not model[key]:
+            raise chk.fail(("model", key), f"expected a non-empty string, {_got(model[key])}")
+    _check_name(chk, model["name"], builtin)
+    _check_description(chk, model.get("description"))
+    urdf = (base_dir / model["urdf"]).resolve()
+    if not urdf.is_file():
+        raise chk.fail(("model", "urdf"), f"URDF file {model['urdf']!r} not found (looked for {urdf}); "
+                                          "expected a path relative to the model file")
+    try:
+        chain = load_urdf(urdf, model["base"], model["tip"], source=str(urdf))
+    except UrdfError as exc:
+        raise chk.fail(("model", "urdf"), f"cannot use the URDF: {exc}") from None
+    names = chain.joints
+
+    joints = data.get("joints", {})
+    if not isinstance(joints, dict):
+        raise chk.fail(("joints",), f"expected tables [joints.default] and [joints.<URDF joint name>], {_got(joints)}")
+    values: Dict[str, Dict[str, float]] = {}
+    for jname, entry in joints.items():
+        path: KeyPath = ("joints", jname)
+        if jname != "default" and jname not in names:
+            raise chk.fail(path, f"no revolute joint {jname!r} on the chain {model['base']} -> {model['tip']}; "
+                                 f"expected 'default' or one of {', '.join(names)}" + _suggest(jname, names))
+        if not isinstance(entry, dict):
+            raise chk.fail(path, f"expected a table with K, Jm, Bm, {_got(entry)}")
+        values[jname] = {}
+        for key, val in entry.items():
+            if key not in _ELASTIC:
+                raise chk.fail(path + (key,), f"unknown key; a joint table allows {', '.join(_ELASTIC)}"
+                                              + _suggest(key, _ELASTIC))
+            unit, kind, meaning, _ = _ELASTIC[key]
+            values[jname][key] = _number(chk, path + (key,), val, unit, kind, meaning)
+    per: Dict[str, List[float]] = {k: [] for k in _ELASTIC}
+    for jname in names:
+        for key, (unit, _, meaning, default) in _ELASTIC.items():
+            v = values.get(jname, {}).get(key, values.get("default", {}).get(key, default))
+            if v is None:
+                raise chk.fail(("joints", jname, key),
+                               f"missing {meaning} of joint {jname!r}: expected {key} = <number in {unit}> in "
+                               f"[joints.{jname}] or [joints.default]", line_path=("joints",))
+            per[key].append(v)
+
+    params = data.get("parameters", {})
+    if not isinstance(params, dict):
+        raise chk.fail(("parameters",), f"expected a table, {_got(params)}")
+    for key in params:
+        if key != "g0":
+            raise chk.fail(("parameters", key), "unknown parameter; the URDF form takes g0 only here "
+                                                "(elastic parameters go in [joints.*], inertials in the URDF)")
+    g0 = _number(chk, ("parameters", "g0"), params.get("g0", DEFAULT_G0), "m/s^2", ">=0",
+                 "gravitational acceleration")
+
+    notes = data.get("notes", {})
+    if not isinstance(notes, dict):
+        raise chk.fail(("notes",), f"expected a table of strings keyed K, Jm, Bm, {_got(notes)}")
+    for key, val in notes.items():
+        if key not in _ELASTIC:
+            raise chk.fail(("notes", key), f"unknown key; [notes] allows {', '.join(_ELASTIC)}")
+        _check_description(chk, val, ("notes", key))
+    return UrdfModelSpec(name=model["name"], urdf=urdf, base=model["base"], tip=model["tip"], joints=names,
+                         K=tuple(per["K"]), Jm=tuple(per["Jm"]), Bm=tuple(per["Bm"]), g0=g0,
+                         description=model.get("description"), notes=dict(notes), source=chk.source)

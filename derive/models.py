@@ -14,7 +14,8 @@ from __future__ import annotations
 
 import re
 from dataclasses import dataclass, field
-from typing import Dict, Tuple
+from pathlib import Path
+from typing import Dict, Optional, Tuple
 
 import sympy as sp
 
@@ -58,6 +59,10 @@ class FlexibleJointModel:
     program : Program
         Named intermediate symbols used by D, h and the potential (empty for
         small models). Derivations append their own derivative symbols.
+    source : dict or None
+        Where a model built from a URDF comes from (``urdf`` path relative to
+        the repository root, its ``sha256``, ``base``, ``tip``, ``joints`` in q
+        order); recorded in the manifest. None for the built-in formulas.
     """
 
     name: str
@@ -75,6 +80,7 @@ class FlexibleJointModel:
     Bm: Tuple[sp.Expr, ...]
     description: str
     program: Program = field(default_factory=Program)
+    source: Optional[Dict[str, object]] = None
 
     @property
     def state(self) -> Tuple[sp.Symbol, ...]:
@@ -290,7 +296,11 @@ def make_planar(n: int, name: str = None, defaults: Dict[str, float] = None,
     )
 
 
-MODEL_NAMES: Tuple[str, ...] = ("link1",) + tuple(f"planar{n}" for n in range(1, 8))
+#: Built-in spatial arms: each is the URDF model file ``derive/robots/<name>/<name>.toml``.
+SPATIAL_NAMES: Tuple[str, ...] = ("elbow3", "panda")
+ROBOTS = Path(__file__).resolve().parent / "robots"
+
+MODEL_NAMES: Tuple[str, ...] = ("link1",) + tuple(f"planar{n}" for n in range(1, 8)) + SPATIAL_NAMES
 
 
 def build(name: str) -> FlexibleJointModel:
@@ -306,4 +316,7 @@ def build(name: str) -> FlexibleJointModel:
     match = re.fullmatch(r"planar([1-7])", name or "")
     if match:
         return make_planar(int(match.group(1)))
+    if name in SPATIAL_NAMES:
+        from .model_file import load_model_file  # imports this module: import here, not at the top
+        return load_model_file(ROBOTS / name / f"{name}.toml", builtin=True).build()
     raise ValueError(f"unknown model {name!r}; available models: {', '.join(MODEL_NAMES)}")

@@ -132,6 +132,7 @@ def write_model(lin: Linearization, outdir: Path) -> Dict[str, object]:
         "header": HEADER,
         "model": m.name,
         "description": m.description,
+        **({"source": m.source} if m.source is not None else {}),  # URDF-built models only
         "n": m.n,
         "nx": 4 * m.n,
         "parameters": [
