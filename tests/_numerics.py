@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-ALL_MODELS = ("link1",) + tuple(f"planar{n}" for n in range(1, 8))
+ALL_MODELS = ("link1",) + tuple(f"planar{n}" for n in range(1, 8)) + ("elbow3", "panda")
 
 
 def directional(fun, x, v, rel_step=1e-3):
