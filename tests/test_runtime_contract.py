@@ -58,38 +58,48 @@ def test_unknown_model_lists_available(bad, fragment):
         fjm_runtime.load(bad)
 
 
-@pytest.mark.parametrize("x, fragment", [
-    (np.zeros(3), r"x: expected shape \(4,\)"),
-    (np.zeros((2, 4)), r"x: expected shape \(4,\)"),
-    (np.array([0, np.nan, 0, 0]), "x: entry 1 is nan"),
-    (np.array([0, 0, np.inf, 0]), "x: entry 2 is inf"),
-    ("abc", "x: expected a numeric array"),
+def assert_message(exc_info, fragments):
+    """The message names the argument, the bad value and the expectation (each fragment present)."""
+    msg = str(exc_info.value)
+    missing = [f for f in fragments if f not in msg]
+    assert not missing, f"message lacks {missing}: {msg}"
+
+
+@pytest.mark.parametrize("x, fragments", [
+    (np.zeros(3), ["x", "(3,)", "(4,)"]),
+    (np.zeros((2, 4)), ["x", "(2, 4)", "(4,)"]),
+    (np.array([0, np.nan, 0, 0]), ["x", "entry 1", "nan", "finite"]),
+    (np.array([0, 0, np.inf, 0]), ["x", "entry 2", "inf", "finite"]),
+    ("abc", ["x", "'abc'", "numeric"]),
 ])
-def test_bad_state_is_named(x, fragment):
+def test_bad_state_is_named(x, fragments):
     m = fjm_runtime.load("link1")
-    with pytest.raises(ValueError, match=fragment):
+    with pytest.raises(ValueError) as info:
         m.alpha(x, None)
+    assert_message(info, fragments)
 
 
-@pytest.mark.parametrize("p, fragment", [
-    (np.ones(6), r"p: expected shape \(7,\)"),
-    ({"k": 1.0}, "unknown parameter name"),
-    ({"K": float("nan")}, r"p\['K'\] = nan: expected a finite value"),
-    ({"K": -1.0}, r"p\['K'\] = -1.0: expected > 0"),
-    ({"J_m": 0.0}, r"p\['J_m'\] = 0.0: expected > 0"),
-    ({"B_m": -0.1}, r"p\['B_m'\] = -0.1: expected >= 0"),
-    ({"K": "stiff"}, r"p\['K'\] = 'stiff': expected a real number"),
+@pytest.mark.parametrize("p, fragments", [
+    (np.ones(6), ["p", "(6,)", "(7,)"]),
+    ({"k": 1.0}, ["p", "'k'", "unknown", "'K'"]),
+    ({"K": float("nan")}, ["p", "'K'", "nan", "finite"]),
+    ({"K": -1.0}, ["p", "'K'", "-1.0", "> 0"]),
+    ({"J_m": 0.0}, ["p", "'J_m'", "0.0", "> 0"]),
+    ({"B_m": -0.1}, ["p", "'B_m'", "-0.1", ">= 0"]),
+    ({"K": "stiff"}, ["p", "'K'", "'stiff'", "number"]),
 ])
-def test_bad_params_are_named(p, fragment):
+def test_bad_params_are_named(p, fragments):
     m = fjm_runtime.load("link1")
-    with pytest.raises(ValueError, match=fragment):
+    with pytest.raises(ValueError) as info:
         m.f(np.zeros(4), p)
+    assert_message(info, fragments)
 
 
 def test_centre_of_mass_must_lie_on_the_link():
     m = fjm_runtime.load("planar2")
-    with pytest.raises(ValueError, match=r"p\['r2'\] = 1.5: expected <= l2"):
+    with pytest.raises(ValueError) as info:
         m.f(np.zeros(8), {"r2": 1.5})
+    assert_message(info, ["p", "'r2'", "1.5", "l2", "1.0"])
 
 
 def test_runtime_never_imports_sympy():

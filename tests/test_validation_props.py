@@ -52,8 +52,25 @@ def expect_error(fn, *args, arg: str, also=()):
 
 # --- physical parameter sets ------------------------------------------------------------------
 
-POSITIVE = re.compile(r"^(J_l|J_m|K|M|L|m\d+|l\d+|r\d+|I\d+|K\d+|Jm\d+)$")
-NON_NEGATIVE = re.compile(r"^(B_m|Bm\d+|g0)$")
+# The physical range follows from what a parameter IS (its SI unit in the manifest), as the
+# README states it: masses, lengths, inertias and stiffnesses > 0; damping and gravity >= 0.
+RANGE_BY_UNIT = {"kg": "positive", "m": "positive", "kg m^2": "positive", "N m/rad": "positive",
+                 "N m s/rad": "non-negative", "m/s^2": "non-negative"}
+
+
+def physical_range(model, name: str) -> str:
+    unit = {q["name"]: q["unit"] for q in model.manifest["parameters"]}[name]
+    if unit not in RANGE_BY_UNIT:  # pragma: no cover - a new kind of parameter: make the test say so
+        raise AssertionError(f"test does not know the physical range of {name!r} [{unit}]")
+    return RANGE_BY_UNIT[unit]
+
+
+def positive_names(model):
+    return [k for k in model.param_names if physical_range(model, k) == "positive"]
+
+
+def non_negative_names(model):
+    return [k for k in model.param_names if physical_range(model, k) == "non-negative"]
 
 
 @st.composite
@@ -61,12 +78,8 @@ def valid_params(draw, model):
     """A physically valid parameter dict for ``model`` (all keys)."""
     p = {}
     for name in model.param_names:
-        if POSITIVE.match(name):
-            p[name] = draw(st.floats(min_value=1e-2, max_value=1e2))
-        elif NON_NEGATIVE.match(name):
-            p[name] = draw(st.floats(min_value=0.0, max_value=1e2))
-        else:  # pragma: no cover - a new parameter kind: make the test say so
-            raise AssertionError(f"test does not know the physical range of parameter {name!r}")
+        low = 1e-2 if physical_range(model, name) == "positive" else 0.0
+        p[name] = draw(st.floats(min_value=low, max_value=1e2))
     for name in model.param_names:  # centre of mass on the link: r_i <= l_i
         if re.fullmatch(r"r\d+", name):
             frac = draw(st.floats(min_value=1e-3, max_value=1.0))
@@ -217,21 +230,33 @@ def test_p_dict_not_a_number(data, name, junk):
 def test_p_non_positive(data, name):
     """Masses, lengths, inertias, stiffnesses, motor inertias <= 0 are rejected, naming the parameter."""
     m = MODELS[name]
-    key = data.draw(st.sampled_from([k for k in m.param_names if POSITIVE.match(k)]))
+    key = data.draw(st.sampled_from(positive_names(m)))
     value = data.draw(st.floats(max_value=0.0, min_value=-1e6))
     as_array = data.draw(st.booleans())
     p = {**m.default_params, key: value}
     pv = np.array([p[k] for k in m.param_names]) if as_array else {key: value}
     msg = expect_error(m.beta, np.zeros(m.nx), pv, arg="p", also=(key, "> 0"))
+    assert str(value) in msg, msg  # the bad value
 
 
 @PROPS
 @given(data=st.data(), name=model_st)
 def test_p_negative_damping_or_gravity(data, name):
     m = MODELS[name]
-    key = data.draw(st.sampled_from([k for k in m.param_names if NON_NEGATIVE.match(k)]))
+    key = data.draw(st.sampled_from(non_negative_names(m)))
     value = data.draw(st.floats(max_value=-1e-9, min_value=-1e6))
-    expect_error(m.f, np.zeros(m.nx), {key: value}, arg="p", also=(key, ">= 0"))
+    expect_error(m.f, np.zeros(m.nx), {key: value}, arg="p", also=(key, str(value), ">= 0"))
+
+
+def test_every_parameter_has_a_known_physical_range():
+    """The unit table above covers every parameter; the README's groups come out as stated."""
+    m = MODELS["link1"]
+    assert positive_names(m) == ["J_l", "J_m", "K", "M", "L"]
+    assert non_negative_names(m) == ["g0", "B_m"]
+    for name in ("planar2", "planar3"):
+        model = MODELS[name]
+        assert len(positive_names(model)) + len(non_negative_names(model)) == len(model.param_names)
+        assert {k.rstrip("0123456789") for k in non_negative_names(model)} == {"Bm", "g"}
 
 
 @PROPS
@@ -242,7 +267,7 @@ def test_p_centre_of_mass_beyond_link(data, name):
     length = data.draw(st.floats(min_value=0.1, max_value=10))
     excess = data.draw(st.floats(min_value=1e-6, max_value=10))
     p = {f"l{i}": length, f"r{i}": length * (1 + excess)}
-    expect_error(m.alpha, np.zeros(m.nx), p, arg="p", also=(f"r{i}", f"l{i}"))
+    expect_error(m.alpha, np.zeros(m.nx), p, arg="p", also=(f"r{i}", f"l{i}", str(p[f"r{i}"]), str(length)))
 
 
 # --- u and model names -----------------------------------------------------------------------
