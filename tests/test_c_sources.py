@@ -37,7 +37,7 @@ import pytest
 import fjm_runtime
 from fjm_runtime.model import QUANTITIES, generated_root
 
-MODELS = ("link1", "planar1", "planar2", "planar3", "planar4", "planar5", "planar6", "planar7")
+MODELS = ("link1", "planar1", "planar2", "planar3", "planar4", "planar5", "planar6", "planar7", "elbow3", "panda")
 FLOAT_MODELS = ("link1", "planar2", "planar3")
 STRICT = ["-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic"]
 #: Optimisation level: -O2, what users build with (README, examples/c) and what the bench measures.
