@@ -4,7 +4,7 @@ Examples
 --------
 ``fjm simulate link1 --K 120 --reference sine --duration 10 --plot out/run.png``
 ``fjm simulate planar2 --controller ismc --param K1=120 --param K2=180 --reference sine``
-``fjm figures --out out``
+``fjm figures --out out`` (``--quick``: a fast smoke run of the same pipeline)
 ``fjm sweep link1 --samples 1000 --chunk 250 --out out/sweep.csv`` (Dask; ``--scheduler ADDRESS``)
 ``fjm derive --model-file arm.toml --out DIR`` (needs ``pip install '.[derive]'``)
 """
@@ -108,6 +108,9 @@ def build_parser() -> argparse.ArgumentParser:
     fig = sub.add_parser("figures", help="reproduce the paper's figures and the comparisons (make demo)")
     fig.add_argument("--out", type=Path, default=Path("out"), help="output directory (default out)")
     fig.add_argument("--samples", type=int, default=40, help="Monte Carlo samples (default 40)")
+    fig.add_argument("--quick", action="store_true",
+                     help="smoke test: 1 s runs and at most 2 Monte Carlo samples; still writes every "
+                          "figure and summary.md (not the documented numbers)")
     return parser
 
 
@@ -269,7 +272,7 @@ def main(argv: Optional[List[str]] = None) -> int:
             if args.samples < 1:
                 raise ValueError(f"--samples = {args.samples}: expected an integer >= 1")
             from .figures import make_figures
-            summary = make_figures(args.out, n_mc=args.samples)
+            summary = make_figures(args.out, n_mc=args.samples, quick=args.quick)
             print(summary)
             return 0
     except ValueError as exc:

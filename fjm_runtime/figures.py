@@ -36,6 +36,10 @@ K_CASES = (100.0, 150.0, 200.0)
 K_BOUNDS = {"K": (100.0, 200.0)}
 MC_BOUNDS = {"K": (100.0, 200.0), "J_l": (0.8, 1.2), "J_m": (1.6, 2.4)}
 DURATION = 10.0
+#: ``fjm figures --quick``: every experiment, figure and table, with short runs and few samples
+#: (a smoke test of the pipeline; its numbers are not the documented ones).
+QUICK_DURATION = 1.0
+QUICK_SAMPLES = 2
 ETA = 10.0
 TASKS = {
     # name: (reference factory, error region E for Lemma 1, description)
@@ -90,14 +94,15 @@ def link1_controller(kind: str, design: Design, model=None):
                            beta_hat=design.beta_hat)
 
 
-def run_link1(kind: str, task: str, K: float, design: Design, model=None, **extra) -> SimulationResult:
+def run_link1(kind: str, task: str, K: float, design: Design, model=None, duration: float = DURATION,
+              **extra) -> SimulationResult:
     """One link1 run: controller ``kind`` with nominal K_NOM, plant with ``K`` (and ``extra`` true params)."""
     m = model or load("link1")
     ref = TASKS[task][0]()
     ctrl = link1_controller(kind, design, m)
     params = {"K": K}
     params.update(extra)
-    return simulate(m, ctrl, ref, duration=DURATION, true_params=params)
+    return simulate(m, ctrl, ref, duration=duration, true_params=params)
 
 
 # -- plotting helpers --------------------------------------------------------------------------
@@ -304,7 +309,7 @@ METRIC_HEADER = ("final abs(e1) (rad) | RMS e1 (rad) | RMS e1, 2nd half (rad) | 
 
 
 def monte_carlo(n_samples: int, design: Design, factors=(1.0, 0.1, 0.02, 0.0), seed: int = 7,
-                progress: Callable[[str], None] = _log):
+                progress: Callable[[str], None] = _log, duration: float = DURATION):
     """Tracking with K ~ U[100, 200], J_l, J_m ~ U[+-20 %]; k_s = factor x Lemma 1 bound (fixed delta).
 
     Returns
@@ -323,7 +328,7 @@ def monte_carlo(n_samples: int, design: Design, factors=(1.0, 0.1, 0.02, 0.0), s
             ctrl = make_controller("smc", m, {"K": K_NOM}, lam=LAM, k_s=f * design.k_s, delta=design.delta,
                                    beta_hat=design.beta_hat)
             try:
-                r = simulate(m, ctrl, ref, duration=DURATION, true_params=p)
+                r = simulate(m, ctrl, ref, duration=duration, true_params=p)
             except SimulationDivergedError:
                 diverged += 1
                 continue
@@ -363,18 +368,38 @@ def plot_monte_carlo(mc, design: Design, n_samples: int, path: Path) -> Path:
     return _save(fig, path)
 
 
-def make_figures(out_dir, n_mc: int = 40, progress: Callable[[str], None] = _log) -> Path:
-    """Run every experiment, write PNGs and ``summary.md`` into ``out_dir``; returns the summary path."""
+def make_figures(out_dir, n_mc: int = 40, progress: Callable[[str], None] = _log, quick: bool = False) -> Path:
+    """Run every experiment, write PNGs and ``summary.md`` into ``out_dir``; returns the summary path.
+
+    Parameters
+    ----------
+    out_dir : str or Path
+        Output directory (created).
+    n_mc : int
+        Monte Carlo samples.
+    progress : callable
+        Receives one line per stage.
+    quick : bool
+        Smoke-test mode: every run lasts ``QUICK_DURATION`` s instead of ``DURATION`` and at most
+        ``QUICK_SAMPLES`` Monte Carlo samples are drawn; every figure and section is still written,
+        but the numbers are not the documented ones (the summary says so).
+    """
     t_start = time.perf_counter()
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     m = load("link1")
+    duration = QUICK_DURATION if quick else DURATION
+    if quick:
+        n_mc = min(n_mc, QUICK_SAMPLES)
     md: List[str] = ["# fjm demo: paper reproduction and beyond", ""]
+    if quick:
+        md += [f"**Quick mode** (`fjm figures --quick`): {duration:g} s runs and {n_mc} Monte Carlo samples, a "
+               "smoke test of the pipeline; run `fjm figures` (`make demo`) for the documented numbers.", ""]
     md += [f"link1, Table 1 parameters, true K in {list(K_CASES)}; the controller knows only "
            f"K_nom = {K_NOM:g} (T_hat, alpha_hat) and the paper's beta_hat for K in [100, 200]. "
            f"Triple pole at -{LAM:g} (c = {coefficients_from_pole(LAM).tolist()}), boundary layer "
            f"delta = k_s / {LAYER_RATE:g}, RK4 with dt = 1 ms, torque sampled and held every step, "
-           f"{DURATION:g} s per run.", ""]
+           f"{duration:g} s per run.", ""]
 
     # 1. paper reproduction (Figs 1-4) -------------------------------------------------------
     designs = {task: Design.for_task(task) for task in TASKS}
@@ -391,7 +416,7 @@ def make_figures(out_dir, n_mc: int = 40, progress: Callable[[str], None] = _log
     paper: Dict[str, Dict[float, SimulationResult]] = {}
     for task in TASKS:
         progress(f"paper {task}: K = {', '.join(f'{k:g}' for k in K_CASES)}")
-        paper[task] = {K: run_link1("smc", task, K, designs[task], m) for K in K_CASES}
+        paper[task] = {K: run_link1("smc", task, K, designs[task], m, duration=duration) for K in K_CASES}
         fig_name = {"regulation": "fig1_2_regulation.png", "tracking": "fig3_4_tracking.png"}[task]
         plot_paper_case(paper[task], task, designs[task], out / fig_name)
     md += ["## Paper reproduction (Figs 1-4): sliding-mode control with sat, nominal parameters only", "",
@@ -420,7 +445,7 @@ def make_figures(out_dir, n_mc: int = 40, progress: Callable[[str], None] = _log
     # 2. sat vs sign --------------------------------------------------------------------------
     progress("sat vs sign")
     K_chat = 100.0
-    sign = run_link1("sign", "tracking", K_chat, designs["tracking"], m)
+    sign = run_link1("sign", "tracking", K_chat, designs["tracking"], m, duration=duration)
     sat = paper["tracking"][K_chat]
     plot_sat_vs_sign(sat, sign, K_chat, out / "chattering_sat_vs_sign.png")
     md += ["## Chattering: sign vs sat (tracking, true K = 100)", "",
@@ -436,7 +461,7 @@ def make_figures(out_dir, n_mc: int = 40, progress: Callable[[str], None] = _log
         progress(f"controller comparison link1 {task}")
         comp[task] = {"smc": paper[task]}
         for kind in ("fl", "ismc", "adaptive", "adaptive-paper"):
-            comp[task][kind] = {K: run_link1(kind, task, K, designs[task], m) for K in K_CASES}
+            comp[task][kind] = {K: run_link1(kind, task, K, designs[task], m, duration=duration) for K in K_CASES}
         labelled = {kind: {f"K = {K:g}": r for K, r in per.items()} for kind, per in comp[task].items()
                     if kind != "adaptive-paper"}
         plot_controller_comparison(
@@ -468,7 +493,7 @@ def make_figures(out_dir, n_mc: int = 40, progress: Callable[[str], None] = _log
             ctrl = make_controller("ismc", m, {"K": K_NOM}, lam=LAM, k_s=designs["regulation"].k_s,
                                    delta=designs["regulation"].delta, beta_hat=designs["regulation"].beta_hat,
                                    u_max=10.0, anti_windup=aw)
-            r = simulate(m, ctrl, SmoothStep(1.0, rise_time=1.0), duration=DURATION, true_params={"K": K})
+            r = simulate(m, ctrl, SmoothStep(1.0, rise_time=1.0), duration=duration, true_params={"K": K})
             md.append(f"| {K:g} | {'on' if aw else 'off'} | {np.max(r.e1[:, 0]):.4f} | {_fmt(abs(r.e1[-1, 0]))} | "
                       f"{np.max(np.abs(r.z)):.4f} | {r.metrics.max_abs_u:.2f} |")
     md.append("")
@@ -502,7 +527,7 @@ def make_figures(out_dir, n_mc: int = 40, progress: Callable[[str], None] = _log
                     label = "K = (" + ", ".join(f"{k:g}" for k in Ks) + ")"
                     ctrl = make_controller(kind, mn, nominal, lam=LAM, k_s=k_s, delta=max(k_s, 1.0) / LAYER_RATE)
                     try:
-                        r = simulate(mn, ctrl, ref, duration=DURATION, true_params=true)
+                        r = simulate(mn, ctrl, ref, duration=duration, true_params=true)
                     except SimulationDivergedError as exc:
                         md.append(f"| {name} | {CTRL_LABELS[kind]} | {k_s:g} | {label} | diverged at "
                                   f"t = {exc.t:.3f} s | | | | | |")
@@ -536,8 +561,10 @@ def make_figures(out_dir, n_mc: int = 40, progress: Callable[[str], None] = _log
     # 4b. the same chains with the nominal stiffness at the LOWER bound -------------------------
     k_low = 100.0
     md += [f"### Nominal stiffness at the lower bound (K_nom = {k_low:g}) on the chains", "",
-           "Same reference, lambda, delta = k_s / 200 and k_s = 20000 as above. Underestimating the "
-           "stiffness avoids the divergence seen above at K_nom = 150 over the whole range [100, 200]; the "
+           "Same reference, lambda, delta = k_s / 200 and k_s = 20000 as above, every joint with the same "
+           "true stiffness. Underestimating the stiffness avoids the divergence seen above at K_nom = 150 "
+           "for equal stiffnesses over the whole range [100, 200] (not for unequal ones: on planar3, e.g. "
+           "K = (200, 100, 150) diverges; see tests/test_chain_stability.py); the "
            "accuracy still degrades as the true stiffness moves away from the nominal one, much less with "
            "the integral surface than with the paper's.", "",
            f"| model | controller | true stiffness | {METRIC_HEADER} |", "|---|---|---|---|---|---|---|---|---|"]
@@ -552,7 +579,7 @@ def make_figures(out_dir, n_mc: int = 40, progress: Callable[[str], None] = _log
                                        delta=20000.0 / LAYER_RATE)
                 label = f"K_i = {K:g}"
                 try:
-                    r = simulate(mn, ctrl, ref, duration=DURATION, true_params={f"K{i + 1}": K for i in range(n)})
+                    r = simulate(mn, ctrl, ref, duration=duration, true_params={f"K{i + 1}": K for i in range(n)})
                 except SimulationDivergedError as exc:
                     md.append(f"| {name} | {CTRL_LABELS[kind]} | {label} | diverged at t = {exc.t:.3f} s | | | | | |")
                     continue
@@ -562,7 +589,7 @@ def make_figures(out_dir, n_mc: int = 40, progress: Callable[[str], None] = _log
     # 5. Monte Carlo ---------------------------------------------------------------------------
     progress(f"Monte Carlo ({n_mc} samples x 4 gains)")
     mc_design = Design.for_task("tracking", MC_BOUNDS)
-    mc, _ = monte_carlo(n_mc, mc_design, progress=progress)
+    mc, _ = monte_carlo(n_mc, mc_design, progress=progress, duration=duration)
     plot_monte_carlo(mc, mc_design, n_mc, out / "monte_carlo.png")
     md += ["## Monte Carlo robustness (tracking)", "",
            f"{n_mc} samples (seed 7): K ~ U[100, 200], J_l ~ U[0.8, 1.2], J_m ~ U[1.6, 2.4]; controller nominal "
