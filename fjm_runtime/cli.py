@@ -111,6 +111,9 @@ def build_parser() -> argparse.ArgumentParser:
     fig.add_argument("--quick", action="store_true",
                      help="smoke test: 1 s runs and at most 2 Monte Carlo samples; still writes every "
                           "figure and summary.md (not the documented numbers)")
+
+    from .tune import add_parser as add_tune_parser
+    add_tune_parser(sub)
     return parser
 
 
@@ -268,6 +271,9 @@ def main(argv: Optional[List[str]] = None) -> int:
             return _cmd_simulate(args)
         if args.command == "sweep":
             return _cmd_sweep(args)
+        if args.command == "tune":
+            from .tune import run as run_tune
+            return run_tune(args)
         if args.command == "figures":
             if args.samples < 1:
                 raise ValueError(f"--samples = {args.samples}: expected an integer >= 1")
