@@ -13,6 +13,9 @@ child runs derive's real ``main`` through a tiny wrapper that pauses (sleeps)
 at a hook point and prints a marker: after planar6 has been emitted into the
 staging directory, or between the two renames that swap the new tree in.
 Nothing else of derive is replaced.
+
+SIGKILL cannot be handled: a child killed at the swap pause leaves ``<out>.old`` and no
+``<out>``, and ``derive.emit.writer.recover`` must restore the complete previous tree.
 """
 
 from __future__ import annotations
@@ -166,3 +169,55 @@ def test_interrupt_during_swap_keeps_a_complete_tree(marked_copy, sig):
                 assert after[k] == before[k], k
     leftovers = sorted(p.name for p in out.parent.iterdir() if p.name != out.name)
     assert not leftovers, f"left behind next to the output: {leftovers}"
+
+
+def test_sigkill_between_the_renames_is_recovered(marked_copy):
+    """SIGKILL cannot be deferred: killed right after the live tree was moved aside, ``generated/``
+    is missing and ``generated.old`` holds the previous tree. ``recover()`` (run first by every
+    derive) must put the complete previous tree back; a following derive then succeeds."""
+    from derive.emit.writer import recover
+
+    out = marked_copy
+    before = tree_bytes(out)
+    proc = _start(out, "--models", "link1", hook="swap")
+    _read_until(proc, b"PAUSED swap", timeout=120)
+    proc.kill()  # SIGKILL at the pause point: after rename(generated -> generated.old), before the second
+    proc.communicate(timeout=60)
+    assert proc.returncode == -signal.SIGKILL
+    old = out.with_name(out.name + ".old")
+    assert not out.exists() and old.is_dir(), sorted(p.name for p in out.parent.iterdir())
+
+    recover(out)
+    assert out.is_dir() and not old.exists()
+    assert tree_bytes(out) == before  # the complete previous tree, byte for byte
+    recover(out)  # idempotent: nothing to do on a complete tree
+    assert tree_bytes(out) == before
+
+    # the next derive starts from the recovered tree and completes normally
+    proc = _start(out, "--models", "link1")
+    log, _ = proc.communicate(timeout=120)
+    assert proc.returncode == 0, log.decode(errors="replace")
+    after = tree_bytes(out)
+    assert set(after) == set(before)
+    for k in before:
+        expected = (REPO / "generated" / k).read_bytes() if k.startswith("link1/") else before[k]
+        assert after[k] == expected, k
+    assert not old.exists()
+
+
+def test_recover_leaves_a_complete_tree_alone(tmp_path):
+    """Killed after the second rename (new tree in place, ``.old`` not yet removed): recover() must
+    not touch the live tree; with no ``.old`` at all it does nothing either."""
+    from derive.emit.writer import recover
+
+    out = tmp_path / "generated"
+    shutil.copytree(REPO / "generated" / "link1", out / "link1")
+    old = tmp_path / "generated.old"
+    shutil.copytree(REPO / "generated" / "link1", old / "link1")
+    (old / "link1" / "manifest.json").write_text("{}\n")  # the previous (different) tree
+    before = tree_bytes(out)
+    recover(out)
+    assert tree_bytes(out) == before
+    shutil.rmtree(old)
+    recover(out)
+    assert tree_bytes(out) == before
