@@ -566,3 +566,82 @@ def make_spatial(desc: ChainDescription, name: str, params: Tuple[Param, ...],
         Bm=tuple(sym[f"Bm{i}"] for i in range(1, n + 1)),
         description=description, program=prog,
     )
+
+
+def make_spatial_jacobian(desc: ChainDescription, name: str, params: Tuple[Param, ...],
+                          description: str) -> FlexibleJointModel:
+    """The same model in the Jacobian (Lagrangian) form, kept for comparison and cross-checks.
+
+    World-frame kinematics (rotations ``W_k``, origins ``o_k``, axes ``z_k``,
+    centres of mass ``c_k``) as named symbols;
+    ``D = sum_k m_k Jv_k^T Jv_k + Jw_k^T (W_k Ic_k W_k^T) Jw_k`` with
+    ``Jv_k[:, j] = z_j x (c_k - o_j)``, ``Jw_k[:, j] = z_j`` (j <= k); and
+    ``h = D' dq - 1/2 d/dq (dq^T D dq) + dV/dq`` by directional derivatives
+    of D. :func:`make_spatial` (CRBA + RNEA) is the emitted form: see
+    docs/spatial.md for the operation counts of both.
+    """
+    from .lie import DirectionalDerivative
+
+    base = make_spatial(desc, name, params, description)  # for c_i, s_i, R_i and the numbers
+    num = chain_numerics(desc)
+    n = base.n
+    prog = Program()
+    q, dq = base.q, base.dq
+    g0 = sp.Symbol("g0", real=True)
+
+    def d(label, e):
+        e = sp.sympify(e)
+        if e.is_Atom or (e.is_Mul and sum(1 for a in e.args if not a.is_Number) <= 1):
+            return e
+        return prog.define(label, e)
+
+    cs = []
+    for i in range(n):
+        box: Dict[str, sp.Expr] = {}
+        box["c"] = prog.define(f"c{i + 1}", sp.cos(q[i]), rule=lambda dd, i=i, b=box: -b["s"] * dd(q[i]))
+        box["s"] = prog.define(f"s{i + 1}", sp.sin(q[i]), rule=lambda dd, i=i, b=box: b["c"] * dd(q[i]))
+        cs.append((box["c"], box["s"]))
+    W = [[sp.Integer(int(r == k)) for k in range(3)] for r in range(3)]
+    o = [sp.Integer(0)] * 3
+    zs, os_, cms, Iws = [], [], [], []
+    for i, b in enumerate(num.bodies):
+        c, s = cs[i]
+        R0 = [[_num(b.R0[r, k]) for k in range(3)] for r in range(3)]
+        Ri = [[R0[r][0] * c + R0[r][1] * s, R0[r][1] * c - R0[r][0] * s, R0[r][2]] for r in range(3)]
+        o = [d(f"o{i + 1}{'xyz'[r]}", o[r] + sp.Add(*[W[r][k] * _num(b.p[k]) for k in range(3)])) for r in range(3)]
+        W = [[d(f"W{i + 1}_{r + 1}{k + 1}", sp.Add(*[W[r][a] * Ri[a][k] for a in range(3)])) for k in range(3)]
+             for r in range(3)]
+        com = b.first_moment / b.mass
+        cms.append([d(f"cm{i + 1}{'xyz'[r]}", o[r] + sp.Add(*[W[r][k] * _num(com[k]) for k in range(3)]))
+                    for r in range(3)])
+        Ic = b.inertia_origin - b.mass * (float(com @ com) * np.eye(3) - np.outer(com, com))
+        WI = [[sp.Add(*[W[r][a] * _num(Ic[a, k]) for a in range(3)]) for k in range(3)] for r in range(3)]
+        Iws.append([[d(f"Iw{i + 1}_{r + 1}{k + 1}", sp.Add(*[WI[r][a] * W[k][a] for a in range(3)]))
+                     if k >= r else None for k in range(3)] for r in range(3)])
+        for r in range(3):
+            for k in range(r):
+                Iws[-1][r][k] = Iws[-1][k][r]
+        zs.append([W[r][2] for r in range(3)])
+        os_.append(o)
+    D = sp.zeros(n, n)
+    for k in range(n):
+        m = _num(num.bodies[k].mass)
+        Jv = [dvec for dvec in ([d(f"Jv{k + 1}_{j + 1}{'xyz'[r]}", e) for r, e in enumerate(
+            _cross(zs[j], [cms[k][a] - os_[j][a] for a in range(3)]))] for j in range(k + 1))]
+        for a in range(k + 1):
+            Iz = _matvec(Iws[k], zs[a])
+            for b_ in range(a + 1):
+                D[a, b_] += m * _dot(Jv[a], Jv[b_]) + _dot(zs[b_], Iz)
+    for a in range(n):
+        for b_ in range(a + 1):
+            D[a, b_] = D[b_, a] = prog.define(f"Dj{a + 1}_{b_ + 1}", D[a, b_])
+    V = g0 * d("Vj", sp.Add(*[_num(num.bodies[k].mass) * cms[k][2] for k in range(n)]))
+    dt = DirectionalDerivative({q[i]: dq[i] for i in range(n)}, program=prog, tag="jt")
+    Ddot = dt(D)
+    dqv = sp.Matrix(dq)
+    h = Ddot * dqv
+    for i in range(n):
+        di = DirectionalDerivative({q[i]: sp.Integer(1)}, program=prog, tag=f"jq{i + 1}")
+        h[i] = prog.define(f"hj{i + 1}", h[i] - (dqv.T * di(D) * dqv)[0, 0] / 2 + di(V))
+    from dataclasses import replace
+    return replace(base, D=D, h=h, potential=V, program=prog)
