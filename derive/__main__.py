@@ -119,8 +119,11 @@ def derive_into(root: Path, models: List[str], log=print,
     return timings
 
 
-def diff_trees(expected: Path, actual: Path) -> List[str]:
-    """Human-readable differences between two generated trees (empty if identical)."""
+def diff_trees(expected: Path, actual: Path, start: Path = Path(".")) -> List[str]:
+    """Human-readable differences between two generated trees (empty if identical).
+
+    ``start``: compare only this subdirectory (e.g. one model); reported paths keep it.
+    """
     problems: List[str] = []
 
     def walk(rel: Path):
@@ -139,7 +142,9 @@ def diff_trees(expected: Path, actual: Path) -> List[str]:
         for name in sorted(cmp.common_dirs):
             walk(rel / name)
 
-    walk(Path("."))
+    if not (actual / start).is_dir():
+        return [f"missing from generated/: {start}/"]
+    walk(start)
     return problems
 
 
@@ -200,7 +205,7 @@ def main(argv=None, prog: str = "python -m derive") -> int:
                 print(f"check-generated: {out} does not exist; run `make derive`", file=sys.stderr)
                 return 1
             if args.models:  # compare only the requested models
-                problems = [p for name in models for p in diff_trees(fresh / name, out / name)]
+                problems = [p for name in models for p in diff_trees(fresh, out, Path(name))]
             else:
                 problems = diff_trees(fresh, out)
         if problems:
