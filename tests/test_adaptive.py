@@ -44,7 +44,8 @@ def test_estimate_converges_with_excitation(tracking_runs, K):
     K_hat = ctrl.stiffness_estimate(res.z)[:, 0]
     assert abs(K_hat[0] - 150.0) == 0.0
     # measured: 100.06 and 199.77 at 10 s (LS error = 50 / (1 + P0 int phi_f^2))
-    assert abs(K_hat[-1] - K) < 0.5
+    # README: within 0.06 / 0.23 N m/rad of K = 100 / 200 after 10 s (tested with ~30 % margin)
+    assert abs(K_hat[-1] - K) < {100.0: 0.08, 200.0: 0.3}[K]
     assert abs(K_hat[5000] - K) < 1.0  # at 5 s
     assert np.all(np.diff(np.abs(K_hat[1:] - K)) <= 1e-9)  # monotone approach (no projection active)
 
@@ -53,7 +54,8 @@ def test_estimate_converges_with_excitation(tracking_runs, K):
 def test_adaptive_tracking_accuracy(tracking_runs, K):
     _, res, ismc = tracking_runs[K]
     # measured RMS e1 over 5-10 s: 1.95e-5 (K = 100), 3.8e-5 (K = 200); integral SMC 1.14e-2, 5.9e-3
-    assert res.metrics.rms_error_second_half < 5e-5
+    # README: 2.0e-5 / 3.8e-5 rad (tested with ~20 % margin)
+    assert res.metrics.rms_error_second_half < {100.0: 2.4e-5, 200.0: 4.6e-5}[K]
     assert res.metrics.final_error < 5e-5
     # README: "150-600x lower tracking RMS than ismc"; measured 585x (K = 100), 155x (K = 200).
     # Margin: about 10 % outside the claimed range.
@@ -96,7 +98,7 @@ def test_no_excitation_no_learning(link1):
     assert np.all(ctrl.stiffness_estimate(res.z) == 150.0)
 
 
-@pytest.mark.parametrize("integral, tol", [(True, 1e-5), (False, 1e-3)])
+@pytest.mark.parametrize("integral, tol", [(True, 2e-6), (False, 1e-4)])
 def test_regulation_removes_offset(link1, integral, tol):
     """Smooth step to 1 rad: the paper's SMC rests 0.17 / 0.10 rad off; with K_hat both surfaces converge."""
     for K in (100.0, 200.0):

@@ -87,3 +87,18 @@ def test_offset_prediction_rejects_integral_and_sign(link1):
         predict_regulation_offset(link1, make_controller("ismc", link1, {}, **DESIGN), 1.0, {"K": 100.0})
     with pytest.raises(ValueError, match="sign"):
         predict_regulation_offset(link1, make_controller("sign", link1, {}, lam=8.0, k_s=10.0), 1.0, {"K": 100.0})
+
+
+@pytest.mark.parametrize("K_true, claimed", [(100.0, -0.169), (200.0, +0.102)])
+def test_readme_offset_numbers_for_table_1(link1, K_true, claimed):
+    """README: Table 1, q_d = 1 rad, K_nom = 150: offset -0.169 rad at K = 100, +0.102 rad at K = 200,
+    matched by simulation; about -(3 / lambda^2)(K_nom / K - 1) M g0 L sin(q_d) / J_l."""
+    lam = DESIGN["lam"]
+    smc = make_controller("smc", link1, {"K": 150.0}, beta_hat=beta_hat_link1({}, K_BOUNDS), **DESIGN)
+    pred = predict_regulation_offset(link1, smc, 1.0, {"K": K_true})
+    assert pred.offset == pytest.approx(claimed, abs=5e-4)
+    res = simulate(link1, smc, SmoothStep(1.0, rise_time=2.0), duration=10.0, true_params={"K": K_true})
+    assert res.e1[-1, 0] == pytest.approx(pred.offset, abs=1e-6)
+    approx = -(3.0 / lam ** 2) * (150.0 / K_true - 1.0) * 1.0 * 9.8 * 1.0 * np.sin(1.0) / 1.0
+    assert pred.first_order == pytest.approx(approx, rel=1e-12)
+    assert abs(pred.offset - approx) < 0.15 * abs(approx)  # "about": measured 12.5 % (K = 100), 5.8 % (K = 200)
