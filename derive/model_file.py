@@ -21,6 +21,12 @@ Parameter names are those of ``planar<n>``: ``m1..mn, l1..ln, r1..rn,
 I1..In, K1..Kn, Jm1..Jmn, Bm1..Bmn, g0``. Units must be fjm's SI units (a few
 spellings accepted, e.g. ``"kg m^2"``, ``"kg*m^2"``, ``"kg·m²"``).
 
+A second form describes a spatial arm by a URDF file (``[model] urdf = "arm.urdf"``, relative
+to the model file, with ``base`` and ``tip`` link names) and per-joint elastic parameters
+(``[joints.default]`` and ``[joints.<URDF joint name>]`` with ``K``, ``Jm``, ``Bm``; optional
+``[parameters] g0`` and ``[notes]``); it is built by :func:`derive.spatial.make_spatial`. See
+docs/spatial.md and examples/elbow_arm.toml.
+
 The file is parsed with :mod:`tomllib` (Python >= 3.11) or ``tomli`` and then
 checked against an explicit schema: allowed tables and keys, types, ranges and
 physical plausibility. Nothing from the file is evaluated or sympified: it
