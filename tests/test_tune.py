@@ -1,0 +1,271 @@
+"""Reaching-gain synthesis (fjm_runtime.tune): certificates, the paper's bound, trajectories, CLI.
+
+Robustness claims: controller on NOMINAL parameters, plant on TRUE ones. The
+checks of the certificate use independent evaluations (closed forms written
+here, finite differences of T along the true vector field, simulated
+trajectories), never values copied from the code under test.
+"""
+import json
+
+import numpy as np
+import pytest
+from scipy.optimize import minimize_scalar
+
+import fjm_runtime as fjm
+from fjm_runtime.cli import main
+from fjm_runtime.controllers import make_controller
+from fjm_runtime.references import Sinusoid, SmoothStep
+from fjm_runtime.robust import beta_hat_link1, lemma1_gain, link1_alpha, link1_T_inverse
+from fjm_runtime.simulate import simulate
+from fjm_runtime.tune import InfeasibleGainError, certificate, paper_bound, synthesize_gains
+
+K_NOM = 150.0
+K_BOX = {"K": (100.0, 200.0)}
+REG = (SmoothStep(1.0, rise_time=2.0), (0.05, 0.1, 0.5, 1.0))     # regulation box of the demo
+TRK = (Sinusoid(0.5, 1.0), (0.05, 0.5, 0.5, 0.5))                 # tracking box of the demo
+
+
+@pytest.fixture(scope="module")
+def link1():
+    return fjm.load("link1")
+
+
+@pytest.fixture(scope="module")
+def planar2():
+    return fjm.load("planar2")
+
+
+def _link1_kwargs(box=REG, lam=8.0):
+    ref, E = box
+    return dict(param_box=K_BOX, reference_bounds=ref.derivative_bounds()[:, 0], error_bounds=E, lam=lam,
+                beta_hat=beta_hat_link1({"K": K_NOM}, K_BOX))
+
+
+# -- the paper's Lemma 1 in TRUE coordinates, independent closed form -----------------------------
+def _delta_alpha_closed_form(y1, y2, y3, K, Kn, Jl=1.0, Jm=2.0, mgl=9.8):
+    """alpha(x; Kn) - alpha(x; K) at x = T^-1(y; K) for link1 with B_m = 0 (derived by hand)."""
+    G = mgl / Jl
+    d = 1.0 / K - 1.0 / Kn
+    return d * (Jl * Jm * G * np.sin(y1) * (y2 ** 2 + G * np.cos(y1)) + Kn * (Jl + Jm) * (y3 + G * np.sin(y1)))
+
+
+def test_closed_form_matches_link1_alpha():
+    rng = np.random.default_rng(3)
+    y = rng.uniform(-2, 2, size=(50, 4))
+    for K in (100.0, 200.0, 123.0):
+        x = link1_T_inverse(y, {"K": K})
+        direct = link1_alpha(x, {"K": K_NOM}) - link1_alpha(x, {"K": K})
+        np.testing.assert_allclose(_delta_alpha_closed_form(y[:, 0], y[:, 1], y[:, 2], K, K_NOM), direct,
+                                   rtol=1e-9, atol=1e-9)
+
+
+def _independent_paper_bound(ref, E, lam, eta=10.0):
+    R = ref.derivative_bounds()[:, 0]
+    Y = R[:4] + np.asarray(E)
+    c1, c2, c3 = lam ** 3, 3 * lam ** 2, 3 * lam
+    W = R[4] + c1 * E[1] + c2 * E[2] + c3 * E[3]
+    H = 0.0
+    # affine in 1/K, in y2^2 and in y3: vertices; y1: dense scan then bounded refinement
+    for K in (100.0, 200.0):
+        for y2 in (0.0, Y[1]):
+            for y3 in (-Y[2], Y[2]):
+                f = lambda y1: -abs(_delta_alpha_closed_form(y1, y2, y3, K, K_NOM))
+                grid = np.linspace(-Y[0], Y[0], 20001)
+                vals = -f(grid)
+                j = int(np.argmax(vals))
+                best = vals[j]
+                lo, hi = grid[max(j - 1, 0)], grid[min(j + 1, grid.size - 1)]
+                if hi > lo:
+                    r = minimize_scalar(f, bounds=(lo, hi), method="bounded", options={"xatol": 1e-13})
+                    best = max(best, -r.fun)
+                H = max(H, best)
+    b_min, b_max = 1.0 * 2.0 / 200.0, 1.0 * 2.0 / 100.0
+    b_hat = 0.5 * (b_min + b_max)
+    rho = (b_max - b_min) / (b_max + b_min)
+    return rho * W + H / b_hat + eta
+
+
+@pytest.mark.parametrize("box, published", [(REG, 1240.0), (TRK, 765.0)], ids=["regulation", "tracking"])
+def test_paper_bound_in_true_coordinates(link1, box, published):
+    ref, E = box
+    expected = _independent_paper_bound(ref, E, 8.0)
+    assert abs(expected - published) < 1.0, "the independent closed form no longer gives the published bound"
+    got = paper_bound(link1, {"K": K_NOM}, param_box=K_BOX, reference_bounds=ref.derivative_bounds()[:, 0],
+                      error_bounds=E, lam=8.0)
+    assert got.k_s == pytest.approx(expected, rel=1e-6)
+
+
+# -- certificates: negative for the synthesized gain, positive 20 % below ---------------------------
+@pytest.mark.parametrize("lam", [8.0, 20.0, 30.0])
+def test_link1_certificate_sign(link1, lam):
+    kw = _link1_kwargs(REG, lam)
+    res = synthesize_gains(link1, {"K": K_NOM}, **kw)
+    assert res.feasible, res.reason
+    assert res.certificate[0] <= -res.eta[0] + 1e-9
+    assert res.certificate[0] < 0
+    low = certificate(link1, 0.8 * res.k_s, {"K": K_NOM}, **kw)
+    assert low["certificate"][0] > 0
+
+
+def test_lemma1_gain_is_not_certified_for_the_implemented_law_at_large_lambda(link1):
+    """The Lemma 1 gain (true coordinates) does not give reaching for s built from T(x; K_nom) at lambda = 30."""
+    ref, E = REG
+    kw = _link1_kwargs(REG, 30.0)
+    g = lemma1_gain([30.0 ** 3, 3 * 30.0 ** 2, 3 * 30.0], ref.derivative_bounds()[:, 0], nominal={"K": K_NOM},
+                    bounds=K_BOX, error_bounds=E)
+    assert certificate(link1, g.k_s, {"K": K_NOM}, **kw)["certificate"][0] > 0
+
+
+def _direct_sdot(model, nominal, true_params, x, r, k_s, lam, beta_hat=None):
+    """s' of the paper-surface sign law by central differences of T(x; p_nom) along the TRUE vector field."""
+    ctrl = make_controller("sign", model, nominal, lam=lam, k_s=k_s, beta_hat=beta_hat)
+    smp = ctrl.evaluate(0.0, x, np.zeros(0), r)
+    xdot = model.f(x, true_params) + model.g(x, true_params) @ smp.u
+    n, h = model.n, 1e-6
+    dy = ((model.T(x + h * xdot, model.params_array(nominal)) - model.T(x - h * xdot, model.params_array(nominal)))
+          / (2 * h)).reshape(4, n)
+    c = ctrl.c
+    sdot = c[0] * (dy[0] - r[1]) + c[1] * (dy[1] - r[2]) + c[2] * (dy[2] - r[3]) + dy[3] - r[4]
+    return smp.s, sdot
+
+
+def _state_at(model, nominal, y_hat):
+    """x with T(x; p_nom) = y_hat (Newton on the motor half, independent of fjm_runtime.tune)."""
+    n = model.n
+    pn = model.params_array(nominal)
+    x = np.concatenate([y_hat[:2 * n], y_hat[:2 * n]])
+    for _ in range(20):
+        r = model.T(x, pn)[2 * n:] - y_hat[2 * n:]
+        J = np.empty((2 * n, 2 * n))
+        for j in range(2 * n):
+            dx = np.zeros(4 * n); dx[2 * n + j] = 1e-6
+            J[:, j] = (model.T(x + dx, pn)[2 * n:] - model.T(x - dx, pn)[2 * n:]) / 2e-6
+        x[2 * n:] -= np.linalg.solve(J, r)
+    assert np.max(np.abs(model.T(x, pn) - y_hat)) < 1e-8
+    return x
+
+
+def _check_witness(model, nominal, kw, k_low):
+    """At the witness of the gain 20 % below, the direct s' has sgn(s) s' > 0 and equals the certificate."""
+    low = certificate(model, k_low, nominal, **kw)
+    n = model.n
+    lam = kw["lam"]
+    c3 = 3 * lam
+    for i in range(n):
+        wit = low["witness"][i]
+        y_hat = np.asarray(wit["y_hat"], dtype=float).reshape(-1)
+        x = _state_at(model, nominal, y_hat)
+        eps = 1e-9
+        sign = np.full(n, 1.0); sign[i] = wit["sign_s"]
+        e = np.zeros((4, n)); e[3] = eps * sign
+        r = np.zeros((5, n))
+        r[:4] = y_hat.reshape(4, n) - e
+        r[4] = np.asarray(wit["w"]) + c3 * e[3]          # w = y4d' - c3 e4
+        true = dict(nominal); true.update(wit["params"])
+        s, sdot = _direct_sdot(model, nominal, true, x, r, k_low, lam, kw.get("beta_hat"))
+        val = np.sign(s[i]) * sdot[i]
+        assert val > 0
+        assert val == pytest.approx(low["certificate"][i], rel=1e-4, abs=1e-3 * np.max(k_low))
+
+
+def test_link1_witness_direct_evaluation(link1):
+    kw = _link1_kwargs(REG, 20.0)
+    res = synthesize_gains(link1, {"K": K_NOM}, **kw)
+    _check_witness(link1, {"K": K_NOM}, kw, 0.8 * res.k_s)
+
+
+# -- planar2 ---------------------------------------------------------------------------------------
+P2_NOM = {"K1": 100.0, "K2": 100.0}
+P2_REF = Sinusoid([0.5, 0.3], [1.0, 1.5], n=2, phase=[0.0, 0.5])
+P2_KW = dict(param_box={"K1": (100.0, 200.0), "K2": (100.0, 200.0)}, reference_bounds=P2_REF.derivative_bounds(),
+             error_bounds=(0.02, 0.1, 0.2, 30.0), lam=8.0, n_grid=3)
+# a wide jerk-error bound: during reaching s falls mostly through e4 (s' ~ -k_s), so e4 must stay in the box
+
+
+@pytest.fixture(scope="module")
+def planar2_gain(planar2):
+    return synthesize_gains(planar2, P2_NOM, **P2_KW)
+
+
+def test_planar2_certificate_sign(planar2, planar2_gain):
+    res = planar2_gain
+    assert res.feasible, res.reason
+    assert np.all(res.certificate <= -res.eta + 1e-9)
+    _check_witness(planar2, P2_NOM, P2_KW, 0.8 * res.k_s)
+
+
+# -- simulated trajectories: sgn(s) s' <= -eta wherever the state is in the box and |s| > delta ----------
+def _trajectory_check(res, E, eta, c):
+    s = res.s
+    dt = res.t[1] - res.t[0]
+    sdot = (s[2:] - s[:-2]) / (2 * dt)
+    e = res.y_hat - res.ref[:, :4]
+    inside = np.all(np.abs(e) <= np.asarray(E)[None, :, None] * (1 + 1e-9), axis=1)      # (N+1, n)
+    ok = inside[1:-1] & inside[2:] & inside[:-2]
+    out = (np.abs(s[1:-1]) > res.delta) & (np.abs(s[2:]) > res.delta) & (np.abs(s[:-2]) > res.delta)
+    mask = ok & out
+    assert mask.sum() >= 20, f"only {mask.sum()} samples outside the layer inside the box: vacuous check"
+    worst = np.max(np.sign(s[1:-1][mask]) * sdot[mask])
+    assert worst <= -0.5 * eta, f"sgn(s) s' = {worst:.3g} > -eta/2 on the trajectory"
+    return worst
+
+
+@pytest.mark.parametrize("K_true", [100.0, 200.0])
+def test_link1_trajectory_reaching(link1, K_true):
+    ref, E = REG
+    kw = _link1_kwargs(REG, 8.0)
+    gain = synthesize_gains(link1, {"K": K_NOM}, **kw)
+    ctrl = make_controller("smc", link1, {"K": K_NOM}, lam=8.0, k_s=gain.k_s, delta=gain.delta,
+                           beta_hat=kw["beta_hat"])
+    e0 = 0.8 * np.asarray(E)
+    x0 = link1_T_inverse(ref(0.0)[:4, 0] + e0, {"K": K_NOM})
+    res = simulate(link1, ctrl, ref, duration=1.5, dt=1e-4, true_params={"K": K_true}, x0=x0)
+    _trajectory_check(res, E, gain.eta[0], ctrl.c)
+
+
+def test_planar2_trajectory_reaching(planar2, planar2_gain):
+    """With the default layer k_s / 200 the whole error box lies inside the layer (vacuous); a thin layer and a
+    short step expose the reaching phase (layer slope 1 / (5 dt), stable under the zero-order hold)."""
+    E = P2_KW["error_bounds"]
+    dt = 1e-5
+    delta = 5 * dt * planar2_gain.k_s
+    ctrl = make_controller("smc", planar2, P2_NOM, lam=8.0, k_s=planar2_gain.k_s, delta=delta)
+    y0 = P2_REF(0.0)[:4] + 0.8 * np.asarray(E)[:, None] * np.array([1.0, -1.0])[None, :]
+    x0 = _state_at(planar2, P2_NOM, y0.reshape(-1))
+    res = simulate(planar2, ctrl, P2_REF, duration=0.02, dt=dt, true_params={"K1": 200.0, "K2": 100.0}, x0=x0)
+    _trajectory_check(res, E, planar2_gain.eta[0], ctrl.c)
+
+
+# -- infeasible boxes and errors -------------------------------------------------------------------
+def test_infeasible_actuator_limit(link1):
+    kw = _link1_kwargs(REG, 30.0)
+    res = synthesize_gains(link1, {"K": K_NOM}, u_max=5.0, **kw)
+    assert not res.feasible
+    assert "u_max" in res.reason and "5" in res.reason
+    with pytest.raises(InfeasibleGainError, match="u_max"):
+        synthesize_gains(link1, {"K": K_NOM}, u_max=5.0, raise_infeasible=True, **kw)
+
+
+def test_unknown_box_parameter(link1):
+    kw = _link1_kwargs(REG, 8.0)
+    kw["param_box"] = {"K_x": (1.0, 2.0)}
+    with pytest.raises(ValueError, match="K_x.*expected one of"):
+        synthesize_gains(link1, {"K": K_NOM}, **kw)
+
+
+# -- CLI -------------------------------------------------------------------------------------------
+def test_cli_tune_link1_lam30(capsys):
+    assert main(["tune", "link1", "--lam", "30"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["feasible"] is True
+    assert out["k_s"][0] > 0
+    assert out["certificate"][0] < 0
+    assert out["certificate"][0] <= -out["eta"][0] + 1e-9
+    assert out["reaching_time_bound"][0] > 0
+
+
+def test_cli_tune_infeasible_exit_status(capsys):
+    assert main(["tune", "link1", "--lam", "30", "--u-max", "5"]) == 1
+    cap = capsys.readouterr()
+    assert json.loads(cap.out)["feasible"] is False
+    assert "u_max" in cap.err
