@@ -626,7 +626,7 @@ def load_model_file(path: Path_, builtin: bool = False):
 
 REPO = Path(__file__).resolve().parent.parent
 _URDF_MODEL_KEYS = ("name", "urdf", "base", "tip", "description")
-_URDF_TOP = ("model", "joints", "parameters", "notes")
+_URDF_TOP = ("model", "joints", "parameters", "payload", "notes")
 #: Elastic parameters per joint: key -> (SI unit, bound kind, meaning, default or None = required).
 _ELASTIC: Dict[str, Tuple[str, str, str, Optional[float]]] = {
     "K": ("N m/rad", ">0", "joint stiffness", None),
@@ -669,16 +669,19 @@ class UrdfModelSpec:
     description: Optional[str]
     notes: Dict[str, str] = field(default_factory=dict)
     source: str = "<model file>"
+    payload: Optional[Tuple[float, Tuple[float, float, float]]] = None  # (mass, com in the tip frame)
 
     def build(self) -> FlexibleJointModel:
         """The symbolic model (:func:`derive.spatial.make_spatial` of the URDF chain)."""
-        from .spatial import elastic_params, make_spatial
+        from .spatial import elastic_params, make_spatial, payload_params
         from .urdf import load_urdf
 
         chain = load_urdf(self.urdf, self.base, self.tip, source=_repo_relative(self.urdf))
         n = len(chain.joints)
         params = elastic_params(n, self.K, self.Jm, self.Bm, self.g0, chain.joints,
                                 {k: f"; {v}" for k, v in self.notes.items()})
+        if self.payload is not None:
+            params = params + payload_params(self.payload[0], self.payload[1], self.tip)
         description = self.description or (
             f"Spatial serial chain of {n} revolute joints from the URDF {_repo_relative(self.urdf)} "
             f"(robot {chain.robot}, {self.base} -> {self.tip}), flexible joints, gravity g0 along -z "
@@ -730,6 +733,9 @@ def _parse_urdf_form(data: dict, chk: "_Checker", base_dir: Path, builtin: bool)
         K = 2000.0
         [parameters]
         g0 = 9.81                  # optional
+        [payload]                  # optional: parameters m_load, x_load, y_load, z_load
+        mass = 0.5                 # kg (default of m_load), a point mass fixed to the tip link
+        com = [0.0, 0.0, 0.1]      # m, in the tip link frame
         [notes]                    # optional text appended to the parameter meanings
         K = "illustrative, see ..."
     """
@@ -807,6 +813,25 @@ def _parse_urdf_form(data: dict, chk: "_Checker", base_dir: Path, builtin: bool)
         if key not in _ELASTIC:
             raise chk.fail(("notes", key), f"unknown key; [notes] allows {', '.join(_ELASTIC)}")
         _check_description(chk, val, ("notes", key))
+    payload = None
+    if "payload" in data:
+        table = data["payload"]
+        if not isinstance(table, dict):
+            raise chk.fail(("payload",), f"expected a table with mass and com, {_got(table)}")
+        for key in table:
+            if key not in ("mass", "com"):
+                raise chk.fail(("payload", key), "unknown key; [payload] allows mass, com")
+        for key in ("mass", "com"):
+            if key not in table:
+                raise chk.fail(("payload", key), f"missing required key: {key}", line_path=("payload",))
+        mass = _number(chk, ("payload", "mass"), table["mass"], "kg", ">=0", "payload mass")
+        com = table["com"]
+        if not isinstance(com, list) or len(com) != 3:
+            raise chk.fail(("payload", "com"), f"expected an array of 3 numbers (m, in the tip link frame), "
+                                               f"{_got(com)}")
+        com = tuple(_number(chk, ("payload", "com"), v, "m", "any", "payload position") for v in com)
+        payload = (mass, com)
     return UrdfModelSpec(name=model["name"], urdf=urdf, base=model["base"], tip=model["tip"], joints=names,
                          K=tuple(per["K"]), Jm=tuple(per["Jm"]), Bm=tuple(per["Bm"]), g0=g0,
-                         description=model.get("description"), notes=dict(notes), source=chk.source)
+                         description=model.get("description"), notes=dict(notes), source=chk.source,
+                         payload=payload)

@@ -50,7 +50,8 @@ from .models import FlexibleJointModel, Param, _state_symbols
 from .program import Program
 
 __all__ = ["Inertial", "Joint", "Attached", "ChainDescription", "BodyNumerics", "ChainNumerics",
-           "rpy_matrix", "chain_numerics", "planar_description", "make_spatial", "elastic_params", "SNAP"]
+           "rpy_matrix", "chain_numerics", "planar_description",
+           "payload_params", "PAYLOAD", "make_spatial", "elastic_params", "SNAP"]
 
 Vec3 = Tuple[float, float, float]
 
@@ -233,6 +234,9 @@ class ChainNumerics:
 
     joint_names: Tuple[str, ...]
     bodies: Tuple[BodyNumerics, ...] = field(default_factory=tuple)
+    #: Pose of the tip link frame in the last body frame: rotation (3, 3) and origin (3,).
+    tip_R: np.ndarray = field(default_factory=lambda: np.eye(3))
+    tip_p: np.ndarray = field(default_factory=lambda: np.zeros(3))
 
 
 def _inertia_matrix(i6: Sequence[float]) -> np.ndarray:
@@ -303,7 +307,9 @@ def chain_numerics(desc: ChainDescription) -> ChainNumerics:
     out = tuple(BodyNumerics(R0=b["R0"], p=b["p"], mass=mass[i + 1], first_moment=first[i + 1],
                              inertia_origin=(inert[i + 1] + inert[i + 1].T) / 2)
                 for i, b in enumerate(bodies))
-    return ChainNumerics(joint_names=desc.revolute_names, bodies=out)
+    tip_k, tip_R, tip_p = pose[parent]
+    assert tip_k == len(bodies)
+    return ChainNumerics(joint_names=desc.revolute_names, bodies=out, tip_R=tip_R, tip_p=tip_p)
 
 
 def planar_description(n: int, m: Sequence[float], l: Sequence[float], r: Sequence[float],
@@ -343,6 +349,27 @@ def _num(v: float) -> sp.Expr:
     if v == int(v) and abs(v) < 2 ** 31:
         return sp.Integer(int(v))
     return sp.Float(v)
+
+
+#: Optional tip payload parameters (a point mass in the tip link frame), after g0.
+PAYLOAD: Tuple[str, ...] = ("m_load", "x_load", "y_load", "z_load")
+
+
+def payload_params(mass: float, com: Sequence[float], tip: str) -> Tuple[Param, ...]:
+    """Parameters ``m_load, x_load, y_load, z_load``: a point payload fixed to the tip link.
+
+    Parameters
+    ----------
+    mass : float
+        Default payload mass (kg, >= 0).
+    com : sequence of 3 floats
+        Default position of the payload in the tip link frame (m).
+    tip : str
+        Tip link name, quoted in the meanings.
+    """
+    return (Param("m_load", float(mass), f"payload mass, a point mass fixed to the tip link {tip} (>= 0)", "kg"),
+            *(Param(f"{a}_load", float(v), f"payload position along {a} of the tip link {tip} frame", "m")
+              for a, v in zip("xyz", com)))
 
 
 def elastic_params(n: int, K: Sequence[float], Jm: Sequence[float], Bm: Sequence[float],
@@ -416,8 +443,10 @@ def make_spatial(desc: ChainDescription, name: str, params: Tuple[Param, ...],
     num = chain_numerics(desc)
     n = len(num.bodies)
     expected = [f"{g}{i}" for g in ("K", "Jm", "Bm") for i in range(1, n + 1)] + ["g0"]
-    if [p.name for p in params] != expected:
-        raise ValueError(f"{name}: parameters must be {expected}, got {[p.name for p in params]}")
+    payload = [p.name for p in params] == expected + list(PAYLOAD)
+    if [p.name for p in params] != expected and not payload:
+        raise ValueError(f"{name}: parameters must be {expected} (optionally followed by {list(PAYLOAD)}), "
+                         f"got {[p.name for p in params]}")
     sym = {p.name: sp.Symbol(p.name, real=True) for p in params}
     g0 = sym["g0"]
     q, dq, qm, dqm = _state_symbols(n)
@@ -453,6 +482,20 @@ def make_spatial(desc: ChainDescription, name: str, params: Tuple[Param, ...],
     mass = [_num(b.mass) for b in num.bodies]
     hmom = [[_num(v) for v in b.first_moment] for b in num.bodies]
     Io = [[[_num(b.inertia_origin[r, k]) for k in range(3)] for r in range(3)] for b in num.bodies]
+    if payload:  # a point mass m_load at c_load (tip link frame) joins the last body
+        mp = sym["m_load"]
+        c = [sp.Add(*[_num(num.tip_R[r, k]) * sym[f"{'xyz'[k]}_load"] for k in range(3)]) + _num(num.tip_p[r])
+             for r in range(3)]
+        c = [d(f"cload{'xyz'[r]}", c[r]) for r in range(3)]
+        last = n - 1
+        mass[last] = d("mlast", mass[last] + mp)
+        hmom[last] = [d(f"hlast{'xyz'[r]}", hmom[last][r] + mp * c[r]) for r in range(3)]
+        cc = c[0] ** 2 + c[1] ** 2 + c[2] ** 2
+        Io[last] = [[d(f"Iolast{r + 1}{k + 1}", Io[last][r][k] + mp * ((cc if r == k else 0) - c[r] * c[k]))
+                     if k >= r else None for k in range(3)] for r in range(3)]
+        for r in range(3):
+            for k in range(r):
+                Io[last][r][k] = Io[last][k][r]
 
     # ---- h: recursive Newton-Euler, ddq = 0, base accelerated by +g0 e_z (gravity) --------
     zero = [sp.Integer(0)] * 3
@@ -582,7 +625,9 @@ def make_spatial_jacobian(desc: ChainDescription, name: str, params: Tuple[Param
     """
     from .lie import DirectionalDerivative
 
-    base = make_spatial(desc, name, params, description)  # for c_i, s_i, R_i and the numbers
+    if any(p.name in PAYLOAD for p in params):
+        raise ValueError(f"{name}: the Jacobian form takes no payload parameters")
+    base = make_spatial(desc, name, params, description)  # for the parameters and state symbols
     num = chain_numerics(desc)
     n = base.n
     prog = Program()

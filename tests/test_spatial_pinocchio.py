@@ -46,7 +46,9 @@ def pinocchio_model(name):
             out += [np.cos(qi), np.sin(qi)] if nq == 2 else [qi]
         return np.array(out)
 
-    return m, model, model.createData(), q_pin
+    fid = model.getFrameId(src["tip"])
+    tip = model.frames[fid].placement  # tip link frame in the last joint's frame
+    return m, model, model.createData(), q_pin, tip
 
 
 def states(m, rng, count):
@@ -65,8 +67,9 @@ def rel(a, b):
 
 @pytest.mark.parametrize("name", SPATIAL)
 def test_inertia_bias_and_forward_dynamics_match_pinocchio(name):
-    m, model, data, q_pin = pinocchio_model(name)
+    m, model, data, q_pin, tip = pinocchio_model(name)
     n = m.n
+    body = model.inertias[n].copy()
     rng = np.random.default_rng(sum(map(ord, name)))
     worst = {"crba": 0.0, "rnea": 0.0, "aba": 0.0}
     for k, x in enumerate(states(m, rng, SAMPLES)):
@@ -74,6 +77,11 @@ def test_inertia_bias_and_forward_dynamics_match_pinocchio(name):
         if k % 2:  # other stiffnesses, motor inertias, damping and gravity too
             for key in p:
                 p[key] = p[key] * rng.uniform(0.5, 2.0) if not key.startswith("Bm") else rng.uniform(0, 1)
+        if "m_load" in p:  # a point payload fixed to the tip link: added to the last body in Pinocchio
+            p["m_load"] = rng.uniform(0, 3) if k % 3 else 0.0
+            com = rng.uniform(-0.15, 0.15, 3)
+            p.update(x_load=com[0], y_load=com[1], z_load=com[2])
+            model.inertias[n] = body + pin.Inertia(p["m_load"], tip.act(com), np.zeros((3, 3)))
         K = np.array([p[f"K{i + 1}"] for i in range(n)])
         model.gravity.linear[:] = [0.0, 0.0, -p["g0"]]
         q, dq, qm = x[:n], x[n:2 * n], x[2 * n:3 * n]
@@ -97,7 +105,7 @@ def test_inertia_bias_and_forward_dynamics_match_pinocchio(name):
 @pytest.mark.parametrize("name", SPATIAL)
 def test_energy_matches_pinocchio(name):
     """Kinetic + potential energy of the links == Pinocchio's (plus motors and springs)."""
-    m, model, data, q_pin = pinocchio_model(name)
+    m, model, data, q_pin, _ = pinocchio_model(name)
     n = m.n
     rng = np.random.default_rng(3)
     p = m.default_params
@@ -122,4 +130,5 @@ def test_manifest_records_the_urdf_source(name):
     urdf = REPO / src["urdf"]
     assert hashlib.sha256(urdf.read_bytes()).hexdigest() == src["sha256"]
     assert len(src["joints"]) == m.n
-    assert m.param_names == tuple(f"{g}{i}" for g in ("K", "Jm", "Bm") for i in range(1, m.n + 1)) + ("g0",)
+    elastic = tuple(f"{g}{i}" for g in ("K", "Jm", "Bm") for i in range(1, m.n + 1)) + ("g0",)
+    assert m.param_names in (elastic, elastic + ("m_load", "x_load", "y_load", "z_load"))

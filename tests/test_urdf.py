@@ -268,6 +268,9 @@ def test_model_file_urdf_form(tmp_path):
     (lambda t: t.replace("Bm = 0.2", "Kx = 0.2"), "joints.j2.Kx", "unknown key; a joint table allows K, Jm, Bm"),
     (lambda t: t + "\n[parameters]\nm1 = 2.0\n", "parameters.m1", "takes g0 only"),
     (lambda t: t.replace('base = "base"\n', ""), "model.base", "missing required key: base"),
+    (lambda t: t + "\n[payload]\nmass = -1.0\ncom = [0, 0, 0]\n", "payload.mass",
+     "-1.0 kg is not physical: payload mass must be >= 0"),
+    (lambda t: t + "\n[payload]\nmass = 1.0\ncom = [0, 0]\n", "payload.com", "expected an array of 3 numbers"),
 ])
 def test_model_file_urdf_form_errors(tmp_path, edit, key, expected):
     write(tmp_path, arm())
@@ -279,6 +282,14 @@ def test_model_file_urdf_form_errors(tmp_path, edit, key, expected):
     assert msg.startswith(f"{path}:"), msg
     assert f": {key}: " in msg, msg
     assert re.search(expected, msg), msg
+
+
+def test_model_file_payload_parameters(tmp_path):
+    write(tmp_path, arm())
+    spec = load_model_file(write(tmp_path, TOML + "\n[payload]\nmass = 0.5\ncom = [0.0, 0.1, 0.2]\n", "two.toml"))
+    m = spec.build()
+    assert m.param_names[-5:] == ("g0", "m_load", "x_load", "y_load", "z_load")
+    assert [p.default for p in m.params[-4:]] == [0.5, 0.0, 0.1, 0.2]
 
 
 def test_urdf_model_file_name_may_not_shadow_a_builtin(tmp_path):
