@@ -11,9 +11,9 @@ the default ``--out`` only in a source checkout; from an installed package
 ``--check`` regenerates every model into a temp dir and compares with
 ``generated/`` byte for byte; it exits 1 with a summary of what differs.
 
-``--model-file arm.toml --out DIR`` derives a user's planar chain described
-in a TOML file (see :mod:`derive.model_file`) into ``DIR/<name>/``, exactly
-like a built-in model.
+``--model-file arm.toml --out DIR`` derives a user's planar chain, or a
+spatial arm from a URDF file, described in a TOML file (see
+:mod:`derive.model_file`) into ``DIR/<name>/``, exactly like a built-in model.
 """
 
 from __future__ import annotations
@@ -154,8 +154,9 @@ def main(argv=None, prog: str = "python -m derive") -> int:
     ap.add_argument("--models", nargs="+", metavar="MODEL",
                     help=f"models to derive (default: all): {' '.join(MODEL_NAMES)}")
     ap.add_argument("--model-file", action="append", type=Path, default=[], metavar="FILE.toml",
-                    help="derive a planar chain described in a TOML model file into --out/<name>/ "
-                         "(repeatable; requires --out; see examples/arm.toml)")
+                    help="derive a planar chain or a URDF arm described in a TOML model file into "
+                         "--out/<name>/ (repeatable; requires --out; see examples/arm.toml and "
+                         "examples/elbow_arm.toml)")
     ap.add_argument("--out", type=Path, default=None, metavar="DIR",
                     help="output root (default: generated/ of the source checkout; required when derive is "
                          "installed from a wheel: then set FJM_GENERATED=DIR for fjm_runtime.load())")
