@@ -39,9 +39,14 @@ the reference bounds ``|y_d^(k)| <= R_k``, so that::
 / (beta_max + beta_min)``).
 
 Lemma 1 is stated in the TRUE coordinates. The implemented controller forms
-``e`` from ``T(x; p_nom)``; with a wrong stiffness that adds a term to ``s'``
-(and the regulation offset analysed in :func:`predict_regulation_offset`). The
-gain does not include it; tests check reaching numerically.
+``e`` from ``T(x; p_nom)``; with a wrong stiffness that adds a drift to ``s'``
+that the input cannot cancel (through ``c2 = 3 lambda^2`` and ``c3``; also the
+regulation offset analysed in :func:`predict_regulation_offset`). The gain of
+this module does NOT include it and is therefore not a reaching guarantee for
+the law that runs (on link1 it fails from lambda ~ 20):
+:func:`fjm_runtime.tune.synthesize_gains` (``fjm tune``) certifies gains for the
+implemented law, and :func:`fjm_runtime.tune.paper_bound` evaluates this
+module's bound for any scalar model.
 """
 from __future__ import annotations
 
