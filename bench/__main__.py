@@ -168,7 +168,8 @@ def bench_derive(work: Path, reps: int, checks: list) -> dict:
         data["wall_seconds"] = wall
         runs.append(data)
     res = {"total_seconds": statistics.median(r["total_seconds"] for r in runs),
-           "wall_seconds": statistics.median(r["wall_seconds"] for r in runs), "repetitions": reps}
+           "wall_seconds": statistics.median(r["wall_seconds"] for r in runs), "repetitions": reps,
+           "n_models": len(runs[0]["models"])}
     for name in runs[0]["models"]:
         manifest = json.loads((out / name / "manifest.json").read_text())
         fn_ops = {q: f["operations"] for q, f in manifest["functions"].items()}
