@@ -180,7 +180,7 @@ def _build_inverse(model, p_const=None):
 
 
 def _build_nominal_fn(model, p_nom: np.ndarray, c_last: np.ndarray, beta_hat):
-    """CasADi Function ``(x, y, p) -> [F0; vec G; alpha_hat; vec B]`` (see the module docstring)."""
+    """CasADi Function ``(x, y, p) -> [F0; vec G; alpha_hat; vec B; vec C J g]`` (see the module docstring)."""
     import casadi as ca
     n, nx, npar = int(model.n), int(model.nx), len(model.param_names)
     fns = model.functions
@@ -198,7 +198,8 @@ def _build_nominal_fn(model, p_nom: np.ndarray, c_last: np.ndarray, beta_hat):
     lin = float(c_last[0]) * y[n:2 * n] + float(c_last[1]) * y[2 * n:3 * n] + float(c_last[2]) * y[3 * n:]
     F0 = ca.mtimes(CJ, f + ca.mtimes(g, a_hat)) - lin
     G = ca.mtimes(ca.mtimes(CJ, g), B)
-    out = ca.vertcat(F0, ca.reshape(G, n * n, 1), a_hat, ca.reshape(B, n * n, 1))
+    CJg = ca.mtimes(CJ, g)
+    out = ca.vertcat(F0, ca.reshape(G, n * n, 1), a_hat, ca.reshape(B, n * n, 1), ca.reshape(CJg, n * n, 1))
     return ca.Function("tune_nominal", [x, y, p], [out])
 
 
@@ -429,8 +430,10 @@ def _nominal_setup(model, nominal_params, param_box, reference_bounds, error_bou
 class _Analysis:
     """Grid of the box and the values ``F0``, ``G``, ``alpha_hat``, ``B`` on it (one model, one setting)."""
 
-    def __init__(self, model, p_nom, box, cc, Ybox, W, beta_hat, budget: int, seed: int, n_grid=None):
+    def __init__(self, model, p_nom, box, cc, Ybox, W, beta_hat, budget: int, seed: int, n_grid=None,
+                 D=None):
         self.model, self.n = model, int(model.n)
+        self.D = np.zeros(self.n) if D is None else np.asarray(D, dtype=float)
         self.p_nom, self.W, self.Ybox = p_nom, W, Ybox
         self.fn = _build_nominal_fn(model, p_nom, cc[-3:], beta_hat)
         self.ev = _Evaluator(model, self.fn, p_inverse=p_nom)
@@ -452,10 +455,18 @@ class _Analysis:
         V = self.ev(Y, P)
         self._unpack(V)
 
+    def split(self, V):
+        """``(|F0| + |C J g| D, G)`` from raw values: the drift bound including the matched disturbance."""
+        n = self.n
+        F0 = np.abs(V[:, :n])
+        if np.any(self.D > 0):
+            CJg = V[:, 2 * n + 2 * n * n:2 * n + 3 * n * n].reshape(-1, n, n, order="F")
+            F0 = F0 + np.abs(CJg) @ self.D
+        return F0, V[:, n:n + n * n].reshape(-1, n, n, order="F")
+
     def _unpack(self, V):
         n = self.n
-        self.F0 = V[:, :n]
-        self.G = V[:, n:n + n * n].reshape(-1, n, n, order="F")
+        self.F0, self.G = self.split(V)
         self.ah = V[:, n + n * n:2 * n + n * n]
         self.B = V[:, 2 * n + n * n:2 * n + 2 * n * n].reshape(-1, n, n, order="F")
 
@@ -473,9 +484,7 @@ class _Analysis:
     def phi_at(self, pts, k):
         Y, P = _assemble(self.dims, pts, self.n, self.p_nom)
         V = self.ev(Y, P)
-        n = self.n
-        F0 = V[:, :n]
-        G = V[:, n:n + n * n].reshape(-1, n, n, order="F")
+        F0, G = self.split(V)
         return self.phi(F0, G, self.W, k), V
 
     def margin(self, Phi: np.ndarray, kind: str = "curvature") -> np.ndarray:
@@ -577,16 +586,19 @@ def _witness(an: "_Analysis", pt: np.ndarray, i: int, k) -> dict:
     G = V[0, n:n + n * n].reshape(n, n, order="F")
     sgn = 1.0 if F0[i] >= 0 else -1.0
     w = sgn * np.sign(G[i] - np.eye(n)[i]) * an.W
-    params = {d.name: float(pt[j]) for j, d in enumerate(an.dims) if d.kind == "p"}
+    CJg = V[0, 2 * n + 2 * n * n:2 * n + 3 * n * n].reshape(n, n, order="F")
+    d = sgn * np.sign(CJg[i]) * an.D
+    params = {d_.name: float(pt[j]) for j, d_ in enumerate(an.dims) if d_.kind == "p"}
     return {"joint": i + 1, "y_hat": Y[0].reshape(4, n).tolist(), "params": params,
-            "w": w.tolist(), "sign_s": sgn, "F0": float(F0[i]), "G_row": G[i].tolist()}
+            "w": w.tolist(), "sign_s": sgn, "F0": float(F0[i]), "G_row": G[i].tolist(),
+            "disturbance": d.tolist()}
 
 
 def synthesize_gains(model, nominal_params=None, *, param_box=None, reference_bounds, error_bounds,
                      lam: Optional[float] = None, c=None, integral: bool = False, beta_hat=None,
                      eta=10.0, u_max=None, delta=None, layer_rate: float = 200.0,
                      include_margin: bool = True, budget: int = 60000, n_grid: Optional[int] = None,
-                     seed: int = 0, raise_infeasible: bool = False) -> TuneResult:
+                     seed: int = 0, raise_infeasible: bool = False, disturbance_bound=0.0) -> TuneResult:
     """Per-joint switching gains for the law that is run (nominal coordinates), with a certificate.
 
     Parameters
@@ -621,6 +633,10 @@ def synthesize_gains(model, nominal_params=None, *, param_box=None, reference_bo
         Points per nonlinear coordinate (overrides ``budget``).
     raise_infeasible : bool
         Raise :class:`InfeasibleGainError` instead of returning ``feasible=False``.
+    disturbance_bound : float or array_like, shape (n,)
+        ``D_j >= |d_j|`` of a matched motor torque disturbance (plant ``x' = f + g (u + d)``,
+        e.g. Coulomb friction, :mod:`fjm_runtime.disturbance`), N m; adds
+        ``sum_j |(C J g)_ij| D_j`` to the drift bound.
 
     Returns
     -------
@@ -635,7 +651,10 @@ def synthesize_gains(model, nominal_params=None, *, param_box=None, reference_bo
     umax = None if u_max is None else np.broadcast_to(np.asarray(u_max, dtype=float), (n,)).copy()
     if umax is not None and (not np.all(np.isfinite(umax)) or np.any(umax <= 0)):
         raise ValueError(f"u_max = {umax.tolist()}: expected finite values > 0 (N m)")
-    an = _Analysis(model, p_nom, box, cc, Ybox, W, bh, budget, seed, n_grid)
+    D = np.broadcast_to(np.asarray(disturbance_bound, dtype=float), (n,)).copy()
+    if not np.all(np.isfinite(D)) or np.any(D < 0):
+        raise ValueError(f"disturbance_bound = {D.tolist()}: expected finite values >= 0 (N m)")
+    an = _Analysis(model, p_nom, box, cc, Ybox, W, bh, budget, seed, n_grid, D)
     F0, G = an.F0, an.G
     k, reason = _solve_gain(F0, G, W, eta)
     margin = np.zeros(n)
@@ -647,7 +666,7 @@ def synthesize_gains(model, nominal_params=None, *, param_box=None, reference_bo
             pts, _ = an.refine(Phi, k)
             extra_pts = np.vstack([extra_pts, pts])
             _, V = an.phi_at(extra_pts, k)
-            F0x = V[:, :n]; Gx = V[:, n:n + n * n].reshape(-1, n, n, order="F")
+            F0x, Gx = an.split(V)
             eta_eff = eta + (margin if include_margin else 0.0)
             k_new, reason = _solve_gain(np.vstack([F0, F0x]), np.vstack([G, Gx]), W, eta_eff)
             if reason:
@@ -656,7 +675,7 @@ def synthesize_gains(model, nominal_params=None, *, param_box=None, reference_bo
             k = k_new
             if done:
                 break
-    allF0 = np.vstack([F0, an.phi_at(extra_pts, np.zeros(n))[1][:, :n]]) if len(extra_pts) else F0
+    allF0 = np.vstack([F0, an.split(an.phi_at(extra_pts, np.zeros(n))[1])[0]]) if len(extra_pts) else F0
     sup_F = np.max(np.abs(allF0), axis=0) + np.max(np.abs(G - np.eye(n)), axis=0) @ W
     all_pts = np.vstack([an.pts, extra_pts]) if len(extra_pts) else an.pts
     if reason:
@@ -684,7 +703,7 @@ def synthesize_gains(model, nominal_params=None, *, param_box=None, reference_bo
     settings = {"nominal_params": dict(zip(model.param_names, p_nom.tolist())), "param_box": box,
                 "reference_bounds": R.tolist(), "error_bounds": E.tolist(), "integral": bool(integral),
                 "beta_hat": "beta(x; p_nom)" if bh is None else bh.tolist(), "include_margin": include_margin,
-                "layer_rate": layer_rate}
+                "layer_rate": layer_rate, "disturbance_bound": D.tolist()}
     result = TuneResult(model=model.name, feasible=not reason, reason=reason, k_s=k, delta=dl, eta=eta,
                         certificate=cert, certificate_grid_bound=grid_bound, margin=margin, witness=witness,
                         sup_F=sup_F, u_bound=u_bound, u_max=umax, W=W, y_box=Ybox, c=cc, grid=grid,
@@ -696,7 +715,7 @@ def synthesize_gains(model, nominal_params=None, *, param_box=None, reference_bo
 
 def certificate(model, k_s, nominal_params=None, *, param_box=None, reference_bounds, error_bounds,
                 lam: Optional[float] = None, c=None, integral: bool = False, beta_hat=None,
-                budget: int = 60000, n_grid: Optional[int] = None, seed: int = 0) -> dict:
+                budget: int = 60000, n_grid: Optional[int] = None, seed: int = 0, disturbance_bound=0.0) -> dict:
     """Worst ``sgn(s_i) s_i'`` bound on the box for a GIVEN gain (e.g. a hand-picked or Lemma 1 gain).
 
     Same box and method as :func:`synthesize_gains`. Returns a dict with
@@ -709,7 +728,8 @@ def certificate(model, k_s, nominal_params=None, *, param_box=None, reference_bo
     k = np.broadcast_to(np.asarray(k_s, dtype=float), (n,)).copy()
     if not np.all(np.isfinite(k)) or np.any(k < 0):
         raise ValueError(f"k_s = {k.tolist()}: expected finite values >= 0")
-    an = _Analysis(model, p_nom, box, cc, Ybox, W, bh, budget, seed, n_grid)
+    D = np.broadcast_to(np.asarray(disturbance_bound, dtype=float), (n,)).copy()
+    an = _Analysis(model, p_nom, box, cc, Ybox, W, bh, budget, seed, n_grid, D)
     Phi = an.phi(an.F0, an.G, W, k)
     margin = an.margin(Phi)
     pts, ph = an.refine(Phi, k)
@@ -857,7 +877,8 @@ def _stiffness_names(model) -> List[str]:
 def synthesize_adaptive_gains(model, nominal_params=None, *, K_bounds, param_box=None, reference_bounds,
                               error_bounds, lam=None, c=None, integral: bool = True, n_estimates: int = 3,
                               eta=10.0, u_max=None, layer_rate: float = 200.0, budget: int = 60000,
-                              n_grid: Optional[int] = None, n_gamma: int = 20000, seed: int = 0) -> AdaptiveTuneResult:
+                              n_grid: Optional[int] = None, n_gamma: int = 20000, seed: int = 0,
+                              disturbance_bound=0.0) -> AdaptiveTuneResult:
     """Gains for the adaptive-stiffness law: frozen-estimate synthesis plus the ``K_hat'`` term.
 
     The adaptive law runs the same sliding-mode law with ``p_hat`` (``K`` replaced
@@ -905,7 +926,8 @@ def synthesize_adaptive_gains(model, nominal_params=None, *, K_bounds, param_box
         nom.update(dict(zip(kn, combo)))
         r = synthesize_gains(model, nom, param_box=box, reference_bounds=reference_bounds,
                              error_bounds=error_bounds, lam=lam, c=c, integral=integral, eta=eta, u_max=u_max,
-                             layer_rate=layer_rate, budget=budget, n_grid=n_grid, seed=seed)
+                             layer_rate=layer_rate, budget=budget, n_grid=n_grid, seed=seed,
+                             disturbance_bound=disturbance_bound)
         per.append(({k: float(v) for k, v in zip(kn, combo)}, r))
         if not r.feasible and not reason:
             reason = f"K_hat = {dict(zip(kn, combo))}: {r.reason}"

@@ -269,3 +269,47 @@ def test_cli_tune_infeasible_exit_status(capsys):
     cap = capsys.readouterr()
     assert json.loads(cap.out)["feasible"] is False
     assert "u_max" in cap.err
+
+
+# -- matched disturbances --------------------------------------------------------------------------
+def test_disturbance_raises_gain_by_bound_over_beta_hat(link1):
+    """link1: C J g = K_nom / (J_l J_m) and G = (C J g) beta_hat, so the gain grows by exactly D / beta_hat."""
+    kw = _link1_kwargs(REG, 8.0)
+    r0 = synthesize_gains(link1, {"K": K_NOM}, **kw)
+    r1 = synthesize_gains(link1, {"K": K_NOM}, disturbance_bound=2.0, **kw)
+    assert (r1.k_s[0] - r0.k_s[0]) == pytest.approx(2.0 / kw["beta_hat"], rel=1e-6)
+    assert certificate(link1, r0.k_s, {"K": K_NOM}, disturbance_bound=2.0, **kw)["certificate"][0] > 0
+    assert r1.certificate[0] <= -r1.eta[0] + 1e-9
+
+
+def test_disturbed_model_drift(link1):
+    from fjm_runtime.disturbance import with_motor_disturbance
+    plant = with_motor_disturbance(link1, coulomb=2.0, bias=0.5)
+    rng = np.random.default_rng(0)
+    for _ in range(5):
+        x = rng.uniform(-1, 1, 4)
+        expected = link1.f(x, {"K": 120.0}) + link1.g(x, {"K": 120.0}) @ np.array([-2.0 * np.sign(x[3]) + 0.5])
+        np.testing.assert_allclose(plant.f(x, {"K": 120.0}), expected, rtol=1e-12, atol=1e-12)
+    assert plant.bound[0] == pytest.approx(2.5)
+
+
+def test_link1_trajectory_reaching_with_coulomb_friction(link1):
+    """Plant with Coulomb friction 2 N m (sign) on the motor: the gain synthesized with D = 2 still reaches."""
+    from fjm_runtime.disturbance import with_motor_disturbance
+    ref, E = REG
+    kw = _link1_kwargs(REG, 8.0)
+    gain = synthesize_gains(link1, {"K": K_NOM}, disturbance_bound=2.0, **kw)
+    ctrl = make_controller("smc", link1, {"K": K_NOM}, lam=8.0, k_s=gain.k_s, delta=gain.delta,
+                           beta_hat=kw["beta_hat"])
+    x0 = link1_T_inverse(ref(0.0)[:4, 0] + 0.8 * np.asarray(E), {"K": K_NOM})
+    plant = with_motor_disturbance(link1, coulomb=2.0)
+    res = simulate(plant, ctrl, ref, duration=1.0, dt=1e-4, true_params={"K": 100.0}, x0=x0)
+    _trajectory_check(res, E, gain.eta[0], ctrl.c)
+
+
+def test_torque_disturbance_bound_is_enforced(link1):
+    from fjm_runtime.disturbance import TorqueDisturbance
+    ctrl = make_controller("smc", link1, {"K": K_NOM}, lam=8.0, k_s=100.0, delta=1.0)
+    wrapped = TorqueDisturbance(ctrl, lambda t: np.array([3.0 * np.sin(t)]), bound=1.0)
+    with pytest.raises(ValueError, match="exceeds the stated bound"):
+        simulate(link1, wrapped, Sinusoid(0.5, 1.0), duration=2.0, dt=1e-2)
