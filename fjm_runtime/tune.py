@@ -1021,6 +1021,9 @@ def add_parser(sub) -> None:
     tp.add_argument("--layer-rate", type=float, default=200.0,
                     help="boundary layer delta = k_s / rate (default 200)")
     tp.add_argument("--budget", type=int, default=60000, help="approximate grid size (default 60000)")
+    tp.add_argument("--disturbance-bound", type=float, default=0.0, metavar="D",
+                    help="bound of a matched motor torque disturbance (Coulomb friction level + any bounded "
+                         "torque), N m (default 0)")
     tp.add_argument("--no-margin", action="store_true",
                     help="do not make the grid's curvature margin part of the condition")
 
@@ -1077,7 +1080,7 @@ def run(args) -> int:
     res = synthesize_gains(m, nominal, param_box=box, reference_bounds=R, error_bounds=E, lam=args.lam,
                            integral=(args.controller == "ismc"), beta_hat=beta_hat, eta=args.eta,
                            u_max=args.u_max, layer_rate=args.layer_rate, include_margin=not args.no_margin,
-                           budget=args.budget)
+                           budget=args.budget, disturbance_bound=args.disturbance_bound)
     c = res.c
     Ea = np.asarray(res.settings["error_bounds"])
     s0 = (c[1:] @ Ea[:3] + Ea[3]) if c.size == 4 else (c @ Ea[:3] + Ea[3])   # sup |s| on the error box
