@@ -25,7 +25,7 @@ import fjm_runtime
 from fjm_runtime.model import QUANTITIES
 
 REPO = Path(__file__).resolve().parent.parent
-MODELS = ("link1", "planar1", "planar2", "planar3", "planar4", "planar5", "planar6", "planar7")
+MODELS = ("link1", "planar1", "planar2", "planar3", "planar4", "planar5", "planar6", "planar7", "elbow3", "panda")
 SOURCES = ("pyproject.toml", "README.md", "LICENSE", "derive", "fjm_runtime", "generated")
 
 
