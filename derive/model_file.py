@@ -625,7 +625,7 @@ def load_model_file(path: Path_, builtin: bool = False):
 # --------------------------------------------------------------------------------------------
 
 REPO = Path(__file__).resolve().parent.parent
-_URDF_MODEL_KEYS = ("name", "urdf", "base", "tip", "description")
+_URDF_MODEL_KEYS = ("name", "urdf", "base", "tip", "description", "symbolic")
 _URDF_TOP = ("model", "joints", "parameters", "payload", "notes")
 #: Elastic parameters per joint: key -> (SI unit, bound kind, meaning, default or None = required).
 _ELASTIC: Dict[str, Tuple[str, str, str, Optional[float]]] = {
@@ -670,10 +670,11 @@ class UrdfModelSpec:
     notes: Dict[str, str] = field(default_factory=dict)
     source: str = "<model file>"
     payload: Optional[Tuple[float, Tuple[float, float, float]]] = None  # (mass, com in the tip frame)
+    symbolic: Tuple[str, ...] = ()  # links whose inertials are runtime parameters
 
     def build(self) -> FlexibleJointModel:
         """The symbolic model (:func:`derive.spatial.make_spatial` of the URDF chain)."""
-        from .spatial import elastic_params, make_spatial, payload_params
+        from .spatial import elastic_params, inertial_params, make_spatial, payload_params
         from .urdf import load_urdf
 
         chain = load_urdf(self.urdf, self.base, self.tip, source=_repo_relative(self.urdf))
@@ -682,11 +683,12 @@ class UrdfModelSpec:
                                 {k: f"; {v}" for k, v in self.notes.items()})
         if self.payload is not None:
             params = params + payload_params(self.payload[0], self.payload[1], self.tip)
+        params = params + inertial_params(chain.description, self.symbolic)
         description = self.description or (
             f"Spatial serial chain of {n} revolute joints from the URDF {_repo_relative(self.urdf)} "
             f"(robot {chain.robot}, {self.base} -> {self.tip}), flexible joints, gravity g0 along -z "
             f"of {self.base}.")
-        model = make_spatial(chain.description, self.name, params, description)
+        model = make_spatial(chain.description, self.name, params, description, symbolic=self.symbolic)
         src = {"urdf": _repo_relative(self.urdf), "sha256": chain.sha256, "base": self.base,
                "tip": self.tip, "joints": list(chain.joints)}
         if chain.ignored:
@@ -768,6 +770,19 @@ def _parse_urdf_form(data: dict, chk: "_Checker", base_dir: Path, builtin: bool)
         raise chk.fail(("model", "urdf"), f"cannot use the URDF: {exc}") from None
     names = chain.joints
 
+    symbolic = model.get("symbolic", [])
+    if not isinstance(symbolic, list) or not all(isinstance(v, str) for v in symbolic):
+        raise chk.fail(("model", "symbolic"), f"expected an array of link names, {_got(symbolic)}")
+    for link in symbolic:
+        if not re.fullmatch(r"[A-Za-z0-9_]+", link) or symbolic.count(link) > 1:
+            raise chk.fail(("model", "symbolic"), f"{_show(link)}: expected distinct link names of letters, "
+                                                  "digits and _ (they become parameter names m_<link>, ...)")
+    try:
+        from .spatial import chain_numerics
+        chain_numerics(chain.description, tuple(symbolic))
+    except ValueError as exc:
+        raise chk.fail(("model", "symbolic"), str(exc)) from None
+
     joints = data.get("joints", {})
     if not isinstance(joints, dict):
         raise chk.fail(("joints",), f"expected tables [joints.default] and [joints.<URDF joint name>], {_got(joints)}")
@@ -834,4 +849,4 @@ def _parse_urdf_form(data: dict, chk: "_Checker", base_dir: Path, builtin: bool)
     return UrdfModelSpec(name=model["name"], urdf=urdf, base=model["base"], tip=model["tip"], joints=names,
                          K=tuple(per["K"]), Jm=tuple(per["Jm"]), Bm=tuple(per["Bm"]), g0=g0,
                          description=model.get("description"), notes=dict(notes), source=chk.source,
-                         payload=payload)
+                         payload=payload, symbolic=tuple(symbolic))

@@ -51,7 +51,7 @@ from .program import Program
 
 __all__ = ["Inertial", "Joint", "Attached", "ChainDescription", "BodyNumerics", "ChainNumerics",
            "rpy_matrix", "chain_numerics", "planar_description",
-           "payload_params", "PAYLOAD", "make_spatial", "elastic_params", "SNAP"]
+           "payload_params", "PAYLOAD", "inertial_params", "INERTIAL_FIELDS", "make_spatial", "elastic_params", "SNAP"]
 
 Vec3 = Tuple[float, float, float]
 
@@ -237,6 +237,8 @@ class ChainNumerics:
     #: Pose of the tip link frame in the last body frame: rotation (3, 3) and origin (3,).
     tip_R: np.ndarray = field(default_factory=lambda: np.eye(3))
     tip_p: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    #: Links with symbolic inertials: (link, body index 1..n, R, p of the link frame in the body frame, Inertial).
+    symbolic: Tuple[tuple, ...] = ()
 
 
 def _inertia_matrix(i6: Sequence[float]) -> np.ndarray:
@@ -244,12 +246,16 @@ def _inertia_matrix(i6: Sequence[float]) -> np.ndarray:
     return np.array([[ixx, ixy, ixz], [ixy, iyy, iyz], [ixz, iyz, izz]])
 
 
-def chain_numerics(desc: ChainDescription) -> ChainNumerics:
+def chain_numerics(desc: ChainDescription, symbolic: Sequence[str] = ()) -> ChainNumerics:
     """Merge fixed joints and attached links; align body frames with the joint axes.
 
     Parameters
     ----------
     desc : ChainDescription
+    symbolic : sequence of str
+        Links whose inertial is left out of the numeric sums (it becomes
+        runtime parameters, see :func:`make_spatial`); their poses are in
+        :attr:`ChainNumerics.symbolic`.
 
     Returns
     -------
@@ -265,7 +271,7 @@ def chain_numerics(desc: ChainDescription) -> ChainNumerics:
     # Per path link: (body index, R, p) = pose of the link frame in B_body (body 0 = base).
     pose: Dict[str, Tuple[int, np.ndarray, np.ndarray]] = {desc.base: (0, np.eye(3), np.zeros(3))}
     bodies: List[dict] = []
-    pieces: List[Tuple[int, np.ndarray, np.ndarray, Optional[Inertial]]] = []
+    pieces: List[Tuple[int, np.ndarray, np.ndarray, Optional[Inertial], str]] = []
     parent = desc.base
     for j in desc.joints:
         k, R, p = pose[parent]
@@ -279,7 +285,7 @@ def chain_numerics(desc: ChainDescription) -> ChainNumerics:
         else:
             raise ValueError(f"joint {j.name!r}: kind {j.kind!r}; expected 'revolute' or 'fixed'")
         pose[j.child] = (k, R, p)
-        pieces.append((k, R, p, j.inertial))
+        pieces.append((k, R, p, j.inertial, j.child))
         parent = j.child
     if not bodies:
         raise ValueError("the chain has no revolute joint")
@@ -289,12 +295,19 @@ def chain_numerics(desc: ChainDescription) -> ChainNumerics:
         k, R, p = pose[a.parent]
         for xyz, rpy in a.origins:
             R, p = _snap(R @ rpy_matrix(rpy)), p + R @ np.asarray(xyz, float)
-        pieces.append((k, R, p, a.inertial))
+        pieces.append((k, R, p, a.inertial, a.name))
 
     mass = [0.0] * (len(bodies) + 1)
     first = [np.zeros(3) for _ in range(len(bodies) + 1)]
     inert = [np.zeros((3, 3)) for _ in range(len(bodies) + 1)]
-    for k, R, p, inertial in pieces:
+    sym_pieces = {}
+    for k, R, p, inertial, link in pieces:
+        if link in symbolic:
+            if k == 0 or inertial is None:
+                raise ValueError(f"symbolic inertial of link {link!r}: expected a moving link with an <inertial> "
+                                 "(on the chain or fixed to it)")
+            sym_pieces[link] = (k, R, p, inertial)
+            continue
         if inertial is None or inertial.mass == 0:
             continue
         Rc = _snap(R @ rpy_matrix(inertial.rpy))
@@ -307,9 +320,14 @@ def chain_numerics(desc: ChainDescription) -> ChainNumerics:
     out = tuple(BodyNumerics(R0=b["R0"], p=b["p"], mass=mass[i + 1], first_moment=first[i + 1],
                              inertia_origin=(inert[i + 1] + inert[i + 1].T) / 2)
                 for i, b in enumerate(bodies))
+    missing = [k for k in symbolic if k not in sym_pieces]
+    if missing:
+        raise ValueError(f"symbolic inertial of link(s) {missing}: not a link of the chain "
+                         f"(expected among {[pc[4] for pc in pieces if pc[0] > 0 and pc[3] is not None]})")
     tip_k, tip_R, tip_p = pose[parent]
     assert tip_k == len(bodies)
-    return ChainNumerics(joint_names=desc.revolute_names, bodies=out, tip_R=tip_R, tip_p=tip_p)
+    return ChainNumerics(joint_names=desc.revolute_names, bodies=out, tip_R=tip_R, tip_p=tip_p,
+                         symbolic=tuple((link, *sym_pieces[link]) for link in symbolic))
 
 
 def planar_description(n: int, m: Sequence[float], l: Sequence[float], r: Sequence[float],
@@ -372,6 +390,36 @@ def payload_params(mass: float, com: Sequence[float], tip: str) -> Tuple[Param, 
               for a, v in zip("xyz", com)))
 
 
+#: Inertial parameters of a link listed in ``symbolic`` (suffix ``_<link>``).
+INERTIAL_FIELDS: Tuple[Tuple[str, str, str], ...] = (
+    ("m", "mass of link {l}", "kg"),
+    ("cx", "centre of mass of link {l}, x in the link frame", "m"),
+    ("cy", "centre of mass of link {l}, y in the link frame", "m"),
+    ("cz", "centre of mass of link {l}, z in the link frame", "m"),
+    ("ixx", "inertia of link {l} about its centre of mass, xx (URDF inertial frame)", "kg m^2"),
+    ("ixy", "inertia of link {l} about its centre of mass, xy (URDF inertial frame)", "kg m^2"),
+    ("ixz", "inertia of link {l} about its centre of mass, xz (URDF inertial frame)", "kg m^2"),
+    ("iyy", "inertia of link {l} about its centre of mass, yy (URDF inertial frame)", "kg m^2"),
+    ("iyz", "inertia of link {l} about its centre of mass, yz (URDF inertial frame)", "kg m^2"),
+    ("izz", "inertia of link {l} about its centre of mass, zz (URDF inertial frame)", "kg m^2"),
+)
+
+
+def inertial_params(desc: ChainDescription, links: Sequence[str]) -> Tuple[Param, ...]:
+    """Parameters ``m_<link>, cx_<link>, ..., izz_<link>`` with the URDF values as defaults.
+
+    The inertial frame's orientation (``rpy``) stays baked; the centre of mass
+    is in the link frame, the tensor in the inertial frame (URDF conventions).
+    """
+    num = chain_numerics(desc, links)
+    out = []
+    for link, _, _, _, inertial in num.symbolic:
+        values = (inertial.mass, *inertial.xyz, *inertial.inertia)
+        out += [Param(f"{f}_{link}", float(v), meaning.format(l=link), unit)
+                for (f, meaning, unit), v in zip(INERTIAL_FIELDS, values)]
+    return tuple(out)
+
+
 def elastic_params(n: int, K: Sequence[float], Jm: Sequence[float], Bm: Sequence[float],
                    g0: float = 9.81, joint_names: Sequence[str] = None,
                    sources: Dict[str, str] = None) -> Tuple[Param, ...]:
@@ -420,7 +468,7 @@ def _matTvec(M, v):
 
 
 def make_spatial(desc: ChainDescription, name: str, params: Tuple[Param, ...],
-                 description: str) -> FlexibleJointModel:
+                 description: str, symbolic: Sequence[str] = ()) -> FlexibleJointModel:
     """Flexible-joint model of a spatial serial chain of revolute joints.
 
     Parameters
@@ -430,9 +478,13 @@ def make_spatial(desc: ChainDescription, name: str, params: Tuple[Param, ...],
     name : str
         Model name (a C identifier).
     params : tuple of Param
-        ``K1..Kn, Jm1..Jmn, Bm1..Bmn, g0`` (see :func:`elastic_params`).
+        ``K1..Kn, Jm1..Jmn, Bm1..Bmn, g0`` (see :func:`elastic_params`),
+        optionally followed by the payload (:func:`payload_params`), then by
+        the inertial parameters of the ``symbolic`` links (:func:`inertial_params`).
     description : str
         One paragraph for the report and manifest.
+    symbolic : sequence of str
+        Links whose inertials are runtime parameters instead of baked numbers.
 
     Returns
     -------
@@ -440,13 +492,15 @@ def make_spatial(desc: ChainDescription, name: str, params: Tuple[Param, ...],
         ``D`` (n, n), ``h`` (n, 1) and the potential as symbols of its
         :class:`Program` (see the module docstring for the algorithms).
     """
-    num = chain_numerics(desc)
+    num = chain_numerics(desc, symbolic)
     n = len(num.bodies)
     expected = [f"{g}{i}" for g in ("K", "Jm", "Bm") for i in range(1, n + 1)] + ["g0"]
-    payload = [p.name for p in params] == expected + list(PAYLOAD)
-    if [p.name for p in params] != expected and not payload:
-        raise ValueError(f"{name}: parameters must be {expected} (optionally followed by {list(PAYLOAD)}), "
-                         f"got {[p.name for p in params]}")
+    inertial_names = [f"{f}_{link}" for link in symbolic for f, _, _ in INERTIAL_FIELDS]
+    names = [p.name for p in params]
+    payload = names[len(expected):len(expected) + len(PAYLOAD)] == list(PAYLOAD)
+    if names != expected + (list(PAYLOAD) if payload else []) + inertial_names:
+        raise ValueError(f"{name}: parameters must be {expected} (optionally followed by {list(PAYLOAD)}) "
+                         f"and then {inertial_names}, got {names}")
     sym = {p.name: sp.Symbol(p.name, real=True) for p in params}
     g0 = sym["g0"]
     q, dq, qm, dqm = _state_symbols(n)
@@ -482,6 +536,25 @@ def make_spatial(desc: ChainDescription, name: str, params: Tuple[Param, ...],
     mass = [_num(b.mass) for b in num.bodies]
     hmom = [[_num(v) for v in b.first_moment] for b in num.bodies]
     Io = [[[_num(b.inertia_origin[r, k]) for k in range(3)] for r in range(3)] for b in num.bodies]
+    for link, k, Rl, pl, inertial in num.symbolic:  # inertials as parameters join their body
+        ms = sym[f"m_{link}"]
+        cl = [sym[f"c{a}_{link}"] for a in "xyz"]
+        c = [d(f"cB_{link}_{'xyz'[r]}", sp.Add(*[_num(Rl[r, j]) * cl[j] for j in range(3)]) + _num(pl[r]))
+             for r in range(3)]
+        Rc = _snap(Rl @ rpy_matrix(inertial.rpy))
+        i6 = [sym[f"i{a}_{link}"] for a in ("xx", "xy", "xz", "yy", "yz", "zz")]
+        Ic = [[i6[0], i6[1], i6[2]], [i6[1], i6[3], i6[4]], [i6[2], i6[4], i6[5]]]
+        RIc = [[sp.Add(*[_num(Rc[r, a]) * Ic[a][b] * _num(Rc[j, b]) for a in range(3) for b in range(3)])
+                for j in range(3)] for r in range(3)]
+        b = k - 1
+        mass[b] = d(f"mb_{link}", mass[b] + ms)
+        hmom[b] = [d(f"hb_{link}_{'xyz'[r]}", hmom[b][r] + ms * c[r]) for r in range(3)]
+        cc = c[0] ** 2 + c[1] ** 2 + c[2] ** 2
+        Io[b] = [[d(f"Iob_{link}_{r + 1}{j + 1}", Io[b][r][j] + RIc[r][j] + ms * ((cc if r == j else 0) - c[r] * c[j]))
+                  if j >= r else None for j in range(3)] for r in range(3)]
+        for r in range(3):
+            for j in range(r):
+                Io[b][r][j] = Io[b][j][r]
     if payload:  # a point mass m_load at c_load (tip link frame) joins the last body
         mp = sym["m_load"]
         c = [sp.Add(*[_num(num.tip_R[r, k]) * sym[f"{'xyz'[k]}_load"] for k in range(3)]) + _num(num.tip_p[r])

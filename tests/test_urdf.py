@@ -311,3 +311,56 @@ def test_example_urdf_model_file_derives(tmp_path):
     x = np.linspace(-0.5, 0.7, 12)
     # same URDF, same inertials: D equal; only K/Jm defaults differ
     np.testing.assert_allclose(m.inertia(x, None), ref.inertia(x, None), rtol=1e-14, atol=1e-14)
+
+
+def test_symbolic_inertials_equal_a_urdf_with_those_numbers(tmp_path):
+    """`symbolic = ["l2", "tool"]`: the inertials become parameters m_l2, cx_l2, ..., izz_tool
+    (URDF values as defaults); at other values the model equals the baked model of a URDF
+    carrying those values."""
+    from derive.emit.functions import build_functions
+    from derive.linearize import linearize
+    tool = '<inertial><origin xyz="0.01 0 0.02" rpy="0.3 0.1 0"/><mass value="0.2"/>' \
+           '<inertia ixx="0.001" ixy="0" ixz="0" iyy="0.002" iyz="0" izz="0.0015"/></inertial>'
+    base_text = arm().replace('<link name="tool"/>', f'<link name="tool">{tool}</link>')
+    write(tmp_path, base_text)
+    toml = TOML.replace('tip = "tool"', 'tip = "tool"\nsymbolic = ["l2", "tool"]')
+    spec = load_model_file(write(tmp_path, toml, "two.toml"))
+    m = spec.build()
+    names = m.param_names
+    assert names[:7] == ("K1", "K2", "Jm1", "Jm2", "Bm1", "Bm2", "g0")
+    assert names[7:10] == ("m_l2", "cx_l2", "cy_l2") and names[-1] == "izz_tool" and len(names) == 27
+    defaults = dict(zip(names, (p.default for p in m.params)))
+    assert defaults["m_l2"] == 1.0 and defaults["cz_l2"] == 0.1 and defaults["iyy_tool"] == 0.002
+    sym_fs = build_functions(linearize(m))
+    new = {"m_l2": 1.7, "cx_l2": 0.02, "cy_l2": -0.03, "cz_l2": 0.15, "ixx_l2": 0.03, "ixy_l2": 0.001,
+           "ixz_l2": -0.002, "iyy_l2": 0.02, "iyz_l2": 0.0005, "izz_l2": 0.015,
+           "m_tool": 0.4, "cx_tool": 0.0, "cy_tool": 0.05, "cz_tool": 0.03, "ixx_tool": 0.002,
+           "ixy_tool": 0.0001, "ixz_tool": 0.0, "iyy_tool": 0.003, "iyz_tool": 0.0, "izz_tool": 0.0025}
+    baked_text = arm(mass2="1.7").replace(
+        '<inertia ixx="0.01" ixy="0" ixz="0" iyy="0.01" iyz="0" izz="0.01"/></inertial>\n  </link>\n  <link name="tool"/>',
+        '<inertia ixx="0.03" ixy="0.001" ixz="-0.002" iyy="0.02" iyz="0.0005" izz="0.015"/></inertial>\n  </link>\n'
+        '  <link name="tool"><inertial><origin xyz="0.0 0.05 0.03" rpy="0.3 0.1 0"/><mass value="0.4"/>'
+        '<inertia ixx="0.002" ixy="0.0001" ixz="0" iyy="0.003" iyz="0" izz="0.0025"/></inertial></link>')
+    baked_text = baked_text.replace('<origin xyz="0 0 0.1"/><mass value="1.7"/>',
+                                    '<origin xyz="0.02 -0.03 0.15"/><mass value="1.7"/>')
+    assert baked_text.count("0.02 -0.03 0.15") == 1 and 'izz="0.0025"' in baked_text
+    (tmp_path / "baked").mkdir()
+    write(tmp_path / "baked", baked_text)
+    baked = load_model_file(write(tmp_path / "baked", TOML, "two.toml")).build()
+    baked_fs = build_functions(linearize(baked))
+    p_sym = np.array([defaults[k] for k in names[:7]] + [new[k] for k in names[7:]])
+    p_baked = np.array([defaults[k] for k in names[:7]])
+    rng = np.random.default_rng(5)
+    for _ in range(5):
+        x = rng.uniform(-2, 2, 8)
+        for q in ("inertia", "f", "alpha", "energy", "ad"):
+            a, b = np.array(sym_fs[q](x, p_sym)), np.array(baked_fs[q](x, p_baked))
+            assert np.max(np.abs(a - b)) <= 1e-12 * max(1.0, np.max(np.abs(b))), q
+
+
+def test_symbolic_inertial_of_an_unknown_link(tmp_path):
+    write(tmp_path, arm())
+    path = write(tmp_path, TOML.replace('tip = "tool"', 'tip = "tool"\nsymbolic = ["l7"]'), "two.toml")
+    with pytest.raises(ModelFileError, match=r"model.symbolic: symbolic inertial of link\(s\) \['l7'\]: "
+                                             r"not a link of the chain \(expected among \['l1', 'l2'\]\)"):
+        load_model_file(path)
