@@ -339,7 +339,7 @@ def bench_closed_loop(work: Path, reps: int, slow_reps: int, checks: list) -> di
 # -- batch ------------------------------------------------------------------------------------
 def bench_batch(reps: int, slow_reps: int, checks: list, n_runs: int = 1000) -> dict:
     import warnings
-    from fjm_runtime.batch import METRIC_NAMES, _vector_isa, simulate_batch
+    from fjm_runtime.batch import METRIC_NAMES, SimdFallbackWarning, _vector_isa, simulate_batch
     from .closed_loop import link1_case, numpy_batch
     case = link1_case()
     Ks = np.random.default_rng(0).uniform(100.0, 200.0, n_runs)
@@ -348,7 +348,7 @@ def bench_batch(reps: int, slow_reps: int, checks: list, n_runs: int = 1000) -> 
 
     def run(threads=None, simd=True):
         with warnings.catch_warnings():
-            warnings.simplefilter("error")   # a SIMD fallback is an error here, not a footnote
+            warnings.simplefilter("error", SimdFallbackWarning)   # an error here, not a footnote
             return simulate_batch(case.model, case.controller, case.reference, P, duration=case.duration,
                                   dt=case.dt, x0=case.x0(), simd=simd, threads=threads)
 
