@@ -271,10 +271,11 @@ class _Dim:
     hi: float
     affine: bool = False
     points: int = 2
+    constant: bool = False
 
     def values(self) -> np.ndarray:
-        if self.lo == self.hi:
-            return np.array([self.lo])
+        if self.lo == self.hi or self.constant:
+            return np.array([0.5 * (self.lo + self.hi)])
         return np.array([self.lo, self.hi]) if self.affine else np.linspace(self.lo, self.hi, self.points)
 
 
@@ -302,8 +303,13 @@ def _assemble(dims: List[_Dim], pts: np.ndarray, n: int, p_nom: np.ndarray):
     return Y, P
 
 
-def _classify(dims, evaluate, n, p_nom, rng, n_test: int = 48, tol: float = 1e-7) -> None:
-    """Mark the coordinates along which ``F0`` and ``G`` are affine (numerical midpoint/third-point test)."""
+def _classify(dims, evaluate, n, p_nom, rng, n_test: int = 48, tol: float = 1e-7, relevant=None) -> None:
+    """Mark the coordinates along which the outputs are affine (numerical midpoint/third-point test).
+
+    ``relevant``: indices of the outputs that enter ``Phi``; a coordinate that none of
+    them depends on is marked ``constant`` (one grid point; the torque bound then
+    handles it separately).
+    """
     lo = np.array([d.lo for d in dims]); hi = np.array([d.hi for d in dims])
     base = lo + (hi - lo) * rng.random((n_test, len(dims)))
     for d, dim in enumerate(dims):
@@ -319,6 +325,11 @@ def _classify(dims, evaluate, n, p_nom, rng, n_test: int = 48, tol: float = 1e-7
         scale = 1.0 + np.max(np.abs(V))
         err = max(np.max(np.abs(m - 0.5 * (a + b))), np.max(np.abs(t - (2 * a + b) / 3.0)))
         dim.affine = bool(err <= tol * scale)
+        if relevant is not None:
+            ra, rb, rm = a[:, relevant], b[:, relevant], m[:, relevant]
+            rs = 1.0 + np.max(np.abs(V[:, :, relevant]))
+            dim.constant = bool(dim.affine and np.max(np.abs(rb - ra)) <= tol * rs and
+                                np.max(np.abs(rm - ra)) <= tol * rs)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -439,7 +450,9 @@ class _Analysis:
         self.ev = _Evaluator(model, self.fn, p_inverse=p_nom)
         self.rng = np.random.default_rng(seed)
         self.dims = _dims(model, Ybox, p_nom, box)
-        _classify(self.dims, self.ev, self.n, p_nom, self.rng)
+        n = self.n
+        relevant = np.r_[0:n + n * n, 2 * n + 2 * n * n:2 * n + 3 * n * n]      # F0, G, C J g
+        _classify(self.dims, self.ev, self.n, p_nom, self.rng, relevant=relevant)
         nl = [d for d in self.dims if not d.affine and d.lo < d.hi]
         n_vert = int(np.prod([len(d.values()) for d in self.dims if d.affine or d.lo == d.hi]))
         if n_grid is None:
@@ -469,6 +482,25 @@ class _Analysis:
         self.F0, self.G = self.split(V)
         self.ah = V[:, n + n * n:2 * n + n * n]
         self.B = V[:, 2 * n + n * n:2 * n + 2 * n * n].reshape(-1, n, n, order="F")
+
+    def u_bound(self, k, top: int = 200) -> np.ndarray:
+        """``sup |u_i| = |alpha_hat_i| + sum_j |B_ij| (W_j + k_j)`` on the grid; coordinates collapsed
+        as irrelevant for ``Phi`` (but affine) are put back at their vertices around the worst points."""
+        n = self.n
+        U = np.abs(self.ah) + np.abs(self.B) @ (self.W + k)
+        collapsed = [d for d, dim in enumerate(self.dims) if dim.constant and dim.lo < dim.hi]
+        best = np.max(U, axis=0)
+        if not collapsed:
+            return best
+        idx = np.unique(np.concatenate([np.argsort(-U[:, i])[:top] for i in range(n)]))
+        combos = np.array(list(product(*[(self.dims[d].lo, self.dims[d].hi) for d in collapsed])))
+        pts = np.repeat(self.pts[idx], len(combos), axis=0)
+        pts[:, collapsed] = np.tile(combos, (len(idx), 1))
+        Y, P = _assemble(self.dims, pts, n, self.p_nom)
+        V = self.ev(Y, P)
+        ah = V[:, n + n * n:2 * n + n * n]
+        B = V[:, 2 * n + n * n:2 * n + 2 * n * n].reshape(-1, n, n, order="F")
+        return np.maximum(best, np.max(np.abs(ah) + np.abs(B) @ (self.W + k), axis=0))
 
     # Phi on a set of values
     @staticmethod
@@ -688,8 +720,7 @@ def synthesize_gains(model, nominal_params=None, *, param_box=None, reference_bo
         cert = np.max(Phi_all, axis=0)
         grid_bound = np.max(Phi_grid, axis=0) + margin
         witness = [_witness(an, all_pts[int(np.argmax(Phi_all[:, i]))], i, k) for i in range(n)]
-        Bab = np.abs(an.B)
-        u_bound = np.max(np.abs(an.ah) + Bab @ (W + k), axis=0)
+        u_bound = an.u_bound(k)
     dl = (k / layer_rate) if delta is None else np.broadcast_to(np.asarray(delta, dtype=float), (n,)).copy()
     if not reason and umax is not None and np.any(u_bound > umax):
         i = int(np.argmax(u_bound / umax))
@@ -697,7 +728,8 @@ def synthesize_gains(model, nominal_params=None, *, param_box=None, reference_bo
                   f"|u| up to {u_bound[i]:.4g} N m on the box, above u_max = {umax[i]:.4g} N m: no admissible "
                   "gain within the actuator limit (shrink the box or lambda, or use the adaptive law)")
     grid = {"coordinates": [{"name": d.name, "lo": d.lo, "hi": d.hi,
-                             "treatment": "vertices (affine)" if d.affine else f"grid {d.points} + local max"}
+                             "treatment": "no effect (one point)" if d.constant else
+                             "vertices (affine)" if d.affine else f"grid {d.points} + local max"}
                             for d in an.dims],
             "grid_points": int(an.pts.shape[0]), "refined_points": int(extra_pts.shape[0])}
     settings = {"nominal_params": dict(zip(model.param_names, p_nom.tolist())), "param_box": box,
