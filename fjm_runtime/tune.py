@@ -43,11 +43,15 @@ so its supremum is at the end points: those coordinates are enumerated at their
 two vertices (the exact vertex argument; e.g. the stiffnesses, which enter ``f``
 linearly, and ``y4_hat``). The other coordinates (link angles, velocities, ...)
 are covered by a tensor grid, then L-BFGS-B local maximization from the worst
-grid points refines the supremum. The grid supremum plus a Lipschitz margin
-``sum_d L_d h_d / 2`` (``L_d`` the largest slope between grid neighbours, ``h_d``
-the spacing) is reported; with ``include_margin=True`` (default) the gain covers
-it. This is a NUMERICAL certificate on that grid, not a proof: the affinity
-tests and the slopes are sampled. Invariance of the error box is ASSUMED, not
+grid points refines the supremum. The grid supremum plus a curvature margin
+``sum_d M_d h_d^2 / 8`` (``M_d`` the largest negative curvature seen in the
+grid's second differences along coordinate ``d``, ``h_d`` the spacing: ``Phi``
+exceeds its multilinear interpolant by at most that when ``Phi'' >= -M_d``) is
+reported; with ``include_margin=True`` (default) the gain covers it.
+Coordinates on which ``F0`` and ``G`` do not depend at all get one grid point
+(the torque bound puts them back at their vertices). This is a NUMERICAL
+certificate on that grid, not a proof: the affinity tests and the curvatures
+are sampled. Invariance of the error box is ASSUMED, not
 proven: the reaching condition holds while the state is in the box; whether the
 state leaves the box (large initial errors, the reaching transient, peaking in
 the other joints) is not analysed.
@@ -355,9 +359,9 @@ class TuneResult:
         ``sup Phi_i`` found for ``k_s`` (grid + local refinement): the worst
         ``sgn(s_i) s_i'`` bound on the box; ``<= -eta_i`` when feasible.
     certificate_grid_bound : ndarray, shape (n,)
-        Grid supremum plus the Lipschitz margin.
+        Grid supremum plus the curvature margin.
     margin : ndarray, shape (n,)
-        The Lipschitz margin ``sum_d L_d h_d / 2``.
+        The curvature margin ``sum_d M_d h_d^2 / 8`` (see :meth:`_Analysis.margin`).
     witness : list of dict
         Per joint, where the certificate is attained: ``y_hat`` (4, n), the
         parameters that differ from nominal, the worst ``w`` and sign of ``s``.
@@ -658,7 +662,7 @@ def synthesize_gains(model, nominal_params=None, *, param_box=None, reference_bo
     delta : float or array_like, optional
         Boundary layer; default ``k_s / layer_rate``.
     include_margin : bool
-        Make the grid bound (grid supremum + Lipschitz margin) satisfy the condition too.
+        Make the grid bound (grid supremum + curvature margin) satisfy the condition too.
     budget : int
         Approximate number of grid points (sets the grid size of the nonlinear coordinates).
     n_grid : int, optional
@@ -752,7 +756,7 @@ def certificate(model, k_s, nominal_params=None, *, param_box=None, reference_bo
 
     Same box and method as :func:`synthesize_gains`. Returns a dict with
     ``certificate`` (n,) (grid + local refinement), ``grid_bound`` (n,) (grid
-    supremum + Lipschitz margin), ``margin`` (n,) and ``witness`` (list of dict).
+    supremum + curvature margin), ``margin`` (n,) and ``witness`` (list of dict).
     """
     n = int(model.n)
     p_nom, box, cc, R, E, Ybox, W, bh = _nominal_setup(model, nominal_params, param_box, reference_bounds,
