@@ -42,8 +42,10 @@ def as_vector(name: str, value, length: int) -> np.ndarray:
 
 
 # Parameter groups that must be strictly positive / non-negative (by name prefix).
-_POSITIVE = re.compile(r"^(J_l|J_m|K|M|L|m\d+|l\d+|r\d+|I\d+|K\d+|Jm\d+)$")
-_NON_NEGATIVE = re.compile(r"^(B_m|Bm\d+|g0)$")
+_POSITIVE = re.compile(r"^(J_l|J_m|K|M|L|m\d+|l\d+|r\d+|I\d+|K\d+|Jm\d+|m_(?!load$).+)$")
+_NON_NEGATIVE = re.compile(r"^(B_m|Bm\d+|g0|m_load)$")
+# Spatial models: inertia tensor of a link about its centre of mass (``symbolic = [...]``).
+_TENSOR = ("ixx", "ixy", "ixz", "iyy", "iyz", "izz")
 
 
 def check_physical(names: Tuple[str, ...], values: np.ndarray, arg: str = "p") -> None:
@@ -51,7 +53,10 @@ def check_physical(names: Tuple[str, ...], values: np.ndarray, arg: str = "p") -
 
     Masses, lengths, inertias, stiffnesses and motor inertias must be > 0;
     damping and gravity >= 0; a centre of mass must lie on its link
-    (``r_i <= l_i``).
+    (``r_i <= l_i``). Spatial models: a payload mass ``m_load`` >= 0 (its
+    position ``x_load, y_load, z_load`` any finite value), link masses
+    ``m_<link>`` > 0 and each link's tensor ``ixx_<link> .. izz_<link>``
+    positive definite (centres of mass ``cx_<link>..`` any finite value).
     """
     lookup = dict(zip(names, values))
     for name, v in lookup.items():
@@ -59,6 +64,17 @@ def check_physical(names: Tuple[str, ...], values: np.ndarray, arg: str = "p") -
             raise FjmValueError(f"{arg}[{name!r}] = {v}: expected > 0 (a physical {name} is positive)")
         if _NON_NEGATIVE.match(name) and not v >= 0:
             raise FjmValueError(f"{arg}[{name!r}] = {v}: expected >= 0")
+    for name in names:
+        if name.startswith("ixx_"):
+            link = name[4:]
+            keys = [f"{f}_{link}" for f in _TENSOR]
+            if all(k in lookup for k in keys):
+                xx, xy, xz, yy, yz, zz = (lookup[k] for k in keys)
+                tensor = np.array([[xx, xy, xz], [xy, yy, yz], [xz, yz, zz]], dtype=float)
+                if not np.all(np.linalg.eigvalsh(tensor) > 0):
+                    raise FjmValueError(
+                        f"{arg}[{', '.join(repr(k) for k in keys)}] = {[xx, xy, xz, yy, yz, zz]}: "
+                        f"expected a positive definite inertia tensor of link {link!r}")
     for name, v in lookup.items():
         if name.startswith("r") and name[1:].isdigit() and f"l{name[1:]}" in lookup:
             length = lookup[f"l{name[1:]}"]
