@@ -378,6 +378,9 @@ class TuneResult:
     grid : dict
         Coordinates, which were enumerated at vertices (affine) and grid sizes.
     settings : dict
+    margin_lipschitz : ndarray, shape (n,)
+        For comparison: the Lipschitz margin ``sum_d L_d h_d / 2`` of the same grid
+        (valid under weaker assumptions, much coarser on coarse grids; not used by the gain).
     """
 
     model: str
@@ -398,6 +401,7 @@ class TuneResult:
     c: np.ndarray
     grid: dict
     settings: dict = field(default_factory=dict)
+    margin_lipschitz: Optional[np.ndarray] = None
 
     def reaching_time_bound(self, s0) -> np.ndarray:
         """``(|s_i(0)| - delta_i)^+ / eta_i`` per joint (s), valid while the state stays in the box."""
@@ -715,7 +719,7 @@ def synthesize_gains(model, nominal_params=None, *, param_box=None, reference_bo
     sup_F = np.max(np.abs(allF0), axis=0) + np.max(np.abs(G - np.eye(n)), axis=0) @ W
     all_pts = np.vstack([an.pts, extra_pts]) if len(extra_pts) else an.pts
     if reason:
-        cert = np.full(n, np.nan); grid_bound = np.full(n, np.nan); witness = []
+        cert = np.full(n, np.nan); grid_bound = np.full(n, np.nan); witness = []; margin_lip = None
         u_bound = np.full(n, np.nan)
     else:
         Phi_all, V_all = an.phi_at(all_pts, k) if len(extra_pts) else (an.phi(F0, G, W, k), None)
@@ -723,6 +727,7 @@ def synthesize_gains(model, nominal_params=None, *, param_box=None, reference_bo
         margin = an.margin(Phi_grid)
         cert = np.max(Phi_all, axis=0)
         grid_bound = np.max(Phi_grid, axis=0) + margin
+        margin_lip = an.margin(Phi_grid, kind="lipschitz")
         witness = [_witness(an, all_pts[int(np.argmax(Phi_all[:, i]))], i, k) for i in range(n)]
         u_bound = an.u_bound(k)
     dl = (k / layer_rate) if delta is None else np.broadcast_to(np.asarray(delta, dtype=float), (n,)).copy()
@@ -743,7 +748,7 @@ def synthesize_gains(model, nominal_params=None, *, param_box=None, reference_bo
     result = TuneResult(model=model.name, feasible=not reason, reason=reason, k_s=k, delta=dl, eta=eta,
                         certificate=cert, certificate_grid_bound=grid_bound, margin=margin, witness=witness,
                         sup_F=sup_F, u_bound=u_bound, u_max=umax, W=W, y_box=Ybox, c=cc, grid=grid,
-                        settings=settings)
+                        settings=settings, margin_lipschitz=margin_lip)
     if reason and raise_infeasible:
         raise InfeasibleGainError(f"{model.name}: {reason}", result)
     return result
