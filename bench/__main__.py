@@ -175,6 +175,8 @@ def bench_derive(work: Path, reps: int, checks: list) -> dict:
         fn_ops = {q: f["operations"] for q, f in manifest["functions"].items()}
         res[name] = {
             "seconds": statistics.median(r["models"][name]["seconds"] for r in runs),
+            **{k: statistics.median(r["models"][name][k] for r in runs)
+               for k in ("derive_seconds", "emit_seconds") if all(k in r["models"][name] for r in runs)},
             "ops": runs[0]["models"][name]["operations"],
             "ops_by_function": fn_ops,
             "c_bytes": manifest["c_sources"][f"{name}.c"],
@@ -263,6 +265,66 @@ def bench_alpha_beta(work: Path, reps: int, checks: list, models=AB_MODELS) -> d
         res[name] = entry
         log(f"  {name}: generated {entry['generated_us']:.3f} us, peer ({best}) {entry['peer_us']:.3f} us")
     return res
+
+
+# -- spatial arm: the Panda against the adam-robotics peer ------------------------------------
+def bench_spatial(work: Path, reps: int, checks: list, name: str = "panda") -> dict:
+    """alpha + beta of the spatial ``name``: generated C vs the adam-robotics + CasADi AD peer."""
+    import fjm_runtime
+    from .alpha_beta import build_generated, time_interleaved
+    from .ccutil import compile_object
+    from .spatial import build_adam_peer, generated_alpha_beta_c
+    tol, tol_chk = TOLERANCES["alpha_beta"], TOLERANCES["alpha_beta_checksum"]
+    m = fjm_runtime.load(name)
+    p = m.params_array({"m_load": 0.0})  # adam knows no payload: compare without one
+    rng = np.random.default_rng(1)
+    xs = [rng.normal(scale=0.5, size=m.nx) for _ in range(3)]
+    x = xs[0]
+    log(f"spatial {name}: gcc -O2 of the shipped {name}.c (all eight functions) ...")
+    obj = work / "spatial" / f"{name}.o"
+    obj.parent.mkdir(parents=True, exist_ok=True)
+    gcc_all = statistics.median(compile_object(REPO / "generated" / name / f"{name}.c", obj)
+                                for _ in range(max(1, reps // 2)))
+    gen = build_generated(m, work / "spatial", obj=obj)
+    ab_only = [generated_alpha_beta_c(m, work / "spatial") for _ in range(max(1, reps // 2))]
+    log(f"spatial {name}: building the adam-robotics peer (CasADi AD, CSE, codegen, gcc -O2) ...")
+    peer, info = build_adam_peer(m, work / "spatial")
+    refs = [(m.alpha(xi, p), m.beta(xi, p)) for xi in xs]
+    gen_out = [gen(xi, p) for xi in xs]
+    err_c = max(max(_rel(a, ra), _rel(b, rb)) for (a, b), (ra, rb) in zip(gen_out, refs))
+    check(checks, f"spatial.{name}.generated_c",
+          f"{name}: generated C (`generated/{name}/{name}.c`) vs the generated `.casadi` Functions", err_c, tol)
+    err = 0.0
+    for xi, (ga, gb), (ra, rb) in zip(xs, gen_out, refs):
+        a, b = peer(xi, p)
+        err = max(err, _rel(a, ga), _rel(b, gb), _rel(a, ra), _rel(b, rb))
+    check(checks, f"spatial.{name}.adam_peer",
+          f"{name}: adam-robotics + CasADi AD peer (same URDF) vs generated C and `.casadi`, alpha and beta",
+          err, tol)
+    iters = 8
+    want = 0.0
+    for k in range(iters):
+        xk = x.copy()
+        xk[0] = x[0] + 1e-9 * (k & 7)
+        want += float(m.alpha(xk, p)[0]) + float(m.beta(xk, p)[0, 0])
+    chk_err = max(abs(lib.timed_run(x, p, iters)[1] - want) / max(1.0, abs(want)) for lib in (gen, peer))
+    check(checks, f"spatial.{name}.timed_loop",
+          f"{name}: checksum of the timed C loops (generated and adam peer) vs the `.casadi` Functions",
+          chk_err, tol_chk)
+    gen_us, peer_us = time_interleaved([gen, peer], x, p, reps=3 * reps)
+    log(f"  {name}: generated {gen_us:.2f} us, adam peer {peer_us:.2f} us")
+    manifest = json.loads((REPO / "generated" / name / "manifest.json").read_text())
+    return {
+        "n": int(m.n),
+        "generated_us": gen_us, "peer_us": peer_us, "ratio": gen_us / peer_us,
+        "generated_c_bytes_all": int(manifest["c_sources"][f"{name}.c"]), "generated_gcc_seconds_all": gcc_all,
+        "generated_c_bytes": int(ab_only[0]["c_bytes"]),
+        "generated_gcc_seconds": statistics.median(a["gcc_seconds"] for a in ab_only),
+        "generated_ops": {q: int(manifest["functions"][q]["operations"]) for q in ("alpha", "beta")},
+        "peer_c_bytes": int(info["c_bytes"]), "peer_gcc_seconds": info["gcc_seconds"],
+        "peer_build_seconds": info["build_seconds"], "peer_ops": info["ops"],
+        "max_rel_diff_peer_vs_generated": err,
+    }
 
 
 # -- closed loop ----------------------------------------------------------------------------
@@ -429,17 +491,17 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(prog="python -m bench", description=__doc__.split("\n\n")[0])
     ap.add_argument("--quick", action="store_true", help="one repetition per figure (smoke test / checks)")
     ap.add_argument("--skip-derive", action="store_true", help="skip the derive and gcc timings")
-    ap.add_argument("--only", nargs="+", choices=("derive", "alpha_beta", "closed_loop", "batch"),
+    ap.add_argument("--only", nargs="+", choices=("derive", "alpha_beta", "spatial", "closed_loop", "batch"),
                     help="run only these sections")
     ap.add_argument("--out", type=Path, default=None,
                     help="results file (default: bench/results.json for a full run, "
                          "build/bench-results.json otherwise)")
     args = ap.parse_args(argv)
     reps, slow = (1, 1) if args.quick else (5, 3)
-    sections = set(args.only or ("derive", "alpha_beta", "closed_loop", "batch"))
+    sections = set(args.only or ("derive", "alpha_beta", "spatial", "closed_loop", "batch"))
     if args.skip_derive:
         sections.discard("derive")
-    full = not args.quick and len(sections) == 4
+    full = not args.quick and len(sections) == 5
     out = args.out or (DEFAULT_OUT if full else REPO / "build" / "bench-results.json")
     t_start = time.perf_counter()
     results = {"machine": machine(), "quick": bool(args.quick)}
@@ -449,6 +511,7 @@ def main(argv=None) -> int:
         os.environ.setdefault("FJM_CACHE", str(work / "cache"))  # cold, private compile cache
         plan = [("derive", lambda: bench_derive(work, 1 if args.quick else 3, checks)),
                 ("alpha_beta", lambda: bench_alpha_beta(work, reps, checks)),
+                ("spatial", lambda: bench_spatial(work, reps, checks)),
                 ("closed_loop", lambda: bench_closed_loop(work, reps, slow, checks)),
                 ("batch", lambda: bench_batch(reps, slow, checks))]
         failed = []
