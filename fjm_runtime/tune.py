@@ -463,14 +463,28 @@ class _Analysis:
         _classify(self.dims, self.ev, self.n, p_nom, self.rng, relevant=relevant)
         nl = [d for d in self.dims if not d.affine and d.lo < d.hi]
         n_vert = int(np.prod([len(d.values()) for d in self.dims if d.affine or d.lo == d.hi]))
+        self.random = False
         if n_grid is None:
             per = int(np.floor((budget / max(n_vert, 1)) ** (1.0 / max(len(nl), 1)) + 1e-9))
             n_grid = max(3, per)
+            self.random = n_vert * float(n_grid) ** len(nl) > 4 * budget
         for d in nl:
             d.points = int(n_grid)
-        axes = [d.values() for d in self.dims]
-        self.shape = tuple(len(a) for a in axes)
-        mesh = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, len(self.dims))
+        if self.random:
+            # too many coordinates for a grid: uniform samples, affine coordinates at random vertices
+            N = int(budget)
+            mesh = np.empty((N, len(self.dims)))
+            for j, d in enumerate(self.dims):
+                v = d.values()
+                if d.affine or d.lo == d.hi:
+                    mesh[:, j] = v[self.rng.integers(0, len(v), N)]
+                else:
+                    mesh[:, j] = self.rng.uniform(d.lo, d.hi, N)
+            self.shape = None
+        else:
+            axes = [d.values() for d in self.dims]
+            self.shape = tuple(len(a) for a in axes)
+            mesh = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, len(self.dims))
         self.pts = mesh
         Y, P = _assemble(self.dims, mesh, self.n, p_nom)
         V = self.ev(Y, P)
@@ -538,6 +552,8 @@ class _Analysis:
         Both use slopes/curvatures sampled on the grid: numerical, not proven.
         """
         n = self.n
+        if self.shape is None:            # random sampling: no grid, no margin
+            return np.zeros(n)
         A = Phi.reshape(self.shape + (n,))
         m = np.zeros(n)
         rest = tuple(range(A.ndim - 1))
@@ -740,7 +756,10 @@ def synthesize_gains(model, nominal_params=None, *, param_box=None, reference_bo
                              "treatment": "no effect (one point)" if d.constant else
                              "vertices (affine)" if d.affine else f"grid {d.points} + local max"}
                             for d in an.dims],
-            "grid_points": int(an.pts.shape[0]), "refined_points": int(extra_pts.shape[0])}
+            "grid_points": int(an.pts.shape[0]), "refined_points": int(extra_pts.shape[0]),
+            "sampling": ("random (too many coordinates for a grid): uniform samples, affine coordinates at random "
+                         "vertices, local maximization; no grid margin, a weaker numerical certificate")
+            if an.random else "tensor grid"}
     settings = {"nominal_params": dict(zip(model.param_names, p_nom.tolist())), "param_box": box,
                 "reference_bounds": R.tolist(), "error_bounds": E.tolist(), "integral": bool(integral),
                 "beta_hat": "beta(x; p_nom)" if bh is None else bh.tolist(), "include_margin": include_margin,
