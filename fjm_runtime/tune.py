@@ -446,6 +446,32 @@ def _nominal_setup(model, nominal_params, param_box, reference_bounds, error_bou
     return p_nom, box, cc, R, E, Ybox, np.asarray(W, dtype=float), bh
 
 
+def _box_maximize(fg, v0: np.ndarray, maxiter: int = 60, tol: float = 1e-12) -> np.ndarray:
+    """Projected gradient ascent on ``[0, 1]^d`` with an adaptive step (NumPy only, no SciPy).
+
+    ``fg(v) -> (value, gradient)``. Accepts a step when the value increases
+    (then grows the step 1.5x), halves it otherwise; stops when the step falls
+    below ``tol`` or after ``maxiter`` accepted-or-rejected trials. Returns the best ``v``.
+    """
+    v = np.clip(np.asarray(v0, dtype=float), 0.0, 1.0)
+    f, g = fg(v)
+    step = 0.1
+    for _ in range(maxiter):
+        norm = float(np.linalg.norm(g))
+        if norm == 0.0 or step < tol:
+            break
+        cand = np.clip(v + step * g / norm, 0.0, 1.0)
+        if np.array_equal(cand, v):
+            break
+        fc, gc = fg(cand)
+        if fc > f:
+            v, f, g = cand, fc, gc
+            step *= 1.5
+        else:
+            step *= 0.5
+    return v
+
+
 class _Analysis:
     """Grid of the box and the values ``F0``, ``G``, ``alpha_hat``, ``B`` on it (one model, one setting)."""
 
@@ -568,9 +594,8 @@ class _Analysis:
                 m += np.maximum(curv, 0.0) * h ** 2 / 8.0
         return m
 
-    def refine(self, Phi, k, n_starts: int = 4, maxiter: int = 40):
+    def refine(self, Phi, k, n_starts: int = 4, maxiter: int = 80):
         """Local maximization of ``Phi_i`` from the worst grid points; returns extra points and values."""
-        from scipy.optimize import minimize
         n = self.n
         free = [d for d, dim in enumerate(self.dims) if not dim.affine and dim.lo < dim.hi]
         if not free:
@@ -597,13 +622,12 @@ class _Analysis:
                     for a in range(len(free)):
                         dv = np.clip(v[a] + h, 0, 1) - np.clip(v[a] - h, 0, 1)
                         grad[a] = (val[1 + 2 * a] - val[2 + 2 * a]) / dv if dv > 0 else 0.0
-                    return -val[0], -grad
+                    return val[0], grad
 
                 v0 = (base[free] - lo) / span
-                r = minimize(obj, v0, jac=True, method="L-BFGS-B", bounds=[(0.0, 1.0)] * len(free),
-                             options={"maxiter": maxiter, "ftol": 1e-15, "gtol": 1e-12})
+                vbest = _box_maximize(obj, v0, maxiter=maxiter)
                 pt = base.copy()
-                pt[free] = lo + np.clip(r.x, 0, 1) * span
+                pt[free] = lo + vbest * span
                 extra.append(pt)
         extra = np.array(extra)
         ph, _ = self.phi_at(extra, k)
@@ -841,7 +865,6 @@ def paper_bound(model, nominal_params=None, *, param_box, reference_bounds, erro
     ``c . (T(x; p) - y_d)``, which is not the one the controller computes: see
     :func:`synthesize_gains` for the implemented law.
     """
-    from scipy.optimize import minimize
     if int(model.n) != 1:
         raise ValueError(f"paper_bound: model {model.name!r} has n = {model.n}; Lemma 1 is stated for one joint "
                          "(use synthesize_gains for chains)")
@@ -872,16 +895,24 @@ def paper_bound(model, nominal_params=None, *, param_box, reference_bounds, erro
         for j0 in np.argsort(-dA)[:8]:
             base = pts[j0].copy()
 
-            def obj(v, base=base):
-                pt = base.copy(); pt[free] = lo + v * (hi - lo)
-                Yv, Pv = _assemble(dims, pt[None, :], 1, p_nom)
-                return -abs(float(ev(Yv, Pv)[0, 0]))
+            def obj(v, base=base, h=1e-7):
+                vs = np.repeat(v[None, :], 2 * len(free) + 1, axis=0)
+                for a in range(len(free)):
+                    vs[1 + 2 * a, a] = min(v[a] + h, 1.0)
+                    vs[2 + 2 * a, a] = max(v[a] - h, 0.0)
+                pt = np.repeat(base[None, :], vs.shape[0], axis=0)
+                pt[:, free] = lo + vs * (hi - lo)
+                Yv, Pv = _assemble(dims, pt, 1, p_nom)
+                val = np.abs(ev(Yv, Pv)[:, 0])
+                grad = np.array([(val[1 + 2 * a] - val[2 + 2 * a]) / max(vs[1 + 2 * a, a] - vs[2 + 2 * a, a], 1e-300)
+                                 for a in range(len(free))])
+                return float(val[0]), grad
 
-            r = minimize(obj, (base[free] - lo) / (hi - lo), method="L-BFGS-B", bounds=[(0, 1)] * len(free),
-                         options={"ftol": 1e-16, "gtol": 1e-12, "maxiter": 200, "eps": 1e-9})
-            if -r.fun > best:
-                best = -float(r.fun)
-                best_pt = base.copy(); best_pt[free] = lo + np.clip(r.x, 0, 1) * (hi - lo)
+            vb = _box_maximize(obj, (base[free] - lo) / (hi - lo), maxiter=300, tol=1e-14)
+            val, _ = obj(vb)
+            if val > best:
+                best = val
+                best_pt = base.copy(); best_pt[free] = lo + vb * (hi - lo)
     beta = V[:, 1]
     b_min, b_max = float(np.min(beta)), float(np.max(beta))
     bh = 0.5 * (b_min + b_max) if beta_hat is None else float(beta_hat)
