@@ -42,7 +42,7 @@ third-point tests at random points). Along affine coordinates ``Phi`` is convex,
 so its supremum is at the end points: those coordinates are enumerated at their
 two vertices (the exact vertex argument; e.g. the stiffnesses, which enter ``f``
 linearly, and ``y4_hat``). The other coordinates (link angles, velocities, ...)
-are covered by a tensor grid, then L-BFGS-B local maximization from the worst
+are covered by a tensor grid, then local maximization (projected gradient ascent) from the worst
 grid points refines the supremum. The grid supremum plus a curvature margin
 ``sum_d M_d h_d^2 / 8`` (``M_d`` the largest negative curvature seen in the
 grid's second differences along coordinate ``d``, ``h_d`` the spacing: ``Phi``
