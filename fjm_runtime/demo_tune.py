@@ -17,7 +17,7 @@ import numpy as np
 from . import load
 from .controllers import make_controller
 from .disturbance import with_motor_disturbance
-from .figures import ETA, K_NOM, LAM, LAYER_RATE, METRIC_HEADER, TASKS, _fmt, _log, _metrics_row
+from .figures import ETA, K_NOM, LAM, LAYER_RATE, METRIC_HEADER, TASKS, _log, _metrics_row
 from .references import Sinusoid
 from .robust import beta_hat_link1, lemma1_gain
 from .controllers import coefficients_from_pole
