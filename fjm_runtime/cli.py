@@ -93,6 +93,9 @@ def build_parser() -> argparse.ArgumentParser:
     sw.add_argument("--seed", type=int, default=0, help="sampling seed (default 0)")
     sw.add_argument("--k-min", type=float, default=100.0, help="stiffness lower bound, N m/rad (default 100)")
     sw.add_argument("--k-max", type=float, default=200.0, help="stiffness upper bound, N m/rad (default 200)")
+    sw.add_argument("--k-rel", type=float, nargs=2, default=None, metavar=("LO", "HI"),
+                    help="instead of --k-min/--k-max: every stiffness = its default x U[LO, HI] "
+                         "(spatial arms, e.g. panda --k-rel 0.7 1.3)")
     sw.add_argument("--controller", default="smc", choices=CONTROLLER_KINDS, help="controller (default smc)")
     sw.add_argument("--lam", type=float, default=8.0, help="pole magnitude lambda, 1/s (default 8)")
     sw.add_argument("--k-s", type=float, default=1000.0, help="switching gain, rad/s^4 (default 1000)")
@@ -229,7 +232,8 @@ def _cmd_sweep(args) -> int:
         options["k_s"] = args.k_s
     spec = SweepSpec(model=args.model, controller=args.controller, controller_options=options,
                      reference=args.reference, duration=args.duration, dt=args.dt)
-    P = sample_parameters(m, args.samples, seed=args.seed, k_range=(args.k_min, args.k_max))
+    P = sample_parameters(m, args.samples, seed=args.seed, k_range=(args.k_min, args.k_max),
+                          k_relative=args.k_rel)
     t0 = time.perf_counter()
     metrics = sweep(spec, P, chunk_size=args.chunk, scheduler=args.scheduler, n_workers=args.workers,
                     progress=lambda d, t: print(f"\rfjm sweep: {d}/{t} chunks", end="", file=sys.stderr,
@@ -245,16 +249,19 @@ def _cmd_sweep(args) -> int:
 
 
 def _cmd_derive(argv: List[str]) -> int:
-    """``fjm derive ...`` = ``python -m derive ...``; SymPy is imported only here."""
-    try:
-        from derive.__main__ import main as derive_main
-    except ModuleNotFoundError as exc:
-        if exc.name in ("sympy", "derive", "tomli"):
-            print(f"fjm derive: error: the derivation needs the build-time extra ({exc.name} is missing); "
+    """``fjm derive ...`` = ``python -m derive ...`` in a subprocess (the runtime never imports derive)."""
+    import importlib.util
+    import subprocess
+    import os
+    for mod in ("derive", "sympy"):
+        if importlib.util.find_spec(mod) is None:
+            print(f"fjm derive: error: the derivation needs the build-time extra ({mod} is missing); "
                   "install it with: pip install '.[derive]'  (or: pip install 'fjm[derive]')", file=sys.stderr)
             return 2
-        raise
-    return derive_main(argv, prog="fjm derive")
+    code = "import sys; from derive.__main__ import main; sys.exit(main(sys.argv[1:], prog='fjm derive'))"
+    root = str(Path(importlib.util.find_spec("derive").origin).resolve().parent.parent)
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join([root] + [v for v in [os.environ.get("PYTHONPATH")] if v]))
+    return subprocess.run([sys.executable, "-c", code, *argv], env=env).returncode
 
 
 def main(argv: Optional[List[str]] = None) -> int:

@@ -56,7 +56,7 @@ class SweepSpec:
 
 
 def sample_parameters(model, n_samples: int, seed: int = 0, k_range=(100.0, 200.0),
-                      spread: Optional[Dict[str, float]] = None) -> np.ndarray:
+                      spread: Optional[Dict[str, float]] = None, k_relative=None) -> np.ndarray:
     """TRUE parameter rows: stiffness(es) uniform in ``k_range``, others within ``+-spread``.
 
     Parameters
@@ -66,6 +66,10 @@ def sample_parameters(model, n_samples: int, seed: int = 0, k_range=(100.0, 200.
     seed : int
     k_range : (float, float)
         Bounds of every stiffness parameter (``K`` or ``K1..Kn``), N m/rad.
+    k_relative : (float, float), optional
+        Instead of ``k_range``: every stiffness is its default times a factor
+        uniform in ``[lo, hi]`` (for arms whose joints differ in stiffness,
+        e.g. the Panda's 1e4 / 3e3 N m/rad; ``(0.7, 1.3)`` is +-30 %).
     spread : dict str -> float, optional
         Relative half-width per parameter name (default: link inertia and
         motor inertia +-20 %, as in the robustness study).
@@ -76,9 +80,11 @@ def sample_parameters(model, n_samples: int, seed: int = 0, k_range=(100.0, 200.
     """
     if int(n_samples) < 1:
         raise FjmValueError(f"n_samples = {n_samples!r}: expected an integer >= 1")
-    lo, hi = (float(v) for v in k_range)
+    lo, hi = (float(v) for v in (k_range if k_relative is None else k_relative))
     if not (0 < lo <= hi and np.isfinite(hi)):
-        raise FjmValueError(f"k_range = {k_range!r}: expected 0 < K_min <= K_max < inf")
+        field = "k_range" if k_relative is None else "k_relative"
+        raise FjmValueError(f"{field} = {k_range if k_relative is None else k_relative!r}: "
+                            "expected 0 < min <= max < inf")
     if spread is None:
         spread = {k: 0.2 for k in model.param_names if k in ("J_l", "J_m") or k.startswith(("Jm", "I"))}
     unknown = sorted(set(spread) - set(model.param_names))
@@ -89,7 +95,7 @@ def sample_parameters(model, n_samples: int, seed: int = 0, k_range=(100.0, 200.
     P = np.tile(base, (int(n_samples), 1))
     for j, name in enumerate(model.param_names):
         if name == "K" or (name.startswith("K") and name[1:].isdigit()):
-            P[:, j] = rng.uniform(lo, hi, len(P))
+            P[:, j] = rng.uniform(lo, hi, len(P)) * (1.0 if k_relative is None else base[j])
         elif name in spread:
             P[:, j] = base[j] * rng.uniform(1 - spread[name], 1 + spread[name], len(P))
     return P
