@@ -191,43 +191,52 @@ class SlidingModeController:
         self.anti_windup = bool(anti_windup)
         self.n_states = n if self.integral else 0
 
+    # -- the emitted law -----------------------------------------------------
+    @property
+    def law_kind(self) -> str:
+        """Which emitted law runs: ``smc``, ``ismc``, ``fl`` or ``adaptive`` (``<model>_control_<kind>``)."""
+        if self.integral:
+            return "ismc"
+        return "fl" if self.mode == "fl" else "smc"
+
+    def _law_z_offset(self) -> int:
+        """Leading entries of the emitted law's ``z`` not held by this controller (always 0 here)."""
+        return 0
+
+    def gain_values(self) -> dict:
+        """Every gain of the law, by the names of the emitted ``gains`` layout (manifest ``controls``)."""
+        n = self.n
+        bh = self.beta_hat if self.beta_hat is not None else np.zeros((n, n))
+        return {"c": self.c, "k_s": self.k_s, "delta": self.delta, "sign": float(self.mode == "sign"),
+                "k_lin": self.k_lin, "u_max": self.u_max if self.u_max is not None else np.ones(n),
+                "limit": float(self.u_max is not None), "anti_windup": float(self.anti_windup),
+                "use_beta_hat": float(self.beta_hat is not None), "beta_hat": bh.ravel(order="F")}
+
+    @property
+    def gains(self) -> np.ndarray:
+        """The ``gains`` argument of the emitted law, packed by the model's manifest layout."""
+        values = self.gain_values()
+        layout = self.model.manifest["controls"][self.law_kind]["gains"]
+        return np.concatenate([np.broadcast_to(np.asarray(values[b["name"]], dtype=float), (b["size"],))
+                               for b in layout])
+
+    def law_functions(self):
+        """``(law, zdot)``: the emitted ``casadi.Function`` s of :attr:`law_kind` (``zdot`` None if stateless)."""
+        fns = self.model.controls
+        k = self.law_kind
+        return fns[f"control_{k}"], fns.get(f"control_{k}_zdot")
+
+    def _z_full(self, z):
+        off = self._law_z_offset()
+        return np.concatenate([np.zeros(off), z]) if off else z
+
     # -- interface -----------------------------------------------------------
     def initial_state(self, t0: float, x0: np.ndarray, r0: np.ndarray) -> np.ndarray:
         """Initial controller state, shape ``(n_states,)`` (the integrator starts at 0)."""
         return np.zeros(self.n_states)
 
-    def switching(self, s: np.ndarray) -> np.ndarray:
-        """``psi(s / delta)``: sat, sign or zero, shape (n,)."""
-        if self.mode == "sat":
-            return np.clip(s / self.delta, -1.0, 1.0)
-        if self.mode == "sign":
-            return np.sign(s)
-        return np.zeros_like(s)
-
-    def surface(self, e: np.ndarray, z: np.ndarray):
-        """Sliding variable and the linear part of ``nu``.
-
-        Parameters
-        ----------
-        e : ndarray, shape (4, n)
-            Errors ``y_hat - y_d``.
-        z : ndarray, shape (n_states,)
-            Integrator state (ignored unless ``integral``).
-
-        Returns
-        -------
-        s : ndarray, shape (n,)
-        linear : ndarray, shape (n,)
-            ``c1 e2 + c2 e3 + c3 e4`` (or ``c0 e1 + ... + c3 e4``).
-        """
-        chain = np.vstack([z[None, :], e]) if self.integral else e
-        m = self.c.size
-        s = self.c @ chain[:m] + chain[m]
-        linear = self.c @ chain[1:m + 1]
-        return s, linear
-
     def evaluate(self, t: float, x: np.ndarray, z: np.ndarray, r: np.ndarray) -> ControlSample:
-        """Control law at one sample.
+        """Control law at one sample: the emitted ``<model>_control_<kind>``.
 
         Parameters
         ----------
@@ -241,123 +250,66 @@ class SlidingModeController:
             Reference and its derivatives (see :mod:`fjm_runtime.references`).
         """
         n = self.n
-        z = np.asarray(z, dtype=float)
-        p = self._params(z)
-        y_hat = np.asarray(self.model.T(x, p), dtype=float).reshape(4, n)
-        e = y_hat - r[:4]
-        s, linear = self.surface(e, self._integrator(z))
-        nu = r[4] - linear - self.k_s * self.switching(s) - self.k_lin * s
-        alpha = np.asarray(self.model.alpha(x, p), dtype=float).reshape(n)
-        beta = self.beta_hat if self.beta_hat is not None else \
-            np.asarray(self.model.beta(x, p), dtype=float).reshape(n, n)
-        u_cmd = alpha + beta @ nu
-        if self.u_max is None:
-            u, saturated = u_cmd, np.zeros(n, dtype=bool)
-        else:
-            u = np.clip(u_cmd, -self.u_max, self.u_max)
-            saturated = np.abs(u_cmd) > self.u_max
-        return ControlSample(u, u_cmd, s, y_hat, e, saturated)
+        r = np.asarray(r, dtype=float)
+        law, _ = self.law_functions()
+        u, s, _, u_cmd, y_hat = (np.asarray(v).ravel() for v in law(
+            np.asarray(x, dtype=float), self._z_full(np.asarray(z, dtype=float)), r.reshape(-1),
+            self.p_nom, self.gains))
+        y_hat = y_hat.reshape(4, n)
+        saturated = np.zeros(n, dtype=bool) if self.u_max is None else np.abs(u_cmd) > self.u_max
+        return ControlSample(u, u_cmd, s, y_hat, y_hat - r[:4], saturated)
 
     def state_derivative(self, t: float, x: np.ndarray, z: np.ndarray, r: np.ndarray,
                          sample: ControlSample) -> np.ndarray:
-        """``z' = e1 = q_l - q_d`` with conditional-integration anti-windup, shape (n_states,).
+        """``z'`` under the sample's held torque (the emitted ``<model>_control_<kind>_zdot``), shape (n_states,).
 
-        ``y_hat_1 = q_l`` for every model, so no model evaluation is needed; the
-        saturation flags come from the last sample (zero-order hold).
+        ``z_int' = e1 = q_l - q_d`` with conditional-integration anti-windup (and, for
+        the adaptive law, the estimator rates); the saturation test uses the last
+        sample's ``u_cmd`` (zero-order hold).
         """
-        if not self.integral:
+        if self.n_states == 0:
             return np.zeros(0)
-        e1 = x[:self.n] - r[0]
-        if self.u_max is not None and self.anti_windup:
-            winding = (sample.u_cmd > self.u_max) & (e1 < 0) | (sample.u_cmd < -self.u_max) & (e1 > 0)
-            e1 = np.where(winding, 0.0, e1)
-        return e1
+        _, zdot = self.law_functions()
+        out = np.asarray(zdot(np.asarray(x, dtype=float), self._z_full(np.asarray(z, dtype=float)),
+                              np.asarray(r, dtype=float).reshape(-1), self.p_nom, self.gains,
+                              sample.u_cmd, sample.u)).ravel()
+        return out[self._law_z_offset():]
 
-
-    def _params(self, z) -> np.ndarray:
-        """Parameters the law is evaluated with: the nominal ones here.
-
-        Subclasses that estimate parameters online override this and
-        :meth:`_integrator` (and their CasADi mirrors below).
-        """
-        return self.p_nom
-
-    def _integrator(self, z):
-        """The integral-surface state within the controller state ``z``."""
-        return z
-
-    # -- CasADi mirror (used by the fused simulator; must match evaluate) ----
-    def _symbolic_params(self, z):
-        """Parameters the law is evaluated with (CasADi): the nominal ones here.
-
-        Subclasses that estimate parameters online override this (and
-        :meth:`_symbolic_integrator` if their state holds more than ``z'= e1``).
-        """
-        import casadi as ca
-        return ca.DM(self.p_nom)
-
-    def _symbolic_integrator(self, z):
-        """The integral-surface state within the controller state ``z``."""
-        return z
-
-    def symbolic_evaluate(self, x, z, r, fns):
-        """CasADi mirror of :meth:`evaluate` for the fused simulator.
+    # -- CasADi composition (fused, compiled and batch simulators) -------------
+    def symbolic_evaluate(self, x, z, r, fns=None):
+        """The emitted law composed into a CasADi graph.
 
         Parameters
         ----------
-        x : casadi.MX, shape (4n, 1)
-        z : casadi.MX, shape (n_states, 1)
-        r : casadi.MX, shape (5n, 1)
+        x : casadi SX/MX, shape (4n, 1)
+        z : casadi SX/MX, shape (n_states, 1)
+        r : casadi SX/MX, shape (5n, 1)
             Reference rows stacked: ``r.reshape(-1)`` of the (5, n) array.
-        fns : dict
-            CasADi Functions ``T``, ``alpha``, ``beta`` of ``(x, p)``.
+        fns : ignored
+            Kept for callers that pass the model Functions.
 
         Returns
         -------
         dict with ``u``, ``u_cmd``, ``s`` (n, 1) and ``y_hat`` (4n, 1).
         """
         import casadi as ca
-        n = self.n
-        blk = lambda v, i: v[i * n:(i + 1) * n]
-        p = self._symbolic_params(z)
-        y_hat = fns["T"](x, p)
-        e = [blk(y_hat, i) - blk(r, i) for i in range(4)]
-        chain = ([self._symbolic_integrator(z)] if self.integral else []) + e
-        m = self.c.size
-        s = chain[m]
-        linear = 0
-        for j in range(m):
-            s = s + float(self.c[j]) * chain[j]
-            linear = linear + float(self.c[j]) * chain[j + 1]
-        if self.mode == "sat":
-            psi = ca.fmin(ca.fmax(s / ca.DM(self.delta), -1.0), 1.0)
-        elif self.mode == "sign":
-            psi = ca.sign(s)
-        else:
-            psi = ca.DM.zeros(n, 1)
-        nu = blk(r, 4) - linear - ca.DM(self.k_s) * psi - ca.DM(self.k_lin) * s
-        beta = ca.DM(self.beta_hat) if self.beta_hat is not None else ca.reshape(fns["beta"](x, p), n, n)
-        u_cmd = fns["alpha"](x, p) + ca.mtimes(beta, nu)
-        if self.u_max is None:
-            u = u_cmd
-        else:
-            um = ca.DM(self.u_max)
-            u = ca.fmin(ca.fmax(u_cmd, -um), um)
+        law, _ = self.law_functions()
+        off = self._law_z_offset()
+        zf = ca.vertcat(ca.DM.zeros(off), z) if off else z
+        u, s, _, u_cmd, y_hat = law(x, zf, r, ca.DM(self.p_nom), ca.DM(self.gains))
         return {"u": u, "u_cmd": u_cmd, "s": s, "y_hat": y_hat}
 
     def symbolic_state_derivative(self, x, z, r, sample):
-        """CasADi mirror of :meth:`state_derivative` (``sample`` from :meth:`symbolic_evaluate`)."""
+        """``z'`` of :meth:`state_derivative` in CasADi (``sample`` from :meth:`symbolic_evaluate`)."""
         import casadi as ca
-        if not self.integral:
-            return ca.MX(0, 1)
-        n = self.n
-        e1 = x[:n] - r[:n]
-        if self.u_max is not None and self.anti_windup:
-            um = ca.DM(self.u_max)
-            uc = sample["u_cmd"]
-            winding = (uc > um) * (e1 < 0) + (uc < -um) * (e1 > 0)
-            e1 = e1 * (1 - winding)
-        return e1
+        if self.n_states == 0:
+            return ca.DM(0, 1)
+        _, zdot = self.law_functions()
+        off = self._law_z_offset()
+        zf = ca.vertcat(ca.DM.zeros(off), z) if off else z
+        out = zdot(x, zf, r, ca.DM(self.p_nom), ca.DM(self.gains), sample["u_cmd"], sample["u"])
+        return out[off:]
+
 
 
 def _params_array(model, p, field: str) -> np.ndarray:
@@ -402,6 +354,144 @@ def make_controller(kind: str, model, nominal_params, **kwargs) -> SlidingModeCo
         kwargs.pop("k_s", None)
         return SlidingModeController(model, nominal_params, mode="fl", **kwargs)
     if kind == "adaptive":
-        from .adaptive import make_adaptive
         return make_adaptive(model, nominal_params, **kwargs)
     raise ValueError(f"controller = {kind!r}: expected one of {', '.join(CONTROLLER_KINDS)}")
+
+
+# -- adaptive stiffness (scheme and assumptions: fjm_runtime.adaptive) --------
+
+#: Names of the blocks of the estimator part of ``z``, in order.
+ESTIMATOR_BLOCKS = ("K_hat", "u_f", "phi_f", "w_f", "P")
+
+
+def _param_indices(model):
+    """Indices of the stiffness, motor inertia and motor damping of each joint in ``param_names``."""
+    names = list(model.param_names)
+    n = int(model.n)
+    if n == 1 and "K" in names:
+        groups = (["K"], ["J_m"], ["B_m"])
+    else:
+        groups = ([f"K{i + 1}" for i in range(n)], [f"Jm{i + 1}" for i in range(n)],
+                  [f"Bm{i + 1}" for i in range(n)])
+    try:
+        return tuple(np.array([names.index(nm) for nm in g], dtype=int) for g in groups)
+    except ValueError:
+        raise ValueError(f"model {getattr(model, 'name', '?')!r}: adaptive stiffness needs parameters "
+                         f"{groups[0]}, {groups[1]}, {groups[2]} (found {names})") from None
+
+
+def _bounds(K_bounds, n: int):
+    try:
+        lo, hi = K_bounds
+    except (TypeError, ValueError):
+        raise ValueError(f"K_bounds = {K_bounds!r}: expected (K_min, K_max) in N m/rad") from None
+    lo = np.broadcast_to(np.asarray(lo, dtype=float), (n,)).copy() if np.ndim(lo) == 0 else np.asarray(lo, float)
+    hi = np.broadcast_to(np.asarray(hi, dtype=float), (n,)).copy() if np.ndim(hi) == 0 else np.asarray(hi, float)
+    if lo.shape != (n,) or hi.shape != (n,):
+        raise ValueError(f"K_bounds with shapes {lo.shape}, {hi.shape}: expected scalars or shape ({n},)")
+    if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi)) and np.all(lo > 0) and np.all(hi > lo)):
+        raise ValueError(f"K_bounds = ({lo.tolist()}, {hi.tolist()}): expected finite 0 < K_min < K_max "
+                         "(N m/rad)")
+    return lo, hi
+
+
+def _positive(value, field: str) -> float:
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{field} = {value!r}: expected a number > 0") from None
+    if not (np.isfinite(v) and v > 0):
+        raise ValueError(f"{field} = {value!r}: expected a finite value > 0")
+    return v
+
+
+class AdaptiveStiffnessController(SlidingModeController):
+    """Sliding-mode controller using an online least-squares estimate of the joint stiffness.
+
+    The law and the estimator are the emitted ``<model>_control_adaptive`` (and
+    ``_zdot``); :mod:`fjm_runtime.adaptive` explains the scheme and its assumptions.
+
+    Parameters
+    ----------
+    model, nominal_params
+        As :class:`SlidingModeController`; the nominal stiffness is the initial
+        estimate and must lie inside ``K_bounds``.
+    K_bounds : (K_min, K_max)
+        Stiffness bounds in N m/rad (scalars or one per joint), ``0 < K_min < K_max``;
+        the estimate is projected onto them.
+    filter_rate : float
+        Bandwidth ``a`` of the regressor filter ``a / (s + a)``, 1/s, > 0 (default 20).
+    ls_gain : float
+        Initial least-squares covariance ``P(0)`` in 1/(rad^2 s), > 0 (default 1e5).
+    integral : bool
+        Integral sliding surface (default True) or the paper's surface.
+    beta_hat : optional
+        Constant ``beta_hat``; default ``beta(x; p_hat)`` with the estimated stiffness.
+    **kwargs
+        ``lam``/``c``, ``k_s``, ``delta``, ``mode``, ``k_lin``, ``u_max``, ``anti_windup``
+        as for the base class.
+
+    Controller state ``z``: ``[z_int (n, only with integral=True), K_hat, u_f, phi_f, w_f, P]``.
+    """
+
+    def __init__(self, model, nominal_params, *, K_bounds, filter_rate: float = 20.0,
+                 ls_gain: float = 1e5, integral: bool = True, beta_hat=None, **kwargs):
+        super().__init__(model, nominal_params, integral=integral, beta_hat=beta_hat, **kwargs)
+        n = self.n
+        self.K_min, self.K_max = _bounds(K_bounds, n)
+        self.filter_rate = _positive(filter_rate, "filter_rate")
+        self.ls_gain = _positive(ls_gain, "ls_gain")
+        self.idx_K, self.idx_Jm, self.idx_Bm = _param_indices(model)
+        K0 = self.p_nom[self.idx_K]
+        if np.any(K0 < self.K_min) or np.any(K0 > self.K_max):
+            raise ValueError(f"K_bounds = ({self.K_min.tolist()}, {self.K_max.tolist()}): the nominal stiffness "
+                             f"{K0.tolist()} (initial estimate) must lie inside")
+        self.J_m = self.p_nom[self.idx_Jm]
+        self.B_m = self.p_nom[self.idx_Bm]
+        self.n_int = n if self.integral else 0
+        self.n_states = self.n_int + len(ESTIMATOR_BLOCKS) * n
+
+    @property
+    def law_kind(self) -> str:
+        return "adaptive"
+
+    def _law_z_offset(self) -> int:
+        # the emitted law always carries z_int; the paper's surface is c0 = 0 with z_int = 0
+        return self.n - self.n_int
+
+    def gain_values(self) -> dict:
+        g = super().gain_values()
+        if not self.integral:
+            g["c"] = np.concatenate([[0.0], self.c])
+        g.update(K_min=self.K_min, K_max=self.K_max, filter_rate=self.filter_rate)
+        return g
+
+    def stiffness_estimate(self, z) -> np.ndarray:
+        """The stiffness the controller uses, ``clip(K_hat, K_min, K_max)``; ``z`` of shape
+        ``(n_states,)`` or ``(N, n_states)`` (e.g. ``SimulationResult.z``) -> ``(n,)`` or ``(N, n)``."""
+        z = np.asarray(z, dtype=float)
+        k = self.n_int
+        return np.clip(z[..., k:k + self.n], self.K_min, self.K_max)
+
+    def params_hat(self, z) -> np.ndarray:
+        """Nominal parameters with the stiffness replaced by the estimate, shape ``(n_par,)``."""
+        p = self.p_nom.copy()
+        p[self.idx_K] = self.stiffness_estimate(z)
+        return p
+
+    def initial_state(self, t0: float, x0: np.ndarray, r0: np.ndarray) -> np.ndarray:
+        n = self.n
+        x0 = np.asarray(x0, dtype=float)
+        est = {"K_hat": self.p_nom[self.idx_K], "u_f": np.zeros(n), "phi_f": np.zeros(n),
+               "w_f": x0[3 * n:4 * n], "P": np.full(n, self.ls_gain)}
+        return np.concatenate([np.zeros(self.n_int)] + [est[b] for b in ESTIMATOR_BLOCKS])
+
+
+def make_adaptive(model, nominal_params, *, K_bounds=None, **kwargs) -> AdaptiveStiffnessController:
+    """``make_controller('adaptive', ...)``: ``K_bounds`` defaults to ``nominal +- 1/3`` (100-200 at 150)."""
+    if K_bounds is None:
+        p = np.asarray(model.params_array(nominal_params), dtype=float)
+        K0 = p[_param_indices(model)[0]]
+        K_bounds = (K0 * 2.0 / 3.0, K0 * 4.0 / 3.0)
+    kwargs.setdefault("mode", "sat")
+    return AdaptiveStiffnessController(model, nominal_params, K_bounds=K_bounds, **kwargs)

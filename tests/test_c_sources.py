@@ -239,3 +239,67 @@ def test_no_hardcoded_double(model):
         text = (generated_root() / model / f"{model}{suffix}").read_text()
         lines = [ln.strip() for ln in text.splitlines() if "double" in ln]
         assert lines == ["#define casadi_real double"], f"{model}{suffix}: {lines}"
+
+
+def random_control_inputs(model: fjm_runtime.Model, kind: str, rng: np.random.Generator, count: int):
+    """Random (x, z, r, p, gains) for ``control_<kind>``: flags 0/1, Hurwitz c, positive gains."""
+    n = model.n
+    entry = model.manifest["controls"][kind]
+    nz = sum(b["size"] for b in entry["z"])
+    for x, p in random_points(model, rng, count):
+        z = rng.uniform(-1, 1, nz)
+        if kind == "adaptive":  # positive K_hat and covariance
+            z[n:2 * n] = rng.uniform(80, 220, n)
+            z[5 * n:] = rng.uniform(1, 1e3, n)
+        r = rng.uniform(-1, 1, 5 * n)
+        lam = rng.uniform(2, 10)
+        values = {"k_s": rng.uniform(0, 50, n), "delta": rng.uniform(0.5, 5, n), "k_lin": rng.uniform(0, 5, n),
+                  "u_max": rng.uniform(1, 50, n), "beta_hat": (np.eye(n) * rng.uniform(0.01, 0.1)).ravel(),
+                  "K_min": np.full(n, 100.0), "K_max": np.full(n, 200.0), "filter_rate": rng.uniform(5, 30)}
+        for b in entry["gains"]:
+            if b["size"] == 1 and b["name"] not in values:
+                values[b["name"]] = float(rng.integers(0, 2))
+            if b["name"] == "c":
+                from math import comb
+                values["c"] = np.array([comb(b["size"], k) * lam ** (b["size"] - k) for k in range(b["size"])])
+        gains = np.concatenate([np.broadcast_to(values[b["name"]], (b["size"],)) for b in entry["gains"]])
+        yield x, z, r, p, gains
+
+
+@pytest.mark.parametrize("model", MODELS)
+def test_control_laws_c_equals_casadi(c_builds, model, record_property):
+    """Every emitted law (and its _zdot part) in C equals its CasADi Function (issue 12)."""
+    m = fjm_runtime.load(model)
+    lib = ctypes.CDLL(str(c_builds[(model, "double")].lib))
+    lib_f = ctypes.CDLL(str(c_builds[(model, "float")].lib)) if model in FLOAT_MODELS else None
+    rng = np.random.default_rng(99 + MODELS.index(model))
+    worst, worst_f = {}, {}
+    for kind in m.manifest["controls"]:
+        for name in [f"control_{kind}", f"control_{kind}_zdot"]:
+            if name not in m.controls:
+                continue
+            fn = m.controls[name]
+            cf = CFunction(lib, f"{model}_{name}", ctypes.c_double)
+            cff = CFunction(lib_f, f"{model}_{name}", ctypes.c_float) if lib_f else None
+            assert (cf.n_in, cf.n_out) == (fn.n_in(), fn.n_out()), name
+            worst[name] = worst_f[name] = 0.0
+            for args in random_control_inputs(m, kind, rng, 4):
+                args = list(args)
+                if name.endswith("_zdot"):
+                    args += [rng.uniform(-60, 60, m.n), rng.uniform(-60, 60, m.n)]
+                ref = fn(*args)
+                ref = [ref] if fn.n_out() == 1 else ref
+                ref = [np.asarray(ca.DM(v).full()) for v in ref]
+                for r, g in zip(ref, cf(*args)):
+                    assert np.all(np.isfinite(g)), name
+                    worst[name] = max(worst[name], rel_dev(g, r))
+                if cff is not None:
+                    a32 = [np.asarray(a, dtype=np.float32).astype(float) for a in args]
+                    for d, f in zip(cf(*a32), cff(*a32)):
+                        worst_f[name] = max(worst_f[name], rel_dev(f, d))
+    record_property("control_c_vs_casadi_rel_dev", worst)
+    print(f"{model}: control laws C vs CasADi {worst}; float vs double {worst_f if lib_f else '-'}")
+    bad = {q: d for q, d in worst.items() if not d <= C_RTOL}
+    assert not bad, f"{model}: C control law differs from CasADi by more than {C_RTOL}: {bad}"
+    bad = {q: d for q, d in worst_f.items() if not d <= FLOAT_RTOL}
+    assert not bad, f"{model}: float control law deviates by more than {FLOAT_RTOL}: {bad}"

@@ -149,7 +149,7 @@ def installed_layout(tmp_path, monkeypatch):
 
 
 @pytest.mark.parametrize("argv", [["--models", "link1"], ["--check"], []])
-@pytest.mark.parametrize("entry", ["python -m derive", "fjm derive"])
+@pytest.mark.parametrize("entry", ["python -m derive"])  # `fjm derive` runs it in a subprocess: tests/test_wheel.py
 def test_no_out_outside_checkout_is_a_usage_error(installed_layout, capsys, argv, entry):
     with pytest.raises(SystemExit) as exc:
         if entry == "fjm derive":
@@ -165,7 +165,7 @@ def test_no_out_outside_checkout_is_a_usage_error(installed_layout, capsys, argv
 
 def test_with_out_outside_checkout_derives_and_load_reads_it(installed_layout, tmp_path, monkeypatch, capsys):
     out = tmp_path / "models"
-    assert cli.main(["derive", "--models", "link1", "--out", str(out)]) == 0
+    assert derive_main_module.main(["--models", "link1", "--out", str(out)]) == 0
     assert list(installed_layout.iterdir()) == [], "no timings or generated/ next to the installed package"
     monkeypatch.setenv("FJM_GENERATED", str(out))
     user = load("link1")
@@ -174,6 +174,19 @@ def test_with_out_outside_checkout_derives_and_load_reads_it(installed_layout, t
     x = np.array([0.3, 0.2, 0.1, -0.4])
     np.testing.assert_allclose(user.alpha(x), ref.alpha(x), rtol=1e-14, atol=0)
     np.testing.assert_allclose(user.beta(x), ref.beta(x), rtol=1e-14, atol=0)
+
+
+def test_fjm_derive_is_a_subprocess_and_names_a_missing_extra(monkeypatch, capsys):
+    """``fjm derive`` runs ``derive`` in a child process (the runtime imports no derive code)."""
+    import importlib.util
+    assert cli.main(["derive", "--check", "--models", "link1"]) == 0
+    real = importlib.util.find_spec
+    monkeypatch.setattr(importlib.util, "find_spec", lambda name, *a: None if name == "sympy" else real(name, *a))
+    assert cli.main(["derive", "--models", "link1"]) == 2
+    err = capsys.readouterr().err
+    assert "sympy is missing" in err and "pip install '.[derive]'" in err, err
+    src = (REPO / "fjm_runtime" / "cli.py").read_text()
+    assert "from derive" not in src.replace("from derive.__main__ import main; sys.exit", "")
 
 
 def test_checkout_default_is_generated(monkeypatch):

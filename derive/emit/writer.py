@@ -31,6 +31,7 @@ import casadi as ca
 import sympy as sp
 
 from ..linearize import Linearization
+from .controls import KINDS, build_controls, layout_lines, manifest_entry
 from .functions import QUANTITIES, build_functions, operation_count
 from .report import render_report
 
@@ -77,7 +78,7 @@ def _silence_unused(src: str) -> str:
 
 def _generate_c(model: str, functions: Dict[str, ca.Function], workdir: Path) -> Dict[str, str]:
     cg = ca.CodeGenerator(f"{model}.c", {"with_header": True})
-    for name, _ in QUANTITIES:
+    for name in functions:  # model quantities, then the control laws, in file order
         cg.add(functions[name])
     cg.generate(str(workdir) + os.sep)
     return {
@@ -103,8 +104,14 @@ def write_model(lin: Linearization, outdir: Path) -> Dict[str, object]:
     m = lin.model
     outdir.mkdir(parents=True, exist_ok=True)
     functions = build_functions(lin)
+    controls = build_controls(m, functions)
     versions = tool_versions()
     ops = {name: operation_count(functions[name]) for name, _ in QUANTITIES}
+    control_ops = {name: operation_count(fn) for name, fn in controls.items()}
+    control_meaning = {}
+    for kind, meaning in KINDS:
+        control_meaning[f"control_{kind}"] = f"control law {kind}: {meaning}"
+        control_meaning[f"control_{kind}_zdot"] = f"controller-state derivative of {kind} under a held torque"
 
     sizes: Dict[str, int] = {}
     for name, meaning in QUANTITIES:
@@ -116,14 +123,22 @@ def write_model(lin: Linearization, outdir: Path) -> Dict[str, object]:
         ) + fn.serialize() + "\n"
         (outdir / f"{name}.casadi").write_text(text)
         sizes[name] = len(text.encode())
+    for name, fn in controls.items():
+        text = _comment_block(
+            [HEADER, f"model: {m.name}; function: {fn.name()} -- {control_meaning[name]}",
+             f"tools: casadi {versions['casadi']}, sympy {versions['sympy']}",
+             *_layout_lines(lin), *layout_lines(m.n), f"operations: {control_ops[name]}"], "# ",
+        ) + fn.serialize() + "\n"
+        (outdir / f"{name}.casadi").write_text(text)
+        sizes[name] = len(text.encode())
 
     with tempfile.TemporaryDirectory() as tmp:
-        sources = _generate_c(m.name, functions, Path(tmp))
+        sources = _generate_c(m.name, {**functions, **controls}, Path(tmp))
     c_header = _comment_block(
         [HEADER, f"model: {m.name} -- {m.description}",
          f"tools: casadi {versions['casadi']}, sympy {versions['sympy']}",
-         *_layout_lines(lin),
-         "operations: " + ", ".join(f"{m.name}_{k} {v}" for k, v in ops.items())], " * ",
+         *_layout_lines(lin), *layout_lines(m.n),
+         "operations: " + ", ".join(f"{m.name}_{k} {v}" for k, v in {**ops, **control_ops}.items())], " * ",
     )
     for fname, body in sources.items():
         (outdir / fname).write_text("/* " + c_header[3:] + " */\n" + body)
@@ -150,6 +165,24 @@ def write_model(lin: Linearization, outdir: Path) -> Dict[str, object]:
                 "casadi_bytes": sizes[name],
             }
             for name, meaning in QUANTITIES
+        },
+        "controls": {
+            kind: {
+                "casadi_file": f"control_{kind}.casadi",
+                "c_name": f"{m.name}_control_{kind}",
+                "meaning": meaning,
+                "inputs": ["x", "z", "r", "p", "gains"],
+                "outputs": ["u", "s", "z_dot", "u_cmd", "y_hat"],
+                "operations": control_ops[f"control_{kind}"],
+                "casadi_bytes": sizes[f"control_{kind}"],
+                **({"zdot": {"casadi_file": f"control_{kind}_zdot.casadi",
+                             "c_name": f"{m.name}_control_{kind}_zdot",
+                             "inputs": ["x", "z", "r", "p", "gains", "u_cmd", "u"],
+                             "operations": control_ops[f"control_{kind}_zdot"]}}
+                   if f"control_{kind}_zdot" in controls else {}),
+                **manifest_entry(kind, m.n),
+            }
+            for kind, meaning in KINDS
         },
         "c_sources": {fname: len((outdir / fname).read_bytes()) for fname in sorted(sources)},
         "tools": versions,

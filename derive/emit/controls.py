@@ -1,0 +1,278 @@
+"""The control laws, built in CasADi SX from a model's own ``T``, ``alpha`` and ``beta``.
+
+One definition of each law, emitted with the model (``.casadi`` files and
+``<model>.c/.h``) and used by every runtime path (NumPy, fused CasADi,
+compiled, SIMD batch) and by the real-time C example. Every law has the
+signature::
+
+    <model>_control_<kind>(x, z, r, p, gains) -> (u, s, z_dot, u_cmd, y_hat)
+
+* ``x`` (4n): plant state ``[q; dq; q_m; dq_m]`` (measured);
+* ``z`` (:func:`state_layout`): controller state (empty for ``smc``, ``fl``);
+* ``r`` (5n): reference and its four derivatives, rows stacked
+  ``[y_d; y_d'; y_d''; y_d'''; y_d'''']`` (n each);
+* ``p``: NOMINAL parameters in ``param_names`` order (the law's model);
+* ``gains`` (:func:`gains_layout`): every tuning value, so retuning never
+  needs a re-derive; flags are 0 or 1.
+
+Outputs: ``u`` (n) applied torque (after the optional limit), ``s`` (n) the
+sliding variable, ``z_dot`` the controller-state derivative at this sample,
+``u_cmd`` (n) the torque before the limit, ``y_hat`` (4n) = ``T(x; p_hat)``.
+
+The law (per joint, docs/design.md and README "Controllers")::
+
+    y_hat = T(x; p_hat)                 p_hat = p, or with K replaced by clip(K_hat) (adaptive)
+    e_i   = y_hat_i - r_i               i = 1..4
+    s     = c1 e1 + c2 e2 + c3 e3 + e4              (smc, fl)
+          = c0 z + c1 e1 + c2 e2 + c3 e3 + e4      (ismc, adaptive; z' = e1)
+    nu    = r_5 - (c1 e2 + c2 e3 + c3 e4 [+ c0 e1]) - k_s psi(s) - k_lin s
+    psi   = sign(s) if gains.sign else sat(s / delta)             (none for fl)
+    u_cmd = alpha(x; p_hat) + B nu,      B = beta_hat if gains.use_beta_hat else beta(x; p_hat)
+    u     = clip(u_cmd, -u_max, u_max) if gains.limit else u_cmd
+
+The controller state moves under the torque held over the sample, so the
+simulators also need ``z'`` at RK4 stage points with the sample's ``u_cmd``
+and ``u``: ``<model>_control_<kind>_zdot(x, z, r, p, gains, u_cmd, u) -> z_dot``
+(stateful kinds only) is that part of the law alone; the law's own ``z_dot``
+is it evaluated with the law's ``u_cmd``, ``u``.
+"""
+
+from __future__ import annotations
+
+from typing import Dict, List, Tuple
+
+import casadi as ca
+
+#: Emitted laws, in file order, with their meaning.
+KINDS: Tuple[Tuple[str, str], ...] = (
+    ("smc", "paper's sliding-mode law (eqs 10-15), psi = sat(s/delta) or sign(s) (gains.sign)"),
+    ("ismc", "integral sliding-mode law, z' = e1, conditional-integration anti-windup"),
+    ("fl", "plain feedback linearization, nu = y_d'''' - (c1 e2 + c2 e3 + c3 e4) - k_lin s"),
+    ("adaptive", "integral sliding-mode law with an online least-squares stiffness estimate K_hat"),
+)
+
+#: Names of the blocks of the adaptive estimator state, in order (after z_int).
+ESTIMATOR_BLOCKS = ("K_hat", "u_f", "phi_f", "w_f", "P")
+
+
+def gains_layout(kind: str, n: int) -> List[Tuple[str, int, str]]:
+    """Blocks of the ``gains`` vector of ``control_<kind>``: ``(name, size, meaning)`` in order.
+
+    Parameters
+    ----------
+    kind : str
+        One of :data:`KINDS`.
+    n : int
+        Number of joints.
+
+    Returns
+    -------
+    list of (str, int, str)
+    """
+    integral = kind in ("ismc", "adaptive")
+    out = [("c", 4 if integral else 3,
+            "surface coefficients, lowest first: [c0, c1, c2, c3]" if integral else
+            "surface coefficients, lowest first: [c1, c2, c3]")]
+    if kind != "fl":
+        out += [("k_s", n, "switching gain per joint (rad/s^4), >= 0"),
+                ("delta", n, "boundary-layer width per joint, > 0 (used when sign = 0)"),
+                ("sign", 1, "1: psi = sign(s) (eq 15); 0: psi = sat(s / delta)")]
+    out += [("k_lin", n, "linear feedback on s per joint (1/s), >= 0"),
+            ("u_max", n, "torque limit per joint (N m), > 0 (used when limit = 1)"),
+            ("limit", 1, "1: u = clip(u_cmd, -u_max, u_max); 0: u = u_cmd")]
+    if integral:
+        out += [("anti_windup", 1, "1: freeze z_i while u_cmd_i is beyond u_max_i and e1_i pushes further")]
+    out += [("use_beta_hat", 1, "1: B = beta_hat; 0: B = beta(x; p_hat)"),
+            ("beta_hat", n * n, "constant beta estimate, (n, n) column-major")]
+    if kind == "adaptive":
+        out += [("K_min", n, "stiffness lower bound per joint (N m/rad)"),
+                ("K_max", n, "stiffness upper bound per joint (N m/rad)"),
+                ("filter_rate", 1, "regressor filter bandwidth a of a/(s + a) (1/s)")]
+    return out
+
+
+def state_layout(kind: str, n: int) -> List[Tuple[str, int, str]]:
+    """Blocks of the controller state ``z`` of ``control_<kind>``: ``(name, size, meaning)``."""
+    if kind == "ismc":
+        return [("z_int", n, "integral of e1 = q - y_d (rad s)")]
+    if kind == "adaptive":
+        return [("z_int", n, "integral of e1 = q - y_d (rad s)"),
+                ("K_hat", n, "stiffness estimate (N m/rad)"),
+                ("u_f", n, "filtered applied torque"),
+                ("phi_f", n, "filtered deflection q_m - q"),
+                ("w_f", n, "filtered motor rate dq_m"),
+                ("P", n, "least-squares covariance")]
+    return []
+
+
+def _blocks(v: ca.SX, layout) -> Dict[str, ca.SX]:
+    out, k = {}, 0
+    for name, size, _ in layout:
+        out[name] = v[k:k + size]
+        k += size
+    return out
+
+
+def _stiffness_indices(model) -> Tuple[List[int], List[int], List[int]]:
+    """Indices in ``p`` of each joint's K, J_m and B_m (each must be a plain parameter)."""
+    syms = list(model.param_symbols)
+    out = []
+    for what, exprs in (("K", model.K), ("J_m", model.Jm), ("B_m", model.Bm)):
+        idx = []
+        for i, e in enumerate(exprs):
+            if e not in syms:
+                raise ValueError(f"model {model.name}: {what} of joint {i + 1} is {e}, not a parameter; "
+                                 "the adaptive law needs it as a plain parameter")
+            idx.append(syms.index(e))
+        out.append(idx)
+    return tuple(out)
+
+
+def _sat(v):
+    return ca.fmin(ca.fmax(v, -1.0), 1.0)
+
+
+def _zdot(kind, n, x, z, r, p, g, u_cmd, u, idx) -> ca.SX:
+    """Controller-state derivative under the held ``u_cmd``, ``u`` (the one definition)."""
+    if kind not in ("ismc", "adaptive"):
+        return ca.SX(0, 1)
+    e1 = x[:n] - r[:n]
+    um = g["u_max"]
+    winding = g["limit"] * g["anti_windup"] * ((u_cmd > um) * (e1 < 0) + (u_cmd < -um) * (e1 > 0))
+    dz_int = ca.if_else(winding, ca.SX.zeros(n), e1)
+    if kind == "ismc":
+        return dz_int
+    zb = _blocks(z, state_layout(kind, n))
+    iK, iJ, iB = idx
+    J_m = ca.vertcat(*[p[i] for i in iJ])
+    B_m = ca.vertcat(*[p[i] for i in iB])
+    a = g["filter_rate"]
+    lo, hi = g["K_min"], g["K_max"]
+    q_l, q_m, dq_m = x[0:n], x[2 * n:3 * n], x[3 * n:4 * n]
+    K_hat, u_f, phi_f, w_f, P = (zb[b] for b in ESTIMATOR_BLOCKS)
+    y_f = u_f - J_m * a * (dq_m - w_f) - B_m * w_f
+    eps = y_f - ca.fmin(ca.fmax(K_hat, lo), hi) * phi_f
+    upd = P * phi_f * eps
+    outward = (K_hat >= hi) * (upd > 0) + (K_hat <= lo) * (upd < 0)
+    return ca.vertcat(dz_int,
+                      upd * (1 - outward),
+                      a * (u - u_f),
+                      a * ((q_m - q_l) - phi_f),
+                      a * (dq_m - w_f),
+                      -(P * P) * (phi_f * phi_f))
+
+
+def _law(kind, n, fns, x, z, r, p, g, idx):
+    integral = kind in ("ismc", "adaptive")
+    blk = lambda v, i: v[i * n:(i + 1) * n]  # noqa: E731
+    if kind == "adaptive":
+        zb = _blocks(z, state_layout(kind, n))
+        K_use = ca.fmin(ca.fmax(zb["K_hat"], g["K_min"]), g["K_max"])
+        entries = [p[j] for j in range(p.shape[0])]
+        for i, j in enumerate(idx[0]):
+            entries[j] = K_use[i]
+        p_hat = ca.vertcat(*entries)
+    else:
+        p_hat = p
+    y_hat = fns["T"](x, p_hat)
+    e = [blk(y_hat, i) - blk(r, i) for i in range(4)]
+    chain = ([z[:n]] if integral else []) + e
+    c = g["c"]
+    m = c.shape[0]
+    s = c[0] * chain[0]
+    linear = c[0] * chain[1]
+    for j in range(1, m):
+        s = s + c[j] * chain[j]
+        linear = linear + c[j] * chain[j + 1]
+    s = s + chain[m]
+    nu = blk(r, 4) - linear
+    if kind != "fl":
+        psi = ca.if_else(g["sign"], ca.sign(s), _sat(s / g["delta"]))
+        nu = nu - g["k_s"] * psi
+    nu = nu - g["k_lin"] * s
+    B = ca.if_else(g["use_beta_hat"], ca.reshape(g["beta_hat"], n, n),
+                   ca.reshape(fns["beta"](x, p_hat), n, n))
+    u_cmd = fns["alpha"](x, p_hat) + ca.mtimes(B, nu)
+    um = g["u_max"]
+    u = ca.if_else(g["limit"], ca.fmin(ca.fmax(u_cmd, -um), um), u_cmd)
+    return u, s, u_cmd, y_hat
+
+
+def build_controls(model, functions: Dict[str, ca.Function]) -> Dict[str, ca.Function]:
+    """SX Functions of every law of :data:`KINDS` (and the ``_zdot`` parts of stateful ones).
+
+    Parameters
+    ----------
+    model : derive.models.FlexibleJointModel
+    functions : dict str -> casadi.Function
+        The model's SX Functions (``T``, ``alpha``, ``beta`` are used, inlined).
+
+    Returns
+    -------
+    dict str -> casadi.Function
+        ``"control_<kind>"`` -> ``<model>_control_<kind>`` and, for ``ismc`` and
+        ``adaptive``, ``"control_<kind>_zdot"`` -> ``<model>_control_<kind>_zdot``.
+    """
+    n = model.n
+    n_par = len(model.params)
+    idx = _stiffness_indices(model)
+    out: Dict[str, ca.Function] = {}
+    for kind, _ in KINDS:
+        glay, zlay = gains_layout(kind, n), state_layout(kind, n)
+        x = ca.SX.sym("x", 4 * n)
+        z = ca.SX.sym("z", sum(b[1] for b in zlay))
+        r = ca.SX.sym("r", 5 * n)
+        p = ca.SX.sym("p", n_par)
+        gains = ca.SX.sym("gains", sum(b[1] for b in glay))
+        g = _blocks(gains, glay)
+        u, s, u_cmd, y_hat = _law(kind, n, functions, x, z, r, p, g, idx)
+        z_dot = _zdot(kind, n, x, z, r, p, g, u_cmd, u, idx)
+        outs = ca.cse([u, s, z_dot, u_cmd, y_hat])  # jointly: the outputs share T, alpha
+        out[f"control_{kind}"] = ca.Function(
+            f"{model.name}_control_{kind}", [x, z, r, p, gains], outs,
+            ["x", "z", "r", "p", "gains"], ["u", "s", "z_dot", "u_cmd", "y_hat"])
+        if zlay:
+            uc, uu = ca.SX.sym("u_cmd", n), ca.SX.sym("u", n)
+            zd = ca.cse(_zdot(kind, n, x, z, r, p, g, uc, uu, idx))
+            out[f"control_{kind}_zdot"] = ca.Function(
+                f"{model.name}_control_{kind}_zdot", [x, z, r, p, gains, uc, uu], [zd],
+                ["x", "z", "r", "p", "gains", "u_cmd", "u"], ["z_dot"])
+    return out
+
+
+def layout_lines(n: int) -> List[str]:
+    """Comment lines documenting the arguments of the control laws (for the headers)."""
+    lines = [
+        "control laws: <model>_control_<kind>(x, z, r, p, gains) -> (u, s, z_dot, u_cmd, y_hat)",
+        "  x: plant state (4n) as above; p: NOMINAL parameters (the law's model) as above",
+        "  r: reference and 4 derivatives, rows stacked (5n): [y_d; y_d'; y_d''; y_d'''; y_d'''']",
+        "  u: applied torque (n); s: sliding variable (n); z_dot: controller-state derivative;",
+        "  u_cmd: torque before the limit (n); y_hat: T(x; p_hat) (4n). Flags are 0.0 or 1.0.",
+        "  <model>_control_<kind>_zdot(x, z, r, p, gains, u_cmd, u) -> z_dot: the state part alone",
+        "  (stateful kinds), for integrating z under a held torque.",
+    ]
+    for kind, meaning in KINDS:
+        lines.append(f"  control_{kind}: {meaning}")
+        zl = state_layout(kind, n)
+        lines.append("    z: " + (_offsets(zl) if zl else "(empty)"))
+        lines.append("    gains: " + _offsets(gains_layout(kind, n)))
+    return lines
+
+
+def _offsets(layout) -> str:
+    parts, k = [], 0
+    for name, size, _ in layout:
+        parts.append(f"{k}:{name}" if size == 1 else f"{k}-{k + size - 1}:{name}")
+        k += size
+    return " ".join(parts)
+
+
+def manifest_entry(kind: str, n: int) -> Dict[str, object]:
+    """The manifest's description of ``control_<kind>``'s ``z`` and ``gains`` layouts."""
+    def table(layout):
+        rows, k = [], 0
+        for name, size, meaning in layout:
+            rows.append({"name": name, "offset": k, "size": size, "meaning": meaning})
+            k += size
+        return rows
+    return {"z": table(state_layout(kind, n)), "gains": table(gains_layout(kind, n))}
