@@ -147,8 +147,8 @@ def test_panda_limits_are_the_urdfs():
 
 
 def test_panda_section_quick(tmp_path):
-    cases = {"exact": (1.0,) * 7, "all -30 %": (0.7,) * 7}
-    md = fs.panda_section(tmp_path, duration=0.01, cases=cases, backend="casadi")
+    md = fs.panda_section(tmp_path, duration=10.0, quick=True)
+    cases = fs.QUICK_CASES
     text = "\n".join(md)
     assert (tmp_path / "panda_tracking.png").stat().st_size > 1000
     rows = [ln for ln in md if ln.startswith("| ") and not ln.startswith("| controller")]

@@ -1,0 +1,291 @@
+"""The demo's spatial-arm section: the 7-joint Panda tracking joint-space sines.
+
+The controller knows only the NOMINAL parameters (the model defaults); the TRUE
+plant's joint stiffnesses differ from them by up to +-30 % per joint (a few
+sampled cases), and every commanded torque is saturated at the Panda's URDF
+effort limits. Each controller (``fl``, ``smc``, ``ismc``, ``adaptive``) runs
+on every case with the compiled backend; :func:`panda_section` writes a figure
+(joint errors and torques) and returns the markdown table of errors and peak
+torques for ``out/summary.md``.
+
+Gains: :mod:`fjm_runtime.tune` (``fjm tune``) certifies switching gains over a
+grid of the whole state box; for the Panda that box has 28 coordinates (7 of
+them angles on which ``F`` and ``G`` depend nonlinearly) plus 7 stiffnesses,
+beyond what its grid can cover (see :data:`GAIN_NOTE`), so the gains here are
+stated, not synthesized.
+"""
+from __future__ import annotations
+
+import time
+from pathlib import Path
+from typing import Callable, Dict, List, Optional
+
+import numpy as np
+
+from .controllers import make_controller
+from .references import Sinusoid
+from .simulate import SimulationDivergedError, SimulationResult, simulate
+
+#: ``<limit effort>`` of panda_joint1..7 in derive/robots/panda/panda.urdf (N m); the runtime
+#: never reads a URDF, tests/test_spatial_control.py checks these against the file.
+PANDA_EFFORT = (87.0, 87.0, 87.0, 87.0, 12.0, 12.0, 12.0)
+#: ``<limit lower upper>`` of panda_joint1..7 (rad), checked against the URDF likewise.
+PANDA_LOWER = (-2.8973, -1.7628, -2.8973, -3.0718, -2.8973, -0.0175, -2.8973)
+PANDA_UPPER = (2.8973, 1.7628, 2.8973, -0.0698, 2.8973, 3.7525, 2.8973)
+
+#: Centre of the sines: Franka's "ready" pose (inside every joint's limits).
+READY = (0.0, -0.785, 0.0, -2.356, 0.0, 1.571, 0.785)
+AMPLITUDE = (0.3, 0.25, 0.3, 0.3, 0.4, 0.3, 0.4)   # rad
+OMEGA = (1.0, 1.2, 0.9, 1.1, 1.5, 1.3, 1.7)         # rad/s
+
+#: True stiffness = nominal x factor, per joint.
+STIFFNESS_CASES = {
+    "exact (x 1.0)": (1.0,) * 7,
+    "all -3 %": (0.97,) * 7,
+    "all +3 %": (1.03,) * 7,
+    "all -30 %": (0.7,) * 7,
+    "all +30 %": (1.3,) * 7,
+    "alternating -30 / +30 %": (0.7, 1.3, 0.7, 1.3, 0.7, 1.3, 0.7),
+    "alternating +30 / -30 %": (1.3, 0.7, 1.3, 0.7, 1.3, 0.7, 1.3),
+}
+CONTROLLERS = ("fl", "smc", "ismc", "adaptive")
+LABELS = {"fl": "FL (linear nu)", "smc": "SMC (paper surface, sat)", "ismc": "integral SMC (sat)",
+          "adaptive": "adaptive K + integral SMC"}
+
+LAM = 10.0          # 1/s: triple (smc) or quadruple (fl, ismc, adaptive) pole
+K_S = 200.0         # rad/s^4, every joint
+LAYER_RATE = 200.0  # delta = k_s / LAYER_RATE
+K_BOUNDS = (0.65, 1.35)  # adaptive: K_hat in [0.65, 1.35] x nominal
+DURATION = 10.0
+QUICK_CASES = ("exact (x 1.0)", "all -30 %")
+QUICK_DURATION = 0.05
+#: 5 kHz: at 1 kHz the zero-order hold against the wrist's fast mode (link 7 ~0.007 kg m^2 on a 3e3 N m/rad
+#: spring, ~670 rad/s) costs ~0.1 rad on joint 7 even with the exact model.
+DT = 2e-4
+
+GAIN_NOTE = (
+    "Gains are stated, not synthesized: `fjm tune` certifies a gain by gridding the whole error/reference box "
+    "(28 nonlinear state coordinates for the Panda, the 7 link angles and velocities among them) with the 7 "
+    "stiffnesses at their vertices, which its grid budget cannot resolve for 7 joints (a handful of points per "
+    "coordinate); the same lambda, k_s and delta = k_s / 200 serve every joint.")
+
+
+def reference(n: int = 7) -> Sinusoid:
+    """Joint-space sines about :data:`READY`, starting at rest at ``READY - AMPLITUDE`` (phase -pi/2)."""
+    return Sinusoid(list(AMPLITUDE), list(OMEGA), n=n, offset=list(READY), phase=-0.5 * np.pi)
+
+
+def rest_state(model, q, p) -> np.ndarray:
+    """State at rest at link angles ``q`` holding gravity: ``q_m = q + K^-1 G(q)`` (parameters ``p``).
+
+    ``G(q) = -D(q) ddq`` with ``ddq`` the link acceleration of ``f`` at ``q_m = q``, ``dq = 0``.
+    """
+    n = int(model.n)
+    q = np.asarray(q, dtype=float)
+    x = np.concatenate([q, np.zeros(n), q, np.zeros(n)])
+    ddq = np.asarray(model.f(x, p), dtype=float).ravel()[n:2 * n]
+    G = -np.asarray(model.inertia(x, p), dtype=float) @ ddq
+    pv = model.params_array(p)
+    K = pv[[list(model.param_names).index(f"K{i + 1}") for i in range(n)]]
+    x[2 * n:3 * n] = q + G / K
+    return x
+
+
+def mismatch_ratio(model, factor: float, lam: float = LAM) -> np.ndarray:
+    """Per joint, the uncancelled spring term of a stiffness error over the surface's ``c2``.
+
+    A one-joint estimate (link inertia ``I_i = D_ii`` at :data:`READY`, couplings
+    ignored): with ``K_nom`` in ``alpha``, ``beta`` and ``T`` and a true ``K``, the
+    closed loop keeps ``y^(4) = ... + (K_nom - K) (1 / (I J_m) + 1 / I^2) (I y^(2) + G)``,
+    i.e. a term ``a = |K_nom - K| (1 / (I J_m) + 1 / I^2)`` on ``y^(2)`` against
+    ``c2 = 6 lambda^2`` of the quadruple pole; ``a / c2 >> 1`` means the linear
+    part cannot dominate it (destabilizing for ``K < K_nom``).
+
+    Returns
+    -------
+    ndarray, shape (n,)
+        ``a_i / c2`` for a true stiffness ``factor x`` nominal.
+    """
+    n = int(model.n)
+    x = rest_state(model, READY[:n], None)
+    inertia = np.diag(np.asarray(model.inertia(x), dtype=float))
+    pv = model.params_array()
+    names = list(model.param_names)
+    K = pv[[names.index(f"K{i + 1}") for i in range(n)]]
+    Jm = pv[[names.index(f"Jm{i + 1}") for i in range(n)]]
+    a = abs(1.0 - factor) * K * (1.0 / (inertia * Jm) + 1.0 / inertia ** 2)
+    return a / (6.0 * lam ** 2)
+
+
+def controller(kind: str, model, lam: float = LAM, k_s: float = K_S, u_max=PANDA_EFFORT):
+    """One of :data:`CONTROLLERS` on the model's NOMINAL (default) parameters, torque-limited."""
+    kw = dict(lam=lam, k_s=k_s, delta=k_s / LAYER_RATE, u_max=np.asarray(u_max, dtype=float))
+    if kind == "adaptive":
+        K0 = np.array([model.default_params[f"K{i + 1}"] for i in range(model.n)])
+        kw["K_bounds"] = (K_BOUNDS[0] * K0, K_BOUNDS[1] * K0)
+    return make_controller(kind, model, model.default_params, **kw)
+
+
+def run_cases(model, duration: float = DURATION, dt: float = DT, cases=None, kinds=CONTROLLERS,
+              backend: str = "compiled", progress: Callable[[str], None] = None) -> Dict[str, Dict[str, object]]:
+    """``{kind: {case: SimulationResult or SimulationDivergedError}}`` on the TRUE stiffness cases."""
+    cases = STIFFNESS_CASES if cases is None else cases
+    ref = reference(model.n)
+    out: Dict[str, Dict[str, object]] = {}
+    for kind in kinds:
+        ctrl = controller(kind, model)
+        out[kind] = {}
+        for label, factors in cases.items():
+            if progress:
+                progress(f"panda {kind}, true K = nominal x ({label})")
+            p_true = {f"K{i + 1}": model.default_params[f"K{i + 1}"] * f for i, f in enumerate(factors)}
+            x0 = rest_state(model, ref(0.0)[0], p_true)
+            try:
+                out[kind][label] = simulate(model, ctrl, ref, duration=duration, dt=dt, true_params=p_true,
+                                            x0=x0, backend=backend)
+            except SimulationDivergedError as exc:
+                out[kind][label] = exc
+    return out
+
+
+def joint_errors(r: SimulationResult):
+    """``(rms per joint, final |e| per joint, peak |u| per joint, saturated fraction per joint)``."""
+    e = r.e1
+    u_lim = np.asarray(PANDA_EFFORT)[: e.shape[1]]
+    sat = np.mean(np.abs(r.u) >= u_lim * (1 - 1e-9), axis=0)
+    return (np.sqrt(np.mean(e ** 2, axis=0)), np.abs(e[-1]), np.max(np.abs(r.u), axis=0), sat)
+
+
+def _fmt(v: float) -> str:
+    return f"{v:.2e}" if (v != 0 and (abs(v) < 1e-2 or abs(v) >= 1e3)) else f"{v:.3g}"
+
+
+def table(results) -> List[str]:
+    """Markdown rows: errors (RMS, final, worst joint) and peak torques per controller and case."""
+    lines = ["| controller | true stiffness | RMS e1 (rad, worst joint) | final abs(e1) (rad, worst joint) | "
+             "RMS e1 2nd half (rad, all joints) | peak abs(u) joints 1-4 / 5-7 (N m) | time at the limit (worst joint) |",
+             "|---|---|---|---|---|---|---|"]
+    for kind, per in results.items():
+        for label, r in per.items():
+            if isinstance(r, SimulationDivergedError):
+                lines.append(f"| {LABELS[kind]} | {label} | diverged at t = {r.t:.3f} s | | | | |")
+                continue
+            rms, fin, peak, sat = joint_errors(r)
+            lines.append(f"| {LABELS[kind]} | {label} | {_fmt(rms.max())} | {_fmt(fin.max())} | "
+                         f"{_fmt(r.metrics.rms_error_second_half)} | {peak[:4].max():.1f} / {peak[4:].max():.1f} | "
+                         f"{100 * sat.max():.0f} % |")
+    return lines
+
+
+def csv(results) -> str:
+    """One line per controller, case and joint: RMS and final error (rad), peak torque (N m); or diverged."""
+    lines = ["controller,case,joint,rms_error,final_error,peak_torque,diverged_at"]
+    for kind, per in results.items():
+        for label, r in per.items():
+            if isinstance(r, SimulationDivergedError):
+                lines.append(f"{kind},{label},,,,,{r.t:.4f}")
+                continue
+            rms, fin, peak, _ = joint_errors(r)
+            lines += [f"{kind},{label},{i + 1},{rms[i]:.6g},{fin[i]:.6g},{peak[i]:.6g}," for i in range(rms.size)]
+    return "\n".join(lines) + "\n"
+
+
+def holds(results, tol: float = 1e-2) -> Dict[str, bool]:
+    """Per controller: no divergence and RMS error of every joint below ``tol`` rad in every case."""
+    return {kind: all(not isinstance(r, SimulationDivergedError) and joint_errors(r)[0].max() < tol
+                      for r in per.values()) for kind, per in results.items()}
+
+
+def plot(results, case: str, path: Path) -> Path:
+    """Joint errors (top) and torques (bottom) of every controller for one stiffness case."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    kinds = [k for k in results if not isinstance(results[k][case], SimulationDivergedError)]
+    fig, axes = plt.subplots(2, max(1, len(kinds)), figsize=(4.2 * max(1, len(kinds)), 6.5), squeeze=False,
+                             sharex=True)
+    for j, kind in enumerate(kinds):
+        r = results[kind][case]
+        for i in range(r.e1.shape[1]):
+            axes[0, j].plot(r.t, r.e1[:, i], lw=0.8, label=f"joint {i + 1}")
+            axes[1, j].plot(r.t, r.u[:, i], lw=0.8)
+        axes[0, j].set_title(LABELS[kind], fontsize=9)
+        axes[1, j].set_xlabel("t (s)")
+    axes[0, 0].set_ylabel("e1 = q - q_d (rad)")
+    axes[1, 0].set_ylabel("u (N m), limits 87 / 12")
+    axes[0, 0].legend(fontsize=6, ncol=2)
+    fig.suptitle(f"Panda, joint-space sines, nominal controller, true K = nominal x ({case})", fontsize=10)
+    fig.tight_layout()
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def panda_section(out: Path, duration: float = DURATION, progress: Optional[Callable[[str], None]] = None,
+                  model=None, cases=None, backend: str = "compiled", quick: bool = False) -> List[str]:
+    """Run the Panda experiment, write ``panda_tracking.png`` into ``out``; returns the summary lines.
+
+    Parameters
+    ----------
+    out : Path
+        Output directory (the figure goes there).
+    duration : float
+        Simulated seconds per run (``DURATION`` for the documented numbers).
+    progress : callable, optional
+        Receives one line per run.
+    model : Model, optional
+        Default ``load("panda")``.
+    cases : dict, optional
+        ``{label: stiffness factors}``; default :data:`STIFFNESS_CASES`.
+    backend : str
+        Passed to :func:`fjm_runtime.simulate.simulate` (``'compiled'`` for the demo).
+    quick : bool
+        Smoke test (``fjm figures --quick``): :data:`QUICK_CASES` for at most
+        :data:`QUICK_DURATION` s with the ``'casadi'`` backend (nothing to compile).
+    """
+    from . import load
+    t0 = time.perf_counter()
+    m = model if model is not None else load("panda")
+    if quick:
+        cases = {k: STIFFNESS_CASES[k] for k in QUICK_CASES} if cases is None else cases
+        duration, backend = min(duration, QUICK_DURATION), "casadi"
+    cases = STIFFNESS_CASES if cases is None else cases
+    res = run_cases(m, duration=duration, cases=cases, progress=progress, backend=backend)
+    first = next(iter(cases))
+    fig = plot(res, first, Path(out) / "panda_tracking.png")
+    (Path(out) / "panda_tracking.csv").write_text(csv(res))
+    ok = holds(res)
+    held = [LABELS[k] for k, v in ok.items() if v]
+    failed = [LABELS[k] for k, v in ok.items() if not v]
+    md = ["## Spatial arm: Panda (7 joints), stiffness +-30 %, URDF torque limits", "",
+          f"Joint-space sines `q_d = ready + A sin(omega t - pi/2)` about Franka's ready pose {list(READY)} "
+          f"(A = {list(AMPLITUDE)} rad, omega = {list(OMEGA)} rad/s: inside every joint's URDF limits), "
+          f"{duration:g} s at {1 / DT:g} Hz, compiled backend, starting at rest holding gravity. The controllers "
+          "know only the NOMINAL parameters (the model defaults: K = 1e4 N m/rad joints 1-4, 3e3 joints 5-7); the "
+          "TRUE stiffness is the nominal one times the factors of each case. Torques are saturated at the URDF "
+          f"effort limits {list(PANDA_EFFORT)} N m (anti-windup on the integral surfaces). lambda = {LAM:g}, "
+          f"k_s = {K_S:g}, delta = {K_S / LAYER_RATE:g} on every joint; adaptive: K_hat in "
+          f"[{K_BOUNDS[0]:g}, {K_BOUNDS[1]:g}] x nominal. {GAIN_NOTE}", "",
+          *table(res), "",
+          "Why: a one-joint estimate (`figures_spatial.mismatch_ratio`, link inertia D_ii at the ready pose) of "
+          "the spring term a stiffness error leaves uncancelled, `|K_nom - K| (1/(I J_m) + 1/I^2) y^(2)`, against "
+          f"c2 = 6 lambda^2 = {6 * LAM ** 2:g} of the quadruple pole: at 30 % it is "
+          f"{', '.join(f'{v:.0f}' for v in mismatch_ratio(m, 0.7))} x c2 for joints 1..7 (the wrist's small "
+          "link inertias dominate), and even at 3 % "
+          f"{', '.join(f'{v:.1f}' for v in mismatch_ratio(m, 0.97))} x c2. No lambda the 5 kHz loop and the "
+          "torque limits allow can dominate that, and the switching gain is capped by the same 12 N m. With the "
+          "stiffness overestimated (true K < K_nom) the term destabilizes (without torque limits FL diverges "
+          "within 0.04 s at -30 % and 0.13 s at -3 %); underestimated it is a stiff undamped mode of up to "
+          "sqrt(a) rad/s that the sampled loop excites (FL with K_nom = 0.7 x default and the true default: "
+          "RMS 0.6-2.7 rad within 1 s). The adaptive law's estimator (filter 20 rad/s) is far slower than that. "
+          "What holds on this arm is only the exact stiffness (first row of each block); robust tracking "
+          "needs either identified stiffnesses to within well under 1 % on the wrist or a law that does not "
+          "cancel the spring through the nominal model.",
+          "",
+          f"Hold (every joint's RMS error < 1e-2 rad in every case, no divergence): "
+          f"{', '.join(held) if held else 'none'}; do not hold: {', '.join(failed) if failed else 'none'}. "
+          f"Figure: `{fig.name}` (case {first!r}); per joint: `panda_tracking.csv`. "
+          f"{time.perf_counter() - t0:.0f} s.", ""]
+    return md
