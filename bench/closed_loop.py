@@ -20,6 +20,7 @@ import numpy as np
 import fjm_runtime
 from fjm_runtime.compiled import closed_loop_runner
 from fjm_runtime.controllers import make_controller
+from fjm_runtime.loop import metrics_from_sums
 from fjm_runtime.references import Sinusoid
 
 from .ccutil import compile_object, link_shared
@@ -207,14 +208,7 @@ def numpy_batch(case: Case, K_values: np.ndarray) -> dict:
         dq = dq + dt / 6 * (a1[1] + 2 * a2[1] + 2 * a3[1] + a4[1])
         qm = qm + dt / 6 * (a1[2] + 2 * a2[2] + 2 * a3[2] + a4[2])
         dqm = dqm + dt / 6 * (a1[3] + 2 * a2[3] + 2 * a3[3] + a4[3])
-    reaching = np.where(last_out >= N, np.inf,
-                        np.where(last_out < 0, 0.0, t[np.minimum(last_out + 1, N).astype(int)]))
     return {
-        "final_error": np.abs(q - R[N, 0]),
-        "rms_error": np.sqrt(sum_e2 / (N + 1)),
-        "rms_error_second_half": np.sqrt(sum_half / half.sum()),
-        "max_abs_u": max_u,
-        "reaching_time": reaching,
-        "total_variation_u": tv,
+        **metrics_from_sums(t, np.abs(q - R[N, 0]), sum_e2, sum_half, max_u, last_out, tv, 1),
         "x_final": np.stack([q, dq, qm, dqm], axis=1),
     }

@@ -20,6 +20,7 @@ import casadi as ca
 import numpy as np
 
 from .compiled import DEFAULT_FLAGS, CompileError, compile_library, generate_source
+from .loop import casadi_functions, metrics_from_sums, symbolic_closed_loop_rk4
 
 METRIC_NAMES = ("final_error", "rms_error", "rms_error_second_half", "max_abs_u",
                 "reaching_time", "total_variation_u")
@@ -80,7 +81,6 @@ def _metric_step(model, controller, dt: float, max_state: float) -> ca.Function:
     (the TRUE parameters ``p`` ride along unchanged, so a fold maps only the references);
     ``flags = [in_second_half, k, is_first, is_last]``.
     """
-    from .simulate import casadi_functions, symbolic_closed_loop_rk4
     fns = casadi_functions(model)
     if fns is None or not hasattr(controller, "symbolic_evaluate"):
         raise ValueError("simulate_batch: needs a model with CasADi Functions and a controller "
@@ -363,17 +363,8 @@ def simulate_batch(model, controller, reference, params_true_array, *, duration:
     nw = nx + z0.size
     sum_e2, sum_half, max_u, last_out, tv, first_bad = (acc[:, nw + n + i] for i in range(6))
     x_fin = acc[:, :nx]
-    final_error = np.max(np.abs(x_fin[:, :n] - R[n_steps, :n]), axis=1)
-    reaching = np.where(last_out >= n_steps, np.inf,
-                        np.where(last_out < 0, t[0], t[np.minimum(last_out + 1, n_steps).astype(int)]))
-    metrics = {
-        "final_error": final_error,
-        "rms_error": np.sqrt(sum_e2 / ((n_steps + 1) * n)),
-        "rms_error_second_half": np.sqrt(sum_half / (half.sum() * n)),
-        "max_abs_u": max_u,
-        "reaching_time": reaching,
-        "total_variation_u": tv,
-    }
+    metrics = metrics_from_sums(t, np.max(np.abs(x_fin[:, :n] - R[n_steps, :n]), axis=1), sum_e2, sum_half,
+                                max_u, last_out, tv, n)
     diverged = first_bad >= 0
     for v in metrics.values():
         v[diverged] = np.nan

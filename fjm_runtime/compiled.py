@@ -36,6 +36,8 @@ from typing import Optional, Sequence, Tuple
 import casadi as ca
 import numpy as np
 
+from .loop import build_fused_step, casadi_functions, check_divergence
+
 #: Default compiler flags (also part of the cache key).
 DEFAULT_FLAGS: Tuple[str, ...] = ("-O2", "-fPIC", "-shared")
 
@@ -183,13 +185,12 @@ def compile_function(fn: ca.Function, flags: Sequence[str] = DEFAULT_FLAGS,
 
 def closed_loop_step(model, controller, dt: float) -> ca.Function:
     """The fused step ``(w, r0, rh, r1, p_true) -> (w_next, [u; s; y_hat])`` (SX)."""
-    from .simulate import _build_fused_step, casadi_functions
     fns = casadi_functions(model)
     if fns is None or not hasattr(controller, "symbolic_evaluate"):
         raise ValueError("backend = 'compiled': the model exposes no CasADi Functions or the "
                          "controller has no symbolic_evaluate; use backend='python'")
     nz = int(getattr(controller, "n_states", 0))
-    return _build_fused_step(fns, controller, int(model.nx), int(model.n), nz,
+    return build_fused_step(fns, controller, int(model.nx), int(model.n), nz,
                              len(model.param_names), float(dt))
 
 
@@ -280,7 +281,6 @@ def closed_loop_library(model, controller, dt: float,
 
 def run_compiled(model, controller, reference, p_true, x0, z0, dt, n_steps, max_state):
     """Run the compiled closed loop; returns ``t, X, Z, U, S, Yh, R`` like the other backends."""
-    from .simulate import SimulationDivergedError
     nx, n = int(model.nx), int(model.n)
     loop = closed_loop_library(model, controller, dt)
     t = dt * np.arange(n_steps + 1)
@@ -288,14 +288,7 @@ def run_compiled(model, controller, reference, p_true, x0, z0, dt, n_steps, max_
     R = r_half[0::2].reshape(n_steps + 1, 5, n)
     w0 = np.concatenate([np.asarray(x0, float), np.asarray(z0, float)])
     w_out, a_out = loop(w0, r_half[0:-1:2], r_half[1::2], r_half[2::2], p_true)
-    bad = ~np.all(np.isfinite(w_out), axis=1) | (np.max(np.abs(w_out), axis=1) > max_state)
-    if np.any(bad):
-        j = int(np.argmax(bad))
-        tb = t[j + 1]
-        raise SimulationDivergedError(
-            tb, f"simulation diverged at t = {tb:.4f} s: state "
-            f"{'is not finite' if not np.all(np.isfinite(w_out[j])) else f'exceeds |x| = {max_state:g}'}"
-            f" (last applied torque {np.round(a_out[j, :n], 3).tolist()} N m)")
+    check_divergence(t[1:], w_out, a_out[:, :n], max_state)
     W = np.vstack([w0[None], w_out])
     X, Z = W[:, :nx], W[:, nx:]
     last = controller.evaluate(t[-1], X[-1], Z[-1], R[-1])

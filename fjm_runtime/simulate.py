@@ -12,47 +12,9 @@ from typing import Callable, Optional
 
 import numpy as np
 
+from .loop import (Metrics, SimulationDivergedError, build_fused_step, casadi_functions,  # noqa: F401
+                   check_divergence, compute_metrics, metrics_from_sums, symbolic_closed_loop_rk4)
 from .rk4 import rk4_step
-
-
-class SimulationDivergedError(RuntimeError):
-    """The closed loop produced a non-finite (or absurdly large) state."""
-
-    def __init__(self, t: float, message: str):
-        super().__init__(message)
-        self.t = t
-
-
-@dataclass
-class Metrics:
-    """Per-run figures of merit (link-position error ``e1 = q_l - q_d``, worst joint).
-
-    Attributes
-    ----------
-    final_error : float
-        ``max_i |e1_i(t_end)|`` in rad.
-    rms_error : float
-        RMS of ``e1`` over the whole run (all joints), rad.
-    rms_error_second_half : float
-        RMS of ``e1`` over ``t >= t_end / 2``, rad.
-    max_abs_u : float
-        ``max |u|`` in N m.
-    reaching_time : float
-        First time after which ``|s_i| <= delta_i`` for all joints until the end
-        (s); ``inf`` if the boundary layer is not reached and kept.
-    total_variation_u : float
-        ``sum_k |u_{k+1} - u_k|`` (summed over joints), N m: the chattering measure.
-    """
-
-    final_error: float
-    rms_error: float
-    rms_error_second_half: float
-    max_abs_u: float
-    reaching_time: float
-    total_variation_u: float
-
-    def as_dict(self) -> dict:
-        return dict(self.__dict__)
 
 
 @dataclass
@@ -95,32 +57,6 @@ class SimulationResult:
     e1: np.ndarray
     delta: np.ndarray
     metrics: Metrics
-
-
-def compute_metrics(t, e1, u, s, delta) -> Metrics:
-    """Compute :class:`Metrics` from sampled trajectories.
-
-    Parameters
-    ----------
-    t : ndarray, shape (N+1,)
-    e1, u, s : ndarray, shape (N+1, n)
-    delta : ndarray, shape (n,)
-    """
-    half = t >= 0.5 * t[-1]
-    inside = np.all(np.abs(s) <= delta, axis=1)
-    if inside[-1]:
-        outside_idx = np.flatnonzero(~inside)
-        reaching = t[0] if outside_idx.size == 0 else t[min(outside_idx[-1] + 1, t.size - 1)]
-    else:
-        reaching = np.inf
-    return Metrics(
-        final_error=float(np.max(np.abs(e1[-1]))),
-        rms_error=float(np.sqrt(np.mean(e1 ** 2))),
-        rms_error_second_half=float(np.sqrt(np.mean(e1[half] ** 2))),
-        max_abs_u=float(np.max(np.abs(u))),
-        reaching_time=float(reaching),
-        total_variation_u=float(np.sum(np.abs(np.diff(u, axis=0)))),
-    )
 
 
 def _true_params_array(model, true_params) -> np.ndarray:
@@ -254,11 +190,7 @@ def simulate(model, controller, reference, *, duration: float, dt: float = 1e-3,
             return np.concatenate([dx, dz])
 
         w = rk4_step(rhs, tk, np.concatenate([x, z]), dt)
-        if not np.all(np.isfinite(w)) or np.max(np.abs(w)) > max_state:
-            raise SimulationDivergedError(
-                tk + dt, f"simulation diverged at t = {tk + dt:.4f} s: state "
-                f"{'is not finite' if not np.all(np.isfinite(w)) else f'exceeds |x| = {max_state:g}'}"
-                f" (last applied torque {np.round(u, 3).tolist()} N m)")
+        check_divergence([tk + dt], w[None], u[None], max_state)
         x, z = w[:nx], w[nx:]
         if progress is not None and (k + 1) % report_every == 0:
             progress((k + 1) / n_steps)
@@ -274,24 +206,6 @@ def _finish(model, controller, p_true, t, X, Z, U, S, Yh, R) -> SimulationResult
     metrics = compute_metrics(t, e1, U, S, delta)
     return SimulationResult(t=t, x=X, z=Z, u=U, y=Y, y_hat=Yh, ref=R, s=S, e1=e1,
                             delta=delta, metrics=metrics)
-
-
-def casadi_functions(model):
-    """The model's CasADi Functions ``f, g, T, alpha, beta`` of ``(x, p)``, or ``None``.
-
-    Uses the loader's ``Model.functions`` mapping (name -> casadi.Function).
-    """
-    fns = getattr(model, "functions", None)
-    if fns is None:
-        fns = getattr(model, "casadi_functions", None)
-    if fns is None:
-        return None
-    try:
-        import casadi as ca
-        out = {k: fns[k] for k in ("f", "g", "T", "alpha", "beta")}
-    except (KeyError, TypeError, ImportError):
-        return None
-    return out if all(isinstance(v, ca.Function) for v in out.values()) else None
 
 
 _MAPPED: dict = {}
@@ -318,66 +232,9 @@ def _true_outputs(model, p_true, X):
     return np.stack([np.asarray(model.T(xk, p_true), dtype=float).reshape(4, n) for xk in X])
 
 
-def symbolic_closed_loop_rk4(fns, controller, w, r0, rh, r1, p, nx: int, n: int, dt: float):
-    """One closed-loop step in CasADi (SX or MX): sample the controller, RK4 of ``[x; z]`` under held u.
-
-    Parameters
-    ----------
-    fns : dict
-        CasADi Functions ``f``, ``g``, ``T``, ``alpha``, ``beta`` of ``(x, p)``.
-    w : casadi SX/MX, shape (nx + nz, 1)
-        Plant state and controller state.
-    r0, rh, r1 : shape (5n, 1)
-        Reference rows at t, t + dt/2, t + dt.
-    p : shape (n_params, 1)
-        TRUE plant parameters.
-
-    Returns
-    -------
-    w_next : shape (nx + nz, 1)
-    out : dict
-        The controller sample of :meth:`symbolic_evaluate` (``u``, ``u_cmd``, ``s``, ``y_hat``).
-    """
-    import casadi as ca
-    nz = int(w.shape[0]) - nx
-    x, z = w[:nx], w[nx:]
-    out = controller.symbolic_evaluate(x, z, r0, fns)
-    u = out["u"]
-
-    def rhs(wk, rk):
-        xk, zk = wk[:nx], wk[nx:]
-        dx = fns["f"](xk, p) + ca.mtimes(ca.reshape(fns["g"](xk, p), nx, n), u)
-        if nz == 0:
-            return dx
-        return ca.vertcat(dx, controller.symbolic_state_derivative(xk, zk, rk, out))
-
-    k1 = rhs(w, r0)
-    k2 = rhs(w + 0.5 * dt * k1, rh)
-    k3 = rhs(w + 0.5 * dt * k2, rh)
-    k4 = rhs(w + dt * k3, r1)
-    return w + (dt / 6.0) * (k1 + 2 * k2 + 2 * k3 + k4), out
-
-
-def _build_fused_step(fns, controller, nx, n, nz, n_par, dt):
-    """One closed-loop step (controller sample + RK4 of [x; z] under held u) as a CasADi Function."""
-    import casadi as ca
-    w = ca.MX.sym("w", nx + nz)
-    r0, rh, r1 = (ca.MX.sym(nm, 5 * n) for nm in ("r0", "rh", "r1"))
-    p = ca.MX.sym("p", n_par)
-    w_next, out = symbolic_closed_loop_rk4(fns, controller, w, r0, rh, r1, p, nx, n, dt)
-    u = out["u"]
-    step = ca.Function("closed_loop_step", [w, r0, rh, r1, p],
-                       [w_next, ca.vertcat(u, out["s"], out["y_hat"])])
-    try:
-        step = step.expand()
-    except Exception:  # noqa: BLE001 - keep the MX graph if it cannot be expanded
-        pass
-    return step
-
-
 def _run_fused(model, fns, controller, reference, p_true, x0, z0, dt, n_steps, progress, max_state):
     nx, n, nz = int(model.nx), int(model.n), z0.size
-    step = _build_fused_step(fns, controller, nx, n, nz, p_true.size, dt)
+    step = build_fused_step(fns, controller, nx, n, nz, p_true.size, dt)
     t = dt * np.arange(n_steps + 1)
     r_half = reference.sample(0.5 * dt * np.arange(2 * n_steps + 1)).reshape(2 * n_steps + 1, 5 * n)
     R = r_half[0::2].reshape(n_steps + 1, 5, n)
@@ -397,14 +254,7 @@ def _run_fused(model, fns, controller, reference, p_true, x0, z0, dt, n_steps, p
         w_out, a_out = runners[m](W[k], rr[0:-1:2].T, rr[1::2].T, rr[2::2].T, p_true)
         w_out, a_out = np.asarray(w_out).T, np.asarray(a_out).T
         W[k + 1:k + m + 1], aux[k:k + m] = w_out, a_out
-        bad = ~np.all(np.isfinite(w_out), axis=1) | (np.max(np.abs(w_out), axis=1) > max_state)
-        if np.any(bad):
-            j = int(np.argmax(bad))
-            tb = t[k + j + 1]
-            raise SimulationDivergedError(
-                tb, f"simulation diverged at t = {tb:.4f} s: state "
-                f"{'is not finite' if not np.all(np.isfinite(w_out[j])) else f'exceeds |x| = {max_state:g}'}"
-                f" (last applied torque {np.round(a_out[j, :n], 3).tolist()} N m)")
+        check_divergence(t[k + 1:k + m + 1], w_out, a_out[:, :n], max_state)
         k += m
         if progress is not None:
             progress(k / n_steps)
