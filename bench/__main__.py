@@ -27,6 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from . import report
+from .realtime import bench_realtime
 
 HERE = Path(__file__).resolve().parent
 REPO = HERE.parent
@@ -491,17 +492,18 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(prog="python -m bench", description=__doc__.split("\n\n")[0])
     ap.add_argument("--quick", action="store_true", help="one repetition per figure (smoke test / checks)")
     ap.add_argument("--skip-derive", action="store_true", help="skip the derive and gcc timings")
-    ap.add_argument("--only", nargs="+", choices=("derive", "alpha_beta", "spatial", "closed_loop", "batch"),
+    ap.add_argument("--only", nargs="+", choices=("derive", "alpha_beta", "spatial", "closed_loop", "batch",
+                                                  "realtime"),
                     help="run only these sections")
     ap.add_argument("--out", type=Path, default=None,
                     help="results file (default: bench/results.json for a full run, "
                          "build/bench-results.json otherwise)")
     args = ap.parse_args(argv)
     reps, slow = (1, 1) if args.quick else (5, 3)
-    sections = set(args.only or ("derive", "alpha_beta", "spatial", "closed_loop", "batch"))
+    sections = set(args.only or ("derive", "alpha_beta", "spatial", "closed_loop", "batch", "realtime"))
     if args.skip_derive:
         sections.discard("derive")
-    full = not args.quick and len(sections) == 5
+    full = not args.quick and len(sections) == 6
     out = args.out or (DEFAULT_OUT if full else REPO / "build" / "bench-results.json")
     t_start = time.perf_counter()
     results = {"machine": machine(), "quick": bool(args.quick)}
@@ -513,7 +515,8 @@ def main(argv=None) -> int:
                 ("alpha_beta", lambda: bench_alpha_beta(work, reps, checks)),
                 ("spatial", lambda: bench_spatial(work, reps, checks)),
                 ("closed_loop", lambda: bench_closed_loop(work, reps, slow, checks)),
-                ("batch", lambda: bench_batch(reps, slow, checks))]
+                ("batch", lambda: bench_batch(reps, slow, checks)),
+                ("realtime", lambda: bench_realtime(work, 10 ** 4 if args.quick else 10 ** 6, checks, check))]
         failed = []
         for name, run in plan:
             if name not in sections:

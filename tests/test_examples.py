@@ -38,7 +38,7 @@ def c_example(tmp_path_factory):
     # The example's own source is built with -Werror; the generated source's strictness is
     # tested (and reported) by tests/test_c_sources.py, so here it only has to build.
     proc = subprocess.run(
-        ["make", "-C", str(EXAMPLES / "c"), f"OUT={out}", "CC=gcc",
+        ["make", "-C", str(EXAMPLES / "c"), "alpha_beta", f"OUT={out}", "CC=gcc",
          "GEN_WARN=-std=c99 -Wall -pedantic"], capture_output=True, text=True)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     exe = out / "link1_alpha_beta"
@@ -128,7 +128,7 @@ def test_opti_example(tmp_path):
 def test_c_example_single_precision(tmp_path):
     """The example also builds with -Dcasadi_real=float and agrees with Python to float accuracy."""
     proc = subprocess.run(
-        ["make", "-C", str(EXAMPLES / "c"), f"OUT={tmp_path}", "CC=gcc", "CFLAGS=-O2 -Dcasadi_real=float",
+        ["make", "-C", str(EXAMPLES / "c"), "alpha_beta", f"OUT={tmp_path}", "CC=gcc", "CFLAGS=-O2 -Dcasadi_real=float",
          "GEN_WARN=-std=c99 -Wall -pedantic"], capture_output=True, text=True)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     m = fjm_runtime.load("link1")
