@@ -1084,8 +1084,9 @@ def add_parser(sub) -> None:
     tp.add_argument("--lam", type=float, default=8.0, help="pole magnitude lambda, 1/s (default 8)")
     tp.add_argument("--nominal", action="append", default=[], metavar="NAME=VALUE",
                     help="NOMINAL controller parameter (repeatable); default: model defaults")
-    tp.add_argument("--k-range", type=float, nargs=2, default=(100.0, 200.0), metavar=("LO", "HI"),
-                    help="true stiffness of every joint, N m/rad (default 100 200)")
+    tp.add_argument("--k-range", type=float, nargs=2, default=None, metavar=("LO", "HI"),
+                    help="true stiffness of every joint, N m/rad (default: each joint's nominal stiffness "
+                         "x [2/3, 4/3], i.e. 100 200 at 150)")
     tp.add_argument("--jm-range", type=float, nargs=2, default=None, metavar=("LO", "HI"),
                     help="true motor inertia of every joint (default: nominal, exact)")
     tp.add_argument("--bm-range", type=float, nargs=2, default=None, metavar=("LO", "HI"),
@@ -1147,11 +1148,21 @@ def run(args) -> int:
             extra[name.strip()] = (float(lo), float(hi))
         except ValueError:
             raise ValueError(f"--param-box {item!r}: LO and HI must be numbers") from None
-    lo, hi = args.k_range
-    if not (0 < lo <= hi):
-        raise ValueError(f"--k-range {lo} {hi}: expected 0 < LO <= HI (N m/rad)")
-    box = param_box_from_ranges(m, k_range=(lo, hi), jm_range=args.jm_range, bm_range=args.bm_range,
-                                mass_range=args.mass_range, extra=extra)
+    k_extra = {}
+    if args.k_range is not None:
+        lo, hi = args.k_range
+        if not (0 < lo <= hi):
+            raise ValueError(f"--k-range {lo} {hi}: expected 0 < LO <= HI (N m/rad)")
+        k_range = (lo, hi)
+    else:
+        k_range = None
+        p_nom = m.params_array(nominal, arg="--nominal")
+        for name in _stiffness_names(m):
+            k0 = float(p_nom[m.param_names.index(name)])
+            k_extra[name] = (k0 * 2.0 / 3.0, k0 * 4.0 / 3.0)
+    k_extra.update(extra)
+    box = param_box_from_ranges(m, k_range=k_range, jm_range=args.jm_range, bm_range=args.bm_range,
+                                mass_range=args.mass_range, extra=k_extra)
     if args.reference_bounds is not None:
         R = _floats(args.reference_bounds, 5, "--reference-bounds")
         ref_label = "explicit"
