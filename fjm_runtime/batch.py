@@ -19,7 +19,7 @@ from typing import Dict, List, Optional, Sequence
 import casadi as ca
 import numpy as np
 
-from .compiled import DEFAULT_FLAGS, CompileError, compile_library, generate_source
+from .compiled import DEFAULT_FLAGS, CompileError, compile_library, fold_driver, generate_source
 from .loop import casadi_functions, metrics_from_sums, symbolic_closed_loop_rk4
 
 METRIC_NAMES = ("final_error", "rms_error", "rms_error_second_half", "max_abs_u",
@@ -119,50 +119,11 @@ def _metric_step(model, controller, dt: float, max_state: float) -> ca.Function:
     return ca.Function("fjm_metric_step", [acc, r0, rh, r1, fl], [ca.cse(acc_next)])
 
 
-_DRIVER = r"""
-/* fjm batch driver: for each run, fold fjm_metric_step over the samples. */
-#include <stdlib.h>
-#include <string.h>
-#ifdef _OPENMP
-#include <omp.h>
-#endif
+_DRIVER = fold_driver("fjm_metric_step") + r"""
 int fjm_batch(int n_runs, int n_samples, int nacc, int nr, double* acc,
               const double* R0, const double* RH, const double* R1, const double* FL,
               int n_threads, int* threads_used) {
-  casadi_int sz_arg, sz_res, sz_iw, sz_w;
-  fjm_metric_step_work(&sz_arg, &sz_res, &sz_iw, &sz_w);
-  int failed = 0, used = 1, nt = 1;
-#ifdef _OPENMP
-  nt = n_threads > 0 ? n_threads : omp_get_max_threads();
-#endif
-  (void)nt; (void)n_threads;
-  #pragma omp parallel num_threads(nt)
-  {
-#ifdef _OPENMP
-    #pragma omp single
-    used = omp_get_num_threads();
-#endif
-    #pragma omp for schedule(dynamic, 4) reduction(|:failed)
-    for (int b = 0; b < n_runs; ++b) {
-      double* buf = (double*)malloc(sizeof(double) * (2 * nacc + sz_w + 1));
-      casadi_int* iw = (casadi_int*)malloc(sizeof(casadi_int) * (sz_iw + 1));
-      double *cur = buf, *nxt = buf + nacc, *w = buf + 2 * nacc;
-      memcpy(cur, acc + (size_t)b * nacc, sizeof(double) * nacc);
-      const double* arg[8];
-      double* res[2];
-      for (int k = 0; k < n_samples; ++k) {
-        arg[0] = cur; arg[1] = R0 + (size_t)k * nr; arg[2] = RH + (size_t)k * nr;
-        arg[3] = R1 + (size_t)k * nr; arg[4] = FL + (size_t)k * 4;
-        res[0] = nxt;
-        failed |= fjm_metric_step(arg, res, iw, w, 0);
-        double* t = cur; cur = nxt; nxt = t;
-      }
-      memcpy(acc + (size_t)b * nacc, cur, sizeof(double) * nacc);
-      free(buf); free(iw);
-    }
-  }
-  *threads_used = used;
-  return failed;
+  return fjm_fold(n_runs, n_samples, nacc, nr, 4, 0, acc, R0, RH, R1, FL, 0, 0, n_threads, threads_used);
 }
 """
 

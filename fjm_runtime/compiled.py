@@ -36,7 +36,7 @@ from typing import Optional, Sequence, Tuple
 import casadi as ca
 import numpy as np
 
-from .loop import build_fused_step, casadi_functions, check_divergence
+from .loop import assemble, build_fused_step, casadi_functions, check_divergence
 
 #: Default compiler flags (also part of the cache key).
 DEFAULT_FLAGS: Tuple[str, ...] = ("-O2", "-fPIC", "-shared")
@@ -207,28 +207,77 @@ def closed_loop_runner(model, controller, dt: float, n_steps: int,
     return compile_function(runner, flags)
 
 
-_LOOP_DRIVER = r"""
-/* fjm closed-loop driver: n_steps calls of the step, states and outputs stored row by row. */
+_FOLD_DRIVER = r"""
+/* fjm driver: for each run, fold FJM_STEP over the samples (runs spread over OpenMP threads when
+ * built with -fopenmp); with W (AUX) given, the state (second output) after every step is stored
+ * row by row, else only the final state is written back into acc. E: 5th input, stride ne (0: constant). */
 #include <stdlib.h>
 #include <string.h>
+#ifdef _OPENMP
+#include <omp.h>
+#endif
+static int fjm_fold(int n_runs, int n_samples, int nw, int nr, int ne, int naux, double* acc,
+                    const double* R0, const double* RH, const double* R1, const double* E,
+                    double* W, double* AUX, int n_threads, int* threads_used) {
+  casadi_int sz_arg, sz_res, sz_iw, sz_w;
+  FJM_STEP_work(&sz_arg, &sz_res, &sz_iw, &sz_w);
+  int failed = 0, used = 1, nt = 1;
+#ifdef _OPENMP
+  nt = n_threads > 0 ? n_threads : omp_get_max_threads();
+#endif
+  (void)nt; (void)n_threads;
+  #pragma omp parallel num_threads(nt)
+  {
+#ifdef _OPENMP
+    #pragma omp single
+    used = omp_get_num_threads();
+#endif
+    #pragma omp for schedule(dynamic, 4) reduction(|:failed)
+    for (int b = 0; b < n_runs; ++b) {
+      double* buf = (double*)malloc(sizeof(double) * (2 * nw + sz_w + 1));
+      casadi_int* iw = (casadi_int*)malloc(sizeof(casadi_int) * (sz_iw + 1));
+      double *a = buf, *a2 = buf + nw, *w = buf + 2 * nw;
+      memcpy(a, acc + (size_t)b * nw, sizeof(double) * nw);
+      const double* cur = a;
+      const double* arg[8];
+      double* res[4];
+      for (int k = 0; k < n_samples; ++k) {
+        size_t row = (size_t)b * n_samples + k;
+        double* dst = W ? W + row * nw : (cur == a ? a2 : a);
+        arg[0] = cur; arg[1] = R0 + (size_t)k * nr; arg[2] = RH + (size_t)k * nr;
+        arg[3] = R1 + (size_t)k * nr; arg[4] = E + (size_t)k * ne;
+        res[0] = dst; res[1] = AUX ? AUX + row * naux : 0;
+        failed |= FJM_STEP(arg, res, iw, w, 0);
+        cur = dst;
+      }
+      memcpy(acc + (size_t)b * nw, cur, sizeof(double) * nw);
+      free(buf); free(iw);
+    }
+  }
+  *threads_used = used;
+  return failed;
+}
+"""
+
+
+def fold_driver(step_name: str) -> str:
+    """C of the one driver loop ``fjm_fold`` over runs and samples, calling the step ``step_name``.
+
+    Used by the single-run compiled loop (``fjm_run``: one run, every state stored) and by
+    the scalar batch (``fjm_batch`` in :mod:`fjm_runtime.batch`: many runs, final
+    accumulators only).
+    """
+    return _FOLD_DRIVER.replace("FJM_STEP", step_name)
+
+
+_LOOP_DRIVER = fold_driver("fjm_closed_loop_step") + r"""
 int fjm_run(int n_steps, int nw, int nr, int naux, const double* w0, const double* R0,
             const double* RH, const double* R1, const double* p, double* W, double* AUX) {
-  casadi_int sz_arg, sz_res, sz_iw, sz_w;
-  fjm_closed_loop_step_work(&sz_arg, &sz_res, &sz_iw, &sz_w);
-  double* w = (double*)malloc(sizeof(double) * (sz_w + 1));
-  casadi_int* iw = (casadi_int*)malloc(sizeof(casadi_int) * (sz_iw + 1));
-  const double* arg[8];
-  double* res[4];
-  const double* cur = w0;
-  int flag = 0;
-  for (int k = 0; k < n_steps && !flag; ++k) {
-    arg[0] = cur; arg[1] = R0 + (size_t)k * nr; arg[2] = RH + (size_t)k * nr;
-    arg[3] = R1 + (size_t)k * nr; arg[4] = p;
-    res[0] = W + (size_t)k * nw; res[1] = AUX + (size_t)k * naux;
-    flag = fjm_closed_loop_step(arg, res, iw, w, 0);
-    cur = res[0];
-  }
-  free(w); free(iw);
+  double* acc = (double*)malloc(sizeof(double) * (nw + 1));
+  int used = 1, flag;
+  memcpy(acc, w0, sizeof(double) * nw);
+  flag = fjm_fold(1, n_steps, nw, nr, 0, naux, acc, R0, RH, R1, p, W, AUX, 1, &used);
+  free(acc);
   return flag;
 }
 """
@@ -289,10 +338,4 @@ def run_compiled(model, controller, reference, p_true, x0, z0, dt, n_steps, max_
     w0 = np.concatenate([np.asarray(x0, float), np.asarray(z0, float)])
     w_out, a_out = loop(w0, r_half[0:-1:2], r_half[1::2], r_half[2::2], p_true)
     check_divergence(t[1:], w_out, a_out[:, :n], max_state)
-    W = np.vstack([w0[None], w_out])
-    X, Z = W[:, :nx], W[:, nx:]
-    last = controller.evaluate(t[-1], X[-1], Z[-1], R[-1])
-    U = np.vstack([a_out[:, :n], last.u[None]])
-    S = np.vstack([a_out[:, n:2 * n], last.s[None]])
-    Yh = np.concatenate([a_out[:, 2 * n:].reshape(n_steps, 4, n), last.y_hat[None]])
-    return t, X, Z, U, S, Yh, R
+    return assemble(controller, t, np.vstack([w0[None], w_out]), a_out, R, nx, n)

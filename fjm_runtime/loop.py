@@ -198,3 +198,21 @@ def build_fused_step(fns, controller, nx, n, nz, n_par, dt):
     except Exception:  # noqa: BLE001 - keep the MX graph if it cannot be expanded
         pass
     return step
+
+
+def assemble(controller, t, W, aux, R, nx: int, n: int):
+    """Sampled trajectories from the states ``W`` (N+1, nw) and the step outputs ``aux`` (N, 6n).
+
+    The law is evaluated once more at ``t_end`` for the last row of ``u``, ``s``, ``y_hat``.
+
+    Returns
+    -------
+    t, X, Z, U, S, Yh, R
+        As :func:`fjm_runtime.simulate.simulate` stores them.
+    """
+    X, Z = W[:, :nx], W[:, nx:]
+    last = controller.evaluate(t[-1], X[-1], Z[-1], R[-1])
+    U = np.vstack([aux[:, :n], last.u[None]])
+    S = np.vstack([aux[:, n:2 * n], last.s[None]])
+    Yh = np.concatenate([aux[:, 2 * n:].reshape(-1, 4, n), last.y_hat[None]])
+    return t, X, Z, U, S, Yh, R

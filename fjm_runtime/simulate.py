@@ -12,7 +12,7 @@ from typing import Callable, Optional
 
 import numpy as np
 
-from .loop import (Metrics, SimulationDivergedError, build_fused_step, casadi_functions,  # noqa: F401
+from .loop import (Metrics, SimulationDivergedError, assemble, build_fused_step, casadi_functions,  # noqa: F401
                    check_divergence, compute_metrics, metrics_from_sums, symbolic_closed_loop_rk4)
 from .rk4 import rk4_step
 
@@ -258,12 +258,7 @@ def _run_fused(model, fns, controller, reference, p_true, x0, z0, dt, n_steps, p
         k += m
         if progress is not None:
             progress(k / n_steps)
-    X, Z = W[:, :nx], W[:, nx:]
-    last = controller.evaluate(t[-1], X[-1], Z[-1], R[-1])
-    U = np.vstack([aux[:, :n], last.u[None]])
-    S = np.vstack([aux[:, n:2 * n], last.s[None]])
-    Yh = np.concatenate([aux[:, 2 * n:].reshape(n_steps, 4, n), last.y_hat[None]])
-    return t, X, Z, U, S, Yh, R
+    return assemble(controller, t, W, aux, R, nx, n)
 
 
 def stderr_progress(label: str) -> Callable[[float], None]:
