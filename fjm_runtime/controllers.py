@@ -19,6 +19,12 @@ The integral variant (``integral=True``) adds a controller state ``z`` with
 ``z' = e1`` and uses ``s = c0 z + c1 e1 + c2 e2 + c3 e3 + e4`` and
 ``nu = y4d' - (c0 e1 + c1 e2 + c2 e3 + c3 e4) - k_s psi(s / delta)``.
 
+The law itself is not written here: it is emitted by ``make derive`` with every model
+(``generated/<model>/control_<kind>.casadi`` and C, ``derive/emit/controls.py``) and called
+(:meth:`SlidingModeController.evaluate`) or composed into CasADi graphs
+(:meth:`SlidingModeController.symbolic_evaluate`) from here; this module validates the gains and
+packs them into the law's ``gains`` vector (:attr:`SlidingModeController.gains`).
+
 Controller interface used by :func:`fjm_runtime.simulate.simulate`:
 
 ``n_states``
