@@ -8,10 +8,8 @@ on every case with the compiled backend; :func:`panda_section` writes a figure
 (joint errors and torques) and returns the markdown table of errors and peak
 torques for ``out/summary.md``.
 
-Gains: :mod:`fjm_runtime.tune` (``fjm tune``) certifies switching gains over a
-grid of the whole state box; for the Panda that box has 28 coordinates (7 of
-them angles on which ``F`` and ``G`` depend nonlinearly) plus 7 stiffnesses,
-beyond what its grid can cover (see :data:`GAIN_NOTE`), so the gains here are
+Gains: :mod:`fjm_runtime.tune` finds no admissible gain for the Panda's +-30 %
+box within the URDF efforts (see :data:`GAIN_NOTE`), so the gains here are
 stated, not synthesized.
 """
 from __future__ import annotations
@@ -64,10 +62,11 @@ QUICK_DURATION = 0.05
 DT = 2e-4
 
 GAIN_NOTE = (
-    "Gains are stated, not synthesized: `fjm tune` certifies a gain by gridding the whole error/reference box "
-    "(28 nonlinear state coordinates for the Panda, the 7 link angles and velocities among them) with the 7 "
-    "stiffnesses at their vertices, which its grid budget cannot resolve for 7 joints (a handful of points per "
-    "coordinate); the same lambda, k_s and delta = k_s / 200 serve every joint.")
+    "Gains are stated, not synthesized: `fjm_runtime.tune.synthesize_gains` on this box (stiffness +-30 %, "
+    "the reference's derivative bounds, error box 0.01 rad / 0.05 / 0.5 / 5, lambda = 10, integral surface, "
+    "the URDF efforts as u_max) finds no admissible gain: reaching needs k_s ~1e7-1e8 rad/s^4, which "
+    "commands thousands of N m on the box against 87 / 12 N m (docs/spatial.md, \"Control\"). The same "
+    "lambda, k_s and delta = k_s / 200 serve every joint.")
 
 
 def reference(n: int = 7) -> Sinusoid:
