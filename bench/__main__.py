@@ -281,7 +281,7 @@ def bench_spatial(work: Path, reps: int, checks: list, name: str = "panda") -> d
     rng = np.random.default_rng(1)
     xs = [rng.normal(scale=0.5, size=m.nx) for _ in range(3)]
     x = xs[0]
-    log(f"spatial {name}: gcc -O2 of the shipped {name}.c (all eight functions) ...")
+    log(f"spatial {name}: gcc -O2 of the shipped {name}.c (every function it ships) ...")
     obj = work / "spatial" / f"{name}.o"
     obj.parent.mkdir(parents=True, exist_ok=True)
     gcc_all = statistics.median(compile_object(REPO / "generated" / name / f"{name}.c", obj)

@@ -35,6 +35,7 @@ TARGETS = {
     "closed_loop.speedup_vs_python": (">=", 50.0),
     "batch.speedup_vs_numpy": (">=", 9.0),
     "batch.generated_s": ("<=", 0.3),
+    "spatial.ratio": ("<=", 0.5),
 }
 
 
@@ -93,6 +94,18 @@ def main_table(r: dict) -> List[str]:
         ("generated C, planar7", "-",
          f"{g('derive.planar7.c_bytes', '.0f', 1e-3)} kB, gcc -O2 {g('derive.planar7.gcc_seconds', '.1f')} s",
          "-", "-", "<= 0.5 MB, <= 5 s", ["derive.planar7.c_bytes", "derive.planar7.gcc_seconds"]),
+        ("`python -m derive` of the 7-joint Panda (URDF), inside `make derive`", "-",
+         f"{g('derive.panda.seconds', '.1f')} s (symbolic {g('derive.panda.derive_seconds', '.1f')} s, emit "
+         f"{g('derive.panda.emit_seconds', '.1f')} s), {g('derive.panda.ops', '.0f')} operations", "-", "-", "-", []),
+        ("alpha + beta compiled, Panda (7 joints)",
+         "adam-robotics 0.5.0 (CasADi backend) on the same URDF, elastic model and Lie derivatives by "
+         "CasADi AD (`jtimes`), same codegen and flags",
+         f"{g('spatial.generated_us', '.2f')} us", f"{g('spatial.peer_us', '.2f')} us",
+         f"ratio {g('spatial.ratio', '.2f')}", "<= 0.5", ["spatial.ratio"]),
+        ("C of alpha + beta, Panda", "the adam peer's C",
+         f"{g('spatial.generated_c_bytes', '.0f', 1e-3)} kB, gcc -O2 {g('spatial.generated_gcc_seconds', '.1f')} s",
+         f"{g('spatial.peer_c_bytes', '.0f', 1e-3)} kB, gcc -O2 {g('spatial.peer_gcc_seconds', '.1f')} s",
+         "-", "-", []),
         ("closed loop link1, 10 s at 1 kHz, RK4 + SMC: the bare compiled loop (outputs preallocated)",
          "hand-written C of the same loop (`bench/hand_loop.c`, -O2)",
          f"{g('closed_loop.generated_ms', '.2f')} ms", f"{g('closed_loop.hand_c_ms', '.2f')} ms",
@@ -154,6 +167,19 @@ def _ab_line(r: dict) -> str:
     return "alpha + beta per call (generated / AD peer, us): " + ", ".join(parts) + "."
 
 
+def _spatial_line(r: dict) -> str:
+    if get(r, "spatial.generated_us") is None:
+        return ""
+    g = lambda k, f, s=1.0: _f(r, k, f, s)  # noqa: E731
+    return (f"Panda: operations after CSE, generated alpha {g('spatial.generated_ops.alpha', '.0f')} + beta "
+            f"{g('spatial.generated_ops.beta', '.0f')}, adam peer alpha {g('spatial.peer_ops.alpha', '.0f')} + beta "
+            f"{g('spatial.peer_ops.beta', '.0f')} (peer built in {g('spatial.peer_build_seconds', '.1f')} s); "
+            f"the shipped `panda.c` (every function it ships, the emitted control laws included) is {g('spatial.generated_c_bytes_all', '.0f', 1e-3)} kB, "
+            f"gcc -O2 {g('spatial.generated_gcc_seconds_all', '.1f')} s; the C sizes above are alpha and beta "
+            f"alone, code-generated from the shipped `.casadi` Functions with the same options. Parameters: "
+            f"the defaults with `m_load = 0` (adam has no payload; gravity baked at g0).")
+
+
 def _ops_line(r: dict) -> str:
     by = r.get("derive", {}).get("ops_growth_exponent_by_function", {})
     tot = get(r, "derive.ops_growth_exponent_planar")
@@ -169,6 +195,8 @@ def _ops_line(r: dict) -> str:
 def render_readme(r: dict) -> str:
     """The block of README.md's "Performance" section."""
     lines = [machine_line(r), "", *main_table(r), "", checks_line(r), "", _ab_line(r)]
+    if _spatial_line(r):
+        lines += ["", _spatial_line(r)]
     ops = _ops_line(r)
     if ops:
         lines += ["", ops]
@@ -187,6 +215,8 @@ def render_bench_readme(r: dict) -> str:
              f"controller k_s = {g('closed_loop.k_s', '.1f')}, delta = {g('closed_loop.delta', '.3f')}, "
              f"beta_hat = {g('closed_loop.beta_hat', '.4f')} (computed by `fjm_runtime.figures.Design`).",
              ]
+    if _spatial_line(r):
+        lines += ["", _spatial_line(r)]
     ops = _ops_line(r)
     if ops:
         lines += ["", ops]

@@ -129,7 +129,7 @@ def build_adam_peer(model, workdir: Path):
 def generated_alpha_beta_c(model, workdir: Path) -> Dict[str, float]:
     """C size and gcc time of the generated ``alpha`` and ``beta`` alone.
 
-    The shipped ``<model>.c`` holds all eight functions; for a like-for-like size
+    The shipped ``<model>.c`` holds every function (control laws too); for a like-for-like size
     and compile time the two shipped ``.casadi`` Functions are code-generated
     alone with the same options.
     """
