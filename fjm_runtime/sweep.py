@@ -82,9 +82,9 @@ def sample_parameters(model, n_samples: int, seed: int = 0, k_range=(100.0, 200.
         raise FjmValueError(f"n_samples = {n_samples!r}: expected an integer >= 1")
     lo, hi = (float(v) for v in (k_range if k_relative is None else k_relative))
     if not (0 < lo <= hi and np.isfinite(hi)):
-        field = "k_range" if k_relative is None else "k_relative"
-        raise FjmValueError(f"{field} = {k_range if k_relative is None else k_relative!r}: "
-                            "expected 0 < min <= max < inf")
+        if k_relative is None:
+            raise FjmValueError(f"k_range = {k_range!r}: expected 0 < K_min <= K_max < inf")
+        raise FjmValueError(f"k_relative = {k_relative!r}: expected 0 < lo <= hi < inf (factors of the defaults)")
     if spread is None:
         spread = {k: 0.2 for k in model.param_names if k in ("J_l", "J_m") or k.startswith(("Jm", "I"))}
     unknown = sorted(set(spread) - set(model.param_names))
