@@ -8,8 +8,11 @@ the design choices are module constants so the summary can quote them:
 * the controller knows only the NOMINAL stiffness ``K_nom = 150`` (``T_hat``,
   ``alpha_hat``) and the paper's ``beta_hat = (beta_max + beta_min) / 2`` for
   ``K in [100, 200]``;
-* sliding surface from a triple pole at ``-LAM``; ``k_s`` from Lemma 1
-  (:func:`fjm_runtime.robust.lemma1_gain`) on a stated error region;
+* sliding surface from a triple pole at ``-LAM``; ``k_s`` from the paper's Lemma 1
+  (:func:`fjm_runtime.robust.lemma1_gain`) on a stated error region: a bound in TRUE
+  coordinates, not a reaching guarantee for the law that runs (which builds ``s``
+  from ``T(x; K_nom)``); the section "Certified gains" (:mod:`fjm_runtime.demo_tune`)
+  runs the gains :mod:`fjm_runtime.tune` certifies for the implemented law;
   boundary layer ``delta = k_s / LAYER_RATE`` (the layer's linear slope is
   ``LAYER_RATE`` 1/s, well inside what a 1 ms zero-order hold tolerates).
 """
@@ -411,7 +414,9 @@ def make_figures(out_dir, n_mc: int = 40, progress: Callable[[str], None] = _log
         md.append(f"| {task} | {TASKS[task][2]} | {TASKS[task][1]} | {g.W:.1f} | {g.H:.2f} | "
                   f"{g.beta_hat:.4f} | {g.rho:.3f} | **{g.k_s:.0f}** | {g.k_s_tight:.0f} | {d.delta:.2f} |")
     md += ["", "k_s = W + H / beta_hat + eta (eta = 10) on the region |y_i - y_id| <= E_i; "
-           "see `fjm_runtime/robust.py` for the reading of eq (16).", ""]
+           "see `fjm_runtime/robust.py` for the reading of eq (16). This bounds s in TRUE coordinates; the "
+           "controller builds s from T(x; K_nom), so it is not a reaching guarantee for the law that runs (see "
+           "\"Certified gains for the law that runs\" below).", ""]
 
     paper: Dict[str, Dict[float, SimulationResult]] = {}
     for task in TASKS:
@@ -585,6 +590,9 @@ def make_figures(out_dir, n_mc: int = 40, progress: Callable[[str], None] = _log
                     continue
                 md.append(_metrics_row([name, CTRL_LABELS[kind], label], r))
     md.append("")
+
+    # 4c. certified gains for the law that runs (fjm tune), disturbance rejection -----------------
+    md += __import__("fjm_runtime.demo_tune", fromlist=["_"]).tuned_gains_section(out, duration, quick, progress)
 
     # 5. Monte Carlo ---------------------------------------------------------------------------
     progress(f"Monte Carlo ({n_mc} samples x 4 gains)")
