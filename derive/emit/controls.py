@@ -134,12 +134,13 @@ def _sat(v):
 
 def _zdot(kind, n, x, z, r, p, g, u_cmd, u, idx) -> ca.SX:
     """Controller-state derivative under the held ``u_cmd``, ``u`` (the one definition)."""
+    T = type(x)  # SX or MX: the same definition builds both
     if kind not in ("ismc", "adaptive"):
-        return ca.SX(0, 1)
+        return T(0, 1)
     e1 = x[:n] - r[:n]
     um = g["u_max"]
     winding = g["limit"] * g["anti_windup"] * ((u_cmd > um) * (e1 < 0) + (u_cmd < -um) * (e1 > 0))
-    dz_int = ca.if_else(winding, ca.SX.zeros(n), e1)
+    dz_int = ca.if_else(winding, T.zeros(n), e1)
     if kind == "ismc":
         return dz_int
     zb = _blocks(z, state_layout(kind, n))
@@ -162,7 +163,7 @@ def _zdot(kind, n, x, z, r, p, g, u_cmd, u, idx) -> ca.SX:
                       -(P * P) * (phi_f * phi_f))
 
 
-def _law(kind, n, fns, x, z, r, p, g, idx):
+def _law(kind, n, core, x, z, r, p, g, idx):
     integral = kind in ("ismc", "adaptive")
     blk = lambda v, i: v[i * n:(i + 1) * n]  # noqa: E731
     if kind == "adaptive":
@@ -174,7 +175,7 @@ def _law(kind, n, fns, x, z, r, p, g, idx):
         p_hat = ca.vertcat(*entries)
     else:
         p_hat = p
-    y_hat = fns["T"](x, p_hat)
+    y_hat, alpha, beta = core(x, p_hat)
     e = [blk(y_hat, i) - blk(r, i) for i in range(4)]
     chain = ([z[:n]] if integral else []) + e
     c = g["c"]
@@ -191,51 +192,67 @@ def _law(kind, n, fns, x, z, r, p, g, idx):
         nu = nu - g["k_s"] * psi
     nu = nu - g["k_lin"] * s
     B = ca.if_else(g["use_beta_hat"], ca.reshape(g["beta_hat"], n, n),
-                   ca.reshape(fns["beta"](x, p_hat), n, n))
-    u_cmd = fns["alpha"](x, p_hat) + ca.mtimes(B, nu)
+                   ca.reshape(beta, n, n))
+    u_cmd = alpha + ca.mtimes(B, nu)
     um = g["u_max"]
     u = ca.if_else(g["limit"], ca.fmin(ca.fmax(u_cmd, -um), um), u_cmd)
     return u, s, u_cmd, y_hat
 
 
+def build_core(model, functions: Dict[str, ca.Function]) -> ca.Function:
+    """``<model>_control_core(x, p_hat) -> (y_hat, alpha, beta)``: the model part every law shares.
+
+    One SX Function, ``T``, ``alpha`` and ``beta`` inlined and jointly CSE'd; the laws
+    call it (so the generated C holds it once). ``beta`` is ``(n, n)`` as ``<model>_beta``.
+    """
+    x = ca.SX.sym("x", 4 * model.n)
+    p = ca.SX.sym("p_hat", len(model.params))
+    outs = ca.cse([functions["T"](x, p), functions["alpha"](x, p), functions["beta"](x, p)])
+    return ca.Function(f"{model.name}_control_core", [x, p], outs,
+                       ["x", "p_hat"], ["y_hat", "alpha", "beta"])
+
+
 def build_controls(model, functions: Dict[str, ca.Function]) -> Dict[str, ca.Function]:
-    """SX Functions of every law of :data:`KINDS` (and the ``_zdot`` parts of stateful ones).
+    """Every law of :data:`KINDS` (and the ``_zdot`` parts of stateful ones), and their shared core.
 
     Parameters
     ----------
     model : derive.models.FlexibleJointModel
     functions : dict str -> casadi.Function
-        The model's SX Functions (``T``, ``alpha``, ``beta`` are used, inlined).
+        The model's SX Functions (``T``, ``alpha``, ``beta`` are used, inlined into the core).
 
     Returns
     -------
     dict str -> casadi.Function
-        ``"control_<kind>"`` -> ``<model>_control_<kind>`` and, for ``ismc`` and
-        ``adaptive``, ``"control_<kind>_zdot"`` -> ``<model>_control_<kind>_zdot``.
+        ``"control_core"`` -> ``<model>_control_core`` (:func:`build_core`, SX);
+        ``"control_<kind>"`` -> ``<model>_control_<kind>``: an MX Function calling the core
+        once, with the law's own arithmetic around the call (call it with SX arguments, or
+        ``expand()`` it, to inline everything); for ``ismc`` and ``adaptive``,
+        ``"control_<kind>_zdot"`` -> ``<model>_control_<kind>_zdot`` (SX, no model part).
     """
     n = model.n
     n_par = len(model.params)
     idx = _stiffness_indices(model)
-    out: Dict[str, ca.Function] = {}
+    core = build_core(model, functions)
+    out: Dict[str, ca.Function] = {"control_core": core}
     for kind, _ in KINDS:
         glay, zlay = gains_layout(kind, n), state_layout(kind, n)
-        x = ca.SX.sym("x", 4 * n)
-        z = ca.SX.sym("z", sum(b[1] for b in zlay))
-        r = ca.SX.sym("r", 5 * n)
-        p = ca.SX.sym("p", n_par)
-        gains = ca.SX.sym("gains", sum(b[1] for b in glay))
+        nz, ng = sum(b[1] for b in zlay), sum(b[1] for b in glay)
+        x, z, r = ca.MX.sym("x", 4 * n), ca.MX.sym("z", nz), ca.MX.sym("r", 5 * n)
+        p, gains = ca.MX.sym("p", n_par), ca.MX.sym("gains", ng)
         g = _blocks(gains, glay)
-        u, s, u_cmd, y_hat = _law(kind, n, functions, x, z, r, p, g, idx)
+        u, s, u_cmd, y_hat = _law(kind, n, core, x, z, r, p, g, idx)
         z_dot = _zdot(kind, n, x, z, r, p, g, u_cmd, u, idx)
-        outs = ca.cse([u, s, z_dot, u_cmd, y_hat])  # jointly: the outputs share T, alpha
         out[f"control_{kind}"] = ca.Function(
-            f"{model.name}_control_{kind}", [x, z, r, p, gains], outs,
+            f"{model.name}_control_{kind}", [x, z, r, p, gains], [u, s, z_dot, u_cmd, y_hat],
             ["x", "z", "r", "p", "gains"], ["u", "s", "z_dot", "u_cmd", "y_hat"])
         if zlay:
+            xs, zs, rs = ca.SX.sym("x", 4 * n), ca.SX.sym("z", nz), ca.SX.sym("r", 5 * n)
+            ps, gs = ca.SX.sym("p", n_par), ca.SX.sym("gains", ng)
             uc, uu = ca.SX.sym("u_cmd", n), ca.SX.sym("u", n)
-            zd = ca.cse(_zdot(kind, n, x, z, r, p, g, uc, uu, idx))
+            zd = ca.cse(_zdot(kind, n, xs, zs, rs, ps, _blocks(gs, glay), uc, uu, idx))
             out[f"control_{kind}_zdot"] = ca.Function(
-                f"{model.name}_control_{kind}_zdot", [x, z, r, p, gains, uc, uu], [zd],
+                f"{model.name}_control_{kind}_zdot", [xs, zs, rs, ps, gs, uc, uu], [zd],
                 ["x", "z", "r", "p", "gains", "u_cmd", "u"], ["z_dot"])
     return out
 
@@ -250,6 +267,8 @@ def layout_lines(n: int) -> List[str]:
         "  u_cmd: torque before the limit (n); y_hat: T(x; p_hat) (4n). Flags are 0.0 or 1.0.",
         "  <model>_control_<kind>_zdot(x, z, r, p, gains, u_cmd, u) -> z_dot: the state part alone",
         "  (stateful kinds), for integrating z under a held torque.",
+        "  <model>_control_core(x, p_hat) -> (y_hat (4n), alpha (n), beta (n, n) column-major): the model",
+        "  part every law calls (p_hat in p's layout: p, or K replaced by clip(K_hat) for adaptive).",
     ]
     for kind, meaning in KINDS:
         lines.append(f"  control_{kind}: {meaning}")

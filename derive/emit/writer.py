@@ -107,8 +107,11 @@ def write_model(lin: Linearization, outdir: Path) -> Dict[str, object]:
     controls = build_controls(m, functions)
     versions = tool_versions()
     ops = {name: operation_count(functions[name]) for name, _ in QUANTITIES}
-    control_ops = {name: operation_count(fn) for name, fn in controls.items()}
-    control_meaning = {}
+    # MX laws: the scalar operations of one call (the core's and the law's own), counted inlined
+    control_ops = {name: operation_count(fn.expand() if fn.is_a("MXFunction") else fn)
+                   for name, fn in controls.items()}
+    control_meaning = {"control_core": "y_hat = T(x; p_hat), alpha(x; p_hat), beta(x; p_hat): "
+                                       "the model part of every control law, called by each"}
     for kind, meaning in KINDS:
         control_meaning[f"control_{kind}"] = f"control law {kind}: {meaning}"
         control_meaning[f"control_{kind}_zdot"] = f"controller-state derivative of {kind} under a held torque"
@@ -183,6 +186,16 @@ def write_model(lin: Linearization, outdir: Path) -> Dict[str, object]:
                 **manifest_entry(kind, m.n),
             }
             for kind, meaning in KINDS
+        },
+        "control_core": {
+            "casadi_file": "control_core.casadi",
+            "c_name": f"{m.name}_control_core",
+            "meaning": control_meaning["control_core"] + " (the laws' operations include it)",
+            "inputs": ["x", "p_hat"],
+            "outputs": ["y_hat", "alpha", "beta"],
+            "shapes_out": [list(controls["control_core"].size_out(i)) for i in range(3)],
+            "operations": control_ops["control_core"],
+            "casadi_bytes": sizes["control_core"],
         },
         "c_sources": {fname: len((outdir / fname).read_bytes()) for fname in sorted(sources)},
         "tools": versions,
