@@ -211,6 +211,35 @@ def bench_derive(work: Path, reps: int, checks: list) -> dict:
 
 
 # -- alpha + beta ---------------------------------------------------------------------------
+def timed_loop_error(m, x, p, libs, iters: int = 8) -> float:
+    """Relative error of the timed C loops' checksum against the ``.casadi`` Functions.
+
+    The timed loop of each library calls alpha + beta ``iters`` times at ``x`` with
+    ``x[0]`` nudged by ``1e-9 (k & 7)`` and sums ``alpha[0] + beta[0, 0]``; the same sum
+    is formed here from the model's Functions, so a loop that times the wrong work fails.
+
+    Parameters
+    ----------
+    m : fjm_runtime.Model
+    x : numpy.ndarray, shape (4n,)
+    p : numpy.ndarray, shape (len(m.param_names),)
+    libs : sequence
+        Timing libraries with ``timed_run(x, p, iters) -> (seconds, checksum)``.
+    iters : int
+
+    Returns
+    -------
+    float
+        The largest relative checksum error over ``libs``.
+    """
+    want = 0.0
+    for k in range(iters):
+        xk = x.copy()
+        xk[0] = x[0] + 1e-9 * (k & 7)
+        want += float(m.alpha(xk, p)[0]) + float(m.beta(xk, p)[0, 0])
+    return max(abs(lib.timed_run(x, p, iters)[1] - want) / max(1.0, abs(want)) for lib in libs)
+
+
 def bench_alpha_beta(work: Path, reps: int, checks: list, models=AB_MODELS) -> dict:
     import fjm_runtime
     from .alpha_beta import build_generated, build_peer, time_interleaved
@@ -244,13 +273,7 @@ def bench_alpha_beta(work: Path, reps: int, checks: list, models=AB_MODELS) -> d
                   f"{name}: AD peer ({variant}) vs generated C and `.casadi`", err, tol)
             libs.append(peer)
         # the timed loops compute what they claim: checksum of 8 calls vs the .casadi Functions
-        iters = 8
-        want = 0.0
-        for k in range(iters):
-            xk = x.copy()
-            xk[0] = x[0] + 1e-9 * (k & 7)
-            want += float(m.alpha(xk, p)[0]) + float(m.beta(xk, p)[0, 0])
-        chk_err = max(abs(lib.timed_run(x, p, iters)[1] - want) / max(1.0, abs(want)) for lib in libs)
+        chk_err = timed_loop_error(m, x, p, libs)
         check(checks, f"alpha_beta.{name}.timed_loop",
               f"{name}: checksum of the timed C loops (generated and peers) vs the `.casadi` Functions",
               chk_err, tol_chk)
@@ -302,13 +325,7 @@ def bench_spatial(work: Path, reps: int, checks: list, name: str = "panda") -> d
     check(checks, f"spatial.{name}.adam_peer",
           f"{name}: adam-robotics + CasADi AD peer (same URDF) vs generated C and `.casadi`, alpha and beta",
           err, tol)
-    iters = 8
-    want = 0.0
-    for k in range(iters):
-        xk = x.copy()
-        xk[0] = x[0] + 1e-9 * (k & 7)
-        want += float(m.alpha(xk, p)[0]) + float(m.beta(xk, p)[0, 0])
-    chk_err = max(abs(lib.timed_run(x, p, iters)[1] - want) / max(1.0, abs(want)) for lib in (gen, peer))
+    chk_err = timed_loop_error(m, x, p, (gen, peer))
     check(checks, f"spatial.{name}.timed_loop",
           f"{name}: checksum of the timed C loops (generated and adam peer) vs the `.casadi` Functions",
           chk_err, tol_chk)
