@@ -117,23 +117,22 @@ def write_model(lin: Linearization, outdir: Path) -> Dict[str, object]:
         control_meaning[f"control_{kind}_zdot"] = f"controller-state derivative of {kind} under a held torque"
 
     sizes: Dict[str, int] = {}
-    for name, meaning in QUANTITIES:
-        fn = functions[name]
+
+    def write_casadi(name: str, fn: ca.Function, meaning: str, layout, n_ops) -> None:
+        """``<name>.casadi``: the header comment block, then the serialized Function."""
         text = _comment_block(
             [HEADER, f"model: {m.name}; function: {fn.name()} -- {meaning}",
              f"tools: casadi {versions['casadi']}, sympy {versions['sympy']}",
-             *_layout_lines(lin), f"operations: {ops[name]}"], "# ",
+             *layout, f"operations: {n_ops}"], "# ",
         ) + fn.serialize() + "\n"
         (outdir / f"{name}.casadi").write_text(text)
         sizes[name] = len(text.encode())
+
+    for name, meaning in QUANTITIES:
+        write_casadi(name, functions[name], meaning, _layout_lines(lin), ops[name])
     for name, fn in controls.items():
-        text = _comment_block(
-            [HEADER, f"model: {m.name}; function: {fn.name()} -- {control_meaning[name]}",
-             f"tools: casadi {versions['casadi']}, sympy {versions['sympy']}",
-             *_layout_lines(lin), *layout_lines(m.n), f"operations: {control_ops[name]}"], "# ",
-        ) + fn.serialize() + "\n"
-        (outdir / f"{name}.casadi").write_text(text)
-        sizes[name] = len(text.encode())
+        write_casadi(name, fn, control_meaning[name], _layout_lines(lin) + layout_lines(m.n),
+                     control_ops[name])
 
     with tempfile.TemporaryDirectory() as tmp:
         sources = _generate_c(m.name, {**functions, **controls}, Path(tmp))
