@@ -348,8 +348,8 @@ def bench_spatial(work: Path, reps: int, checks: list, name: str = "panda") -> d
 # -- closed loop ----------------------------------------------------------------------------
 def bench_closed_loop(work: Path, reps: int, slow_reps: int, checks: list) -> dict:
     import casadi as ca
-    from fjm_runtime.batch import METRIC_NAMES
-    from fjm_runtime.compiled import closed_loop_library
+    from fjm_runtime.batch.runner import METRIC_NAMES
+    from fjm_runtime.sim.compiled import closed_loop_library
     from .closed_loop import GeneratedLoop, HandLoop, link1_case, simulate_call, solve_ivp_loop
     case = link1_case()
     log("closed loop link1 10 s @ 1 kHz: compiling generated and hand C ...")
@@ -419,7 +419,7 @@ def bench_closed_loop(work: Path, reps: int, slow_reps: int, checks: list) -> di
 # -- batch ------------------------------------------------------------------------------------
 def bench_batch(reps: int, slow_reps: int, checks: list, n_runs: int = 1000) -> dict:
     import warnings
-    from fjm_runtime.batch import METRIC_NAMES, SimdFallbackWarning, _vector_isa, simulate_batch
+    from fjm_runtime.batch.runner import METRIC_NAMES, SimdFallbackWarning, _vector_isa, simulate_batch
     from .closed_loop import link1_case, numpy_batch
     case = link1_case()
     Ks = np.random.default_rng(0).uniform(100.0, 200.0, n_runs)
@@ -494,7 +494,7 @@ def machine() -> dict:
     except OSError:
         info["cpu_model"] = platform.processor()
     try:
-        from fjm_runtime.batch import _vector_isa
+        from fjm_runtime.batch.runner import _vector_isa
         info["simd_isa"] = _vector_isa()[0]
     except Exception:  # noqa: BLE001 - informative only
         info["simd_isa"] = "unknown"

@@ -1,6 +1,6 @@
 """Closed-loop peers for link1 (paper's tracking case, 10 s at 1 kHz, RK4 + SMC).
 
-* generated: :func:`fjm_runtime.compiled.closed_loop_library` (the fused step + a C loop,
+* generated: :func:`fjm_runtime.sim.compiled.closed_loop_library` (the fused step + a C loop,
   cached), and the whole ``simulate(..., backend="compiled")`` call;
 * hand C: ``bench/hand_loop.c``, the same loop written by hand, same flags;
 * Python loop: ``simulate(..., backend="python")`` (numpy RK4 calling the CasADi Functions),
@@ -18,10 +18,10 @@ from pathlib import Path
 import numpy as np
 
 import fjm_runtime
-from fjm_runtime.compiled import closed_loop_runner
-from fjm_runtime.controllers import make_controller
-from fjm_runtime.loop import metrics_from_sums
-from fjm_runtime.references import Sinusoid
+from fjm_runtime.sim.compiled import closed_loop_runner
+from fjm_runtime.control.laws import make_controller
+from fjm_runtime.sim.step import metrics_from_sums
+from fjm_runtime.control.references import Sinusoid
 
 from .ccutil import compile_object, link_shared
 
@@ -32,18 +32,18 @@ HERE = Path(__file__).resolve().parent
 def tracking_design():
     """The paper's link1 tracking design, computed by the functions that define it.
 
-    :meth:`fjm_runtime.figures.Design.for_task` (``'tracking'``): Lemma 1 gain
-    (:func:`fjm_runtime.robust.lemma1_gain`) for ``0.5 sin t`` with ``K`` in
+    :meth:`fjm_runtime.experiments.paper.Design.for_task` (``'tracking'``): Lemma 1 gain
+    (:func:`fjm_runtime.analysis.lemma1.lemma1_gain`) for ``0.5 sin t`` with ``K`` in
     [100, 200], boundary layer ``k_s / LAYER_RATE``, ``beta_hat = (beta_min +
-    beta_max) / 2`` (:func:`fjm_runtime.robust.beta_bounds_link1`); triple pole at
+    beta_max) / 2`` (:func:`fjm_runtime.analysis.lemma1.beta_bounds_link1`); triple pole at
     ``-LAM``, nominal ``K_NOM``.
 
     Returns
     -------
-    design : fjm_runtime.figures.Design
+    design : fjm_runtime.experiments.paper.Design
     lam, k_nom : float
     """
-    from fjm_runtime.figures import K_NOM, LAM, Design
+    from fjm_runtime.experiments.paper import K_NOM, LAM, Design
     return Design.for_task("tracking"), float(LAM), float(K_NOM)
 
 
@@ -126,7 +126,7 @@ class HandLoop:
 
 def simulate_call(case: Case, backend: str):
     """The whole ``simulate(..., backend=backend)`` call of the case (references, outputs, metrics)."""
-    from fjm_runtime.simulate import simulate
+    from fjm_runtime.sim.simulate import simulate
     return simulate(case.model, case.controller, case.reference, duration=case.duration, dt=case.dt,
                     true_params=case.p_true, x0=case.x0(), backend=backend)
 

@@ -213,7 +213,7 @@ def render_bench_readme(r: dict) -> str:
              f"Batch on 1 thread: scalar C loop {g('batch.generated_scalar_1thread_s', '.3f')} s, SIMD "
              f"{g('batch.generated_1thread_s', '.3f')} s ({g('batch.simd_over_scalar_1thread', '.1f')}x); "
              f"controller k_s = {g('closed_loop.k_s', '.1f')}, delta = {g('closed_loop.delta', '.3f')}, "
-             f"beta_hat = {g('closed_loop.beta_hat', '.4f')} (computed by `fjm_runtime.figures.Design`).",
+             f"beta_hat = {g('closed_loop.beta_hat', '.4f')} (computed by `fjm_runtime.experiments.paper.Design`).",
              ]
     if _spatial_line(r):
         lines += ["", _spatial_line(r)]

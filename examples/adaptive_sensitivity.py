@@ -1,6 +1,6 @@
 """Sensitivity of the adaptive-stiffness controller to motor-parameter errors and measurement noise (link1).
 
-The adaptive law (fjm_runtime.adaptive) estimates K from the motor equation with
+The adaptive law (fjm_runtime.control.adaptive) estimates K from the motor equation with
 the NOMINAL J_m and B_m; this script measures what +-20 % errors in the TRUE J_m,
 B_m and Gaussian noise on the measured q_l, q_m do to the tracking error and the
 stiffness estimate. Controller: nominal K = 150, K_hat projected onto [100, 200],
@@ -20,10 +20,10 @@ import argparse
 import numpy as np
 
 import fjm_runtime as fjm
-from fjm_runtime.controllers import make_controller
-from fjm_runtime.figures import Design, K_BOUNDS, K_NOM, LAM
-from fjm_runtime.references import Sinusoid
-from fjm_runtime.simulate import SimulationDivergedError, simulate
+from fjm_runtime.control.laws import make_controller
+from fjm_runtime.experiments.paper import Design, K_BOUNDS, K_NOM, LAM
+from fjm_runtime.control.references import Sinusoid
+from fjm_runtime.sim.simulate import SimulationDivergedError, simulate
 
 
 class NoisyMeasurements:

@@ -1,15 +1,15 @@
-"""Issue 7 item 3: online stiffness estimate (fjm_runtime.adaptive) on link1, K_nom = 150, bounds [100, 200]."""
+"""Issue 7 item 3: online stiffness estimate (fjm_runtime.control.adaptive) on link1, K_nom = 150, bounds [100, 200]."""
 import json
 
 import numpy as np
 import pytest
 
 import fjm_runtime
-from fjm_runtime.adaptive import AdaptiveStiffnessController
-from fjm_runtime.controllers import make_controller
-from fjm_runtime.references import Constant, Sinusoid, SmoothStep
-from fjm_runtime.robust import beta_hat_link1
-from fjm_runtime.simulate import simulate
+from fjm_runtime.control.adaptive import AdaptiveStiffnessController
+from fjm_runtime.control.laws import make_controller
+from fjm_runtime.control.references import Constant, Sinusoid, SmoothStep
+from fjm_runtime.analysis.lemma1 import beta_hat_link1
+from fjm_runtime.sim.simulate import simulate
 
 DESIGN = {"lam": 8.0, "k_s": 1000.0, "delta": 5.0}
 BOUNDS = (100.0, 200.0)
@@ -140,7 +140,7 @@ def test_bad_inputs_name_the_field(link1, kw, field):
 
 
 def test_cli_adaptive(capsys):
-    from fjm_runtime.cli import main
+    from fjm_runtime.cli.main import main
     rc = main(["simulate", "link1", "--controller", "adaptive", "--K", "100", "--duration", "3", "--quiet"])
     assert rc == 0
     report = json.loads(capsys.readouterr().out)

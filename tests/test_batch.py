@@ -6,12 +6,12 @@ import numpy as np
 import pytest
 
 import fjm_runtime
-import fjm_runtime.batch as batch_mod
-from fjm_runtime.batch import METRIC_NAMES, SimdFallbackWarning, simulate_batch
-from fjm_runtime.compiled import CompileError
-from fjm_runtime.controllers import make_controller
-from fjm_runtime.references import Sinusoid, SmoothStep
-from fjm_runtime.simulate import simulate
+import fjm_runtime.batch.runner as batch_mod
+from fjm_runtime.batch.runner import METRIC_NAMES, SimdFallbackWarning, simulate_batch
+from fjm_runtime.sim.compiled import CompileError
+from fjm_runtime.control.laws import make_controller
+from fjm_runtime.control.references import Sinusoid, SmoothStep
+from fjm_runtime.sim.simulate import simulate
 
 
 @pytest.fixture(autouse=True)

@@ -68,7 +68,7 @@ def test_compiled_alpha_beta_drivers_agree(tmp_path, name):
 
 def test_hand_c_loop_equals_generated_loop(tmp_path):
     from bench.closed_loop import GeneratedLoop, HandLoop, link1_case
-    from fjm_runtime.compiled import closed_loop_library
+    from fjm_runtime.sim.compiled import closed_loop_library
     case = link1_case(K_true=130.0, duration=1.0)
     hand = HandLoop(case, tmp_path)
     W_h, A_h = hand()
@@ -82,7 +82,7 @@ def test_hand_c_loop_equals_generated_loop(tmp_path):
 
 def test_python_and_solve_ivp_peers_track_the_same_loop():
     from bench.closed_loop import link1_case, python_loop, solve_ivp_loop
-    from fjm_runtime.compiled import closed_loop_library
+    from fjm_runtime.sim.compiled import closed_loop_library
     case = link1_case(duration=0.3)
     lib = closed_loop_library(case.model, case.controller, case.dt)
     W, _ = lib(case.x0(), *case.reference_arrays(), case.p_true)
@@ -94,7 +94,7 @@ def test_python_and_solve_ivp_peers_track_the_same_loop():
 
 def test_numpy_batch_peer_equals_simulate_batch():
     from bench.closed_loop import link1_case, numpy_batch
-    from fjm_runtime.batch import METRIC_NAMES, simulate_batch
+    from fjm_runtime.batch.runner import METRIC_NAMES, simulate_batch
     case = link1_case(duration=1.0)
     Ks = np.array([100.0, 140.0, 200.0])
     P = np.tile(case.p_true, (3, 1))
@@ -108,10 +108,10 @@ def test_numpy_batch_peer_equals_simulate_batch():
 
 def test_closed_loop_design_is_computed_not_pasted(monkeypatch):
     """k_s, delta, beta_hat come from Lemma 1 in the run: change its margin and they follow."""
-    import fjm_runtime.figures as figures
+    import fjm_runtime.experiments.paper as figures
     from bench.closed_loop import link1_case
-    from fjm_runtime.controllers import coefficients_from_pole
-    from fjm_runtime.robust import beta_bounds_link1, lemma1_gain
+    from fjm_runtime.control.laws import coefficients_from_pole
+    from fjm_runtime.analysis.lemma1 import beta_bounds_link1, lemma1_gain
     ref, E, _ = figures.TASKS["tracking"]
     gain = lemma1_gain(coefficients_from_pole(figures.LAM), ref().derivative_bounds()[:, 0],
                        nominal={"K": figures.K_NOM}, bounds=figures.K_BOUNDS, error_bounds=E, eta=figures.ETA)

@@ -16,9 +16,9 @@ import numpy as np
 import pytest
 
 import fjm_runtime
-from fjm_runtime.controllers import make_controller
-from fjm_runtime.references import Sinusoid
-from fjm_runtime.simulate import SimulationDivergedError, simulate
+from fjm_runtime.control.laws import make_controller
+from fjm_runtime.control.references import Sinusoid
+from fjm_runtime.sim.simulate import SimulationDivergedError, simulate
 
 K_S = 20000.0
 DESIGN = {"lam": 8.0, "k_s": K_S, "delta": K_S / 200.0}

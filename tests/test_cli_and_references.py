@@ -4,8 +4,8 @@ import json
 import numpy as np
 import pytest
 
-from fjm_runtime.cli import main
-from fjm_runtime.references import Constant, Sinusoid, SmoothStep
+from fjm_runtime.cli.main import main
+from fjm_runtime.control.references import Constant, Sinusoid, SmoothStep
 
 
 def test_cli_simulate_prints_metrics_and_writes_plot(tmp_path, capsys):

@@ -1,4 +1,4 @@
-"""Compiled closed loop (fjm_runtime.compiled): same trajectories as Python; a robust cache."""
+"""Compiled closed loop (fjm_runtime.sim.compiled): same trajectories as Python; a robust cache."""
 import json
 import os
 import subprocess
@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 
 import fjm_runtime
-from fjm_runtime.compiled import cache_dir, closed_loop_runner
-from fjm_runtime.controllers import make_controller
-from fjm_runtime.references import Sinusoid
-from fjm_runtime.simulate import simulate
+from fjm_runtime.sim.compiled import cache_dir, closed_loop_runner
+from fjm_runtime.control.laws import make_controller
+from fjm_runtime.control.references import Sinusoid
+from fjm_runtime.sim.simulate import simulate
 
 REPO = Path(__file__).resolve().parent.parent
 
@@ -46,9 +46,9 @@ def test_compiled_equals_python(name, kind, kw):
 
 _CHILD = """
 import numpy as np, fjm_runtime
-from fjm_runtime.controllers import make_controller
-from fjm_runtime.references import Sinusoid
-from fjm_runtime.simulate import simulate
+from fjm_runtime.control.laws import make_controller
+from fjm_runtime.control.references import Sinusoid
+from fjm_runtime.sim.simulate import simulate
 m = fjm_runtime.load("link1")
 ctrl = make_controller("smc", m, {}, lam=8.0, k_s=300.0, delta=2.0)
 r = simulate(m, ctrl, Sinusoid(0.5, 1.0), duration=0.2, true_params={"K": 110.0}, backend="compiled")

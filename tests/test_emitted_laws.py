@@ -2,7 +2,7 @@
 
 * every runtime path (python, fused CasADi, compiled) gives the trajectories of an
   independent NumPy implementation of each law, written here from the formulas of the
-  README / fjm_runtime.adaptive docstring (not from the emitted code), to 1e-12 over 10 s;
+  README / fjm_runtime.control.adaptive docstring (not from the emitted code), to 1e-12 over 10 s;
 * the emitted C equals the emitted CasADi Function for every law;
 * bad gains are rejected by the runtime with the errors that existed before.
 """
@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 
 import fjm_runtime
-from fjm_runtime.controllers import make_controller
-from fjm_runtime.references import Sinusoid, SmoothStep
-from fjm_runtime.simulate import simulate
+from fjm_runtime.control.laws import make_controller
+from fjm_runtime.control.references import Sinusoid, SmoothStep
+from fjm_runtime.sim.simulate import simulate
 
 TOL = 1e-12
 
@@ -30,7 +30,7 @@ def stiffness_indices(m):
 
 
 class ReferenceLaw:
-    """The laws from their formulas (README "Controllers", fjm_runtime.adaptive docstring)."""
+    """The laws from their formulas (README "Controllers", fjm_runtime.control.adaptive docstring)."""
 
     def __init__(self, m, kind, p_nom, lam, k_s=0.0, delta=1.0, beta_hat=None, u_max=None,
                  K_bounds=None, filter_rate=20.0, ls_gain=1e5):

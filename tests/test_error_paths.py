@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 
 import fjm_runtime as f
-from fjm_runtime.controllers import make_controller
-from fjm_runtime.references import make_reference
-from fjm_runtime.simulate import simulate
-from fjm_runtime.sweep import sample_parameters
+from fjm_runtime.control.laws import make_controller
+from fjm_runtime.control.references import make_reference
+from fjm_runtime.sim.simulate import simulate
+from fjm_runtime.batch.sweep import sample_parameters
 
 m = f.load("link1")
 p2 = f.load("planar2")

@@ -9,7 +9,7 @@ import re
 
 import pytest
 
-from fjm_runtime.cli import main
+from fjm_runtime.cli.main import main
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 # What `make demo` promises (README "CLI" section: paper Figs 1-4, sat vs sign, controller

@@ -3,10 +3,10 @@ import numpy as np
 import pytest
 
 import fjm_runtime
-from fjm_runtime.controllers import SlidingModeController, make_controller
-from fjm_runtime.references import Sinusoid, SmoothStep
-from fjm_runtime.robust import beta_hat_link1, predict_regulation_offset
-from fjm_runtime.simulate import simulate
+from fjm_runtime.control.laws import SlidingModeController, make_controller
+from fjm_runtime.control.references import Sinusoid, SmoothStep
+from fjm_runtime.analysis.lemma1 import beta_hat_link1, predict_regulation_offset
+from fjm_runtime.sim.simulate import simulate
 
 K_BOUNDS = {"K": (100.0, 200.0)}
 DESIGN = {"lam": 8.0, "k_s": 1000.0, "delta": 5.0}

@@ -92,7 +92,7 @@ def test_deterministic_across_runs_and_hash_seeds(derived, tmp_path):
     out = tmp_path / "again"
     env = dict(os.environ, PYTHONHASHSEED="4242",
                PYTHONPATH=str(REPO) + os.pathsep + os.environ.get("PYTHONPATH", ""))
-    proc = subprocess.run([sys.executable, "-m", "fjm_runtime.cli", "derive", "--model-file", str(EXAMPLE),
+    proc = subprocess.run([sys.executable, "-m", "fjm_runtime.cli.main", "derive", "--model-file", str(EXAMPLE),
                            "--out", str(out)], cwd=tmp_path, env=env, capture_output=True, text=True,
                           timeout=300)
     assert proc.returncode == 0, proc.stderr + proc.stdout
@@ -299,7 +299,7 @@ def test_cli_model_file_needs_out_and_existing_file(tmp_path, capsys):
 
 def test_fjm_derive_without_sympy_says_how_to_install():
     code = ("import sys; sys.modules['sympy'] = None\n"
-            "from fjm_runtime.cli import main\n"
+            "from fjm_runtime.cli.main import main\n"
             "sys.exit(main(['derive', '--model-file', 'arm.toml', '--out', 'x']))\n")
     env = dict(os.environ, PYTHONPATH=str(REPO) + os.pathsep + os.environ.get("PYTHONPATH", ""))
     proc = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=120)
@@ -308,7 +308,7 @@ def test_fjm_derive_without_sympy_says_how_to_install():
 
 
 def test_runtime_cli_does_not_import_sympy():
-    code = ("import sys, fjm_runtime, fjm_runtime.cli\n"
+    code = ("import sys, fjm_runtime, fjm_runtime.cli.main\n"
             "assert 'sympy' not in sys.modules and 'derive' not in sys.modules\n")
     env = dict(os.environ, PYTHONPATH=str(REPO) + os.pathsep + os.environ.get("PYTHONPATH", ""))
     proc = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=120)

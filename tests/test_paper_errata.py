@@ -84,9 +84,9 @@ def test_erratum3_switching_gain_and_stiffness_are_distinct_quantities(m):
     * the nominal stiffness enters through ``T`` (``y3``, ``y4`` carry ``K / J_l``),
       ``alpha`` and ``beta = J_l J_m / K``, never through the switching term.
     """
-    from fjm_runtime.controllers import SlidingModeController
-    from fjm_runtime.references import Sinusoid
-    from fjm_runtime.simulate import simulate
+    from fjm_runtime.control.laws import SlidingModeController
+    from fjm_runtime.control.references import Sinusoid
+    from fjm_runtime.sim.simulate import simulate
 
     assert "K" in m.param_names and "k_s" not in m.param_names
     Jl, Jm, MgL = P["J_l"], P["J_m"], P["M"] * P["g0"] * P["L"]

@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 import fjm_runtime
-from fjm_runtime.rk4 import integrate, rk4_step
+from fjm_runtime.sim.rk4 import integrate, rk4_step
 
 
 def _open_loop_error(dt, ref, rhs, x0, t_end):

@@ -3,10 +3,10 @@ import numpy as np
 import pytest
 
 import fjm_runtime
-from fjm_runtime.controllers import SlidingModeController, make_controller
-from fjm_runtime.references import Sinusoid, make_reference
-from fjm_runtime.robust import lemma1_gain
-from fjm_runtime.simulate import SimulationDivergedError, simulate
+from fjm_runtime.control.laws import SlidingModeController, make_controller
+from fjm_runtime.control.references import Sinusoid, make_reference
+from fjm_runtime.analysis.lemma1 import lemma1_gain
+from fjm_runtime.sim.simulate import SimulationDivergedError, simulate
 
 
 @pytest.fixture(scope="module")

@@ -3,11 +3,11 @@ import numpy as np
 import pytest
 
 import fjm_runtime
-from fjm_runtime.controllers import SlidingModeController, coefficients_from_pole, make_controller
-from fjm_runtime.references import Sinusoid
-from fjm_runtime.rk4 import integrate
-from fjm_runtime.robust import beta_hat_link1, lemma1_gain
-from fjm_runtime.simulate import simulate
+from fjm_runtime.control.laws import SlidingModeController, coefficients_from_pole, make_controller
+from fjm_runtime.control.references import Sinusoid
+from fjm_runtime.sim.rk4 import integrate
+from fjm_runtime.analysis.lemma1 import beta_hat_link1, lemma1_gain
+from fjm_runtime.sim.simulate import simulate
 
 LAM = 8.0
 K_BOUNDS = {"K": (100.0, 200.0)}

@@ -10,11 +10,11 @@ import pytest
 
 import fjm_runtime
 from fjm_runtime import figures_spatial as fs
-from fjm_runtime.batch import METRIC_NAMES, simulate_batch
-from fjm_runtime.controllers import make_controller
-from fjm_runtime.references import Sinusoid
-from fjm_runtime.simulate import simulate
-from fjm_runtime.sweep import run_chunk, sample_parameters, SweepSpec
+from fjm_runtime.batch.runner import METRIC_NAMES, simulate_batch
+from fjm_runtime.control.laws import make_controller
+from fjm_runtime.control.references import Sinusoid
+from fjm_runtime.sim.simulate import simulate
+from fjm_runtime.batch.sweep import run_chunk, sample_parameters, SweepSpec
 from fjm_runtime.validation import FjmValueError, check_physical
 
 REPO = Path(__file__).resolve().parent.parent

@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 
 import fjm_runtime
-from fjm_runtime.batch import simulate_batch
-from fjm_runtime.sweep import SweepSpec, _build, sample_parameters, sweep, write_table
+from fjm_runtime.batch.runner import simulate_batch
+from fjm_runtime.batch.sweep import SweepSpec, _build, sample_parameters, sweep, write_table
 
 
 SPEC = SweepSpec(model="link1", controller="smc", controller_options={"lam": 6.0, "k_s": 20.0, "delta": 0.5},
@@ -42,7 +42,7 @@ def test_dask_sweep_equals_simulate_batch(tmp_path):
 
 
 def test_cli_sweep_writes_the_table(tmp_path, capsys):
-    from fjm_runtime.cli import main
+    from fjm_runtime.cli.main import main
     out = tmp_path / "s.csv"
     rc = main(["sweep", "link1", "--samples", "4", "--chunk", "2", "--duration", "0.5", "--out", str(out)])
     assert rc == 0

@@ -1,4 +1,4 @@
-"""Reaching-gain synthesis (fjm_runtime.tune): certificates, the paper's bound, trajectories, CLI.
+"""Reaching-gain synthesis (fjm_runtime.analysis.certify): certificates, the paper's bound, trajectories, CLI.
 
 Robustness claims: controller on NOMINAL parameters, plant on TRUE ones. The
 checks of the certificate use independent evaluations (closed forms written
@@ -12,12 +12,12 @@ import pytest
 from scipy.optimize import minimize_scalar
 
 import fjm_runtime as fjm
-from fjm_runtime.cli import main
-from fjm_runtime.controllers import make_controller
-from fjm_runtime.references import Sinusoid, SmoothStep
-from fjm_runtime.robust import beta_hat_link1, lemma1_gain, link1_alpha, link1_T_inverse
-from fjm_runtime.simulate import simulate
-from fjm_runtime.tune import InfeasibleGainError, certificate, paper_bound, synthesize_gains
+from fjm_runtime.cli.main import main
+from fjm_runtime.control.laws import make_controller
+from fjm_runtime.control.references import Sinusoid, SmoothStep
+from fjm_runtime.analysis.lemma1 import beta_hat_link1, lemma1_gain, link1_alpha, link1_T_inverse
+from fjm_runtime.sim.simulate import simulate
+from fjm_runtime.analysis.certify import InfeasibleGainError, certificate, paper_bound, synthesize_gains
 
 K_NOM = 150.0
 K_BOX = {"K": (100.0, 200.0)}
@@ -130,7 +130,7 @@ def _direct_sdot(model, nominal, true_params, x, r, k_s, lam, beta_hat=None):
 
 
 def _state_at(model, nominal, y_hat):
-    """x with T(x; p_nom) = y_hat (Newton on the motor half, independent of fjm_runtime.tune)."""
+    """x with T(x; p_nom) = y_hat (Newton on the motor half, independent of fjm_runtime.analysis.certify)."""
     n = model.n
     pn = model.params_array(nominal)
     x = np.concatenate([y_hat[:2 * n], y_hat[:2 * n]])
@@ -283,7 +283,7 @@ def test_disturbance_raises_gain_by_bound_over_beta_hat(link1):
 
 
 def test_disturbed_model_drift(link1):
-    from fjm_runtime.disturbance import with_motor_disturbance
+    from fjm_runtime.control.disturbance import with_motor_disturbance
     plant = with_motor_disturbance(link1, coulomb=2.0, bias=0.5)
     rng = np.random.default_rng(0)
     for _ in range(5):
@@ -295,7 +295,7 @@ def test_disturbed_model_drift(link1):
 
 def test_link1_trajectory_reaching_with_coulomb_friction(link1):
     """Plant with Coulomb friction 2 N m (sign) on the motor: the gain synthesized with D = 2 still reaches."""
-    from fjm_runtime.disturbance import with_motor_disturbance
+    from fjm_runtime.control.disturbance import with_motor_disturbance
     ref, E = REG
     kw = _link1_kwargs(REG, 8.0)
     gain = synthesize_gains(link1, {"K": K_NOM}, disturbance_bound=2.0, **kw)
@@ -308,7 +308,7 @@ def test_link1_trajectory_reaching_with_coulomb_friction(link1):
 
 
 def test_torque_disturbance_bound_is_enforced(link1):
-    from fjm_runtime.disturbance import TorqueDisturbance
+    from fjm_runtime.control.disturbance import TorqueDisturbance
     ctrl = make_controller("smc", link1, {"K": K_NOM}, lam=8.0, k_s=100.0, delta=1.0)
     wrapped = TorqueDisturbance(ctrl, lambda t: np.array([3.0 * np.sin(t)]), bound=1.0)
     with pytest.raises(ValueError, match="exceeds the stated bound"):
@@ -319,7 +319,7 @@ def test_torque_disturbance_bound_is_enforced(link1):
 def test_adaptive_gamma_and_frozen_gains(link1):
     """d s / d K_hat on link1 (integral surface): (c3 (y3 + g sin y1) + y4 + g cos(y1) y2) / K_hat, largest at
     the box corner y1 = Y1 (tan y1 < c3 / Y2 there) and K_hat = K_min; the gain covers every frozen estimate."""
-    from fjm_runtime.tune import synthesize_adaptive_gains
+    from fjm_runtime.analysis.certify import synthesize_adaptive_gains
     ref, E = REG
     R = ref.derivative_bounds()[:, 0]
     res = synthesize_adaptive_gains(link1, {"K": K_NOM}, K_bounds=(100.0, 200.0), reference_bounds=R,
@@ -337,7 +337,7 @@ def test_adaptive_gamma_and_frozen_gains(link1):
 
 def test_torque_disturbance_reaches_the_plant(link1):
     """The plant receives the commanded torque plus d(t); the wrapped law itself is unchanged."""
-    from fjm_runtime.disturbance import TorqueDisturbance
+    from fjm_runtime.control.disturbance import TorqueDisturbance
     ctrl = make_controller("smc", link1, {"K": K_NOM}, lam=8.0, k_s=100.0, delta=1.0)
     d = lambda t: np.array([0.5 * np.cos(3.0 * t)])
     res = simulate(link1, TorqueDisturbance(ctrl, d, bound=0.5), Sinusoid(0.5, 1.0), duration=0.05, dt=1e-3)

@@ -80,7 +80,7 @@ from __future__ import annotations
 
 # The classes live in fjm_runtime.controllers (one module, no import circle); the law
 # and the estimator rates above are the emitted ``<model>_control_adaptive`` (derive/emit/controls.py).
-from .controllers import (ESTIMATOR_BLOCKS, AdaptiveStiffnessController, _param_indices,  # noqa: F401
+from ..control.laws import (ESTIMATOR_BLOCKS, AdaptiveStiffnessController, _param_indices,  # noqa: F401
                           make_adaptive)
 
 __all__ = ["AdaptiveStiffnessController", "ESTIMATOR_BLOCKS", "make_adaptive"]

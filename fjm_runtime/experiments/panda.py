@@ -20,9 +20,9 @@ from typing import Callable, Dict, List, Optional
 
 import numpy as np
 
-from .controllers import make_controller
-from .references import Sinusoid
-from .simulate import SimulationDivergedError, SimulationResult, simulate
+from ..control.laws import make_controller
+from ..control.references import Sinusoid
+from ..sim.simulate import SimulationDivergedError, SimulationResult, simulate
 
 #: ``<limit effort>`` of panda_joint1..7 in derive/robots/panda/panda.urdf (N m); the runtime
 #: never reads a URDF, tests/test_spatial_control.py checks these against the file.
@@ -244,7 +244,7 @@ def panda_section(out: Path, duration: float = DURATION, progress: Optional[Call
         Smoke test (``fjm figures --quick``): :data:`QUICK_CASES` for at most
         :data:`QUICK_DURATION` s with the ``'casadi'`` backend (nothing to compile).
     """
-    from . import load
+    from .. import load
     t0 = time.perf_counter()
     m = model if model is not None else load("panda")
     if quick:

@@ -42,7 +42,7 @@ from typing import NamedTuple, Optional
 
 import numpy as np
 
-from .validation import joint_vector
+from ..validation import joint_vector
 
 MODES = ("sat", "sign", "fl")
 

@@ -26,11 +26,11 @@ from typing import Callable, Dict, List, Optional
 
 import numpy as np
 
-from . import load
-from .controllers import coefficients_from_pole, make_controller
-from .references import Sinusoid, SmoothStep
-from .robust import beta_bounds_link1, closed_loop_eigenvalues, lemma1_gain, predict_regulation_offset
-from .simulate import SimulationDivergedError, SimulationResult, simulate
+from .. import load
+from ..control.laws import coefficients_from_pole, make_controller
+from ..control.references import Sinusoid, SmoothStep
+from ..analysis.lemma1 import beta_bounds_link1, closed_loop_eigenvalues, lemma1_gain, predict_regulation_offset
+from ..sim.simulate import SimulationDivergedError, SimulationResult, simulate
 
 LAM = 8.0
 LAYER_RATE = 200.0
@@ -592,7 +592,7 @@ def make_figures(out_dir, n_mc: int = 40, progress: Callable[[str], None] = _log
     md.append("")
 
     # 4c. certified gains for the law that runs (fjm tune), disturbance rejection -----------------
-    md += __import__("fjm_runtime.demo_tune", fromlist=["_"]).tuned_gains_section(out, duration, quick, progress)
+    md += __import__("fjm_runtime.experiments.certified", fromlist=["_"]).tuned_gains_section(out, duration, quick, progress)
 
     # 5. Monte Carlo ---------------------------------------------------------------------------
     progress(f"Monte Carlo ({n_mc} samples x 4 gains)")

@@ -36,7 +36,7 @@ from typing import Optional, Sequence, Tuple
 import casadi as ca
 import numpy as np
 
-from .loop import assemble, build_fused_step, casadi_functions, check_divergence
+from ..sim.step import assemble, build_fused_step, casadi_functions, check_divergence
 
 #: Default compiler flags (also part of the cache key).
 DEFAULT_FLAGS: Tuple[str, ...] = ("-O2", "-fPIC", "-shared")

@@ -19,8 +19,8 @@ from typing import Dict, List, Optional, Sequence
 import casadi as ca
 import numpy as np
 
-from .compiled import DEFAULT_FLAGS, CompileError, compile_library, fold_driver, generate_source
-from .loop import casadi_functions, metrics_from_sums, symbolic_closed_loop_rk4
+from ..sim.compiled import DEFAULT_FLAGS, CompileError, compile_library, fold_driver, generate_source
+from ..sim.step import casadi_functions, metrics_from_sums, symbolic_closed_loop_rk4
 
 METRIC_NAMES = ("final_error", "rms_error", "rms_error_second_half", "max_abs_u",
                 "reaching_time", "total_variation_u")
@@ -265,7 +265,7 @@ def simulate_batch(model, controller, reference, params_true_array, *, duration:
     BatchResult
         ``info["path"]`` says which code ran (one of :data:`PATHS`).
     """
-    from .simulate import simulate
+    from ..sim.simulate import simulate
     n, nx = int(model.n), int(model.nx)
     P = np.asarray(params_true_array, dtype=float)
     if P.ndim == 1 and P.size == len(model.param_names):

@@ -18,9 +18,9 @@ from typing import Dict, List, Optional
 
 import numpy as np
 
-from .controllers import CONTROLLER_KINDS, coefficients_from_pole, make_controller
-from .references import REFERENCE_KINDS, make_reference
-from .simulate import SimulationDivergedError, simulate, stderr_progress
+from ..control.laws import CONTROLLER_KINDS, coefficients_from_pole, make_controller
+from ..control.references import REFERENCE_KINDS, make_reference
+from ..sim.simulate import SimulationDivergedError, simulate, stderr_progress
 
 
 def _parse_assignments(items: List[str], flag: str) -> Dict[str, float]:
@@ -115,14 +115,14 @@ def build_parser() -> argparse.ArgumentParser:
                      help="smoke test: 1 s runs and at most 2 Monte Carlo samples; still writes every "
                           "figure and summary.md (not the documented numbers)")
 
-    from .tune import add_parser as add_tune_parser
+    from ..analysis.certify import add_parser as add_tune_parser
     add_tune_parser(sub)
     return parser
 
 
 def _cmd_simulate(args) -> int:
-    from . import load
-    from .robust import beta_bounds_link1, lemma1_gain
+    from .. import load
+    from ..analysis.lemma1 import beta_bounds_link1, lemma1_gain
     m = load(args.model)
     n = m.n
     true = _parse_assignments(args.param, "--param")
@@ -187,7 +187,7 @@ def _cmd_simulate(args) -> int:
 
 
 def _plot_run(res, args, path: Path) -> None:
-    from .figures import _plt
+    from ..experiments.paper import _plt
     plt = _plt()
     n = res.e1.shape[1]
     fig, ax = plt.subplots(2, 2, figsize=(12, 7.5), sharex=True)
@@ -223,8 +223,8 @@ def _plot_run(res, args, path: Path) -> None:
 def _cmd_sweep(args) -> int:
     """``fjm sweep``: sample, run on Dask, write the CSV table and a one-line summary."""
     import time
-    from . import load
-    from .sweep import SweepSpec, sample_parameters, sweep, write_table
+    from .. import load
+    from ..batch.sweep import SweepSpec, sample_parameters, sweep, write_table
     m = load(args.model)
     delta = args.delta if args.delta is not None else args.k_s / 200.0
     options = {"lam": args.lam, "delta": delta}
@@ -279,12 +279,12 @@ def main(argv: Optional[List[str]] = None) -> int:
         if args.command == "sweep":
             return _cmd_sweep(args)
         if args.command == "tune":
-            from .tune import run as run_tune
+            from ..analysis.certify import run as run_tune
             return run_tune(args)
         if args.command == "figures":
             if args.samples < 1:
                 raise ValueError(f"--samples = {args.samples}: expected an integer >= 1")
-            from .figures import make_figures
+            from ..experiments.paper import make_figures
             summary = make_figures(args.out, n_mc=args.samples, quick=args.quick)
             print(summary)
             return 0

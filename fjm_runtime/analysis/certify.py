@@ -70,7 +70,7 @@ from typing import Dict, List, Optional, Tuple
 
 import numpy as np
 
-from .controllers import coefficients_from_pole
+from ..control.laws import coefficients_from_pole
 
 __all__ = ["TuneResult", "InfeasibleGainError", "synthesize_gains", "certificate", "paper_bound",
            "AdaptiveTuneResult", "synthesize_adaptive_gains",
@@ -1124,9 +1124,9 @@ def run(args) -> int:
     """``fjm tune``: print the :class:`TuneResult` as JSON; exit status 1 when infeasible."""
     import json
     import sys
-    from . import load
-    from .references import Sinusoid, SmoothStep
-    from .robust import LINK1_PARAMS, beta_bounds_link1
+    from .. import load
+    from ..control.references import Sinusoid, SmoothStep
+    from ..analysis.lemma1 import LINK1_PARAMS, beta_bounds_link1
     m = load(args.model)
     n = int(m.n)
     nominal = {}

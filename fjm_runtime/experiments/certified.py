@@ -14,15 +14,15 @@ from typing import Callable, Dict, List
 
 import numpy as np
 
-from . import load
-from .controllers import make_controller
-from .disturbance import with_motor_disturbance
-from .figures import ETA, K_NOM, LAM, LAYER_RATE, METRIC_HEADER, TASKS, _log, _metrics_row
-from .references import Sinusoid
-from .robust import beta_hat_link1, lemma1_gain
-from .controllers import coefficients_from_pole
-from .simulate import SimulationDivergedError, simulate
-from .tune import certificate, paper_bound, synthesize_adaptive_gains, synthesize_gains
+from .. import load
+from ..control.laws import make_controller
+from ..control.disturbance import with_motor_disturbance
+from ..experiments.paper import ETA, K_NOM, LAM, LAYER_RATE, METRIC_HEADER, TASKS, _log, _metrics_row
+from ..control.references import Sinusoid
+from ..analysis.lemma1 import beta_hat_link1, lemma1_gain
+from ..control.laws import coefficients_from_pole
+from ..sim.simulate import SimulationDivergedError, simulate
+from ..analysis.certify import certificate, paper_bound, synthesize_adaptive_gains, synthesize_gains
 
 #: Actuator limit used for the admissibility of a gain and in the closed-loop runs (N m).
 U_MAX = 100.0

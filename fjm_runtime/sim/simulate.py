@@ -12,9 +12,9 @@ from typing import Callable, Optional
 
 import numpy as np
 
-from .loop import (Metrics, SimulationDivergedError, assemble, build_fused_step, casadi_functions,  # noqa: F401
+from ..sim.step import (Metrics, SimulationDivergedError, assemble, build_fused_step, casadi_functions,  # noqa: F401
                    check_divergence, compute_metrics, metrics_from_sums, symbolic_closed_loop_rk4)
-from .rk4 import rk4_step
+from ..sim.rk4 import rk4_step
 
 
 @dataclass
@@ -152,7 +152,7 @@ def simulate(model, controller, reference, *, duration: float, dt: float = 1e-3,
     if backend not in ("auto", "casadi", "python", "compiled"):
         raise ValueError(f"backend = {backend!r}: expected 'auto', 'casadi', 'compiled' or 'python'")
     if backend == "compiled":  # C via fjm_runtime.compiled (compiled once, cached)
-        from .compiled import run_compiled
+        from ..sim.compiled import run_compiled
         out = run_compiled(model, controller, reference, p_true, x, z, dt, n_steps, max_state)
         return _finish(model, controller, p_true, *out)
     fns = casadi_functions(model)

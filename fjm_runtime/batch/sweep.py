@@ -24,7 +24,7 @@ from typing import Callable, Dict, List, Optional
 
 import numpy as np
 
-from .validation import FjmValueError
+from ..validation import FjmValueError
 
 
 @dataclass(frozen=True)
@@ -102,9 +102,9 @@ def sample_parameters(model, n_samples: int, seed: int = 0, k_range=(100.0, 200.
 
 
 def _build(spec: SweepSpec):
-    from . import load
-    from .controllers import make_controller
-    from .references import make_reference
+    from .. import load
+    from ..control.laws import make_controller
+    from ..control.references import make_reference
     model = load(spec.model)
     controller = make_controller(spec.controller, model, model.default_params, **spec.controller_options)
     reference = make_reference(spec.reference, model.n, **spec.reference_options)
@@ -119,7 +119,7 @@ def run_chunk(spec: SweepSpec, params: np.ndarray) -> Dict[str, np.ndarray]:
     dict str -> ndarray, each of shape (len(params),)
         The metrics of :class:`fjm_runtime.batch.BatchResult` plus ``diverged``.
     """
-    from .batch import simulate_batch
+    from ..batch.runner import simulate_batch
     model, controller, reference = _build(spec)
     res = simulate_batch(model, controller, reference, params, duration=spec.duration, dt=spec.dt,
                          parallel=False)  # one thread per Dask worker: no oversubscription

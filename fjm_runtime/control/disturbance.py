@@ -27,7 +27,7 @@ from typing import Callable, Optional
 
 import numpy as np
 
-from .validation import joint_vector
+from ..validation import joint_vector
 
 
 class DisturbedModel:

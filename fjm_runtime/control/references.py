@@ -11,7 +11,7 @@ import math
 
 import numpy as np
 
-from .validation import joint_vector
+from ..validation import joint_vector
 
 REFERENCE_KINDS = ("step", "sine", "constant")
 
