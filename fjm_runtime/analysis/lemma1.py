@@ -430,3 +430,109 @@ def closed_loop_eigenvalues(model, controller, true_params, x_eq=None, r=None, h
         J[:, i] = (field(x_eq + dx) - field(x_eq - dx)) / (2 * h)
     ev = np.linalg.eigvals(J)
     return ev[np.argsort(-ev.real)]
+
+
+# ---------------------------------------------------------------------------------------------
+# defaults of the command line (policy lives here, the CLI only calls it)
+FALLBACK_SWITCHING_GAIN = 1000.0
+"""Switching gain (rad/s^4) used where the paper's bound does not apply (chains, spatial arms)."""
+
+
+def paper_bound_applies(model) -> bool:
+    """True when the closed-form Lemma 1 helpers of this module apply to ``model``.
+
+    They are written for the paper's single link (eq 1): a model qualifies when it
+    has one joint and exactly the parameters of the generated ``link1`` model
+    (same names, same order).
+
+    Parameters
+    ----------
+    model : Model
+
+    Returns
+    -------
+    bool
+    """
+    from ..model import load
+    return int(model.n) == 1 and tuple(model.param_names) == tuple(load("link1").param_names)
+
+
+def default_error_bounds(reference: str, amplitude: float = 0.5, omega: float = 1.0) -> tuple:
+    """Error region ``E`` (shape (4,)) on which the default Lemma 1 gain is stated.
+
+    Parameters
+    ----------
+    reference : str
+        Reference kind (``'sine'``, ``'step'``, ``'constant'``).
+    amplitude, omega : float
+        Sine amplitude (rad) and frequency (rad/s); ``E_2 = amplitude omega`` for a sine.
+
+    Returns
+    -------
+    tuple of 4 float
+        ``(0.05, amplitude omega, 0.5, 0.5)`` for a sine, ``(0.05, 0.1, 0.5, 1.0)`` otherwise.
+    """
+    if reference == "sine":
+        return (0.05, amplitude * omega, 0.5, 0.5)
+    return (0.05, 0.1, 0.5, 1.0)
+
+
+def _check_k_bounds(k_bounds) -> tuple:
+    lo, hi = (float(v) for v in k_bounds)
+    if not (0 < lo <= hi):
+        raise ValueError(f"k_bounds = {lo}/{hi}: expected 0 < k_min <= k_max (N m/rad)")
+    return lo, hi
+
+
+def paper_beta_hat(model, nominal_params=None, k_bounds=(100.0, 200.0)):
+    """The paper's constant ``beta_hat = (beta_max + beta_min) / 2`` over ``K in k_bounds``, or None.
+
+    Parameters
+    ----------
+    model : Model
+    nominal_params : dict, optional
+        Nominal parameters (defaults for missing names).
+    k_bounds : (float, float)
+        ``(K_min, K_max)``, N m/rad, ``0 < K_min <= K_max``.
+
+    Returns
+    -------
+    float or None
+        None when :func:`paper_bound_applies` is false for ``model``.
+    """
+    if not paper_bound_applies(model):
+        return None
+    return beta_bounds_link1(nominal_params, {"K": _check_k_bounds(k_bounds)})[2]
+
+
+def default_switching_gain(model, nominal_params, lam: float, reference_bounds, *, k_bounds=(100.0, 200.0),
+                           error_bounds=(0.05, 0.5, 0.5, 0.5), eta: float = 10.0):
+    """The Lemma 1 gain ``fjm simulate`` uses by default, or None where the paper's bound does not apply.
+
+    Parameters
+    ----------
+    model : Model
+    nominal_params : dict, optional
+        Nominal parameters of the controller.
+    lam : float
+        Pole magnitude (1/s); ``c`` from :func:`fjm_runtime.control.laws.coefficients_from_pole`.
+    reference_bounds : array_like, shape (5,) or (5, 1)
+        ``R_k >= sup |y_d^(k)|``, k = 0..4 (``Reference.derivative_bounds()``).
+    k_bounds : (float, float)
+        Stiffness interval ``(K_min, K_max)``, N m/rad.
+    error_bounds : array_like, shape (4,)
+        Error region (:func:`default_error_bounds`).
+    eta : float
+        Reaching margin (rad/s^4).
+
+    Returns
+    -------
+    Lemma1Gain or None
+        None when :func:`paper_bound_applies` is false (use :data:`FALLBACK_SWITCHING_GAIN`).
+    """
+    if not paper_bound_applies(model):
+        return None
+    from ..control.laws import coefficients_from_pole
+    R = np.asarray(reference_bounds, dtype=float).reshape(5, -1)[:, 0]
+    return lemma1_gain(coefficients_from_pole(lam), R, nominal=nominal_params,
+                       bounds={"K": tuple(float(v) for v in k_bounds)}, error_bounds=error_bounds, eta=eta)
