@@ -14,10 +14,14 @@ help:
 	@echo "make check-generated  fail if generated/ is stale"
 	@echo "make bench            benchmarks -> bench/results.json"
 
+LOG    := $(VENV)/install.log
+
+# Quiet install: one line on the terminal, pip's output in $(LOG) (its tail is printed on failure).
 $(STAMP): pyproject.toml
-	$(PYTHON) -m venv $(VENV)
-	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet -e '.[dev,bench]'
+	@echo "installing fjm into $(VENV) (log: $(LOG))"
+	@$(PYTHON) -m venv $(VENV) > /dev/null 2>&1 || { echo "error: '$(PYTHON) -m venv $(VENV)' failed (python3 -m venv missing? on Debian/Ubuntu: apt install python3-venv)"; exit 1; }
+	@{ $(PY) -m pip install -q --upgrade pip && $(PY) -m pip install -q -e '.[dev,bench]'; } > $(LOG) 2>&1 \
+	  || { echo "error: pip install failed; last lines of $(LOG):"; tail -n 30 $(LOG); exit 1; }
 	@touch $(STAMP)
 
 venv: $(STAMP)
@@ -34,7 +38,11 @@ test: $(STAMP)
 
 demo: $(STAMP)
 	$(PY) -m fjm_runtime.cli figures --out out
+	@echo
+	@echo "outputs: out/ (figures *.png, every number in out/summary.md)"
+	@echo "run fjm: $(VENV)/bin/fjm --help   (or: source $(VENV)/bin/activate, then fjm --help)"
 
+# python -m bench rewrites the marked numbers of README.md, docs/ and bench/README.md (bench/report.py).
 bench: $(STAMP)
 	$(PY) -m bench
 
