@@ -20,7 +20,7 @@ import numpy as np
 import fjm_runtime
 from fjm_runtime.sim.compiled import closed_loop_runner
 from fjm_runtime.control.laws import make_controller
-from fjm_runtime.sim.step import metrics_from_sums
+from fjm_runtime.sim.metrics import metrics_from_sums
 from fjm_runtime.control.references import Sinusoid
 
 from .ccutil import compile_object, link_shared

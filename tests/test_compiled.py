@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 import fjm_runtime
-from fjm_runtime.sim.compiled import cache_dir, closed_loop_runner
+from fjm_runtime.ccache import cache_dir
+from fjm_runtime.sim.compiled import closed_loop_runner
 from fjm_runtime.control.laws import make_controller
 from fjm_runtime.control.references import Sinusoid
 from fjm_runtime.sim.simulate import simulate

@@ -19,8 +19,9 @@ from typing import Dict, List, Optional, Sequence
 import casadi as ca
 import numpy as np
 
-from ..sim.compiled import DEFAULT_FLAGS, CompileError, compile_library, fold_driver, generate_source
-from ..sim.step import casadi_functions, metrics_from_sums, symbolic_closed_loop_rk4
+from ..ccache import DEFAULT_FLAGS, CompileError, compile_library, fold_driver, generate_source
+from ..sim.metrics import metrics_from_sums
+from ..sim.step import casadi_functions, symbolic_closed_loop_rk4
 
 METRIC_NAMES = ("final_error", "rms_error", "rms_error_second_half", "max_abs_u",
                 "reaching_time", "total_variation_u")

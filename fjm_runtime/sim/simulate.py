@@ -12,9 +12,11 @@ from typing import Callable, Optional
 
 import numpy as np
 
-from ..sim.step import (Metrics, SimulationDivergedError, assemble, build_fused_step, casadi_functions,  # noqa: F401
-                   check_divergence, compute_metrics, metrics_from_sums, symbolic_closed_loop_rk4)
+from ..sim.metrics import Metrics, compute_metrics
 from ..sim.rk4 import rk4_step
+from ..sim.step import SimulationDivergedError, assemble, build_fused_step, casadi_functions, check_divergence
+
+__all__ = ["BACKENDS", "Metrics", "SimulationDivergedError", "SimulationResult", "simulate", "stderr_progress"]
 
 
 @dataclass
@@ -111,7 +113,7 @@ def simulate(model, controller, reference, *, duration: float, dt: float = 1e-3,
         model's CasADi Functions into one ``mapaccum`` (10-50x faster; needs
         the controller's ``symbolic_evaluate``). ``'auto'`` picks ``'casadi'``
         when possible. ``'compiled'``: that same closed loop code-generated to C,
-        compiled once and cached (:mod:`fjm_runtime.compiled`). All give the
+        compiled once and cached (:mod:`fjm_runtime.sim.compiled`). All give the
         same trajectories to rounding.
 
     Returns
@@ -125,6 +127,15 @@ def simulate(model, controller, reference, *, duration: float, dt: float = 1e-3,
     SimulationDivergedError
         The state became non-finite or exceeded ``max_state``; ``.t`` is the time.
     """
+    p_true, x, z, n_steps = _initial_conditions(model, controller, reference, duration, dt, true_params, x0)
+    name = _choose_backend(backend, model, controller)
+    t, X, Z, U, S, Yh, R = BACKENDS[name](model, controller, reference, p_true, x, z, dt, n_steps,
+                                          progress, max_state)
+    return _finish(model, controller, p_true, t, X, Z, U, S, Yh, R)
+
+
+def _initial_conditions(model, controller, reference, duration, dt, true_params, x0):
+    """Check the run's arguments; ``(p_true, x0, z0, n_steps)`` (x0 default: at rest on the reference)."""
     n, nx = int(model.n), int(model.nx)
     if not (np.isfinite(duration) and duration > 0):
         raise ValueError(f"duration = {duration!r}: expected a finite value > 0 s")
@@ -146,25 +157,25 @@ def simulate(model, controller, reference, *, duration: float, dt: float = 1e-3,
         x0[2 * n:3 * n] = r0[0]
     x = _check_state(x0, nx, "x0")
     z = np.asarray(controller.initial_state(0.0, x, r0), dtype=float)
-    nz = z.size
+    return p_true, x, z, int(round(duration / dt))
 
-    n_steps = int(round(duration / dt))
-    if backend not in ("auto", "casadi", "python", "compiled"):
+
+def _choose_backend(backend: str, model, controller) -> str:
+    """The key of :data:`BACKENDS` that runs ``backend`` (``'auto'``: casadi when possible)."""
+    if backend not in ("auto",) + tuple(BACKENDS):
         raise ValueError(f"backend = {backend!r}: expected 'auto', 'casadi', 'compiled' or 'python'")
-    if backend == "compiled":  # C via fjm_runtime.compiled (compiled once, cached)
-        from ..sim.compiled import run_compiled
-        out = run_compiled(model, controller, reference, p_true, x, z, dt, n_steps, max_state)
-        return _finish(model, controller, p_true, *out)
-    fns = casadi_functions(model)
-    fused_ok = fns is not None and hasattr(controller, "symbolic_evaluate")
+    if backend in ("compiled", "python"):
+        return backend
+    fused_ok = casadi_functions(model) is not None and hasattr(controller, "symbolic_evaluate")
     if backend == "casadi" and not fused_ok:
         raise ValueError("backend = 'casadi': the model exposes no CasADi Functions or the controller "
                          "has no symbolic_evaluate; use backend='python'")
-    if backend != "python" and fused_ok:
-        t, X, Z, U, S, Yh, R = _run_fused(model, fns, controller, reference, p_true, x, z, dt, n_steps,
-                                          progress, max_state)
-        return _finish(model, controller, p_true, t, X, Z, U, S, Yh, R)
+    return "casadi" if fused_ok else "python"
 
+
+def _run_python(model, controller, reference, p_true, x, z, dt, n_steps, progress, max_state):
+    """A plain loop calling ``model.f``, ``model.g`` and the controller; ``t, X, Z, U, S, Yh, R``."""
+    n, nx, nz = int(model.n), int(model.nx), z.size
     t = dt * np.arange(n_steps + 1)
     X = np.empty((n_steps + 1, nx)); Z = np.empty((n_steps + 1, nz))
     U = np.empty((n_steps + 1, n)); S = np.empty((n_steps + 1, n))
@@ -194,8 +205,13 @@ def simulate(model, controller, reference, *, duration: float, dt: float = 1e-3,
         x, z = w[:nx], w[nx:]
         if progress is not None and (k + 1) % report_every == 0:
             progress((k + 1) / n_steps)
+    return t, X, Z, U, S, Yh, R
 
-    return _finish(model, controller, p_true, t, X, Z, U, S, Yh, R)
+
+def _run_compiled(model, controller, reference, p_true, x, z, dt, n_steps, progress, max_state):
+    """The closed loop in C (:mod:`fjm_runtime.sim.compiled`, compiled once and cached); no progress."""
+    from ..sim.compiled import run_compiled
+    return run_compiled(model, controller, reference, p_true, x, z, dt, n_steps, max_state)
 
 
 def _finish(model, controller, p_true, t, X, Z, U, S, Yh, R) -> SimulationResult:
@@ -232,8 +248,10 @@ def _true_outputs(model, p_true, X):
     return np.stack([np.asarray(model.T(xk, p_true), dtype=float).reshape(4, n) for xk in X])
 
 
-def _run_fused(model, fns, controller, reference, p_true, x0, z0, dt, n_steps, progress, max_state):
+def _run_fused(model, controller, reference, p_true, x0, z0, dt, n_steps, progress, max_state):
+    """The zero-order-hold RK4 loop as one CasADi ``mapaccum`` (in chunks for progress); ``t, X, ..., R``."""
     nx, n, nz = int(model.nx), int(model.n), z0.size
+    fns = casadi_functions(model)
     step = build_fused_step(fns, controller, nx, n, nz, p_true.size, dt)
     t = dt * np.arange(n_steps + 1)
     r_half = reference.sample(0.5 * dt * np.arange(2 * n_steps + 1)).reshape(2 * n_steps + 1, 5 * n)
@@ -259,6 +277,11 @@ def _run_fused(model, fns, controller, reference, p_true, x0, z0, dt, n_steps, p
         if progress is not None:
             progress(k / n_steps)
     return assemble(controller, t, W, aux, R, nx, n)
+
+
+#: The closed-loop runners by ``backend`` name, each
+#: ``(model, controller, reference, p_true, x0, z0, dt, n_steps, progress, max_state) -> (t, X, Z, U, S, Yh, R)``.
+BACKENDS = {"python": _run_python, "casadi": _run_fused, "compiled": _run_compiled}
 
 
 def stderr_progress(label: str) -> Callable[[float], None]:
