@@ -419,7 +419,7 @@ def bench_closed_loop(work: Path, reps: int, slow_reps: int, checks: list) -> di
 # -- batch ------------------------------------------------------------------------------------
 def bench_batch(reps: int, slow_reps: int, checks: list, n_runs: int = 1000) -> dict:
     import warnings
-    from fjm_runtime.batch.runner import METRIC_NAMES, SimdFallbackWarning, _vector_isa, simulate_batch
+    from fjm_runtime.batch.runner import METRIC_NAMES, SimdFallbackWarning, simulate_batch, vector_isa
     from .closed_loop import link1_case, numpy_batch
     case = link1_case()
     Ks = np.random.default_rng(0).uniform(100.0, 200.0, n_runs)
@@ -434,7 +434,7 @@ def bench_batch(reps: int, slow_reps: int, checks: list, n_runs: int = 1000) -> 
 
     log(f"batch {n_runs} x 10 s: compiling ...")
     one, allt, scal = run(threads=1), run(), run(simd=False)
-    want = f"simd-{_vector_isa()[0]}"
+    want = f"simd-{vector_isa()[0]}"
     check(checks, "batch.simd_path", f"simulate_batch ran `{one.info['path']}` / `{allt.info['path']}`, "
           f"expected `{want}` on this CPU (0 = yes)",
           0.0 if one.info["path"] == allt.info["path"] == want else 1.0, 0.0)
@@ -494,8 +494,8 @@ def machine() -> dict:
     except OSError:
         info["cpu_model"] = platform.processor()
     try:
-        from fjm_runtime.batch.runner import _vector_isa
-        info["simd_isa"] = _vector_isa()[0]
+        from fjm_runtime.batch.runner import vector_isa
+        info["simd_isa"] = vector_isa()[0]
     except Exception:  # noqa: BLE001 - informative only
         info["simd_isa"] = "unknown"
     try:

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import fjm_runtime
-import fjm_runtime.batch.runner as batch_mod
+import fjm_runtime.batch.simd as batch_mod
 from fjm_runtime.batch.runner import METRIC_NAMES, SimdFallbackWarning, simulate_batch
 from fjm_runtime.ccache import CompileError
 from fjm_runtime.control.laws import make_controller

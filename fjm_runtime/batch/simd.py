@@ -1,0 +1,264 @@
+"""SIMD across runs: the batch metric step emitted "structure of arrays".
+
+Every scalar instruction of the SX Function becomes one statement on a vector of
+``LANES`` runs (GCC vector extensions), which the compiler turns into AVX-512, AVX2
+or SSE2 instructions; sin/cos go to glibc's vector math library (libmvec);
+instructions that depend on the per-run parameters only are evaluated once per run.
+Results agree with the scalar code to rounding (libmvec sin/cos: < 4 ulp;
+``x / p -> x * (1 / p)``), not bit for bit. The fixed C text is the template
+``simd_template.c`` next to this module; :func:`soa_source` fills in the statements.
+"""
+from __future__ import annotations
+
+from importlib import resources
+from string import Template
+from typing import Dict, List, Optional, Sequence, Tuple
+
+import casadi as ca
+import numpy as np
+
+from ..ccache import DEFAULT_FLAGS, CompileError, compile_library
+from .scalar import BatchRunner, metric_step
+
+#: Largest step (SX instructions) emitted in SIMD form (a guard against pathological
+#: compile times; gcc handles the vector-extension code in about linear time:
+#: link1 0.2 s, planar3 0.3 s).
+SIMD_MAX_INSTRUCTIONS = 200000
+
+#: C expression of each unary SX operation on vectors (``{a}``: the operand).
+UNARY = {
+    ca.OP_NEG: "-({a})", ca.OP_SQ: "({a})*({a})", ca.OP_TWICE: "2.*({a})", ca.OP_INV: "1./({a})",
+    ca.OP_SIN: "v_sin({a})", ca.OP_COS: "v_cos({a})", ca.OP_TAN: "v_tan({a})", ca.OP_EXP: "v_exp({a})",
+    ca.OP_LOG: "v_log({a})", ca.OP_SQRT: "v_sqrt({a})", ca.OP_TANH: "v_tanh({a})",
+    ca.OP_ATAN: "v_atan({a})", ca.OP_ASIN: "v_asin({a})", ca.OP_ACOS: "v_acos({a})",
+    ca.OP_FABS: "(vd)((vl)({a}) & 0x7fffffffffffffffLL)",
+    ca.OP_NOT: "v_b(({a}) == 0.)", ca.OP_ASSIGN: "({a})",
+    ca.OP_SIGN: "v_sign({a})",
+}
+
+#: C expression of each binary SX operation on vectors (``{a}``, ``{b}``: the operands).
+BINARY = {
+    ca.OP_ADD: "({a})+({b})", ca.OP_SUB: "({a})-({b})", ca.OP_MUL: "({a})*({b})",
+    ca.OP_DIV: "({a})/({b})", ca.OP_POW: "v_pow({a},{b})", ca.OP_CONSTPOW: "v_pow({a},{b})",
+    ca.OP_FMIN: "v_sel(({a})<({b}), {a}, {b})", ca.OP_FMAX: "v_sel(({a})>({b}), {a}, {b})",
+    ca.OP_LT: "v_b(({a})<({b}))", ca.OP_LE: "v_b(({a})<=({b}))",
+    ca.OP_EQ: "v_b(({a})==({b}))", ca.OP_NE: "v_b(({a})!=({b}))",
+    ca.OP_AND: "v_b((({a})!=0.) & (({b})!=0.))", ca.OP_OR: "v_b((({a})!=0.) | (({b})!=0.))",
+    ca.OP_IF_ELSE_ZERO: "(vd)((vl)({b}) & (({a}) != 0.))", ca.OP_ATAN2: "v_atan2({a},{b})",
+    ca.OP_COPYSIGN: "v_copysign({a},{b})",
+}
+
+
+class SoaProgram:
+    """The statements of one SX Function in SIMD form, split into prologue and step body.
+
+    ``prologue`` lines fill ``inv[j]`` (constants and everything computed from the
+    per-run invariant inputs only, once per run group); ``body`` lines compute the
+    work vectors ``w<k>`` of one step. ``src[slot]`` says where the value of an SX
+    work slot lives: ``("inv", j)`` or ``("w", slot)``.
+    """
+
+    def __init__(self, varying: Sequence[int], invariant_from: Optional[int]):
+        self.varying, self.invariant_from = tuple(varying), invariant_from
+        self.body: List[str] = []
+        self.prologue: List[str] = []
+        self.src: Dict[int, Tuple[str, int]] = {}
+        self.recip: Dict[int, int] = {}
+        self.used: set = set()
+        self.n_inv = 0
+
+    def new_inv(self) -> int:
+        """A fresh slot of the invariant array ``inv``."""
+        self.n_inv += 1
+        return self.n_inv - 1
+
+    def ref(self, slot: int) -> str:
+        """The C name of the value in SX work slot ``slot``."""
+        kind, j = self.src[slot]
+        return f"inv[{j}]" if kind == "inv" else f"w{j}"
+
+    def _set_inv(self, slot: int, line_of_j) -> None:
+        j = self.new_inv()
+        self.prologue.append(line_of_j(j))
+        self.src[slot] = ("inv", j)
+
+    def _set_w(self, slot: int, line: str) -> None:
+        self.body.append(line)
+        self.src[slot] = ("w", slot)
+        self.used.add(slot)
+
+    def add_input(self, i, o) -> None:
+        """``OP_INPUT``: entry ``i[1]`` of input ``i[0]`` into slot ``o[0]``."""
+        if self.invariant_from is not None and i[0] == 0 and i[1] >= self.invariant_from:
+            self._set_inv(o[0], lambda j: f"memcpy(&inv[{j}], acc + {i[1]}*LANES, sizeof(vd));")
+        elif i[0] in self.varying:
+            self._set_w(o[0], f"memcpy(&w{o[0]}, arg[{i[0]}] + {i[1]}*LANES, sizeof(vd));")
+        else:
+            self._set_w(o[0], f"w{o[0]} = V0 + arg[{i[0]}][{i[1]}];")
+
+    def add_operation(self, op: int, i, o) -> None:
+        """A unary or binary operation: hoisted if its operands are invariant, ``x / inv`` as ``x * (1 / inv)``."""
+        args = list(i[:1]) if op in UNARY else list(i[:2])
+        fmt = UNARY[op] if op in UNARY else BINARY[op]
+        if all(self.src[a][0] == "inv" for a in args):
+            expr = fmt.format(a=self.ref(args[0]), b=self.ref(args[-1]))
+            self._set_inv(o[0], lambda j: f"inv[{j}] = " + expr + ";")
+            return
+        if op == ca.OP_DIV and self.src[args[1]][0] == "inv":
+            d = self.src[args[1]][1]
+            if d not in self.recip:
+                self.recip[d] = self.new_inv()
+                self.prologue.append(f"inv[{self.recip[d]}] = 1./inv[{d}];")
+            expr = f"({self.ref(args[0])})*inv[{self.recip[d]}]"
+        else:
+            expr = fmt.format(a=self.ref(args[0]), b=self.ref(args[-1]))
+        self._set_w(o[0], f"w{o[0]} = {expr};")
+
+    def add(self, step: ca.Function, k: int) -> None:
+        """Instruction ``k`` of ``step``."""
+        op = step.instruction_id(k)
+        i = step.instruction_input(k)
+        o = step.instruction_output(k)
+        if op == ca.OP_CONST:
+            value = float(step.instruction_constant(k))
+            self._set_inv(o[0], lambda j: f"inv[{j}] = V0 + {value!r};")
+        elif op == ca.OP_INPUT:
+            self.add_input(i, o)
+        elif op == ca.OP_OUTPUT:
+            self.body.append(f"{{ vd t = {self.ref(i[0])}; memcpy(res[{o[0]}] + {o[1]}*LANES, &t, sizeof(vd)); }}")
+        elif op in UNARY or op in BINARY:
+            self.add_operation(op, i, o)
+        else:
+            raise ValueError(f"soa_source: operation {op} not supported")
+
+
+def simd_template() -> Template:
+    """The fixed C text of the SIMD batch (``simd_template.c``: vector helpers, prologue and
+    step frames, the OpenMP driver ``fjm_batch_soa``) with ``$`` placeholders."""
+    return Template(resources.files(__package__).joinpath("simd_template.c").read_text(encoding="utf-8"))
+
+
+def soa_source(step: ca.Function, lanes: int, varying=(0,), invariant_from: int = None) -> str:
+    """C source of ``step`` evaluated on ``lanes`` runs at once (inputs in ``varying`` per lane).
+
+    GCC vector extensions: every SX instruction becomes one statement on a vector of
+    ``lanes`` doubles (compiled to AVX-512/AVX2/SSE2 instructions); sin/cos and friends
+    go through short lane loops that gcc maps to glibc's vector math (libmvec).
+    Defines ``fjm_prologue(acc, inv)``, ``fjm_step_soa(inv, arg, res)`` and the driver
+    ``fjm_batch_soa``; varying inputs and every output are laid out ``[nz][lane]``.
+    Entries ``>= invariant_from`` of input 0 are constant along a run (the TRUE
+    parameters riding in the accumulator): every instruction that depends on them and
+    constants only is hoisted into the prologue (once per run group, not once per
+    step), and a division by such a value becomes a multiplication by its reciprocal
+    (rounding may differ by one ulp).
+    """
+    prog = SoaProgram(varying, invariant_from)
+    for k in range(step.n_instructions()):
+        prog.add(step, k)
+    return simd_template().substitute(
+        lanes=int(lanes), n_inv=max(1, prog.n_inv),
+        prologue="".join("\n  " + ln for ln in prog.prologue),
+        declarations=", ".join(f"w{j}" for j in sorted(prog.used)) or "w_unused",
+        body="".join("\n  " + ln for ln in prog.body))
+
+
+def cpu_flags() -> set:
+    """The CPU feature flags of this machine (``/proc/cpuinfo``; empty set if unknown)."""
+    try:
+        with open("/proc/cpuinfo") as fh:
+            for ln in fh:
+                if ln.startswith("flags"):
+                    return set(ln.split(":", 1)[1].split())
+    except OSError:
+        pass
+    return set()
+
+
+def vector_isa() -> tuple:
+    """``(name, flags)``: the instruction set of the SIMD batch, chosen from THIS machine's CPU.
+
+    ``name`` is ``avx512``, ``avx2``, ``sse2`` or ``generic``; the flags are part of
+    the cache key, so a machine with another instruction set never loads a library
+    built for this one.
+    """
+    cpu = cpu_flags()
+    if {"avx512f", "avx512dq"} <= cpu:
+        return "avx512", ("-mavx512f", "-mavx512dq", "-mprefer-vector-width=512")
+    if "avx2" in cpu:
+        return "avx2", ("-mavx2",)
+    if "sse2" in cpu:
+        return "sse2", ()
+    return "generic", ()
+
+
+class SimdBatchRunner(BatchRunner):
+    """ctypes handle on the SIMD batch loop; same calls as :class:`BatchRunner`.
+
+    Runs are packed ``lanes`` at a time ("structure of arrays"); the last group
+    is filled with copies of the last run.
+    """
+
+    _entry = "fjm_batch_soa"
+
+    def __init__(self, so_path, nacc: int, nr: int, lanes: int, isa: str = "generic",
+                 openmp: bool = True):
+        super().__init__(so_path, nacc, nr, openmp=openmp)
+        self.lanes, self.isa = int(lanes), isa
+
+    @property
+    def path_name(self) -> str:
+        return f"simd-{self.isa}"
+
+    def _pack(self, A):
+        B, L = A.shape[0], self.lanes
+        G = -(-B // L)
+        pad = np.vstack([A, np.repeat(A[-1:], G * L - B, axis=0)])   # fill the last group
+        return np.ascontiguousarray(pad.reshape(G, L, self.nacc).transpose(0, 2, 1)), G
+
+    def _unpack(self, soa, B):
+        return soa.transpose(0, 2, 1).reshape(-1, self.nacc)[:B].copy()
+
+
+def simd_runner(step: ca.Function, n_par: int, flags: Sequence[str], lanes: Optional[int],
+                parallel: bool = True) -> SimdBatchRunner:
+    """Compile (cached) ``step`` (a :func:`~fjm_runtime.batch.scalar.metric_step`) in SIMD form.
+
+    ``lanes`` runs per statement (default 8); the last ``n_par`` entries of the
+    accumulator are the per-run constants hoisted into the prologue.
+    """
+    lanes = int(lanes) if lanes else 8
+    isa, vflags = vector_isa()
+    extra = ("-fno-math-errno", "-ffp-contract=off") + (("-fopenmp",) if parallel else ()) + vflags
+    source = soa_source(step, lanes, invariant_from=step.size1_in(0) - n_par)
+    so = compile_library(source, "fjm_batch_soa", tuple(flags) + extra)
+    return SimdBatchRunner(so, step.size1_in(0), step.size1_in(1), lanes, isa, openmp=parallel)
+
+
+def simd_batch_runner(model, controller, dt: float, max_state: float = 1e6,
+                      flags: Sequence[str] = DEFAULT_FLAGS, lanes: Optional[int] = None,
+                      parallel: bool = True) -> SimdBatchRunner:
+    """Compile (cached) the SIMD-across-runs batch loop (``lanes`` runs per instruction,
+    default 8: one AVX-512 vector, two AVX2 vectors or four SSE2 vectors per operation).
+
+    ``-ffp-contract=off`` keeps the arithmetic identical to the scalar code (no FMA
+    contraction); only sin/cos (libmvec) may differ by a few ulp. Raises
+    :class:`~fjm_runtime.ccache.CompileError` or ``ValueError`` (an operation
+    :func:`soa_source` does not support) instead of falling back.
+    """
+    step = metric_step(model, controller, float(dt), float(max_state))
+    return simd_runner(step, len(model.param_names), flags, lanes, parallel)
+
+
+def simd_runner_or_reason(step: ca.Function, n_par: int, parallel: bool):
+    """``(runner, None)`` with the SIMD form of ``step``, or ``(None, reason)`` when it cannot be used.
+
+    Reasons: the step exceeds :data:`SIMD_MAX_INSTRUCTIONS`, an operation
+    :func:`soa_source` does not support, or a failed build (the message is kept).
+    """
+    if step.n_instructions() > SIMD_MAX_INSTRUCTIONS:
+        return None, (f"the step has {step.n_instructions()} SX instructions > "
+                      f"SIMD_MAX_INSTRUCTIONS = {SIMD_MAX_INSTRUCTIONS}")
+    try:
+        return simd_runner(step, n_par, DEFAULT_FLAGS, None, parallel), None
+    except (CompileError, ValueError) as exc:
+        return None, f"SIMD build failed: {type(exc).__name__}: {str(exc)[:2000]}"
