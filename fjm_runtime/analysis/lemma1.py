@@ -1,4 +1,4 @@
-"""Lemma 1 of the paper for link1: beta_hat from parameter bounds and the switching gain.
+"""Lemma 1 of the paper: beta_hat from parameter bounds and the switching gain (one implementation).
 
 Derivation (true linearizing coordinates ``y = T(x; p)``, ``y4' = (u - alpha) / beta``)
 ------------------------------------------------------------------------------------
@@ -32,7 +32,7 @@ the reference bounds ``|y_d^(k)| <= R_k``, so that::
     k_s (paper, eq 16)   = W + H / beta_hat + eta
     k_s_tight            = rho W + H / beta_hat + eta
 
-``beta = J_l J_m / K`` (corrected, docs/errata.md erratum 2), so with ``K in [K_min, K_max]``
+``beta = J_l J_m / K`` (corrected, erratum 2 of the paper), so with ``K in [K_min, K_max]``
 (and optionally ``J_l, J_m`` intervals) ``beta_min = J_l,min J_m,min / K_max``,
 ``beta_max = J_l,max J_m,max / K_min`` and ``beta_hat = (beta_max + beta_min) / 2``
 (the paper's choice, which makes eq (14) hold with ``rho = (beta_max - beta_min)
@@ -44,9 +44,17 @@ that the input cannot cancel (through ``c2 = 3 lambda^2`` and ``c3``; also the
 regulation offset analysed in :func:`predict_regulation_offset`). The gain of
 this module does NOT include it and is therefore not a reaching guarantee for
 the law that runs (on link1 it fails from lambda ~ 20):
-:func:`fjm_runtime.tune.synthesize_gains` (``fjm tune``) certifies gains for the
-implemented law, and :func:`fjm_runtime.tune.paper_bound` evaluates this
-module's bound for any scalar model.
+:func:`fjm_runtime.analysis.certify.synthesize_gains` (``fjm tune``) certifies
+gains for the implemented law.
+
+One bound, two entry points
+---------------------------
+:func:`paper_bound` evaluates the bound for any one-joint model (``H`` by a grid with
+vertices along affine coordinates and local maximization, ``beta`` sampled on the same
+points); :func:`lemma1_gain` is the link1 reading on a fixed grid (the numbers of the
+figures and of ``fjm simulate``). Both take ``alpha``, ``beta`` and ``T^{-1}`` from the
+generated model (:mod:`fjm_runtime.analysis.link1`) through the same evaluator
+(:func:`mismatch_evaluator`) and the same formulas (:func:`surface_W`, :func:`lemma1_terms`).
 """
 from __future__ import annotations
 
@@ -55,82 +63,45 @@ from itertools import product
 
 import numpy as np
 
-LINK1_PARAMS = ("J_l", "J_m", "K", "M", "g0", "L", "B_m")
-LINK1_DEFAULTS = dict(J_l=1.0, J_m=2.0, K=150.0, M=1.0, g0=9.8, L=1.0, B_m=0.0)
+from .box import assemble, box_dims, box_maximize, check_box, classify_affine, per_joint, surface_coefficients
+from .evaluator import Evaluator, build_true_fn
+from .link1 import POSITIVE, link1_bounds, link1_model, link1_params
 
 
-def _link1_params(p) -> dict:
-    if isinstance(p, dict):
-        unknown = sorted(set(p) - set(LINK1_PARAMS))
-        if unknown:
-            raise ValueError(f"params: unknown names {unknown}; expected a subset of {LINK1_PARAMS}")
-        d = dict(LINK1_DEFAULTS)
-        d.update({k: float(v) for k, v in p.items()})
-    else:
-        a = np.asarray(p, dtype=float).ravel()
-        if a.shape != (len(LINK1_PARAMS),):
-            raise ValueError(f"params with shape {a.shape}: expected ({len(LINK1_PARAMS)},) in order {LINK1_PARAMS}")
-        d = dict(zip(LINK1_PARAMS, a.tolist()))
-    for k in ("J_l", "J_m", "K"):
-        if not (np.isfinite(d[k]) and d[k] > 0):
-            raise ValueError(f"{k} = {d[k]!r}: expected a finite value > 0")
-    return d
+# ---------------------------------------------------------------------------------------------
+# the shared core
+def surface_W(c, R, E) -> float:
+    """``W = R_4 + c1 E_2 + c2 E_3 + c3 E_4 >= |w|`` for ``c`` (3,), ``R`` (5,), ``E`` (4,)."""
+    return float(R[4] + c[0] * E[1] + c[1] * E[2] + c[2] * E[3])
 
 
-def link1_T_inverse(y, p):
-    """Closed-form ``x = T^{-1}(y; p)`` for link1 (broadcasts over leading axes).
-
-    Parameters
-    ----------
-    y : array_like, shape (..., 4)
-    p : dict or array_like
+def lemma1_terms(W: float, H: float, beta_min: float, beta_max: float, beta_hat: float, eta: float):
+    """Lemma 1 gains from its ingredients.
 
     Returns
     -------
-    ndarray, shape (..., 4)
+    k_s_eq16 : float
+        ``W + H / beta_hat + eta`` (the paper's eq 16).
+    k_s_tight : float
+        ``rho W + H / beta_hat + eta``.
+    rho : float
+        ``max |1 - beta / beta_hat|`` over ``[beta_min, beta_max]``.
     """
-    d = _link1_params(p)
-    y = np.asarray(y, dtype=float)
-    g = d["M"] * d["g0"] * d["L"] / d["J_l"]
-    y1, y2, y3, y4 = np.moveaxis(y, -1, 0)
-    c = d["J_l"] / d["K"]
-    x3 = y1 + c * (y3 + g * np.sin(y1))
-    x4 = y2 + c * (y4 + g * np.cos(y1) * y2)
-    return np.stack([y1, y2, x3, x4], axis=-1)
+    rho = max(abs(1 - beta_min / beta_hat), abs(1 - beta_max / beta_hat))
+    return W + H / beta_hat + eta, rho * W + H / beta_hat + eta, rho
 
 
-def link1_alpha(x, p):
-    """Closed-form ``alpha(x; p) = -beta a`` for link1, shape ``x.shape[:-1]``.
+def mismatch_evaluator(model, p_nom) -> Evaluator:
+    """``(Y (N, 4n), P (N, npar)) -> [alpha(x; p_nom) - alpha(x; p), vec beta(x; p)]`` at ``x = T^{-1}(y; p)``.
 
-    ``a = L_f y4``, ``beta = J_l J_m / K``; includes motor damping ``B_m``.
+    The state the TRUE plant is in when its linearizing coordinates are ``y``;
+    ``alpha_hat`` is evaluated there with the nominal parameters, as the controller does.
     """
-    d = _link1_params(p)
-    x = np.asarray(x, dtype=float)
-    x1, x2, x3, x4 = np.moveaxis(x, -1, 0)
-    Jl, Jm, K = d["J_l"], d["J_m"], d["K"]
-    g = d["M"] * d["g0"] * d["L"] / Jl
-    f2 = -g * np.sin(x1) - K / Jl * (x1 - x3)
-    f4 = (K * (x1 - x3) - d["B_m"] * x4) / Jm
-    a = g * np.sin(x1) * x2 ** 2 - g * np.cos(x1) * f2 - K / Jl * (f2 - f4)
-    return -(Jl * Jm / K) * a
+    return Evaluator(model, build_true_fn(model, np.asarray(p_nom, dtype=float)))
 
 
-def _bounds_dict(nominal: dict, bounds) -> dict:
-    out = {}
-    for k, v in (bounds or {}).items():
-        if k not in LINK1_PARAMS:
-            raise ValueError(f"bounds: unknown parameter {k!r}; expected one of {LINK1_PARAMS}")
-        lo, hi = (float(b) for b in v)
-        if not (np.isfinite(lo) and np.isfinite(hi) and lo <= hi):
-            raise ValueError(f"bounds[{k!r}] = {v!r}: expected finite (lo, hi) with lo <= hi")
-        if k in ("J_l", "J_m", "K") and lo <= 0:
-            raise ValueError(f"bounds[{k!r}] = {v!r}: expected lo > 0")
-        out[k] = (lo, hi)
-    for k in LINK1_PARAMS:
-        out.setdefault(k, (nominal[k], nominal[k]))
-    return out
-
-
+# ---------------------------------------------------------------------------------------------
+# link1: beta bounds and the mismatch on a fixed grid
 def beta_bounds_link1(nominal=None, bounds=None):
     """``beta_min, beta_max, beta_hat, rho`` for link1 from parameter bounds.
 
@@ -147,13 +118,23 @@ def beta_bounds_link1(nominal=None, bounds=None):
         ``beta = J_l J_m / K`` ranges over ``[beta_min, beta_max]``;
         ``beta_hat = (beta_max + beta_min) / 2`` and
         ``rho = max |1 - beta / beta_hat| = (beta_max - beta_min) / (beta_max + beta_min)``.
+
+    Notes
+    -----
+    ``beta`` is the generated model's, at the vertices of the ``(J_l, J_m, K)`` box:
+    for link1 it does not depend on the state and is monotone in each of them.
     """
-    nom = _link1_params(nominal or {})
-    b = _bounds_dict(nom, bounds)
-    beta_min = b["J_l"][0] * b["J_m"][0] / b["K"][1]
-    beta_max = b["J_l"][1] * b["J_m"][1] / b["K"][0]
+    m = link1_model()
+    nom = link1_params(nominal or {})
+    b = link1_bounds(nom, bounds)
+    betas = []
+    for combo in product(*[b[k] for k in POSITIVE]):
+        p = dict(nom)
+        p.update(dict(zip(POSITIVE, combo)))
+        betas.append(float(m.beta(np.zeros(4), p)[0, 0]))
+    beta_min, beta_max = min(betas), max(betas)
     beta_hat = 0.5 * (beta_max + beta_min)
-    rho = (beta_max - beta_min) / (beta_max + beta_min)
+    rho = lemma1_terms(0.0, 0.0, beta_min, beta_max, beta_hat, 0.0)[2]
     return beta_min, beta_max, beta_hat, rho
 
 
@@ -165,9 +146,7 @@ def beta_hat_link1(nominal=None, bounds=None) -> float:
 def alpha_mismatch_bound(y_box, nominal=None, bounds=None, n_grid: int = 41, n_param: int = 5) -> float:
     """``H = sup |alpha(x; p_nom) - alpha(x; p)|`` over a y-box and the parameter box (link1).
 
-    ``x = T^{-1}(y; p)`` is the state the TRUE plant is in when its
-    linearizing coordinates are ``y``; ``alpha_hat`` is evaluated at that state
-    with the nominal parameters, as the controller does.
+    ``x = T^{-1}(y; p)`` (:func:`mismatch_evaluator`).
 
     Parameters
     ----------
@@ -189,19 +168,22 @@ def alpha_mismatch_bound(y_box, nominal=None, bounds=None, n_grid: int = 41, n_p
     Y = np.asarray(y_box, dtype=float)
     if Y.shape != (4,) or not np.all(np.isfinite(Y)) or np.any(Y < 0):
         raise ValueError(f"y_box = {Y.tolist()}: expected 4 finite half-widths >= 0")
-    nom = _link1_params(nominal or {})
-    b = _bounds_dict(nom, bounds)
+    m = link1_model()
+    names = list(m.param_names)
+    nom = link1_params(nominal or {})
+    b = link1_bounds(nom, bounds)
     axes = [np.linspace(-Y[0], Y[0], n_grid), np.linspace(-Y[1], Y[1], 9),
             np.linspace(-Y[2], Y[2], 5), np.linspace(-Y[3], Y[3], 5)]
     grid = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 4)
-    uncertain = [k for k in LINK1_PARAMS if b[k][0] != b[k][1]]
-    values = [np.linspace(b[k][0], b[k][1], n_param) for k in uncertain]
+    uncertain = [k for k in names if b[k][0] != b[k][1]]
+    p_nom = np.array([nom[k] for k in names])
+    ev = mismatch_evaluator(m, p_nom)
     H = 0.0
-    for combo in product(*values) if uncertain else [()]:
-        p = dict(nom)
-        p.update(dict(zip(uncertain, combo)))
-        x = link1_T_inverse(grid, p)
-        H = max(H, float(np.max(np.abs(link1_alpha(x, nom) - link1_alpha(x, p)))))
+    for combo in product(*[np.linspace(b[k][0], b[k][1], n_param) for k in uncertain]):
+        p = p_nom.copy()
+        p[[names.index(k) for k in uncertain]] = combo
+        V = ev(grid, np.repeat(p[None, :], grid.shape[0], axis=0))
+        H = max(H, float(np.max(np.abs(V[:, 0]))))
     return H
 
 
@@ -274,162 +256,114 @@ def lemma1_gain(c, reference_bounds, *, nominal=None, bounds=None, error_bounds=
         raise ValueError(f"error_bounds = {E.tolist()}: expected 4 finite values >= 0")
     if not (np.isfinite(eta) and eta > 0):
         raise ValueError(f"eta = {eta!r}: expected a finite value > 0")
-    nom = _link1_params(nominal or {})
+    nom = link1_params(nominal or {})
     beta_min, beta_max, beta_hat, rho = beta_bounds_link1(nom, bounds)
-    W = R[4] + c[0] * E[1] + c[1] * E[2] + c[2] * E[3]
+    W = surface_W(c, R, E)
     y_box = R[:4] + E
     H = alpha_mismatch_bound(y_box, nom, bounds, n_grid=n_grid)
-    return Lemma1Gain(k_s=W + H / beta_hat + eta, k_s_tight=rho * W + H / beta_hat + eta, W=W, H=H,
-                      beta_hat=beta_hat, beta_min=beta_min, beta_max=beta_max, rho=rho, eta=float(eta),
-                      y_box=y_box)
+    k_s, k_s_tight, _ = lemma1_terms(W, H, beta_min, beta_max, beta_hat, eta)
+    return Lemma1Gain(k_s=k_s, k_s_tight=k_s_tight, W=W, H=H, beta_hat=beta_hat, beta_min=beta_min,
+                      beta_max=beta_max, rho=rho, eta=float(eta), y_box=y_box)
 
 
+# ---------------------------------------------------------------------------------------------
+# any one-joint model: the bound on a box with vertices along affine coordinates
 @dataclass
-class OffsetPrediction:
-    """Predicted steady state of a set-point regulation (link1).
+class PaperBound:
+    """Lemma 1 (eq 16 with ``rho``) in TRUE coordinates: ``k_s = rho W + H / beta_hat + eta``.
 
     Attributes
     ----------
-    q_ss : float
-        Link angle at which the closed loop comes to rest (rad).
-    offset : float
-        ``q_ss - q_d`` (rad), exact for the controller's law (includes the boundary-layer term).
-    first_order : float
-        ``-(c3 / c1) (K_nom / K - 1) M g0 L sin(q_d) / J_l``: the sliding-surface
-        term alone (``= -(3 / lambda^2) (...)`` for a triple pole), i.e. the
-        offset when ``s = 0``; the rest, ``offset - first_order``, is the
-        ``O(delta / k_s)`` boundary-layer term plus the ``sin(q_ss)`` vs
-        ``sin(q_d)`` difference.
-    s_ss : float
-        Sliding variable at rest.
+    k_s : float
+        ``rho W + H / beta_hat + eta``.
+    k_s_eq16 : float
+        ``W + H / beta_hat + eta`` (the paper's eq 16, ``rho`` replaced by 1).
+    rho, W, H, beta_hat, beta_min, beta_max, eta : float
+    H_at : dict
+        Where ``|alpha_hat - alpha|`` is largest (``y`` and the parameters).
     """
 
-    q_ss: float
-    offset: float
-    first_order: float
-    s_ss: float
+    k_s: float
+    k_s_eq16: float
+    rho: float
+    W: float
+    H: float
+    beta_hat: float
+    beta_min: float
+    beta_max: float
+    eta: float
+    H_at: dict
 
 
-def link1_equilibrium(q: float, p) -> np.ndarray:
-    """Rest state of link1 holding the link at ``q``: ``[q, 0, q + M g0 L sin(q) / K, 0]``."""
-    d = _link1_params(p)
-    return np.array([q, 0.0, q + d["M"] * d["g0"] * d["L"] * np.sin(q) / d["K"], 0.0])
+def paper_bound(model, nominal_params=None, *, param_box, reference_bounds, error_bounds, lam=None, c=None,
+                eta: float = 10.0, beta_hat=None, n_grid: int = 41, seed: int = 0) -> PaperBound:
+    """The paper's Lemma 1 gain evaluated on a box in TRUE coordinates (scalar models, e.g. link1).
 
+    ``H = sup |alpha(x; p_nom) - alpha(x; p)|`` over ``x = T^{-1}(y; p)``, ``|y_k| <=
+    R_{k-1} + E_k`` and the parameter box (grid over the nonlinear coordinates,
+    vertices over the affine ones, then local maximization);
+    ``beta_min/max`` over the same points; ``beta_hat = (beta_max + beta_min) / 2``
+    unless given; ``rho = max |1 - beta / beta_hat|``; ``W = R_4 + c1 E2 + c2 E3 + c3 E4``.
 
-def predict_regulation_offset(model, controller, q_d: float, true_params, search: float = 1.5,
-                              n_scan: int = 301) -> OffsetPrediction:
-    """Steady-state regulation error of a non-integral controller on link1 with wrong parameters.
-
-    At rest at link angle ``q`` the plant needs the holding torque
-    ``u_eq = M g0 L sin(q)`` and sits at ``x(q) = [q, 0, q + M g0 L sin(q) / K, 0]``.
-    The controller (nominal ``T_hat``) sees ``e3 = T3(x(q); p_nom) = (K_nom / K - 1)
-    M g0 L sin(q) / J_l`` (when ``J_l``, ``M``, ``L`` are right) instead of 0, so
-    the rest point solves ``u_controller(x(q)) = u_eq(q)``. We solve that scalar
-    equation (scan over ``q_d +- search`` then bisection; the root nearest
-    ``q_d`` is returned). Inside the boundary layer the solution is
-    ``c1 e1 + c3 e3 = s_ss`` with ``s_ss = O(delta / k_s)``, i.e. ``e1 ~ -(c3/c1) e3``.
-
-    Parameters
-    ----------
-    model : Model
-        ``fjm_runtime.load("link1")``.
-    controller : SlidingModeController
-        A non-integral controller (``'sat'`` or ``'fl'``).
-    q_d : float
-        Constant set point (rad).
-    true_params : dict or array_like
-        Plant parameters.
-
-    Returns
-    -------
-    OffsetPrediction
+    This gain guarantees reaching for the sliding variable in TRUE coordinates,
+    ``c . (T(x; p) - y_d)``, which is not the one the controller computes: see
+    :func:`synthesize_gains` for the implemented law.
     """
-    if getattr(controller, "integral", False):
-        raise ValueError("controller: the integral controller has no offset (z' = e1 forces e1 -> 0)")
-    if getattr(controller, "mode", "sat") == "sign":
-        raise ValueError("controller.mode = 'sign': no rest point (chatters); use 'sat' or 'fl'")
-    if not np.isfinite(q_d):
-        raise ValueError(f"q_d = {q_d!r}: expected a finite angle (rad)")
-    p_true = _link1_params(dict(zip(model.param_names, np.asarray(model.params_array(true_params)).tolist())))
-    p_nom = _link1_params(dict(zip(model.param_names, np.asarray(controller.p_nom).tolist())))
-    r = np.zeros((5, 1)); r[0, 0] = q_d
-    mgl = p_true["M"] * p_true["g0"] * p_true["L"]
-    z = np.zeros(0)
+    if int(model.n) != 1:
+        raise ValueError(f"paper_bound: model {model.name!r} has n = {model.n}; Lemma 1 is stated for one joint "
+                         "(use synthesize_gains for chains)")
+    p_nom = np.asarray(model.params_array(nominal_params or {}, arg="nominal_params"), dtype=float)
+    box = check_box(model, p_nom, param_box)
+    cc = surface_coefficients(lam, c, False)
+    R = per_joint(reference_bounds, 5, 1, "reference_bounds")[:, 0]
+    E = per_joint(error_bounds, 4, 1, "error_bounds")[:, 0]
+    W = surface_W(cc, R, E)
+    Ybox = (R[:4] + E)[:, None]
+    ev = mismatch_evaluator(model, p_nom)
+    dims = box_dims(model, Ybox, p_nom, box)
+    rng = np.random.default_rng(seed)
+    classify_affine(dims, lambda Y, P: ev(Y, P)[:, :1], 1, p_nom, rng)
+    for d in dims:
+        if not d.affine:
+            d.points = n_grid
+    axes = [d.values() for d in dims]
+    pts = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, len(dims))
+    Y, P = assemble(dims, pts, 1, p_nom)
+    V = ev(Y, P)
+    dA = np.abs(V[:, 0])
+    free = [j for j, d in enumerate(dims) if not d.affine and d.lo < d.hi]
+    best, best_pt = float(np.max(dA)), pts[int(np.argmax(dA))]
+    if free:
+        lo = np.array([dims[j].lo for j in free]); hi = np.array([dims[j].hi for j in free])
+        for j0 in np.argsort(-dA)[:8]:
+            base = pts[j0].copy()
 
-    def residual(q):
-        x = link1_equilibrium(q, p_true)
-        return float(controller.evaluate(0.0, x, z, r).u_cmd[0] - mgl * np.sin(q))
+            def obj(v, base=base, h=1e-7):
+                vs = np.repeat(v[None, :], 2 * len(free) + 1, axis=0)
+                for a in range(len(free)):
+                    vs[1 + 2 * a, a] = min(v[a] + h, 1.0)
+                    vs[2 + 2 * a, a] = max(v[a] - h, 0.0)
+                pt = np.repeat(base[None, :], vs.shape[0], axis=0)
+                pt[:, free] = lo + vs * (hi - lo)
+                Yv, Pv = assemble(dims, pt, 1, p_nom)
+                val = np.abs(ev(Yv, Pv)[:, 0])
+                grad = np.array([(val[1 + 2 * a] - val[2 + 2 * a]) / max(vs[1 + 2 * a, a] - vs[2 + 2 * a, a], 1e-300)
+                                 for a in range(len(free))])
+                return float(val[0]), grad
 
-    qs = q_d + np.linspace(-search, search, n_scan)
-    F = np.array([residual(q) for q in qs])
-    idx = np.flatnonzero(np.sign(F[:-1]) * np.sign(F[1:]) <= 0)
-    if idx.size == 0:
-        raise ValueError(f"no rest point within q_d +- {search} rad for these parameters")
-    i = idx[np.argmin(np.abs(qs[idx] - q_d))]
-    lo, hi, flo = qs[i], qs[i + 1], F[i]
-    for _ in range(60):
-        mid = 0.5 * (lo + hi)
-        fm = residual(mid)
-        if np.sign(fm) == np.sign(flo):
-            lo, flo = mid, fm
-        else:
-            hi = mid
-    q_ss = 0.5 * (lo + hi)
-    x_ss = link1_equilibrium(q_ss, p_true)
-    s_ss = float(controller.evaluate(0.0, x_ss, z, r).s[0])
-    c1, c3 = controller.c[0], controller.c[2]
-    first = -(c3 / c1) * (p_nom["K"] / p_true["K"] - 1.0) * mgl * np.sin(q_d) / p_true["J_l"]
-    return OffsetPrediction(q_ss=float(q_ss), offset=float(q_ss - q_d), first_order=float(first), s_ss=s_ss)
-
-
-def closed_loop_eigenvalues(model, controller, true_params, x_eq=None, r=None, h: float = 1e-6) -> np.ndarray:
-    """Eigenvalues of the continuous-time closed loop linearized at a rest point.
-
-    The loop is ``x' = f(x; p_true) + g(x; p_true) u(x)`` with ``u`` the
-    controller's law (nominal parameters, no sampling), differentiated by
-    central differences. Only for controllers without internal state.
-
-    Parameters
-    ----------
-    model : Model
-    controller : SlidingModeController
-        Non-integral controller.
-    true_params : dict or array_like
-    x_eq : array_like, shape (4n,), optional
-        Rest point (default 0: planar chains hanging straight down, link1 at q = 0).
-    r : array_like, shape (5, n), optional
-        Reference held at ``x_eq`` (default: ``q_d = q_l`` of ``x_eq``, derivatives 0).
-    h : float
-        Difference step.
-
-    Returns
-    -------
-    ndarray, shape (4n,), complex
-        Sorted by decreasing real part (the first one decides stability).
-    """
-    if getattr(controller, "integral", False):
-        raise ValueError("controller: integral controllers carry a state; linearize the augmented loop instead")
-    n, nx = int(model.n), int(model.nx)
-    x_eq = np.zeros(nx) if x_eq is None else np.asarray(x_eq, dtype=float)
-    if x_eq.shape != (nx,):
-        raise ValueError(f"x_eq with shape {x_eq.shape}: expected ({nx},)")
-    if r is None:
-        r = np.zeros((5, n))
-        r[0] = x_eq[:n]
-    p = model.params_array(true_params)
-    z = np.zeros(0)
-
-    def field(x):
-        u = controller.evaluate(0.0, x, z, r).u
-        return model.f(x, p) + model.g(x, p) @ u
-
-    J = np.empty((nx, nx))
-    for i in range(nx):
-        dx = np.zeros(nx)
-        dx[i] = h
-        J[:, i] = (field(x_eq + dx) - field(x_eq - dx)) / (2 * h)
-    ev = np.linalg.eigvals(J)
-    return ev[np.argsort(-ev.real)]
+            vb = box_maximize(obj, (base[free] - lo) / (hi - lo), maxiter=300, tol=1e-14)
+            val, _ = obj(vb)
+            if val > best:
+                best = val
+                best_pt = base.copy(); best_pt[free] = lo + vb * (hi - lo)
+    beta = V[:, 1]
+    b_min, b_max = float(np.min(beta)), float(np.max(beta))
+    bh = 0.5 * (b_min + b_max) if beta_hat is None else float(beta_hat)
+    k_eq16, k_tight, rho = lemma1_terms(W, best, b_min, b_max, bh, eta)
+    Yb, Pb = assemble(dims, best_pt[None, :], 1, p_nom)
+    at = {"y": Yb[0].tolist(), "params": {d.name: float(best_pt[j]) for j, d in enumerate(dims) if d.kind == "p"}}
+    return PaperBound(k_s=k_tight, k_s_eq16=k_eq16, rho=rho, W=W, H=best,
+                      beta_hat=bh, beta_min=b_min, beta_max=b_max, eta=float(eta), H_at=at)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -484,7 +418,7 @@ def _check_k_bounds(k_bounds) -> tuple:
     return lo, hi
 
 
-def paper_beta_hat(model, nominal_params=None, k_bounds=(100.0, 200.0)):
+def paper_beta_hat(model, nominal_params=None, k_bounds=(100.0, 200.0), *, box=None):
     """The paper's constant ``beta_hat = (beta_max + beta_min) / 2`` over ``K in k_bounds``, or None.
 
     Parameters
@@ -494,6 +428,8 @@ def paper_beta_hat(model, nominal_params=None, k_bounds=(100.0, 200.0)):
         Nominal parameters (defaults for missing names).
     k_bounds : (float, float)
         ``(K_min, K_max)``, N m/rad, ``0 < K_min <= K_max``.
+    box : dict name -> (lo, hi), optional
+        A parameter box instead of ``k_bounds``: its ``J_l``, ``J_m``, ``K`` intervals are used.
 
     Returns
     -------
@@ -502,6 +438,8 @@ def paper_beta_hat(model, nominal_params=None, k_bounds=(100.0, 200.0)):
     """
     if not paper_bound_applies(model):
         return None
+    if box is not None:
+        return beta_bounds_link1(nominal_params, {k: v for k, v in box.items() if k in POSITIVE})[2]
     return beta_bounds_link1(nominal_params, {"K": _check_k_bounds(k_bounds)})[2]
 
 

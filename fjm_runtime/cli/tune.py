@@ -1,0 +1,190 @@
+"""``fjm tune MODEL``: argparse and printing of the gain synthesis (the analysis is :mod:`fjm_runtime.analysis`).
+
+Every input error is one line on stderr naming what is wrong and what was expected,
+exit status 2, no traceback (parser errors here; ``ValueError`` of the analysis in
+:func:`fjm_runtime.cli.main.main`). A synthesis that finds no admissible gain is a
+result, not an input error: the JSON says why and the exit status is 1.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from typing import Dict, List, Tuple
+
+from ..analysis.box import default_stiffness_box, param_box_from_ranges
+from ..analysis.certify import GUARANTEE, synthesize_gains
+from ..analysis.lemma1 import paper_beta_hat
+
+DEFAULT_ERROR_BOX = {"sine": [0.05, 0.5, 0.5, 0.5], "step": [0.05, 0.1, 0.5, 1.0]}
+
+
+def _floats(text: str, count: int, flag: str) -> List[float]:
+    try:
+        vals = [float(v) for v in str(text).replace(",", " ").split()]
+    except ValueError:
+        raise ValueError(f"{flag} {text!r}: expected {count} numbers separated by commas") from None
+    if len(vals) != count:
+        raise ValueError(f"{flag} {text!r}: expected {count} numbers separated by commas, got {len(vals)}")
+    return vals
+
+
+def _number(text: str) -> float:
+    try:
+        return float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number (expected e.g. 8 or 1e-3)") from None
+
+
+def _integer(text: str) -> int:
+    try:
+        return int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not an integer (expected e.g. 60000)") from None
+
+
+def _one_line_error(prog: str):
+    def error(message: str):
+        print(f"{prog}: error: {message} (see {prog} --help)", file=sys.stderr)
+        sys.exit(2)
+    return error
+
+
+def add_parser(sub) -> None:
+    """Register ``tune`` on the ``fjm`` subparsers."""
+    tp = sub.add_parser(
+        "tune", help="synthesize per-joint switching gains with a reaching certificate (JSON)",
+        description="Per-joint switching gains k_s for the sliding-mode law as it is run (nominal "
+                    "coordinates), such that sgn(s_i) s_i' <= -eta on a box of tracking errors, reference "
+                    "derivatives and true parameters; prints gains, boundary layer, the certificate (worst "
+                    "sgn(s) s' found and where) and the reaching-time bound as JSON. A numerical certificate on "
+                    "a grid (vertices along affine coordinates), not a proof; the box is assumed invariant. "
+                    "Exit status 1 when no admissible gain exists (the JSON says why).")
+    tp.add_argument("model", help="model name, e.g. link1, planar2")
+    tp.add_argument("--controller", choices=("smc", "sign", "ismc"), default="smc",
+                    help="law to certify: smc/sign = paper surface, ismc = integral surface (default smc)")
+    tp.add_argument("--lam", type=_number, default=8.0, help="pole magnitude lambda, 1/s (default 8)")
+    tp.add_argument("--nominal", action="append", default=[], metavar="NAME=VALUE",
+                    help="NOMINAL controller parameter (repeatable); default: model defaults")
+    tp.add_argument("--k-range", type=_number, nargs=2, default=None, metavar=("LO", "HI"),
+                    help="true stiffness of every joint, N m/rad (default: each joint's nominal stiffness "
+                         "x [2/3, 4/3], i.e. 100 200 at 150)")
+    tp.add_argument("--jm-range", type=_number, nargs=2, default=None, metavar=("LO", "HI"),
+                    help="true motor inertia of every joint (default: nominal, exact)")
+    tp.add_argument("--bm-range", type=_number, nargs=2, default=None, metavar=("LO", "HI"),
+                    help="true motor damping of every joint (default: nominal, exact)")
+    tp.add_argument("--mass-range", type=_number, nargs=2, default=None, metavar=("LO", "HI"),
+                    help="true link (link1: tip) mass of every link, kg (default: nominal, exact)")
+    tp.add_argument("--param-box", action="append", default=[], metavar="NAME=LO:HI",
+                    help="interval of any true parameter (repeatable), e.g. --param-box K2=120:180")
+    tp.add_argument("--reference", choices=("sine", "step"), default="sine",
+                    help="reference whose derivative bounds R_0..R_4 define the box (default sine)")
+    tp.add_argument("--amplitude", type=_number, default=0.5, help="sine amplitude, rad (default 0.5)")
+    tp.add_argument("--omega", type=_number, default=1.0, help="sine frequency, rad/s (default 1)")
+    tp.add_argument("--q-d", type=_number, default=1.0, help="step target, rad (default 1)")
+    tp.add_argument("--rise-time", type=_number, default=2.0, help="step duration, s (default 2)")
+    tp.add_argument("--reference-bounds", default=None, metavar="R0,R1,R2,R3,R4",
+                    help="explicit bounds of |y_d^(k)|, k = 0..4 (overrides --reference)")
+    tp.add_argument("--error-box", default=None, metavar="E1,E2,E3,E4",
+                    help="bounds of |y_hat_k - y_dk| (default 0.05,0.5,0.5,0.5 for sine, 0.05,0.1,0.5,1 for step)")
+    tp.add_argument("--beta-hat", choices=("paper", "model"), default="paper",
+                    help="link1: the paper's constant (beta_max + beta_min)/2 over --k-range, or beta(x; nominal); "
+                         "chains always use beta(x; nominal) (default paper)")
+    tp.add_argument("--eta", type=_number, default=10.0, help="reaching margin, rad/s^4 (default 10)")
+    tp.add_argument("--u-max", type=_number, default=None, help="actuator limit, N m (default none)")
+    tp.add_argument("--layer-rate", type=_number, default=200.0,
+                    help="boundary layer delta = k_s / rate (default 200)")
+    tp.add_argument("--budget", type=_integer, default=60000, help="approximate grid size (default 60000)")
+    tp.add_argument("--disturbance-bound", type=_number, default=0.0, metavar="D",
+                    help="bound of a matched motor torque disturbance (Coulomb friction level + any bounded "
+                         "torque), N m (default 0)")
+    tp.add_argument("--no-margin", action="store_true",
+                    help="do not make the grid's curvature margin part of the condition")
+    tp.error = _one_line_error(tp.prog)
+
+
+
+
+def _assignments(items: List[str]) -> Dict[str, float]:
+    out = {}
+    for item in items:
+        name, sep, value = item.partition("=")
+        if not sep:
+            raise ValueError(f"--nominal {item!r}: expected NAME=VALUE, e.g. --nominal K=150")
+        try:
+            out[name.strip()] = float(value)
+        except ValueError:
+            raise ValueError(f"--nominal {item!r}: VALUE {value!r} is not a number") from None
+    return out
+
+
+def _intervals(items: List[str]) -> Dict[str, Tuple[float, float]]:
+    out = {}
+    for item in items:
+        name, sep, rng = item.partition("=")
+        lo, sep2, hi = rng.partition(":")
+        if not sep or not sep2:
+            raise ValueError(f"--param-box {item!r}: expected NAME=LO:HI, e.g. --param-box K2=120:180")
+        try:
+            out[name.strip()] = (float(lo), float(hi))
+        except ValueError:
+            raise ValueError(f"--param-box {item!r}: LO and HI must be numbers") from None
+    return out
+
+
+def _box(m, args, nominal):
+    k_extra = {}
+    k_range = None
+    if args.k_range is not None:
+        lo, hi = args.k_range
+        if not (0 < lo <= hi):
+            raise ValueError(f"--k-range {lo} {hi}: expected 0 < LO <= HI (N m/rad)")
+        k_range = (lo, hi)
+    else:
+        k_extra = default_stiffness_box(m, nominal)
+    k_extra.update(_intervals(args.param_box))
+    return param_box_from_ranges(m, k_range=k_range, jm_range=args.jm_range, bm_range=args.bm_range,
+                                 mass_range=args.mass_range, extra=k_extra)
+
+
+def _reference(args, n):
+    from ..control.references import Sinusoid, SmoothStep
+    if args.reference_bounds is not None:
+        return _floats(args.reference_bounds, 5, "--reference-bounds"), "explicit"
+    if args.reference == "sine":
+        return (Sinusoid(args.amplitude, args.omega, n=n).derivative_bounds(),
+                f"sine amplitude {args.amplitude:g} rad, omega {args.omega:g} rad/s")
+    return (SmoothStep(args.q_d, n=n, rise_time=args.rise_time).derivative_bounds(),
+            f"smooth step to {args.q_d:g} rad in {args.rise_time:g} s")
+
+
+def run(args) -> int:
+    """``fjm tune``: print the :class:`~fjm_runtime.analysis.certify.TuneResult` as JSON.
+
+    Returns
+    -------
+    int
+        0 when a gain exists, 1 when none is admissible (the JSON and one stderr line say why).
+    """
+    from .. import load
+    m = load(args.model)
+    nominal = _assignments(args.nominal)
+    box = _box(m, args, nominal)
+    R, ref_label = _reference(args, int(m.n))
+    E = _floats(args.error_box, 4, "--error-box") if args.error_box is not None else DEFAULT_ERROR_BOX[args.reference]
+    beta_hat = paper_beta_hat(m, nominal, box=box) if args.beta_hat == "paper" else None
+    res = synthesize_gains(m, nominal, param_box=box, reference_bounds=R, error_bounds=E, lam=args.lam,
+                           integral=(args.controller == "ismc"), beta_hat=beta_hat, eta=args.eta,
+                           u_max=args.u_max, layer_rate=args.layer_rate, include_margin=not args.no_margin,
+                           budget=args.budget, disturbance_bound=args.disturbance_bound)
+    s0 = res.max_sliding_variable()
+    report = res.as_dict()
+    report.update({"controller": args.controller, "lam": args.lam, "reference": ref_label,
+                   "s0_max": s0.tolist(),
+                   "reaching_time_bound": None if not res.feasible else res.reaching_time_bound(s0).tolist(),
+                   "guarantee": GUARANTEE})
+    print(json.dumps(report, indent=2))
+    if not res.feasible:
+        print(f"fjm tune: no admissible gain: {res.reason}", file=sys.stderr)
+        return 1
+    return 0
