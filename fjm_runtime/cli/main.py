@@ -18,7 +18,8 @@ from typing import Dict, List, Optional
 
 import numpy as np
 
-from ..control.laws import CONTROLLER_KINDS, coefficients_from_pole, make_controller
+from ..control.factory import CONTROLLER_KINDS, default_delta, make_controller
+from ..control.laws import coefficients_from_pole
 from ..control.references import REFERENCE_KINDS, make_reference
 from ..sim.simulate import SimulationDivergedError, simulate, stderr_progress
 
@@ -115,7 +116,7 @@ def build_parser() -> argparse.ArgumentParser:
                      help="smoke test: 1 s runs and at most 2 Monte Carlo samples; still writes every "
                           "figure and summary.md (not the documented numbers)")
 
-    from ..analysis.certify import add_parser as add_tune_parser
+    from .tune import add_parser as add_tune_parser
     add_tune_parser(sub)
     return parser
 
@@ -154,7 +155,7 @@ def _cmd_simulate(args) -> int:
             k_s = gain.k_s
         else:
             k_s = 1000.0
-    delta = args.delta if args.delta is not None else max(k_s, 1.0) / 200.0
+    delta = args.delta if args.delta is not None else default_delta(k_s)
     if args.controller == "adaptive":
         # beta from the estimated stiffness (not the paper's constant); the bounds project K_hat
         extra.pop("beta_hat", None)
@@ -226,7 +227,7 @@ def _cmd_sweep(args) -> int:
     from .. import load
     from ..batch.sweep import SweepSpec, sample_parameters, sweep, write_table
     m = load(args.model)
-    delta = args.delta if args.delta is not None else args.k_s / 200.0
+    delta = args.delta if args.delta is not None else default_delta(args.k_s)
     options = {"lam": args.lam, "delta": delta}
     if args.controller != "fl":
         options["k_s"] = args.k_s
@@ -279,7 +280,7 @@ def main(argv: Optional[List[str]] = None) -> int:
         if args.command == "sweep":
             return _cmd_sweep(args)
         if args.command == "tune":
-            from ..analysis.certify import run as run_tune
+            from .tune import run as run_tune
             return run_tune(args)
         if args.command == "figures":
             if args.samples < 1:
