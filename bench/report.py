@@ -1,18 +1,26 @@
-"""The bench tables of README.md and bench/README.md, written from ``bench/results.json``.
+"""The measured numbers of README.md, docs/*.md and bench/README.md, written from ``bench/results.json``.
 
 ``python -m bench`` calls :func:`write_all` after a full run; by hand::
 
-    .venv/bin/python -m bench.report            # rewrite both tables from bench/results.json
-    .venv/bin/python -m bench.report --check    # exit 1 if a table differs from the results
+    .venv/bin/python -m bench.report            # rewrite every marked block from bench/results.json
+    .venv/bin/python -m bench.report --docs     # the same (the name ``make bench`` documents)
+    .venv/bin/python -m bench.report --check    # exit 1 if a block differs from the results
 
-Only the text between ``<!-- bench:begin -->`` and ``<!-- bench:end -->`` is
-replaced, so the tables cannot drift from the results they quote.
+Two kinds of marked text are replaced, so the documentation cannot drift from the
+results it quotes:
+
+* the big tables, between ``<!-- bench:begin -->`` and ``<!-- bench:end -->``
+  (docs/benchmarks.md and bench/README.md, see :func:`targets`);
+* named blocks anywhere in README.md, docs/*.md and bench/README.md, between
+  ``<!-- fjm:bench:NAME -->`` and ``<!-- /fjm:bench:NAME -->``; NAME is a key of
+  :data:`BLOCKS` (a number inside a sentence, or whole lines when the rendering has several).
 """
 from __future__ import annotations
 
 import argparse
 import json
 import math
+import re
 import sys
 from pathlib import Path
 from typing import Dict, List, Optional, Sequence
@@ -22,9 +30,10 @@ REPO = HERE.parent
 RESULTS = HERE / "results.json"
 README = REPO / "README.md"
 BENCH_README = HERE / "README.md"
+BENCHMARKS_DOC = REPO / "docs" / "benchmarks.md"
 BEGIN, END = "<!-- bench:begin -->", "<!-- bench:end -->"
 
-#: Targets (issue 5): dotted key in the results, comparison, bound.
+#: Targets: dotted key in the results, comparison, bound.
 TARGETS = {
     "derive.total_seconds": ("<=", 20.0),
     "derive.planar7.seconds": ("<=", 10.0),
@@ -243,31 +252,164 @@ def current_block(text: str) -> str:
 
 
 def targets(r: dict) -> Dict[Path, str]:
-    return {README: render_readme(r), BENCH_README: render_bench_readme(r)}
+    """The files with a ``bench:begin`` / ``bench:end`` table and the block each must hold."""
+    return {BENCHMARKS_DOC: render_readme(r), BENCH_README: render_bench_readme(r)}
+
+
+# -- named blocks: <!-- fjm:bench:NAME --> ... <!-- /fjm:bench:NAME --> -------------------------
+
+NAMED = re.compile(r"<!-- fjm:bench:([a-z0-9-]+) -->(.*?)<!-- /fjm:bench:\1 -->", re.S)
+
+
+def _ns(v: Optional[float]) -> str:
+    """A duration in nanoseconds, in the unit that reads best (``81 ns``, ``3.8 us``, ``2.0 ms``)."""
+    if v is None:
+        return "-"
+    if v < 1e3:
+        return f"{v:.0f} ns"
+    if v < 1e6:
+        return f"{v * 1e-3:.3g} us"
+    return f"{v * 1e-6:.3g} ms"
+
+
+def _seconds(key: str, fmt: str = ".1f"):
+    return lambda r: f"{_f(r, key, fmt)} s"
+
+
+def _realtime(r: dict) -> str:
+    """The fixed-rate controller's step times and float-vs-double deviation (examples/c/realtime.c)."""
+    rt = r.get("realtime") or {}
+    if not rt:
+        return "not measured in this run"
+    g = lambda k: get(r, "realtime." + k)  # noqa: E731
+    steps = g("steps")
+    return (f"{'-' if steps is None else f'{steps:.0e}'.replace('e+0', 'e')} steps inside the closed loop, "
+            f"gcc -O2: median step {_ns(g('link1.double.step_median_ns'))} (link1, 1 kHz) and "
+            f"{_ns(g('panda.double.step_median_ns'))} (panda, 5 kHz), "
+            f"{_f(r, 'realtime.link1.double.ratio_median', '.2f')}x and "
+            f"{_f(r, 'realtime.panda.double.ratio_median', '.2f')}x one `alpha` + `beta` call of the same model; "
+            f"99.9th percentile {_ns(g('link1.double.step_p999_ns'))} and {_ns(g('panda.double.step_p999_ns'))} "
+            f"(panda's period: {_ns(g('panda.double.period_ns'))}); worst case {_ns(g('link1.double.step_max_ns'))} "
+            f"and {_ns(g('panda.double.step_max_ns'))} (the OS preempting the process on a shared machine). "
+            f"Float vs double over the same 10 s closed loop: max |du| / max |u| = "
+            f"{_f(r, 'realtime.link1.float_vs_double_u_relative', '.1e')} (link1), "
+            f"{_f(r, 'realtime.panda.float_vs_double_u_relative', '.1e')} (panda)")
+
+
+def _summary(r: dict) -> str:
+    """The README's few headline numbers (the full table is in docs/benchmarks.md)."""
+    g = lambda k, f, s=1.0: _f(r, k, f, s)  # noqa: E731
+    n = get(r, "derive.n_models")
+    rows = [
+        ("| what | measured |", "|---|---|"),
+        (f"| `make derive`, all {'-' if n is None else int(n)} models | {g('derive.total_seconds', '.1f')} s "
+         f"(Panda {g('derive.panda.seconds', '.1f')} s, planar7 {g('derive.planar7.seconds', '.1f')} s) |",),
+        (f"| `alpha` + `beta`, compiled, planar7 / Panda | {g('alpha_beta.planar7.generated_us', '.2f')} us / "
+         f"{g('spatial.generated_us', '.2f')} us per call ({g('alpha_beta.planar7.ratio', '.2f')}x / "
+         f"{g('spatial.ratio', '.2f')}x the time of CasADi AD of the same model) |",),
+        (f"| link1, 10 s at 1 kHz, `simulate(backend=\"compiled\")` | {g('closed_loop.simulate_compiled_ms', '.1f')} ms "
+         f"({g('closed_loop.speedup_vs_python', '.0f')}x the NumPy loop) |",),
+        (f"| 1000 closed loops of link1 (`simulate_batch`, {int(get(r, 'batch.threads') or 0)} threads) | "
+         f"{g('batch.generated_s', '.2f')} s |",),
+    ]
+    return "\n".join(line for row in rows for line in row) + "\n"
+
+
+#: name -> renderer of a named block (``str``; several lines make a block of whole lines).
+BLOCKS = {
+    "run": lambda r: f"{r.get('finished_utc', '?')}" + (" (`--quick`)" if r.get("quick") else ""),
+    "summary": _summary,
+    "derive-time": _seconds("derive.total_seconds"),
+    "derive-n-models": lambda r: _f(r, "derive.n_models", ".0f"),
+    "planar7-derive-time": _seconds("derive.planar7.seconds"),
+    "elbow3-derive-time": _seconds("derive.elbow3.seconds"),
+    "elbow3-ops": lambda r: _f(r, "derive.elbow3.ops", ".0f"),
+    "panda-derive-time": lambda r: (f"{_f(r, 'derive.panda.seconds', '.1f')} s (symbolic "
+                                    f"{_f(r, 'derive.panda.derive_seconds', '.1f')} s, emission "
+                                    f"{_f(r, 'derive.panda.emit_seconds', '.1f')} s)"),
+    "panda-ops": lambda r: (f"{_f(r, 'derive.panda.ops', '.0f')} operations (" + ", ".join(
+        f"{q} {_f(r, f'derive.panda.ops_by_function.{q}', '.0f')}"
+        for q in ("f", "ad", "T", "alpha", "beta", "energy", "inertia")) + ")"),
+    "panda-alpha-ops": lambda r: _f(r, "derive.panda.ops_by_function.alpha", ".0f"),
+    "elbow3-alpha-ops": lambda r: _f(r, "derive.elbow3.ops_by_function.alpha", ".0f"),
+    "panda-alpha-beta": lambda r: (f"{_f(r, 'spatial.generated_us', '.2f')} us against "
+                                   f"{_f(r, 'spatial.peer_us', '.2f')} us (ratio {_f(r, 'spatial.ratio', '.2f')})"),
+    "realtime": _realtime,
+    "bench-seconds": lambda r: f"{_f(r, 'bench_seconds', '.0f')} s",
+}
+
+
+def doc_files() -> List[Path]:
+    """The files whose named blocks :func:`render_docs` rewrites."""
+    return [README, *sorted((REPO / "docs").glob("*.md")), BENCH_README]
+
+
+def render_named(text: str, r: dict, name: str = "file") -> str:
+    """``text`` with every named block re-rendered from the results ``r``.
+
+    Raises ``ValueError`` for a block name that :data:`BLOCKS` does not know.
+    """
+    def one(m: "re.Match[str]") -> str:
+        key = m.group(1)
+        if key not in BLOCKS:
+            raise ValueError(f"{name}: unknown block <!-- fjm:bench:{key} --> (known: {', '.join(sorted(BLOCKS))})")
+        value = BLOCKS[key](r)
+        body = "\n" + value.rstrip("\n") + "\n" if "\n" in value.rstrip("\n") or m.group(2).startswith("\n") \
+            else value
+        return f"<!-- fjm:bench:{key} -->{body}<!-- /fjm:bench:{key} -->"
+    return NAMED.sub(one, text)
+
+
+def render_file(path: Path, r: dict) -> str:
+    """The whole text ``path`` must hold: its tables and named blocks rendered from ``r``."""
+    text = path.read_text(encoding="utf-8")
+    block = targets(r).get(path)
+    if block is not None:
+        text = replace_block(text, block, str(path))
+    return render_named(text, r, str(path))
+
+
+def stale_files(r: dict) -> List[Path]:
+    """The files whose marked text differs from what the results ``r`` render to."""
+    files = list(dict.fromkeys([*targets(r), *doc_files()]))
+    return [p for p in files if p.is_file() and render_file(p, r) != p.read_text(encoding="utf-8")]
 
 
 def write_all(r: dict, files: Optional[Dict[Path, str]] = None) -> List[Path]:
-    """Rewrite the marked blocks from the results ``r``; returns the files that changed."""
+    """Rewrite every marked table and named block from the results ``r``; returns the files that changed."""
     changed = []
-    for path, block in (files or targets(r)).items():
-        old = path.read_text()
-        new = replace_block(old, block, str(path))
+    if files is not None:
+        for path, block in files.items():
+            old = path.read_text()
+            new = replace_block(old, block, str(path))
+            if new != old:
+                path.write_text(new)
+                changed.append(path)
+        return changed
+    for path in dict.fromkeys([*targets(r), *doc_files()]):
+        if not path.is_file():
+            continue
+        old = path.read_text(encoding="utf-8")
+        new = render_file(path, r)
         if new != old:
-            path.write_text(new)
+            path.write_text(new, encoding="utf-8")
             changed.append(path)
     return changed
 
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(prog="python -m bench.report", description=__doc__.split("\n\n")[0])
-    ap.add_argument("--check", action="store_true", help="exit 1 if a table differs from the results")
+    ap.add_argument("--check", action="store_true", help="exit 1 if a marked block differs from the results")
+    ap.add_argument("--docs", action="store_true",
+                    help="rewrite every marked block of README.md, docs/*.md, bench/README.md (the default action)")
     ap.add_argument("--results", type=Path, default=RESULTS)
     args = ap.parse_args(argv)
     r = load(args.results)
     if args.check:
-        stale = [p for p, block in targets(r).items() if current_block(p.read_text()) != block]
+        stale = stale_files(r)
         for p in stale:
-            print(f"{p}: the bench table differs from {args.results}", file=sys.stderr)
+            print(f"{p}: a marked block differs from {args.results}: run python -m bench.report --docs",
+                  file=sys.stderr)
         return 1 if stale else 0
     for p in write_all(r):
         print(f"rewrote {p}")

@@ -6,9 +6,13 @@
  *
  * The control law is u = alpha(x) + beta(x) nu (gives y4' = nu).
  * Parameters default to the values in generated/link1/manifest.json.
+ * The generated functions perform no checks (a NaN in gives a NaN out, a
+ * negative stiffness gives a meaningless law): this program, their caller,
+ * validates the inputs and exits with status 2 and a one-line message.
  * Build: `make` (see Makefile); works in double (default) and, with
  * CFLAGS+=-Dcasadi_real=float, in single precision.
  */
+#include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 
@@ -16,6 +20,10 @@
 
 #define NX 4 /* x = [q; dq; q_m; dq_m] */
 #define NP 7 /* p = [J_l, J_m, K, M, g0, L, B_m] */
+
+static const char* const PARAM_NAMES[NP] = {"J_l", "J_m", "K", "M", "g0", "L", "B_m"};
+/* J_l, J_m, K, M, L must be > 0; g0 and B_m >= 0 (the runtime's rules, fjm_runtime.validation) */
+static const int PARAM_POSITIVE[NP] = {1, 1, 1, 1, 0, 1, 0};
 
 /* Call one generated function in CasADi's calling convention:
  * query the work sizes, allocate, check out a memory slot, evaluate, release. */
@@ -68,6 +76,15 @@ int main(int argc, char** argv) {
     double v = strtod(argv[i + 1], &end);
     if (end == argv[i + 1] || *end != '\0') {
       fprintf(stderr, "argument %d (%s): not a number\n", i + 1, argv[i + 1]);
+      return 2;
+    }
+    if (!isfinite(v)) {
+      fprintf(stderr, "argument %d (%s): expected a finite number\n", i + 1, argv[i + 1]);
+      return 2;
+    }
+    if (i >= NX && (PARAM_POSITIVE[i - NX] ? !(v > 0) : !(v >= 0))) {
+      fprintf(stderr, "argument %d: %s = %s: expected %s\n", i + 1, PARAM_NAMES[i - NX], argv[i + 1],
+              PARAM_POSITIVE[i - NX] ? "> 0" : ">= 0");
       return 2;
     }
     if (i < NX) x[i] = (casadi_real)v;
