@@ -272,6 +272,41 @@ def test_cli_tune_infeasible_exit_status(capsys):
     assert "u_max" in cap.err
 
 
+def _cli(argv, capsys):
+    try:
+        rc = main(argv)
+    except SystemExit as exc:       # argparse errors leave through sys.exit
+        rc = exc.code
+    return rc, capsys.readouterr()
+
+
+@pytest.mark.parametrize("argv, needle", [
+    (["tune", "nope"], "unknown model 'nope'"),
+    (["tune", "link1", "--lam", "abc"], "--lam: 'abc' is not a number"),
+    (["tune", "link1", "--budget", "1.5"], "--budget: '1.5' is not an integer"),
+    (["tune", "link1", "--controller", "pid"], "--controller: invalid choice: 'pid'"),
+    (["tune", "link1", "--reference-bounds", "1,2"], "--reference-bounds '1,2': expected 5 numbers"),
+    (["tune", "link1", "--error-box", "a,b,c,d"], "--error-box 'a,b,c,d': expected 4 numbers"),
+    (["tune", "link1", "--k-range", "5", "1"], "--k-range 5.0 1.0: expected 0 < LO <= HI"),
+    (["tune", "link1", "--param-box", "K=1"], "expected NAME=LO:HI"),
+    (["tune", "link1", "--nominal", "K=x"], "VALUE 'x' is not a number"),
+])
+def test_cli_tune_bad_input_is_one_line_exit_2(argv, needle, capsys):
+    rc, cap = _cli(argv, capsys)
+    assert rc == 2
+    assert cap.out == ""
+    lines = cap.err.strip().splitlines()
+    assert len(lines) == 1 and needle in lines[0], cap.err
+    assert "Traceback" not in cap.err
+
+
+def test_cli_tune_infeasible_is_one_stderr_line(capsys):
+    rc, cap = _cli(["tune", "link1", "--lam", "30", "--u-max", "5"], capsys)
+    assert rc == 1
+    lines = cap.err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("fjm tune: no admissible gain: ") and "u_max" in lines[0]
+
+
 # -- matched disturbances --------------------------------------------------------------------------
 def test_disturbance_raises_gain_by_bound_over_beta_hat(link1):
     """link1: C J g = K_nom / (J_l J_m) and G = (C J g) beta_hat, so the gain grows by exactly D / beta_hat."""
