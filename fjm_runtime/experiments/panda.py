@@ -8,7 +8,7 @@ on every case with the compiled backend; :func:`panda_section` writes a figure
 (joint errors and torques) and returns the markdown table of errors and peak
 torques for ``out/summary.md``.
 
-Gains: :mod:`fjm_runtime.tune` finds no admissible gain for the Panda's +-30 %
+Gains: :mod:`fjm_runtime.analysis.certify` finds no admissible gain for the Panda's +-30 %
 box within the URDF efforts (see :data:`GAIN_NOTE`), so the gains here are
 stated, not synthesized.
 """
@@ -20,9 +20,10 @@ from typing import Callable, Dict, List, Optional
 
 import numpy as np
 
-from ..control.laws import make_controller
+from ..control.factory import DEFAULT_LAYER_RATE, make_controller
 from ..control.references import Sinusoid
 from ..sim.simulate import SimulationDivergedError, SimulationResult, simulate
+from .report import diverged_marker
 
 #: ``<limit effort>`` of panda_joint1..7 in derive/robots/panda/panda.urdf (N m); the runtime
 #: never reads a URDF, tests/test_spatial_control.py checks these against the file.
@@ -52,7 +53,7 @@ LABELS = {"fl": "FL (linear nu)", "smc": "SMC (paper surface, sat)", "ismc": "in
 
 LAM = 10.0          # 1/s: triple (smc) or quadruple (fl, ismc, adaptive) pole
 K_S = 200.0         # rad/s^4, every joint
-LAYER_RATE = 200.0  # delta = k_s / LAYER_RATE
+LAYER_RATE = DEFAULT_LAYER_RATE  # delta = k_s / LAYER_RATE
 K_BOUNDS = (0.65, 1.35)  # adaptive: K_hat in [0.65, 1.35] x nominal
 DURATION = 10.0
 QUICK_CASES = ("exact (x 1.0)", "all -30 %")
@@ -62,7 +63,7 @@ QUICK_DURATION = 0.05
 DT = 2e-4
 
 GAIN_NOTE = (
-    "Gains are stated, not synthesized: `fjm_runtime.tune.synthesize_gains` on this box (stiffness +-30 %, "
+    "Gains are stated, not synthesized: `fjm_runtime.analysis.certify.synthesize_gains` on this box (stiffness +-30 %, "
     "the reference's derivative bounds, error box 0.01 rad / 0.05 / 0.5 / 5, lambda = 10, integral surface, "
     "the URDF efforts as u_max) finds no admissible gain: reaching needs k_s ~1e7-1e8 rad/s^4, which "
     "commands thousands of N m on the box against 87 / 12 N m (docs/spatial.md, \"Control\"). The same "
@@ -159,6 +160,22 @@ def _fmt(v: float) -> str:
     return f"{v:.2e}" if (v != 0 and (abs(v) < 1e-2 or abs(v) >= 1e3)) else f"{v:.3g}"
 
 
+#: A finished run whose link error exceeds this on some joint (rad: half a turn off the reference,
+#: the arm has left the task) is reported as diverged, like the runs the integrator stops.
+DIVERGED_ERROR = np.pi
+
+
+def divergence_time(r) -> Optional[float]:
+    """First time (s) some joint's ``abs(e1)`` exceeds :data:`DIVERGED_ERROR`; None if never.
+
+    ``r`` is a SimulationResult or a SimulationDivergedError (its ``t``).
+    """
+    if isinstance(r, SimulationDivergedError):
+        return float(r.t)
+    over = np.nonzero(np.any(np.abs(r.e1) > DIVERGED_ERROR, axis=1))[0]
+    return float(r.t[over[0]]) if over.size else None
+
+
 def table(results) -> List[str]:
     """Markdown rows: errors (RMS, final, worst joint) and peak torques per controller and case."""
     lines = ["| controller | true stiffness | RMS e1 (rad, worst joint) | final abs(e1) (rad, worst joint) | "
@@ -166,8 +183,10 @@ def table(results) -> List[str]:
              "|---|---|---|---|---|---|---|"]
     for kind, per in results.items():
         for label, r in per.items():
-            if isinstance(r, SimulationDivergedError):
-                lines.append(f"| {LABELS[kind]} | {label} | diverged at t = {r.t:.3f} s | | | | |")
+            t_div = divergence_time(r)
+            if t_div is not None:
+                why = "" if isinstance(r, SimulationDivergedError) else "abs(e1) > pi rad"
+                lines.append(f"| {LABELS[kind]} | {label} | {diverged_marker(t_div, why)} | | | | |")
                 continue
             rms, fin, peak, sat = joint_errors(r)
             lines.append(f"| {LABELS[kind]} | {label} | {_fmt(rms.max())} | {_fmt(fin.max())} | "
@@ -177,15 +196,17 @@ def table(results) -> List[str]:
 
 
 def csv(results) -> str:
-    """One line per controller, case and joint: RMS and final error (rad), peak torque (N m); or diverged."""
+    """One line per controller, case and joint: RMS and final error (rad), peak torque (N m), divergence time."""
     lines = ["controller,case,joint,rms_error,final_error,peak_torque,diverged_at"]
     for kind, per in results.items():
         for label, r in per.items():
             if isinstance(r, SimulationDivergedError):
                 lines.append(f"{kind},{label},,,,,{r.t:.4f}")
                 continue
+            t_div = divergence_time(r)
+            at = "" if t_div is None else f"{t_div:.4f}"
             rms, fin, peak, _ = joint_errors(r)
-            lines += [f"{kind},{label},{i + 1},{rms[i]:.6g},{fin[i]:.6g},{peak[i]:.6g}," for i in range(rms.size)]
+            lines += [f"{kind},{label},{i + 1},{rms[i]:.6g},{fin[i]:.6g},{peak[i]:.6g},{at}" for i in range(rms.size)]
     return "\n".join(lines) + "\n"
 
 
@@ -195,26 +216,49 @@ def holds(results, tol: float = 1e-2) -> Dict[str, bool]:
                       for r in per.values()) for kind, per in results.items()}
 
 
-def plot(results, case: str, path: Path) -> Path:
-    """Joint errors (top) and torques (bottom) of every controller for one stiffness case."""
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    kinds = [k for k in results if not isinstance(results[k][case], SimulationDivergedError)]
-    fig, axes = plt.subplots(2, max(1, len(kinds)), figsize=(4.2 * max(1, len(kinds)), 6.5), squeeze=False,
-                             sharex=True)
+def plot(results, path: Path) -> Path:
+    """Every controller (rows) on every stiffness case (one line each, same colour in every panel).
+
+    Columns: the worst joint's ``abs(e1)`` (log scale), the largest ``abs(u)`` of joints 1-4 and of
+    joints 5-7 with their URDF effort limits drawn. Cases stopped by the integrator are listed in
+    the legend as diverged.
+    """
+    from .plots import pyplot
+    plt = pyplot()
+    kinds = list(results)
+    cases = list(next(iter(results.values())))
+    colors = plt.get_cmap("tab10").colors
+    fig, axes = plt.subplots(len(kinds), 3, figsize=(13, 2.4 * len(kinds) + 1.6), squeeze=False, sharex=True,
+                             layout="constrained")
+    limits = ((slice(0, 4), PANDA_EFFORT[0], "joints 1-4"), (slice(4, 7), PANDA_EFFORT[4], "joints 5-7"))
     for j, kind in enumerate(kinds):
-        r = results[kind][case]
-        for i in range(r.e1.shape[1]):
-            axes[0, j].plot(r.t, r.e1[:, i], lw=0.8, label=f"joint {i + 1}")
-            axes[1, j].plot(r.t, r.u[:, i], lw=0.8)
-        axes[0, j].set_title(LABELS[kind], fontsize=9)
-        axes[1, j].set_xlabel("t (s)")
-    axes[0, 0].set_ylabel("e1 = q - q_d (rad)")
-    axes[1, 0].set_ylabel("u (N m), limits 87 / 12")
-    axes[0, 0].legend(fontsize=6, ncol=2)
-    fig.suptitle(f"Panda, joint-space sines, nominal controller, true K = nominal x ({case})", fontsize=10)
-    fig.tight_layout()
+        for c, case in enumerate(cases):
+            r = results[kind][case]
+            if isinstance(r, SimulationDivergedError):
+                continue
+            style = dict(color=colors[c % len(colors)], lw=1.0)
+            axes[j, 0].semilogy(r.t, np.maximum(np.max(np.abs(r.e1), axis=1), 1e-12), **style)
+            for k, (sl, _lim, _lab) in enumerate(limits):
+                axes[j, k + 1].plot(r.t, np.max(np.abs(r.u[:, sl]), axis=1), **style)
+        axes[j, 0].set_ylabel(f"{LABELS[kind]}\nmax abs(e1) (rad)", fontsize=8.5)
+        for k, (sl, lim, lab) in enumerate(limits):
+            axes[j, k + 1].axhline(lim, color="k", ls=(0, (4, 2)), lw=1.2, zorder=10)
+            axes[j, k + 1].set_ylim(0, 1.15 * lim)
+            axes[j, k + 1].set_ylabel("max abs(u) (N m)", fontsize=8.5)
+            if j == 0:
+                axes[j, k + 1].set_title(f"torque, {lab} (dashed: URDF limit {lim:g} N m)", fontsize=9.5)
+        if j == 0:
+            axes[j, 0].set_title("tracking error, worst joint", fontsize=9.5)
+    for a in axes[-1]:
+        a.set_xlabel("t (s)")
+    handles = []
+    for c, case in enumerate(cases):
+        dead = [LABELS[k].split(" (")[0] for k in kinds if isinstance(results[k][case], SimulationDivergedError)]
+        lab = case + (f" (diverged: {', '.join(dead)})" if dead else "")
+        handles.append(plt.Line2D([], [], color=colors[c % len(colors)], lw=1.5, label=lab))
+    fig.legend(handles=handles, loc="outside lower center", ncol=min(4, len(cases)), fontsize=8.5, frameon=False,
+               title="true stiffness = nominal x", title_fontsize=8.5)
+    fig.suptitle("Panda, joint-space sines, nominal controller, every stiffness case", fontsize=10.5)
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=110)
@@ -239,7 +283,7 @@ def panda_section(out: Path, duration: float = DURATION, progress: Optional[Call
     cases : dict, optional
         ``{label: stiffness factors}``; default :data:`STIFFNESS_CASES`.
     backend : str
-        Passed to :func:`fjm_runtime.simulate.simulate` (``'compiled'`` for the demo).
+        Passed to :func:`fjm_runtime.sim.simulate.simulate` (``'compiled'`` for the demo).
     quick : bool
         Smoke test (``fjm figures --quick``): :data:`QUICK_CASES` for at most
         :data:`QUICK_DURATION` s with the ``'casadi'`` backend (nothing to compile).
@@ -252,8 +296,7 @@ def panda_section(out: Path, duration: float = DURATION, progress: Optional[Call
         duration, backend = min(duration, QUICK_DURATION), "casadi"
     cases = STIFFNESS_CASES if cases is None else cases
     res = run_cases(m, duration=duration, cases=cases, progress=progress, backend=backend)
-    first = next(iter(cases))
-    fig = plot(res, first, Path(out) / "panda_tracking.png")
+    fig = plot(res, Path(out) / "panda_tracking.png")
     (Path(out) / "panda_tracking.csv").write_text(csv(res))
     ok = holds(res)
     held = [LABELS[k] for k, v in ok.items() if v]
@@ -268,7 +311,7 @@ def panda_section(out: Path, duration: float = DURATION, progress: Optional[Call
           f"k_s = {K_S:g}, delta = {K_S / LAYER_RATE:g} on every joint; adaptive: K_hat in "
           f"[{K_BOUNDS[0]:g}, {K_BOUNDS[1]:g}] x nominal. {GAIN_NOTE}", "",
           *table(res), "",
-          "Why: a one-joint estimate (`figures_spatial.mismatch_ratio`, link inertia D_ii at the ready pose) of "
+          "Why: a one-joint estimate (`experiments.panda.mismatch_ratio`, link inertia D_ii at the ready pose) of "
           "the spring term a stiffness error leaves uncancelled, `|K_nom - K| (1/(I J_m) + 1/I^2) y^(2)`, against "
           f"c2 = 6 lambda^2 = {6 * LAM ** 2:g} of the quadruple pole: at 30 % it is "
           f"{', '.join(f'{v:.0f}' for v in mismatch_ratio(m, 0.7))} x c2 for joints 1..7 (the wrist's small "
@@ -279,12 +322,13 @@ def panda_section(out: Path, duration: float = DURATION, progress: Optional[Call
           "within 0.04 s at -30 % and 0.13 s at -3 %); underestimated it is a stiff undamped mode of up to "
           "sqrt(a) rad/s that the sampled loop excites (FL with K_nom = 0.7 x default and the true default: "
           "RMS 0.6-2.7 rad within 1 s). The adaptive law's estimator (filter 20 rad/s) is far slower than that. "
+          f"Runs whose error exceeds pi rad on some joint are marked diverged, like those the integrator stops. "
           "What holds on this arm is only the exact stiffness (first row of each block); robust tracking "
           "needs either identified stiffnesses to within well under 1 % on the wrist or a law that does not "
           "cancel the spring through the nominal model.",
           "",
           f"Hold (every joint's RMS error < 1e-2 rad in every case, no divergence): "
           f"{', '.join(held) if held else 'none'}; do not hold: {', '.join(failed) if failed else 'none'}. "
-          f"Figure: `{fig.name}` (case {first!r}); per joint: `panda_tracking.csv`. "
+          f"Figure: `{fig.name}` (every case; dashed: the URDF torque limits); per joint: `panda_tracking.csv`. "
           f"{time.perf_counter() - t0:.0f} s.", ""]
     return md

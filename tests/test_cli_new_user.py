@@ -1,0 +1,130 @@
+"""The first hour of a new user: --version, `fjm models`, one-line errors before long work, JSON without
+NaN/inf, readable --help texts, the sweep's stiffness default on arms whose nominal is far from 100..200."""
+import json
+import math
+import time
+import warnings
+
+import numpy as np
+import pytest
+
+import fjm_runtime
+from fjm_runtime.cli.common import finite_or_note
+from fjm_runtime.cli.main import build_parser, main
+from fjm_runtime.cli.sweep import stiffness_range, summary
+from fjm_runtime.validation import FjmValueError
+
+
+def one_line_error(capsys, argv, must=()):
+    t0 = time.perf_counter()
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and err.startswith("fjm: error:"), err
+    assert "Traceback" not in err
+    for word in must:
+        assert word in err, (word, err)
+    return err, time.perf_counter() - t0
+
+
+def test_version(capsys):
+    with pytest.raises(SystemExit) as info:
+        main(["--version"])
+    assert info.value.code == 0
+    assert capsys.readouterr().out.strip() == f"fjm {fjm_runtime.__version__}"
+
+
+def test_models_lists_every_model(capsys):
+    assert main(["models", "--json"]) == 0
+    rows = json.loads(capsys.readouterr().out)
+    assert [r["name"] for r in rows] == fjm_runtime.available_models()
+    by = {r["name"]: r for r in rows}
+    assert by["link1"] == {"name": "link1", "n": 1, "parameters": 7, "source": "built-in"}
+    assert by["planar3"]["n"] == 3 and by["planar3"]["parameters"] == len(fjm_runtime.load("planar3").param_names)
+    assert by["panda"]["n"] == 7 and by["panda"]["source"].startswith("URDF ") and "panda.urdf" in by["panda"]["source"]
+    assert main(["models"]) == 0
+    table = capsys.readouterr().out.splitlines()
+    assert table[0].split() == ["model", "n", "params", "source"] and len(table) == len(rows) + 1
+
+
+def test_sweep_unwritable_out_fails_before_the_sweep(capsys):
+    _, seconds = one_line_error(capsys, ["sweep", "link1", "--out", "/proc/x.csv"], ["--out", "/proc/x.csv"])
+    assert seconds < 5.0  # refused at once, not after 1000 runs
+
+
+def test_outputs_that_are_files_or_have_no_parent(capsys, tmp_path):
+    a_file = tmp_path / "a_file"
+    a_file.write_text("x")
+    one_line_error(capsys, ["figures", "--out", str(a_file)], ["is a file", "directory"])
+    one_line_error(capsys, ["figures", "--out", str(tmp_path / "no" / "such")], ["does not exist"])
+    one_line_error(capsys, ["derive", "--out", str(a_file)], ["is a file", "directory"])
+    one_line_error(capsys, ["simulate", "link1", "--plot", "/nonexistent/dir/x.png"], ["--plot", "does not exist"])
+    assert not (tmp_path / "no").exists()
+
+
+def test_bad_values_are_one_line(capsys):
+    one_line_error(capsys, ["simulate", "link1", "--param", "K"], ["--param", "NAME=VALUE"])
+    one_line_error(capsys, ["simulate", "nosuchmodel", "--quiet"], ["nosuchmodel"])
+    one_line_error(capsys, ["figures", "--samples", "0"], ["--samples"])
+
+
+def test_sweep_stiffness_default_follows_the_nominal():
+    link1, panda = fjm_runtime.load("link1"), fjm_runtime.load("panda")
+    assert stiffness_range(link1, None, None, None) == ((100.0, 200.0), None)
+    k_range, k_rel = stiffness_range(panda, None, None, None)
+    assert k_rel == (0.7, 1.3)  # relative to each joint's nominal 3e3..1e4, not 100..200 N m/rad
+    assert stiffness_range(panda, None, None, [0.9, 1.1])[1] == (0.9, 1.1)
+    with pytest.raises(FjmValueError, match="--k-rel"):
+        stiffness_range(panda, 100.0, 200.0, None)
+    assert stiffness_range(panda, 2000.0, 20000.0, None) == ((2000.0, 20000.0), None)
+
+
+def test_sweep_summary_without_nan_or_warnings():
+    P = np.zeros((3, 7))
+    metrics = {"rms_error_second_half": np.full(3, np.nan), "diverged": np.ones(3, dtype=int)}
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        out = summary(P, metrics, 1.0, "t.csv")
+    text = json.dumps(out, allow_nan=False)
+    assert out["rms_error_second_half_max"] is None and out["rms_error_second_half_max_note"] == "every run diverged"
+    assert "NaN" not in text and out["diverged"] == 3
+    metrics = {"rms_error_second_half": np.array([1.0, np.nan, 3.0]), "diverged": np.array([0, 1, 0])}
+    out = summary(P, metrics, 1.0, "t.csv")
+    assert out["rms_error_second_half_max"] == 3.0 and out["rms_error_second_half_median"] == 2.0
+
+
+def test_simulate_json_has_no_inf(capsys):
+    report = {}
+    finite_or_note(report, "reaching_time", math.inf)
+    finite_or_note(report, "rms", float("nan"))
+    finite_or_note(report, "final", 0.5)
+    assert report == {"reaching_time": None, "reaching_time_note": "not reached", "rms": None,
+                      "rms_note": "not finite", "final": 0.5}
+    # a run too short to reach the layer: reaching time not reached -> null plus a note
+    assert main(["simulate", "link1", "--reference", "step", "--duration", "0.05", "--k-s", "1", "--delta",
+                 "1e-9", "--quiet"]) == 0
+    out = capsys.readouterr().out
+    assert '"inf"' not in out and "Infinity" not in out and "NaN" not in out
+    metrics = json.loads(out)["metrics"]
+    assert all(v is not None or f"{k}_note" in metrics for k, v in metrics.items() if not k.endswith("_note"))
+
+
+def _subparser(name):
+    parser = build_parser()
+    action = next(a for a in parser._actions if getattr(a, "choices", None) and name in a.choices)
+    return action.choices[name]
+
+
+def test_help_texts_are_plain():
+    sweep_help = _subparser("sweep").format_help()
+    assert "+-20 %" in sweep_help and "%%" not in sweep_help
+    assert _subparser("figures").description
+    assert "Figs 1-4" in _subparser("figures").format_help()
+
+
+def test_derive_help_is_plain_text():
+    from fjm_runtime.cli.derive import plain_help
+    raw = ("usage: fjm derive [-h] [--out DIR]\n\n``python -m derive [--models M ...]``.\n\n"
+           "options:\n  --out DIR  output root (default: ``generated/``)\n")
+    text = plain_help(raw)
+    assert "``" not in text and text.startswith("usage: fjm derive") and "Derive models" in text
+    assert "output root (default: generated/)" in text
