@@ -23,7 +23,7 @@ def add_parser(sub) -> None:
     """Add ``sweep`` to the sub-command set ``sub``."""
     sw = sub.add_parser("sweep", help="Monte Carlo sweep of the closed loop on Dask (chunks of compiled batches)",
                         description="Sample TRUE plants (stiffness uniform in [--k-min, --k-max] or relative to "
-                                    "each joint's nominal with --k-rel, link and motor inertias +-20 %%), run "
+                                    "each joint's nominal with --k-rel, link and motor inertias +-20 %), run "
                                     "them in chunks of compiled batch simulations on Dask (a local cluster, or "
                                     "--scheduler ADDRESS), and write one row per run (parameters and metrics) "
                                     "as CSV.")
