@@ -18,10 +18,12 @@ from pathlib import Path
 import numpy as np
 
 import fjm_runtime
-from fjm_runtime.sim.compiled import closed_loop_runner
-from fjm_runtime.control.laws import make_controller
-from fjm_runtime.sim.metrics import metrics_from_sums
+from fjm_runtime.analysis.lemma1 import beta_bounds_link1, lemma1_gain
+from fjm_runtime.control.factory import DEFAULT_LAYER_RATE, default_delta, make_controller
+from fjm_runtime.control.laws import coefficients_from_pole
 from fjm_runtime.control.references import Sinusoid
+from fjm_runtime.sim.compiled import closed_loop_runner
+from fjm_runtime.sim.metrics import metrics_from_sums
 
 from .ccutil import compile_object, link_shared
 
@@ -29,22 +31,46 @@ HERE = Path(__file__).resolve().parent
 
 
 
-def tracking_design():
-    """The paper's link1 tracking design, computed by the functions that define it.
+#: The paper's link1 tracking design (the same numbers as the figures): triple pole at
+#: ``-LAM``, nominal stiffness ``K_NOM``, true stiffness in ``K_BOUNDS``, Lemma 1 margin
+#: ``ETA``, boundary layer ``k_s / LAYER_RATE``; the reference and the error region E
+#: of Lemma 1 are ``TASKS["tracking"]``.
+LAM = 8.0
+K_NOM = 150.0
+K_BOUNDS = {"K": (100.0, 200.0)}
+ETA = 10.0
+LAYER_RATE = DEFAULT_LAYER_RATE
+TASKS = {"tracking": (lambda: Sinusoid(0.5, 1.0), (0.05, 0.5, 0.5, 0.5), "0.5 sin(t) rad")}
 
-    :meth:`fjm_runtime.experiments.paper.Design.for_task` (``'tracking'``): Lemma 1 gain
-    (:func:`fjm_runtime.analysis.lemma1.lemma1_gain`) for ``0.5 sin t`` with ``K`` in
-    [100, 200], boundary layer ``k_s / LAYER_RATE``, ``beta_hat = (beta_min +
+
+@dataclass
+class Design:
+    """Switching gain ``k_s`` (rad/s^4), boundary layer ``delta`` and constant ``beta_hat`` of a design."""
+
+    k_s: float
+    delta: float
+    beta_hat: float
+
+
+def tracking_design():
+    """The paper's link1 tracking design, computed in the run by the functions that define it.
+
+    Lemma 1 gain (:func:`fjm_runtime.analysis.lemma1.lemma1_gain`) for ``0.5 sin t`` with
+    ``K`` in [100, 200], boundary layer ``k_s / LAYER_RATE``
+    (:func:`fjm_runtime.control.defaults.default_delta`), ``beta_hat = (beta_min +
     beta_max) / 2`` (:func:`fjm_runtime.analysis.lemma1.beta_bounds_link1`); triple pole at
     ``-LAM``, nominal ``K_NOM``.
 
     Returns
     -------
-    design : fjm_runtime.experiments.paper.Design
+    design : Design
     lam, k_nom : float
     """
-    from fjm_runtime.experiments.paper import K_NOM, LAM, Design
-    return Design.for_task("tracking"), float(LAM), float(K_NOM)
+    ref_factory, E, _ = TASKS["tracking"]
+    gain = lemma1_gain(coefficients_from_pole(LAM), ref_factory().derivative_bounds()[:, 0],
+                       nominal={"K": K_NOM}, bounds=K_BOUNDS, error_bounds=E, eta=ETA)
+    design = Design(gain.k_s, default_delta(gain.k_s, LAYER_RATE), beta_bounds_link1({"K": K_NOM}, K_BOUNDS)[2])
+    return design, float(LAM), float(K_NOM)
 
 
 @dataclass

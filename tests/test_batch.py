@@ -9,7 +9,7 @@ import fjm_runtime
 import fjm_runtime.batch.simd as batch_mod
 from fjm_runtime.batch.runner import METRIC_NAMES, SimdFallbackWarning, simulate_batch
 from fjm_runtime.ccache import CompileError
-from fjm_runtime.control.laws import make_controller
+from fjm_runtime.control.factory import make_controller
 from fjm_runtime.control.references import Sinusoid, SmoothStep
 from fjm_runtime.sim.simulate import simulate
 

@@ -108,7 +108,7 @@ def test_numpy_batch_peer_equals_simulate_batch():
 
 def test_closed_loop_design_is_computed_not_pasted(monkeypatch):
     """k_s, delta, beta_hat come from Lemma 1 in the run: change its margin and they follow."""
-    import fjm_runtime.experiments.paper as figures
+    import bench.closed_loop as figures
     from bench.closed_loop import link1_case
     from fjm_runtime.control.laws import coefficients_from_pole
     from fjm_runtime.analysis.lemma1 import beta_bounds_link1, lemma1_gain

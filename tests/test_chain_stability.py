@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 import fjm_runtime
-from fjm_runtime.control.laws import make_controller
+from fjm_runtime.control.factory import make_controller
 from fjm_runtime.control.references import Sinusoid
 from fjm_runtime.sim.simulate import SimulationDivergedError, simulate
 

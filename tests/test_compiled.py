@@ -11,7 +11,7 @@ import pytest
 import fjm_runtime
 from fjm_runtime.ccache import cache_dir
 from fjm_runtime.sim.compiled import closed_loop_runner
-from fjm_runtime.control.laws import make_controller
+from fjm_runtime.control.factory import make_controller
 from fjm_runtime.control.references import Sinusoid
 from fjm_runtime.sim.simulate import simulate
 
@@ -47,7 +47,7 @@ def test_compiled_equals_python(name, kind, kw):
 
 _CHILD = """
 import numpy as np, fjm_runtime
-from fjm_runtime.control.laws import make_controller
+from fjm_runtime.control.factory import make_controller
 from fjm_runtime.control.references import Sinusoid
 from fjm_runtime.sim.simulate import simulate
 m = fjm_runtime.load("link1")

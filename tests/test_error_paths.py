@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import fjm_runtime as f
-from fjm_runtime.control.laws import make_controller
+from fjm_runtime.control.factory import make_controller
 from fjm_runtime.control.references import make_reference
 from fjm_runtime.sim.simulate import simulate
 from fjm_runtime.batch.sweep import sample_parameters

@@ -3,7 +3,8 @@ import numpy as np
 import pytest
 
 import fjm_runtime
-from fjm_runtime.control.laws import SlidingModeController, make_controller
+from fjm_runtime.control.factory import make_controller
+from fjm_runtime.control.laws import SlidingModeController
 from fjm_runtime.control.references import Sinusoid, make_reference
 from fjm_runtime.analysis.lemma1 import lemma1_gain
 from fjm_runtime.sim.simulate import SimulationDivergedError, simulate

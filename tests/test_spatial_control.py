@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 
 import fjm_runtime
-from fjm_runtime import figures_spatial as fs
+from fjm_runtime.experiments import panda as fs
 from fjm_runtime.batch.runner import METRIC_NAMES, simulate_batch
-from fjm_runtime.control.laws import make_controller
+from fjm_runtime.control.factory import make_controller
 from fjm_runtime.control.references import Sinusoid
 from fjm_runtime.sim.simulate import simulate
 from fjm_runtime.batch.sweep import run_chunk, sample_parameters, SweepSpec

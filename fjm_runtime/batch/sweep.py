@@ -103,7 +103,7 @@ def sample_parameters(model, n_samples: int, seed: int = 0, k_range=(100.0, 200.
 
 def _build(spec: SweepSpec):
     from .. import load
-    from ..control.laws import make_controller
+    from ..control.factory import make_controller
     from ..control.references import make_reference
     model = load(spec.model)
     controller = make_controller(spec.controller, model, model.default_params, **spec.controller_options)

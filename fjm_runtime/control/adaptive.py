@@ -1,4 +1,4 @@
-"""Sliding-mode control with an online joint-stiffness estimate (issue 7 item 3, research grade).
+"""Sliding-mode control with an online joint-stiffness estimate (research grade).
 
 Why
 ---
@@ -48,7 +48,7 @@ The controller then uses ``p_hat = p_nom`` with the stiffness entries replaced
 by ``K_hat``: ``y_hat = T(x; p_hat)``, ``alpha(x; p_hat)`` and (unless a
 constant ``beta_hat`` is given) ``beta(x; p_hat)``, with the paper's surface
 (``integral=False``) or the integral surface (``integral=True``) of
-:class:`fjm_runtime.controllers.SlidingModeController`. The time variation of
+:class:`fjm_runtime.control.laws.SlidingModeController`. The time variation of
 ``K_hat`` is ignored in ``y4_hat'`` (certainty equivalence); the switching term
 absorbs it while the estimate moves.
 
@@ -78,9 +78,159 @@ Controller state ``z`` (``n`` joints), integrated with the plant in RK4::
 """
 from __future__ import annotations
 
-# The classes live in fjm_runtime.controllers (one module, no import circle); the law
-# and the estimator rates above are the emitted ``<model>_control_adaptive`` (derive/emit/controls.py).
-from ..control.laws import (ESTIMATOR_BLOCKS, AdaptiveStiffnessController, _param_indices,  # noqa: F401
-                          make_adaptive)
+import numpy as np
 
-__all__ = ["AdaptiveStiffnessController", "ESTIMATOR_BLOCKS", "make_adaptive"]
+from .defaults import DEFAULT_FILTER_RATE, DEFAULT_LS_GAIN, default_K_bounds
+from .laws import SlidingModeController
+
+__all__ = ["AdaptiveStiffnessController", "ESTIMATOR_BLOCKS", "make_adaptive", "param_indices"]
+
+#: Names of the blocks of the estimator part of ``z``, in order.
+ESTIMATOR_BLOCKS = ("K_hat", "u_f", "phi_f", "w_f", "P")
+
+
+def param_indices(model):
+    """Indices of the stiffness, motor inertia and motor damping of each joint in ``param_names``.
+
+    Returns
+    -------
+    (idx_K, idx_Jm, idx_Bm) : three ndarray of int, shape (n,)
+        ``K``, ``J_m``, ``B_m`` for link1; ``K_i``, ``Jm_i``, ``Bm_i`` for the chains.
+
+    Raises
+    ------
+    ValueError
+        The model has no such parameters.
+    """
+    names = list(model.param_names)
+    n = int(model.n)
+    if n == 1 and "K" in names:
+        groups = (["K"], ["J_m"], ["B_m"])
+    else:
+        groups = ([f"K{i + 1}" for i in range(n)], [f"Jm{i + 1}" for i in range(n)],
+                  [f"Bm{i + 1}" for i in range(n)])
+    try:
+        return tuple(np.array([names.index(nm) for nm in g], dtype=int) for g in groups)
+    except ValueError:
+        raise ValueError(f"model {getattr(model, 'name', '?')!r}: adaptive stiffness needs parameters "
+                         f"{groups[0]}, {groups[1]}, {groups[2]} (found {names})") from None
+
+
+def _bounds(K_bounds, n: int):
+    try:
+        lo, hi = K_bounds
+    except (TypeError, ValueError):
+        raise ValueError(f"K_bounds = {K_bounds!r}: expected (K_min, K_max) in N m/rad") from None
+    lo = np.broadcast_to(np.asarray(lo, dtype=float), (n,)).copy() if np.ndim(lo) == 0 else np.asarray(lo, float)
+    hi = np.broadcast_to(np.asarray(hi, dtype=float), (n,)).copy() if np.ndim(hi) == 0 else np.asarray(hi, float)
+    if lo.shape != (n,) or hi.shape != (n,):
+        raise ValueError(f"K_bounds with shapes {lo.shape}, {hi.shape}: expected scalars or shape ({n},)")
+    if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi)) and np.all(lo > 0) and np.all(hi > lo)):
+        raise ValueError(f"K_bounds = ({lo.tolist()}, {hi.tolist()}): expected finite 0 < K_min < K_max "
+                         "(N m/rad)")
+    return lo, hi
+
+
+def _positive(value, field: str) -> float:
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{field} = {value!r}: expected a number > 0") from None
+    if not (np.isfinite(v) and v > 0):
+        raise ValueError(f"{field} = {value!r}: expected a finite value > 0")
+    return v
+
+
+class AdaptiveStiffnessController(SlidingModeController):
+    """Sliding-mode controller using an online least-squares estimate of the joint stiffness.
+
+    The law and the estimator are the emitted ``<model>_control_adaptive`` (and
+    ``_zdot``); :mod:`fjm_runtime.control.adaptive` explains the scheme and its assumptions.
+
+    Parameters
+    ----------
+    model, nominal_params
+        As :class:`SlidingModeController`; the nominal stiffness is the initial
+        estimate and must lie inside ``K_bounds``.
+    K_bounds : (K_min, K_max)
+        Stiffness bounds in N m/rad (scalars or one per joint), ``0 < K_min < K_max``;
+        the estimate is projected onto them.
+    filter_rate : float
+        Bandwidth ``a`` of the regressor filter ``a / (s + a)``, 1/s, > 0 (default
+        :data:`~fjm_runtime.control.defaults.DEFAULT_FILTER_RATE`, 20).
+    ls_gain : float
+        Initial least-squares covariance ``P(0)`` in 1/(rad^2 s), > 0 (default
+        :data:`~fjm_runtime.control.defaults.DEFAULT_LS_GAIN`, 1e5).
+    integral : bool
+        Integral sliding surface (default True) or the paper's surface.
+    beta_hat : optional
+        Constant ``beta_hat``; default ``beta(x; p_hat)`` with the estimated stiffness.
+    **kwargs
+        ``lam``/``c``, ``k_s``, ``delta``, ``mode``, ``k_lin``, ``u_max``, ``anti_windup``
+        as for the base class.
+
+    Controller state ``z``: ``[z_int (n, only with integral=True), K_hat, u_f, phi_f, w_f, P]``.
+    """
+
+    def __init__(self, model, nominal_params, *, K_bounds, filter_rate: float = DEFAULT_FILTER_RATE,
+                 ls_gain: float = DEFAULT_LS_GAIN, integral: bool = True, beta_hat=None, **kwargs):
+        super().__init__(model, nominal_params, integral=integral, beta_hat=beta_hat, **kwargs)
+        n = self.n
+        self.K_min, self.K_max = _bounds(K_bounds, n)
+        self.filter_rate = _positive(filter_rate, "filter_rate")
+        self.ls_gain = _positive(ls_gain, "ls_gain")
+        self.idx_K, self.idx_Jm, self.idx_Bm = param_indices(model)
+        K0 = self.p_nom[self.idx_K]
+        if np.any(K0 < self.K_min) or np.any(K0 > self.K_max):
+            raise ValueError(f"K_bounds = ({self.K_min.tolist()}, {self.K_max.tolist()}): the nominal stiffness "
+                             f"{K0.tolist()} (initial estimate) must lie inside")
+        self.J_m = self.p_nom[self.idx_Jm]
+        self.B_m = self.p_nom[self.idx_Bm]
+        self.n_int = n if self.integral else 0
+        self.n_states = self.n_int + len(ESTIMATOR_BLOCKS) * n
+
+    @property
+    def law_kind(self) -> str:
+        return "adaptive"
+
+    def _law_z_offset(self) -> int:
+        # the emitted law always carries z_int; the paper's surface is c0 = 0 with z_int = 0
+        return self.n - self.n_int
+
+    def gain_values(self) -> dict:
+        g = super().gain_values()
+        if not self.integral:
+            g["c"] = np.concatenate([[0.0], self.c])
+        g.update(K_min=self.K_min, K_max=self.K_max, filter_rate=self.filter_rate)
+        return g
+
+    def stiffness_estimate(self, z) -> np.ndarray:
+        """The stiffness the controller uses, ``clip(K_hat, K_min, K_max)``; ``z`` of shape
+        ``(n_states,)`` or ``(N, n_states)`` (e.g. ``SimulationResult.z``) -> ``(n,)`` or ``(N, n)``."""
+        z = np.asarray(z, dtype=float)
+        k = self.n_int
+        return np.clip(z[..., k:k + self.n], self.K_min, self.K_max)
+
+    def params_hat(self, z) -> np.ndarray:
+        """Nominal parameters with the stiffness replaced by the estimate, shape ``(n_par,)``."""
+        p = self.p_nom.copy()
+        p[self.idx_K] = self.stiffness_estimate(z)
+        return p
+
+    def initial_state(self, t0: float, x0: np.ndarray, r0: np.ndarray) -> np.ndarray:
+        n = self.n
+        x0 = np.asarray(x0, dtype=float)
+        est = {"K_hat": self.p_nom[self.idx_K], "u_f": np.zeros(n), "phi_f": np.zeros(n),
+               "w_f": x0[3 * n:4 * n], "P": np.full(n, self.ls_gain)}
+        return np.concatenate([np.zeros(self.n_int)] + [est[b] for b in ESTIMATOR_BLOCKS])
+
+
+def make_adaptive(model, nominal_params, *, K_bounds=None, **kwargs) -> AdaptiveStiffnessController:
+    """``make_controller('adaptive', ...)``: ``K_bounds`` defaults to
+    :func:`~fjm_runtime.control.defaults.default_K_bounds` of the nominal stiffness
+    (``nominal +- 1/3``: 100-200 at 150); ``mode`` defaults to ``'sat'``."""
+    if K_bounds is None:
+        p = np.asarray(model.params_array(nominal_params), dtype=float)
+        K_bounds = default_K_bounds(p[param_indices(model)[0]])
+    kwargs.setdefault("mode", "sat")
+    return AdaptiveStiffnessController(model, nominal_params, K_bounds=K_bounds, **kwargs)

@@ -25,7 +25,7 @@ The law itself is not written here: it is emitted by ``make derive`` with every 
 (:meth:`SlidingModeController.symbolic_evaluate`) from here; this module validates the gains and
 packs them into the law's ``gains`` vector (:attr:`SlidingModeController.gains`).
 
-Controller interface used by :func:`fjm_runtime.simulate.simulate`:
+Controller interface used by :func:`fjm_runtime.sim.simulate.simulate`:
 
 ``n_states``
     size of the internal state ``z`` (0 for the plain controller);
@@ -43,6 +43,7 @@ from typing import NamedTuple, Optional
 import numpy as np
 
 from ..validation import joint_vector
+from .defaults import DEFAULT_DELTA
 
 MODES = ("sat", "sign", "fl")
 
@@ -129,12 +130,14 @@ class SlidingModeController:
     k_s : float or array_like, shape (n,)
         Switching gain (rad/s^4), >= 0; ignored (set to 0) for ``mode='fl'``.
     delta : float or array_like, shape (n,)
-        Boundary-layer width for ``mode='sat'``, > 0.
+        Boundary-layer width for ``mode='sat'``, > 0 (default
+        :data:`~fjm_runtime.control.defaults.DEFAULT_DELTA`; the rule the tools use,
+        ``k_s / 200``, is :func:`~fjm_runtime.control.defaults.default_delta`).
     mode : {'sat', 'sign', 'fl'}
         Switching function.
     beta_hat : array_like, shape (n, n) or scalar, optional
         Constant estimate of ``beta``; default ``beta(x; p_nom)`` at every sample.
-        For link1, :func:`fjm_runtime.robust.beta_hat_link1` gives the paper's
+        For link1, :func:`fjm_runtime.analysis.lemma1.beta_hat_link1` gives the paper's
         ``(beta_max + beta_min) / 2``.
     k_lin : float or array_like, shape (n,), optional
         Linear feedback on ``s`` (1/s), >= 0. Default 0 for 'sat'/'sign' and
@@ -154,7 +157,7 @@ class SlidingModeController:
     """
 
     def __init__(self, model, nominal_params, *, lam: Optional[float] = None, c=None,
-                 k_s=0.0, delta=0.1, mode: str = "sat", beta_hat=None, k_lin=None,
+                 k_s=0.0, delta=DEFAULT_DELTA, mode: str = "sat", beta_hat=None, k_lin=None,
                  u_max=None, integral: bool = False, anti_windup: bool = True):
         if mode not in MODES:
             raise ValueError(f"mode = {mode!r}: expected one of {', '.join(MODES)}")
@@ -253,7 +256,7 @@ class SlidingModeController:
         z : ndarray, shape (n_states,)
             Controller state.
         r : ndarray, shape (5, n)
-            Reference and its derivatives (see :mod:`fjm_runtime.references`).
+            Reference and its derivatives (see :mod:`fjm_runtime.control.references`).
         """
         n = self.n
         r = np.asarray(r, dtype=float)
@@ -317,8 +320,8 @@ class SlidingModeController:
         return out[off:]
 
 
-
 def _params_array(model, p, field: str) -> np.ndarray:
+    """``p`` (dict or array) as the model's parameter vector, shape (n_params,), checked finite."""
     if hasattr(model, "params_array"):
         try:
             a = np.asarray(model.params_array(p, arg=field), dtype=float)
@@ -329,175 +332,3 @@ def _params_array(model, p, field: str) -> np.ndarray:
     if not np.all(np.isfinite(a)):
         raise ValueError(f"{field} = {a.tolist()}: expected finite values")
     return a
-
-
-CONTROLLER_KINDS = ("smc", "ismc", "fl", "sign", "adaptive")
-
-
-def make_controller(kind: str, model, nominal_params, **kwargs) -> SlidingModeController:
-    """Build a controller by name.
-
-    Parameters
-    ----------
-    kind : {'smc', 'ismc', 'fl', 'sign', 'adaptive'}
-        ``'smc'``: paper's surface with ``sat``; ``'sign'``: the paper's
-        discontinuous law; ``'ismc'``: integral surface with ``sat``; ``'fl'``:
-        plain feedback linearization (no switching term, quadruple pole);
-        ``'adaptive'``: online stiffness estimate in ``T``, ``alpha``, ``beta``
-        (:class:`fjm_runtime.adaptive.AdaptiveStiffnessController`; keywords
-        ``K_bounds``, ``filter_rate``, ``ls_gain``, ``integral``).
-    model, nominal_params, **kwargs
-        Passed to :class:`SlidingModeController`.
-    """
-    if kind == "smc":
-        return SlidingModeController(model, nominal_params, mode="sat", **kwargs)
-    if kind == "sign":
-        return SlidingModeController(model, nominal_params, mode="sign", **kwargs)
-    if kind == "ismc":
-        return SlidingModeController(model, nominal_params, mode=kwargs.pop("mode", "sat"),
-                                     integral=True, **kwargs)
-    if kind == "fl":
-        kwargs.pop("k_s", None)
-        return SlidingModeController(model, nominal_params, mode="fl", **kwargs)
-    if kind == "adaptive":
-        return make_adaptive(model, nominal_params, **kwargs)
-    raise ValueError(f"controller = {kind!r}: expected one of {', '.join(CONTROLLER_KINDS)}")
-
-
-# -- adaptive stiffness (scheme and assumptions: fjm_runtime.adaptive) --------
-
-#: Names of the blocks of the estimator part of ``z``, in order.
-ESTIMATOR_BLOCKS = ("K_hat", "u_f", "phi_f", "w_f", "P")
-
-
-def _param_indices(model):
-    """Indices of the stiffness, motor inertia and motor damping of each joint in ``param_names``."""
-    names = list(model.param_names)
-    n = int(model.n)
-    if n == 1 and "K" in names:
-        groups = (["K"], ["J_m"], ["B_m"])
-    else:
-        groups = ([f"K{i + 1}" for i in range(n)], [f"Jm{i + 1}" for i in range(n)],
-                  [f"Bm{i + 1}" for i in range(n)])
-    try:
-        return tuple(np.array([names.index(nm) for nm in g], dtype=int) for g in groups)
-    except ValueError:
-        raise ValueError(f"model {getattr(model, 'name', '?')!r}: adaptive stiffness needs parameters "
-                         f"{groups[0]}, {groups[1]}, {groups[2]} (found {names})") from None
-
-
-def _bounds(K_bounds, n: int):
-    try:
-        lo, hi = K_bounds
-    except (TypeError, ValueError):
-        raise ValueError(f"K_bounds = {K_bounds!r}: expected (K_min, K_max) in N m/rad") from None
-    lo = np.broadcast_to(np.asarray(lo, dtype=float), (n,)).copy() if np.ndim(lo) == 0 else np.asarray(lo, float)
-    hi = np.broadcast_to(np.asarray(hi, dtype=float), (n,)).copy() if np.ndim(hi) == 0 else np.asarray(hi, float)
-    if lo.shape != (n,) or hi.shape != (n,):
-        raise ValueError(f"K_bounds with shapes {lo.shape}, {hi.shape}: expected scalars or shape ({n},)")
-    if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi)) and np.all(lo > 0) and np.all(hi > lo)):
-        raise ValueError(f"K_bounds = ({lo.tolist()}, {hi.tolist()}): expected finite 0 < K_min < K_max "
-                         "(N m/rad)")
-    return lo, hi
-
-
-def _positive(value, field: str) -> float:
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise ValueError(f"{field} = {value!r}: expected a number > 0") from None
-    if not (np.isfinite(v) and v > 0):
-        raise ValueError(f"{field} = {value!r}: expected a finite value > 0")
-    return v
-
-
-class AdaptiveStiffnessController(SlidingModeController):
-    """Sliding-mode controller using an online least-squares estimate of the joint stiffness.
-
-    The law and the estimator are the emitted ``<model>_control_adaptive`` (and
-    ``_zdot``); :mod:`fjm_runtime.adaptive` explains the scheme and its assumptions.
-
-    Parameters
-    ----------
-    model, nominal_params
-        As :class:`SlidingModeController`; the nominal stiffness is the initial
-        estimate and must lie inside ``K_bounds``.
-    K_bounds : (K_min, K_max)
-        Stiffness bounds in N m/rad (scalars or one per joint), ``0 < K_min < K_max``;
-        the estimate is projected onto them.
-    filter_rate : float
-        Bandwidth ``a`` of the regressor filter ``a / (s + a)``, 1/s, > 0 (default 20).
-    ls_gain : float
-        Initial least-squares covariance ``P(0)`` in 1/(rad^2 s), > 0 (default 1e5).
-    integral : bool
-        Integral sliding surface (default True) or the paper's surface.
-    beta_hat : optional
-        Constant ``beta_hat``; default ``beta(x; p_hat)`` with the estimated stiffness.
-    **kwargs
-        ``lam``/``c``, ``k_s``, ``delta``, ``mode``, ``k_lin``, ``u_max``, ``anti_windup``
-        as for the base class.
-
-    Controller state ``z``: ``[z_int (n, only with integral=True), K_hat, u_f, phi_f, w_f, P]``.
-    """
-
-    def __init__(self, model, nominal_params, *, K_bounds, filter_rate: float = 20.0,
-                 ls_gain: float = 1e5, integral: bool = True, beta_hat=None, **kwargs):
-        super().__init__(model, nominal_params, integral=integral, beta_hat=beta_hat, **kwargs)
-        n = self.n
-        self.K_min, self.K_max = _bounds(K_bounds, n)
-        self.filter_rate = _positive(filter_rate, "filter_rate")
-        self.ls_gain = _positive(ls_gain, "ls_gain")
-        self.idx_K, self.idx_Jm, self.idx_Bm = _param_indices(model)
-        K0 = self.p_nom[self.idx_K]
-        if np.any(K0 < self.K_min) or np.any(K0 > self.K_max):
-            raise ValueError(f"K_bounds = ({self.K_min.tolist()}, {self.K_max.tolist()}): the nominal stiffness "
-                             f"{K0.tolist()} (initial estimate) must lie inside")
-        self.J_m = self.p_nom[self.idx_Jm]
-        self.B_m = self.p_nom[self.idx_Bm]
-        self.n_int = n if self.integral else 0
-        self.n_states = self.n_int + len(ESTIMATOR_BLOCKS) * n
-
-    @property
-    def law_kind(self) -> str:
-        return "adaptive"
-
-    def _law_z_offset(self) -> int:
-        # the emitted law always carries z_int; the paper's surface is c0 = 0 with z_int = 0
-        return self.n - self.n_int
-
-    def gain_values(self) -> dict:
-        g = super().gain_values()
-        if not self.integral:
-            g["c"] = np.concatenate([[0.0], self.c])
-        g.update(K_min=self.K_min, K_max=self.K_max, filter_rate=self.filter_rate)
-        return g
-
-    def stiffness_estimate(self, z) -> np.ndarray:
-        """The stiffness the controller uses, ``clip(K_hat, K_min, K_max)``; ``z`` of shape
-        ``(n_states,)`` or ``(N, n_states)`` (e.g. ``SimulationResult.z``) -> ``(n,)`` or ``(N, n)``."""
-        z = np.asarray(z, dtype=float)
-        k = self.n_int
-        return np.clip(z[..., k:k + self.n], self.K_min, self.K_max)
-
-    def params_hat(self, z) -> np.ndarray:
-        """Nominal parameters with the stiffness replaced by the estimate, shape ``(n_par,)``."""
-        p = self.p_nom.copy()
-        p[self.idx_K] = self.stiffness_estimate(z)
-        return p
-
-    def initial_state(self, t0: float, x0: np.ndarray, r0: np.ndarray) -> np.ndarray:
-        n = self.n
-        x0 = np.asarray(x0, dtype=float)
-        est = {"K_hat": self.p_nom[self.idx_K], "u_f": np.zeros(n), "phi_f": np.zeros(n),
-               "w_f": x0[3 * n:4 * n], "P": np.full(n, self.ls_gain)}
-        return np.concatenate([np.zeros(self.n_int)] + [est[b] for b in ESTIMATOR_BLOCKS])
-
-
-def make_adaptive(model, nominal_params, *, K_bounds=None, **kwargs) -> AdaptiveStiffnessController:
-    """``make_controller('adaptive', ...)``: ``K_bounds`` defaults to ``nominal +- 1/3`` (100-200 at 150)."""
-    if K_bounds is None:
-        p = np.asarray(model.params_array(nominal_params), dtype=float)
-        K0 = p[_param_indices(model)[0]]
-        K_bounds = (K0 * 2.0 / 3.0, K0 * 4.0 / 3.0)
-    kwargs.setdefault("mode", "sat")
-    return AdaptiveStiffnessController(model, nominal_params, K_bounds=K_bounds, **kwargs)
