@@ -21,15 +21,17 @@ from .validation import FjmValueError, as_vector, params_vector
 QUANTITIES = ("f", "g", "ad", "T", "alpha", "beta", "energy", "inertia")
 
 
-def generated_root() -> Path:
-    """Directory holding ``<model>/manifest.json``.
+#: Environment variable naming a directory of user models (``<dir>/<model>/manifest.json``).
+USER_MODELS_ENV = "FJM_GENERATED"
 
-    Order: ``$FJM_GENERATED``; the copy shipped inside the installed package
-    (``fjm_runtime/generated``); the repository's ``generated/``.
+
+def generated_root() -> Path:
+    """Directory holding the built-in models (``<model>/manifest.json``).
+
+    The copy shipped inside the installed package (``fjm_runtime/generated``), else
+    the repository's ``generated/``. User models (``$FJM_GENERATED``) are added on top
+    by :func:`model_roots`.
     """
-    env = os.environ.get("FJM_GENERATED")
-    if env:
-        return Path(env)
     here = Path(__file__).resolve().parent
     for cand in (here / "generated", here.parent / "generated"):
         if cand.is_dir():
@@ -37,15 +39,58 @@ def generated_root() -> Path:
     return here.parent / "generated"
 
 
-def available_models(root: Optional[Path] = None) -> List[str]:
-    """Names of the models found under the generated root, sorted."""
-    root = root or generated_root()
+def user_models_root() -> Optional[Path]:
+    """The directory named by ``$FJM_GENERATED``, or None when the variable is unset or empty.
+
+    Raises
+    ------
+    FjmValueError
+        The variable names a path that is not a directory (the message names both).
+    """
+    env = os.environ.get(USER_MODELS_ENV)
+    if not env:
+        return None
+    root = Path(env)
+    if not root.is_dir():
+        raise FjmValueError(f"{USER_MODELS_ENV} = {env!r}: no such directory (expected a directory of "
+                            "generated models, <dir>/<model>/manifest.json); set it to one or unset it")
+    return root
+
+
+def model_roots() -> List[Path]:
+    """Where models are looked up, first match wins: ``$FJM_GENERATED`` (if set), then the built-in ones.
+
+    A user model with the name of a built-in model therefore replaces it; every other
+    built-in model stays available.
+    """
+    user = user_models_root()
+    return ([user] if user is not None else []) + [generated_root()]
+
+
+def _models_in(root: Path) -> List[str]:
     if not root.is_dir():
         return []
     return sorted(d.name for d in root.iterdir() if (d / "manifest.json").is_file())
 
 
+def available_models(root: Optional[Path] = None) -> List[str]:
+    """Names of the models found under ``root`` (default: every root of :func:`model_roots`), sorted."""
+    roots = [Path(root)] if root is not None else model_roots()
+    return sorted({name for r in roots for name in _models_in(r)})
+
+
+def model_directory(name: str) -> Optional[Path]:
+    """The directory of model ``name``: the first root of :func:`model_roots` that has it, or None."""
+    for root in model_roots():
+        if (root / name / "manifest.json").is_file():
+            return root / name
+    return None
+
+
 def _read_function(path: Path) -> ca.Function:
+    if not path.is_file():
+        raise FjmValueError(f"{path}: missing generated file (the model directory is incomplete; "
+                            "regenerate it)")
     lines = [ln for ln in path.read_text().splitlines() if ln and not ln.startswith("#")]
     if len(lines) != 1:
         raise FjmValueError(f"{path}: corrupt generated file (expected one serialized Function line)")
@@ -74,7 +119,15 @@ class Model:
 
     def __init__(self, directory: Path):
         self.directory = Path(directory)
-        self.manifest = json.loads((self.directory / "manifest.json").read_text())
+        manifest = self.directory / "manifest.json"
+        if not manifest.is_file():
+            what = "no such directory" if not self.directory.is_dir() else "no manifest.json in it"
+            raise FjmValueError(f"model directory {str(self.directory)!r}: {what} (expected a generated "
+                                "model directory, <dir>/manifest.json)")
+        try:
+            self.manifest = json.loads(manifest.read_text())
+        except ValueError as exc:
+            raise FjmValueError(f"{manifest}: not valid JSON ({exc})") from None
         self.name: str = self.manifest["model"]
         self.n: int = int(self.manifest["n"])
         self.nx: int = int(self.manifest["nx"])
@@ -167,17 +220,25 @@ def _load_cached(directory: str) -> Model:
 
 
 def load(name: str) -> Model:
-    """Load a generated model by name (``"link1"``, ``"planar1"`` .. ``"planar7"``).
+    """Load a generated model by name (``"link1"``, ``"planar1"`` .. ``"planar7"``, or a user model).
+
+    Names are looked up in ``$FJM_GENERATED`` first (user models; one there with a
+    built-in name wins), then among the built-in models (:func:`model_roots`). A name
+    with a path separator is a model directory (``<dir>/manifest.json``).
 
     Raises
     ------
-    ValueError
-        If no generated model of that name exists; the message lists the
-        available ones.
+    FjmValueError
+        (a ``ValueError``) If no model of that name exists (the message lists the
+        available ones), the directory given does not hold a model (the message names
+        it), or ``$FJM_GENERATED`` is not a directory.
     """
-    root = generated_root()
-    models = available_models(root)
-    if not isinstance(name, str) or name not in models:
+    if isinstance(name, (str, os.PathLike)) and (isinstance(name, os.PathLike) or os.sep in name
+                                                 or (os.altsep and os.altsep in name)):
+        return _load_cached(str(Path(name).resolve()) if Path(name).is_dir() else str(name))
+    directory = model_directory(name) if isinstance(name, str) and name else None
+    if directory is None:
+        models = available_models()
         raise FjmValueError(
-            f"unknown model {name!r}; available models: {', '.join(models) or '(none: run make derive)'}")
-    return _load_cached(str(root / name))
+            f"unknown model {name!r}; available models: {', '.join(models) or '(none found)'}")
+    return _load_cached(str(directory))

@@ -21,8 +21,11 @@ def as_vector(name: str, value, length: int) -> np.ndarray:
     Raises
     ------
     FjmValueError
-        If the shape differs or any entry is NaN/inf.
+        If the shape differs, any entry is NaN/inf, text, or complex (a real array is
+        expected; the imaginary part is never dropped silently).
     """
+    if _is_complex(value):
+        raise FjmValueError(f"{name}: expected a real array of shape ({length},), got complex values {value!r}")
     try:
         if isinstance(value, (str, bytes)) or any(isinstance(v, (str, bytes)) for v in np.ravel(
                 np.asarray(value, dtype=object))):
@@ -110,7 +113,20 @@ def params_vector(names: Tuple[str, ...], defaults: Mapping[str, float], p, arg:
     return values
 
 
+def _is_complex(value) -> bool:
+    """True if ``value`` (array, sequence or scalar) holds complex numbers."""
+    try:
+        arr = np.asarray(value)
+    except (TypeError, ValueError):
+        return False
+    if np.iscomplexobj(arr):
+        return True
+    return arr.dtype == object and any(isinstance(v, (complex, np.complexfloating)) for v in arr.ravel())
+
+
 def _is_number(v) -> bool:
+    if _is_complex(v):
+        return False
     try:
         float(v)
     except (TypeError, ValueError):

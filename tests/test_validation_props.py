@@ -169,6 +169,30 @@ def test_x_numeric_strings_rejected(name, number):
     expect_error(m.alpha, np.zeros(m.nx), p, arg="p")
 
 
+@PROPS
+@given(data=st.data(), name=model_st, quantity=quantity_st, imag=st.floats(min_value=-1e3, max_value=1e3,
+                                                                          allow_nan=False, allow_infinity=False))
+def test_complex_x_and_p_rejected(data, name, quantity, imag):
+    """A complex ``x`` or ``p`` is refused (even with a zero imaginary part): the imaginary part is never dropped."""
+    m = MODELS[name]
+    x = np.array(data.draw(st.lists(finite, min_size=m.nx, max_size=m.nx)), dtype=complex)
+    i = data.draw(st.integers(min_value=0, max_value=m.nx - 1))
+    x[i] += 1j * imag
+    msg = expect_error(call, m, quantity, x, None, arg="x", also=("real",))
+    assert "complex" in msg, msg
+    p = m.params_array().astype(complex)
+    msg = expect_error(call, m, quantity, np.zeros(m.nx), p, arg="p", also=("real",))
+    k = data.draw(st.sampled_from(m.param_names))
+    expect_error(call, m, quantity, np.zeros(m.nx), {k: complex(m.default_params[k], imag)}, arg="p",
+                 also=(k, "real"))
+
+
+def test_complex_x_example():
+    m = MODELS["link1"]
+    with pytest.raises(FjmValueError, match=r"x: expected a real array of shape \(4,\)"):
+        m.alpha(np.array([1j, 0, 0, 0]), m.default_params)
+
+
 # --- p as an array ---------------------------------------------------------------------------
 
 @PROPS
