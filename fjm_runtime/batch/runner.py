@@ -51,7 +51,7 @@ class BatchResult:
     params : ndarray, shape (B, n_params)
         TRUE parameters of each run (``param_names`` order).
     metrics : dict str -> ndarray, shape (B,)
-        The fields of :class:`fjm_runtime.simulate.Metrics`; NaN for diverged runs.
+        The fields of :class:`fjm_runtime.sim.metrics.Metrics`; NaN for diverged runs.
     diverged : ndarray of bool, shape (B,)
     divergence_time : ndarray, shape (B,)
         First time the state was non-finite or beyond ``max_state`` (NaN if never).
@@ -91,7 +91,7 @@ def simulate_batch(model, controller, reference, params_true_array, *, duration:
     Parameters
     ----------
     model, controller, reference
-        As for :func:`fjm_runtime.simulate.simulate`; the controller (nominal
+        As for :func:`fjm_runtime.sim.simulate.simulate`; the controller (nominal
         parameters) and the reference are shared by all runs.
     params_true_array : array_like, shape (B, n_params)
         TRUE plant parameters per run, columns in ``model.param_names`` order.

@@ -3,11 +3,11 @@
 A sweep samples TRUE plant parameters around the defaults (stiffness
 uniform in ``[K_min, K_max]``, the other listed parameters within a relative
 spread), splits the samples into chunks, and runs each chunk with
-:func:`fjm_runtime.batch.simulate_batch` on a Dask worker. The controller
+:func:`fjm_runtime.batch.runner.simulate_batch` on a Dask worker. The controller
 always uses the NOMINAL (default) parameters. Workers receive only plain
 data (model name, settings, the chunk's parameter rows) and rebuild model,
 controller and reference themselves; the compiled batch library is cached
-per machine (:mod:`fjm_runtime.compiled`), so each worker compiles at most
+per machine (:mod:`fjm_runtime.ccache`), so each worker compiles at most
 once.
 
 Without ``scheduler`` a local cluster is started (``n_workers`` processes,
@@ -36,11 +36,11 @@ class SweepSpec:
     model : str
         Generated model name.
     controller : str
-        ``smc``, ``ismc``, ``fl`` or ``sign`` (see :func:`fjm_runtime.controllers.make_controller`).
+        ``smc``, ``ismc``, ``fl`` or ``sign`` (see :func:`fjm_runtime.control.factory.make_controller`).
     controller_options : dict
         Extra keyword arguments of the controller (``lam``, ``k_s``, ``delta`` ...).
     reference : str
-        ``step`` or ``sine`` (see :func:`fjm_runtime.references.make_reference`).
+        ``step`` or ``sine`` (see :func:`fjm_runtime.control.references.make_reference`).
     reference_options : dict
     duration, dt : float
         Seconds.

@@ -9,7 +9,7 @@ model (it knows nothing about ``d``):
   ``-F_c sign(dq_m)`` or smoothed ``-F_c tanh(dq_m / eps)``, plus a constant
   torque ``bias``. The wrapper has the model's interface (``functions``, ``f``,
   ``g``, ``T``, ...), so every simulation backend (python, casadi, compiled)
-  runs it; pass it to :func:`fjm_runtime.simulate.simulate` as the PLANT and
+  runs it; pass it to :func:`fjm_runtime.sim.simulate.simulate` as the PLANT and
   build the controller on the undisturbed model.
 * :class:`TorqueDisturbance` wraps a controller so that the plant receives
   ``u + d(t)`` for a user-supplied bounded signal ``d(t)`` (held over each

@@ -1,7 +1,7 @@
 """Compiled closed loop: the RK4 + sliding-mode step as C, compiled once and cached.
 
 The step is the same CasADi graph the ``'casadi'`` backend of
-:func:`fjm_runtime.simulate.simulate` builds (controller sample with NOMINAL
+:func:`fjm_runtime.sim.simulate.simulate` builds (controller sample with NOMINAL
 parameters, zero-order hold, RK4 of the plant with TRUE parameters). Two
 compiled forms:
 

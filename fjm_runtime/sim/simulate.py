@@ -91,7 +91,7 @@ def simulate(model, controller, reference, *, duration: float, dt: float = 1e-3,
     model : Model
         ``fjm_runtime.load(name)``.
     controller : SlidingModeController
-        Holds its own nominal parameters (see :mod:`fjm_runtime.controllers`).
+        Holds its own nominal parameters (see :mod:`fjm_runtime.control.laws`).
     reference : Reference
         ``reference(t) -> (5, n)``.
     duration : float

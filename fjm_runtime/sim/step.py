@@ -126,7 +126,7 @@ def assemble(controller, t, W, aux, R, nx: int, n: int):
     Returns
     -------
     t, X, Z, U, S, Yh, R
-        As :func:`fjm_runtime.simulate.simulate` stores them.
+        As :func:`fjm_runtime.sim.simulate.simulate` stores them.
     """
     X, Z = W[:, :nx], W[:, nx:]
     last = controller.evaluate(t[-1], X[-1], Z[-1], R[-1])
