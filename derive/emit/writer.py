@@ -87,35 +87,21 @@ def _generate_c(model: str, functions: Dict[str, ca.Function], workdir: Path) ->
     }
 
 
-def write_model(lin: Linearization, outdir: Path) -> Dict[str, object]:
-    """Emit every file of one model into ``outdir`` (created).
-
-    Parameters
-    ----------
-    lin : Linearization
-    outdir : pathlib.Path
-        ``.../<model>``; must not exist yet or be empty.
-
-    Returns
-    -------
-    dict
-        The manifest written to ``manifest.json``.
-    """
-    m = lin.model
-    outdir.mkdir(parents=True, exist_ok=True)
-    functions = build_functions(lin)
-    controls = build_controls(m, functions)
-    versions = tool_versions()
-    ops = {name: operation_count(functions[name]) for name, _ in QUANTITIES}
-    # MX laws: the scalar operations of one call (the core's and the law's own), counted inlined
-    control_ops = {name: operation_count(fn.expand() if fn.is_a("MXFunction") else fn)
-                   for name, fn in controls.items()}
+def _control_meanings() -> Dict[str, str]:
+    """What each control-law Function (core, laws, their ``_zdot``) computes, for headers and the manifest."""
     control_meaning = {"control_core": "y_hat = T(x; p_hat), alpha(x; p_hat), beta(x; p_hat): "
                                        "the model part of every control law, called by each"}
     for kind, meaning in KINDS:
         control_meaning[f"control_{kind}"] = f"control law {kind}: {meaning}"
         control_meaning[f"control_{kind}_zdot"] = f"controller-state derivative of {kind} under a held torque"
+    return control_meaning
 
+
+def _write_casadi_files(lin: Linearization, outdir: Path, functions, controls, ops, control_ops,
+                        versions: Dict[str, str]) -> Dict[str, int]:
+    """Every ``<name>.casadi`` (model quantities, then the laws); returns their byte sizes."""
+    m = lin.model
+    control_meaning = _control_meanings()
     sizes: Dict[str, int] = {}
 
     def write_casadi(name: str, fn: ca.Function, meaning: str, layout, n_ops) -> None:
@@ -133,7 +119,13 @@ def write_model(lin: Linearization, outdir: Path) -> Dict[str, object]:
     for name, fn in controls.items():
         write_casadi(name, fn, control_meaning[name], _layout_lines(lin) + layout_lines(m.n),
                      control_ops[name])
+    return sizes
 
+
+def _write_c_sources(lin: Linearization, outdir: Path, functions, controls, ops, control_ops,
+                     versions: Dict[str, str]) -> List[str]:
+    """``<model>.c`` and ``<model>.h`` with the header comment; returns their file names."""
+    m = lin.model
     with tempfile.TemporaryDirectory() as tmp:
         sources = _generate_c(m.name, {**functions, **controls}, Path(tmp))
     c_header = _comment_block(
@@ -144,30 +136,13 @@ def write_model(lin: Linearization, outdir: Path) -> Dict[str, object]:
     )
     for fname, body in sources.items():
         (outdir / fname).write_text("/* " + c_header[3:] + " */\n" + body)
+    return list(sources)
 
-    manifest = {
-        "header": HEADER,
-        "model": m.name,
-        "description": m.description,
-        **({"source": m.source} if m.source is not None else {}),  # URDF-built models only
-        "n": m.n,
-        "nx": 4 * m.n,
-        "parameters": [
-            {"name": p.name, "default": p.default, "meaning": p.meaning, "unit": p.unit}
-            for p in m.params
-        ],
-        "arguments": argument_layout(lin),
-        "functions": {
-            name: {
-                "casadi_file": f"{name}.casadi",
-                "c_name": f"{m.name}_{name}",
-                "meaning": meaning,
-                "shape": list(functions[name].size_out(0)),
-                "operations": ops[name],
-                "casadi_bytes": sizes[name],
-            }
-            for name, meaning in QUANTITIES
-        },
+
+def _control_entries(m, controls, control_ops, sizes) -> Dict[str, object]:
+    """The manifest's ``controls`` (one entry per law) and ``control_core``."""
+    control_meaning = _control_meanings()
+    entries = {
         "controls": {
             kind: {
                 "casadi_file": f"control_{kind}.casadi",
@@ -196,6 +171,59 @@ def write_model(lin: Linearization, outdir: Path) -> Dict[str, object]:
             "operations": control_ops["control_core"],
             "casadi_bytes": sizes["control_core"],
         },
+    }
+    return entries
+
+
+def write_model(lin: Linearization, outdir: Path) -> Dict[str, object]:
+    """Emit every file of one model into ``outdir`` (created).
+
+    Parameters
+    ----------
+    lin : Linearization
+    outdir : pathlib.Path
+        ``.../<model>``; must not exist yet or be empty.
+
+    Returns
+    -------
+    dict
+        The manifest written to ``manifest.json``.
+    """
+    m = lin.model
+    outdir.mkdir(parents=True, exist_ok=True)
+    functions = build_functions(lin)
+    controls = build_controls(m, functions)
+    versions = tool_versions()
+    ops = {name: operation_count(functions[name]) for name, _ in QUANTITIES}
+    # MX laws: the scalar operations of one call (the core's and the law's own), counted inlined
+    control_ops = {name: operation_count(fn.expand() if fn.is_a("MXFunction") else fn)
+                   for name, fn in controls.items()}
+    sizes = _write_casadi_files(lin, outdir, functions, controls, ops, control_ops, versions)
+    sources = _write_c_sources(lin, outdir, functions, controls, ops, control_ops, versions)
+    manifest = {
+        "header": HEADER,
+        "model": m.name,
+        "description": m.description,
+        **({"source": m.source} if m.source is not None else {}),  # URDF-built models only
+        "n": m.n,
+        "nx": 4 * m.n,
+        "parameters": [
+            {"name": p.name, "default": p.default, "meaning": p.meaning, "unit": p.unit}
+            for p in m.params
+        ],
+        "arguments": argument_layout(lin),
+        "functions": {
+            name: {
+                "casadi_file": f"{name}.casadi",
+                "c_name": f"{m.name}_{name}",
+                "meaning": meaning,
+                "shape": list(functions[name].size_out(0)),
+                "operations": ops[name],
+                "casadi_bytes": sizes[name],
+            }
+            for name, meaning in QUANTITIES
+        },
+        **_control_entries(m, controls, control_ops, sizes),
         "c_sources": {fname: len((outdir / fname).read_bytes()) for fname in sorted(sources)},
         "tools": versions,
         "derivation_seconds": "not stored here (would break byte-identity); see build/derive-timings.json",
