@@ -24,7 +24,7 @@ import casadi as ca
 
 def peer_expressions(model_name: str):
     """SX ``(x, p, exprs)`` with ``exprs`` = dict of alpha/beta variants and y3, y4."""
-    from derive.models import build
+    from derive.registry import build
     from derive.emit.sx import SympyToSX, ldl_factor, ldl_solve
 
     m = build(model_name)

@@ -30,7 +30,8 @@ from pathlib import Path
 from typing import Callable, Dict, List, Optional
 
 from .linearize import linearize
-from .models import MODEL_NAMES, FlexibleJointModel, build
+from .model_base import FlexibleJointModel
+from .registry import MODEL_NAMES, build
 from .emit.writer import recover, swap_in, write_model
 
 REPO = Path(__file__).resolve().parent.parent
@@ -101,7 +102,7 @@ def derive_into(root: Path, models: List[str], log=print,
     """Derive and emit ``models`` into ``root/<model>/``; returns per-model timings (s).
 
     ``builders`` maps extra (user, e.g. model-file) names to functions that
-    build them; other names come from the registry (:func:`derive.models.build`).
+    build them; other names come from the registry (:func:`derive.registry.build`).
     """
     timings: Dict[str, Dict[str, float]] = {}
     builders = builders or {}
@@ -148,8 +149,7 @@ def diff_trees(expected: Path, actual: Path, start: Path = Path(".")) -> List[st
     return problems
 
 
-def main(argv=None, prog: str = "python -m derive") -> int:
-    sys.setrecursionlimit(max(sys.getrecursionlimit(), 20000))  # deep program chains at n = 7
+def _parser(prog: str) -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog=prog, description=__doc__.split("\n\n")[0])
     ap.add_argument("--models", nargs="+", metavar="MODEL",
                     help=f"models to derive (default: all): {' '.join(MODEL_NAMES)}")
@@ -165,58 +165,57 @@ def main(argv=None, prog: str = "python -m derive") -> int:
                          "when writing generated/; they are kept out of generated/ for byte-identity)")
     ap.add_argument("--check", action="store_true",
                     help="regenerate into a temp dir and fail if --out differs")
-    args = ap.parse_args(argv)
+    return ap
+
+
+def _model_file_builders(ap: argparse.ArgumentParser, args) -> Optional[Dict[str, Callable[[], FlexibleJointModel]]]:
+    """Builders of the ``--model-file`` models by name; None after an error was printed (exit 2)."""
     builders: Dict[str, Callable[[], FlexibleJointModel]] = {}
-    if args.model_file:
-        if args.out is None:
-            ap.error("--model-file needs --out DIR (user models are not written into generated/)")
-        try:
-            from .model_file import ModelFileError, load_model_file
-        except ModuleNotFoundError as exc:  # Python < 3.11 without tomli
-            ap.error(f"--model-file needs a TOML parser ({exc.name} is missing): pip install '.[derive]'")
-        for path in args.model_file:
-            try:
-                spec = load_model_file(path)
-            except (ModelFileError, OSError) as exc:
-                print(f"{ap.prog}: error: {exc}", file=sys.stderr)
-                return 2
-            if spec.name in builders:
-                ap.error(f"two model files define the model name {spec.name!r}")
-            builders[spec.name] = spec.build
-        args.models = (args.models or []) + list(builders)
-    models = args.models or list(MODEL_NAMES)
-    unknown = [m for m in models if m not in MODEL_NAMES and m not in builders]
-    if unknown:
-        ap.error(f"unknown model(s) {', '.join(unknown)}; available models: {', '.join(MODEL_NAMES)}")
+    if not args.model_file:
+        return builders
     if args.out is None:
-        fallback = default_out()
-        if fallback is None:
-            ap.error(no_default_out_message(REPO))
-        args.out = fallback
-    signal.signal(signal.SIGTERM, _sigterm_to_exit)
-    out: Path = args.out.resolve()
+        ap.error("--model-file needs --out DIR (user models are not written into generated/)")
+    try:
+        from .model_file import ModelFileError, load_model_file
+    except ModuleNotFoundError as exc:  # Python < 3.11 without tomli
+        ap.error(f"--model-file needs a TOML parser ({exc.name} is missing): pip install '.[derive]'")
+    for path in args.model_file:
+        try:
+            spec = load_model_file(path)
+        except (ModelFileError, OSError) as exc:
+            print(f"{ap.prog}: error: {exc}", file=sys.stderr)
+            return None
+        if spec.name in builders:
+            ap.error(f"two model files define the model name {spec.name!r}")
+        builders[spec.name] = spec.build
+    return builders
 
-    if args.check:
-        with tempfile.TemporaryDirectory(prefix="fjm-check-") as tmp:
-            fresh = Path(tmp) / "generated"
-            fresh.mkdir()
-            derive_into(fresh, list(MODEL_NAMES) if not args.models else models, builders=builders)
-            recover(out)
-            if not out.exists():
-                print(f"check-generated: {out} does not exist; run `make derive`", file=sys.stderr)
-                return 1
-            if args.models:  # compare only the requested models
-                problems = [p for name in models for p in diff_trees(fresh, out, Path(name))]
-            else:
-                problems = diff_trees(fresh, out)
-        if problems:
-            print("check-generated: generated/ is stale; run `make derive` and commit:", file=sys.stderr)
-            for p in problems:
-                print("  " + p, file=sys.stderr)
+
+def _check(out: Path, models: List[str], requested: bool, builders) -> int:
+    """``--check``: regenerate into a temp dir and compare with ``out`` (all models, or the requested ones)."""
+    with tempfile.TemporaryDirectory(prefix="fjm-check-") as tmp:
+        fresh = Path(tmp) / "generated"
+        fresh.mkdir()
+        derive_into(fresh, list(MODEL_NAMES) if not requested else models, builders=builders)
+        recover(out)
+        if not out.exists():
+            print(f"check-generated: {out} does not exist; run `make derive`", file=sys.stderr)
             return 1
-        print("check-generated: generated/ is up to date")
-        return 0
+        if requested:  # compare only the requested models
+            problems = [p for name in models for p in diff_trees(fresh, out, Path(name))]
+        else:
+            problems = diff_trees(fresh, out)
+    if problems:
+        print("check-generated: generated/ is stale; run `make derive` and commit:", file=sys.stderr)
+        for p in problems:
+            print("  " + p, file=sys.stderr)
+        return 1
+    print("check-generated: generated/ is up to date")
+    return 0
 
+
+def _write(out: Path, models: List[str], builders, timings_file: Optional[Path]) -> int:
+    """Derive ``models`` into a sibling staging directory, keep the others, swap it in as ``out``."""
     out.parent.mkdir(parents=True, exist_ok=True)
     recover(out)
     staging = Path(tempfile.mkdtemp(prefix=f".{out.name}-tmp-", dir=out.parent))
@@ -235,7 +234,7 @@ def main(argv=None, prog: str = "python -m derive") -> int:
         if staging.exists():
             shutil.rmtree(staging, ignore_errors=True)
     print(f"derived {len(models)} model(s) in {total:.2f} s -> {out}")
-    timings_path = args.timings or (TIMINGS if out == (REPO / "generated").resolve() else None)
+    timings_path = timings_file or (TIMINGS if out == (REPO / "generated").resolve() else None)
     if timings_path is not None:
         try:
             timings_path.parent.mkdir(parents=True, exist_ok=True)
@@ -243,6 +242,31 @@ def main(argv=None, prog: str = "python -m derive") -> int:
         except OSError as exc:
             print(f"warning: could not write timings to {timings_path}: {exc}", file=sys.stderr)
     return 0
+
+
+def main(argv=None, prog: str = "python -m derive") -> int:
+    sys.setrecursionlimit(max(sys.getrecursionlimit(), 20000))  # deep program chains at n = 7
+    ap = _parser(prog)
+    args = ap.parse_args(argv)
+    builders = _model_file_builders(ap, args)
+    if builders is None:
+        return 2
+    if builders:
+        args.models = (args.models or []) + list(builders)
+    models = args.models or list(MODEL_NAMES)
+    unknown = [m for m in models if m not in MODEL_NAMES and m not in builders]
+    if unknown:
+        ap.error(f"unknown model(s) {', '.join(unknown)}; available models: {', '.join(MODEL_NAMES)}")
+    if args.out is None:
+        fallback = default_out()
+        if fallback is None:
+            ap.error(no_default_out_message(REPO))
+        args.out = fallback
+    signal.signal(signal.SIGTERM, _sigterm_to_exit)
+    out: Path = args.out.resolve()
+    if args.check:
+        return _check(out, models, bool(args.models), builders)
+    return _write(out, models, builders, args.timings)
 
 
 if __name__ == "__main__":

@@ -1,4 +1,4 @@
-"""URDF import (build time only): a base -> tip serial chain as a :class:`ChainDescription`.
+"""URDF import (build time only): a base -> tip serial chain as a :class:`derive.chain.ChainDescription`.
 
 Parsed with the standard library's XML parser (:mod:`xml.parsers.expat`, the
 parser behind :mod:`xml.etree`, maintained with CPython), which reports line
@@ -45,7 +45,7 @@ from typing import Dict, List, Optional, Tuple, Union
 
 import numpy as np
 
-from .spatial import Attached, ChainDescription, Inertial, Joint
+from .chain import Attached, ChainDescription, Inertial, Joint
 
 __all__ = ["UrdfError", "UrdfChain", "parse_urdf", "load_urdf"]
 
@@ -203,30 +203,11 @@ class _Reader:
         return Inertial(mass=mass, xyz=xyz, rpy=rpy, inertia=tensor)
 
 
-def parse_urdf(text: Union[str, bytes], base: str, tip: str, source: str = "<urdf>") -> UrdfChain:
-    """Select the serial chain from ``base`` to ``tip`` of a URDF document.
+Edge = Tuple[_Node, str]  # (joint element, child or parent link name)
 
-    Parameters
-    ----------
-    text : str or bytes
-        The URDF document.
-    base, tip : str
-        Link names.
-    source : str
-        File name for messages.
 
-    Returns
-    -------
-    UrdfChain
-
-    Raises
-    ------
-    UrdfError
-        See the module docstring for the rules.
-    """
-    data = text.encode() if isinstance(text, str) else bytes(text)
-    robot = _parse_xml(data, source)
-    rd = _Reader(source)
+def _index_links(robot: _Node, rd: _Reader) -> Dict[str, _Node]:
+    """``<link>`` elements by name (each named, no name twice)."""
     links: Dict[str, _Node] = {}
     for node in robot.findall("link"):
         name = node.attrs.get("name")
@@ -236,9 +217,15 @@ def parse_urdf(text: Union[str, bytes], base: str, tip: str, source: str = "<urd
             raise rd.fail(node, f"link {name!r} defined twice (first at line {links[name].line}); "
                                 "expected unique link names")
         links[name] = node
+    return links
+
+
+def _index_joints(robot: _Node, rd: _Reader,
+                  links: Dict[str, _Node]) -> Tuple[Dict[str, Edge], Dict[str, List[Edge]]]:
+    """The joint tree: child link -> (joint, parent link), and link -> [(joint, child link)]."""
     joints: Dict[str, _Node] = {}
-    parent_of: Dict[str, Tuple[_Node, str]] = {}  # child link -> (joint, parent link)
-    children: Dict[str, List[Tuple[_Node, str]]] = {k: [] for k in links}
+    parent_of: Dict[str, Edge] = {}  # child link -> (joint, parent link)
+    children: Dict[str, List[Edge]] = {k: [] for k in links}
     for node in robot.findall("joint"):
         name = node.attrs.get("name")
         if not name:
@@ -256,7 +243,7 @@ def parse_urdf(text: Union[str, bytes], base: str, tip: str, source: str = "<urd
                 raise rd.fail(node, f"missing <{role} link=\"...\">")
             if el.attrs["link"] not in links:
                 raise UrdfError(f"link {el.attrs['link']!r} is not defined; expected the name of a <link>",
-                                source, el.line, f"{node.label()} <{role}>")
+                                rd.source, el.line, f"{node.label()} <{role}>")
             ends[role] = el.attrs["link"]
         child = ends["child"]
         if child in parent_of:
@@ -265,20 +252,25 @@ def parse_urdf(text: Union[str, bytes], base: str, tip: str, source: str = "<urd
                                 "a closed kinematic loop; expected a tree (each link has at most one parent joint)")
         parent_of[child] = (node, ends["parent"])
         children[ends["parent"]].append((node, child))
+    return parent_of, children
 
+
+def _base_to_tip(robot: _Node, rd: _Reader, links: Dict[str, _Node], parent_of: Dict[str, Edge],
+                 base: str, tip: str) -> List[Edge]:
+    """The path ``[(joint, child link), ...]`` from the base to the tip."""
     for role, name in (("base", base), ("tip", tip)):
         if name not in links:
             raise UrdfError(f"{role} link {name!r} not found; expected one of the <link> names "
-                            f"({', '.join(sorted(links)) or 'none defined'})", source, robot.line,
+                            f"({', '.join(sorted(links)) or 'none defined'})", rd.source, robot.line,
                             robot.label())
     # Path from the tip up to the base (a cycle would revisit a link).
-    path: List[Tuple[_Node, str]] = []
+    path: List[Edge] = []
     seen = {tip}
     link = tip
     while link != base:
         if link not in parent_of:
             raise UrdfError(f"tip link {tip!r} is not a descendant of base link {base!r}; expected a "
-                            "base -> tip chain of joints", source, links[tip].line, links[tip].label())
+                            "base -> tip chain of joints", rd.source, links[tip].line, links[tip].label())
         jnode, parent = parent_of[link]
         if parent in seen:
             raise rd.fail(jnode, f"the joints form a cycle through link {parent!r}; expected a tree")
@@ -286,12 +278,14 @@ def parse_urdf(text: Union[str, bytes], base: str, tip: str, source: str = "<urd
         path.append((jnode, link))
         link = parent
     path.reverse()
+    return path
 
-    # Joints on the path.
+
+def _path_joints(rd: _Reader, links: Dict[str, _Node], path: List[Edge], base: str,
+                 tip: str) -> Tuple[List[Joint], List[str]]:
+    """The joints on the path (checked), and the links that move (beyond the first moving joint)."""
     chain: List[Joint] = []
     moving = False
-    on_path = {base} | {c for _, c in path}
-    path_joints = {id(j) for j, _ in path}
     moving_links: List[str] = []
     for jnode, child in path:
         kind = jnode.attrs["type"]
@@ -317,9 +311,15 @@ def parse_urdf(text: Union[str, bytes], base: str, tip: str, source: str = "<urd
                            inertial=rd.inertial(links[child], required=kind != "fixed") if moving else None))
     if not moving:
         raise UrdfError(f"no revolute or continuous joint between base {base!r} and tip {tip!r}; expected "
-                        "at least one", source, links[tip].line, links[tip].label())
+                        "at least one", rd.source, links[tip].line, links[tip].label())
+    return chain, moving_links
 
-    # Off-path links hanging on moving links: fixed -> attached, non-fixed -> must be massless.
+
+def _off_path(rd: _Reader, links: Dict[str, _Node], children: Dict[str, List[Edge]], path: List[Edge],
+              moving_links: List[str], base: str, tip: str) -> Tuple[List[Attached], List[str]]:
+    """Off-path links hanging on moving links: fixed -> attached, non-fixed -> must be massless."""
+    on_path = {base} | {c for _, c in path}
+    path_joints = {id(j) for j, _ in path}
     attached: List[Attached] = []
     ignored: List[str] = []
 
@@ -358,6 +358,38 @@ def parse_urdf(text: Union[str, bytes], base: str, tip: str, source: str = "<urd
         attach(link_name, link_name, (), link_name)
     static = set(subtree(base)) - set(moving_links) - {a.name for a in attached} - set(ignored)
     ignored.extend(k for k in static if k not in on_path)
+    return attached, ignored
+
+
+def parse_urdf(text: Union[str, bytes], base: str, tip: str, source: str = "<urdf>") -> UrdfChain:
+    """Select the serial chain from ``base`` to ``tip`` of a URDF document.
+
+    Parameters
+    ----------
+    text : str or bytes
+        The URDF document.
+    base, tip : str
+        Link names.
+    source : str
+        File name for messages.
+
+    Returns
+    -------
+    UrdfChain
+
+    Raises
+    ------
+    UrdfError
+        See the module docstring for the rules.
+    """
+    data = text.encode() if isinstance(text, str) else bytes(text)
+    robot = _parse_xml(data, source)
+    rd = _Reader(source)
+    links = _index_links(robot, rd)
+    parent_of, children = _index_joints(robot, rd, links)
+    path = _base_to_tip(robot, rd, links, parent_of, base, tip)
+    chain, moving_links = _path_joints(rd, links, path, base, tip)
+    attached, ignored = _off_path(rd, links, children, path, moving_links, base, tip)
     desc = ChainDescription(base=base, joints=tuple(chain), attached=tuple(attached))
     return UrdfChain(description=desc, robot=robot.attrs.get("name", ""), joints=desc.revolute_names,
                      ignored=tuple(sorted(set(ignored))), sha256=hashlib.sha256(data).hexdigest())

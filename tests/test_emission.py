@@ -8,7 +8,7 @@ import sympy as sp
 from derive.emit.functions import QUANTITIES, build_functions
 from derive.emit.sx import SympyToSX, ldl_factor, ldl_solve, spd_inverse
 from derive.linearize import linearize
-from derive.models import build
+from derive.registry import build
 
 
 @pytest.mark.parametrize("name", ["link1", "planar3"])

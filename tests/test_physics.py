@@ -5,7 +5,7 @@ import pytest
 import sympy as sp
 
 import fjm_runtime
-from derive.models import build
+from derive.registry import build
 from _independent_chain import PinocchioReference
 from _numerics import ALL_MODELS, random_params, random_state, rk4
 

@@ -15,8 +15,10 @@ import pytest
 import fjm_runtime
 from derive.emit.functions import QUANTITIES, build_functions
 from derive.linearize import linearize
-from derive.models import make_planar
-from derive.spatial import elastic_params, make_spatial, planar_description, rpy_matrix
+from derive.chain import planar_description, rpy_matrix
+from derive.planar import make_planar
+from derive.spatial import make_spatial
+from derive.spatial_params import elastic_params
 from derive.urdf import load_urdf
 from _numerics import random_params, random_state, rk4
 

@@ -207,7 +207,7 @@ def test_massless_branch_is_ignored_and_named(tmp_path):
 def test_fixed_branch_is_merged(tmp_path):
     """A fixed side mass changes D exactly as Pinocchio's merge does."""
     import pinocchio as pin
-    from derive.spatial import chain_numerics
+    from derive.chain import chain_numerics
     extra = f"""  <link name="side">{INERTIAL.format(mass=0.5, ixx=0.02)}</link>
   <joint name="side_joint" type="fixed">
     <origin xyz="0.1 0.2 0" rpy="0.3 0.2 0.1"/>

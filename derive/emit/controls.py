@@ -217,7 +217,7 @@ def build_controls(model, functions: Dict[str, ca.Function]) -> Dict[str, ca.Fun
 
     Parameters
     ----------
-    model : derive.models.FlexibleJointModel
+    model : derive.model_base.FlexibleJointModel
     functions : dict str -> casadi.Function
         The model's SX Functions (``T``, ``alpha``, ``beta`` are used, inlined into the core).
 

@@ -1,0 +1,41 @@
+"""Model registry: the built-in models by name (:data:`MODEL_NAMES`, :func:`build`).
+
+``link1`` and ``planar1..7`` are closed forms (:mod:`derive.planar`); the
+spatial arms ``elbow3`` and ``panda`` are URDF model files shipped in
+``derive/robots/<name>/<name>.toml`` (read by :mod:`derive.model_file`, built
+by :mod:`derive.spatial`). This module sits on top of both: nothing in
+``derive`` below it imports it.
+"""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+from .model_base import MODEL_NAMES, SPATIAL_NAMES, FlexibleJointModel
+from .planar import make_link1, make_planar
+
+__all__ = ["MODEL_NAMES", "SPATIAL_NAMES", "ROBOTS", "build"]
+
+#: Where the built-in spatial arms' model files and URDFs are.
+ROBOTS = Path(__file__).resolve().parent / "robots"
+
+
+def build(name: str) -> FlexibleJointModel:
+    """Build a registered model by name.
+
+    Raises
+    ------
+    ValueError
+        If ``name`` is not registered; the message lists the available models.
+    """
+    if name == "link1":
+        return make_link1()
+    match = re.fullmatch(r"planar([1-7])", name or "")
+    if match:
+        return make_planar(int(match.group(1)))
+    if name in SPATIAL_NAMES:
+        # Imported here: model files need a TOML parser (tomli before Python 3.11), the formula models do not.
+        from .model_file import load_model_file
+        return load_model_file(ROBOTS / name / f"{name}.toml", builtin=True).build()
+    raise ValueError(f"unknown model {name!r}; available models: {', '.join(MODEL_NAMES)}")
