@@ -20,8 +20,8 @@ import argparse
 import numpy as np
 
 import fjm_runtime as fjm
-from fjm_runtime.control.laws import make_controller
-from fjm_runtime.experiments.paper import Design, K_BOUNDS, K_NOM, LAM
+from fjm_runtime.control.factory import make_controller
+from fjm_runtime.experiments.settings import Design, K_BOUNDS, K_NOM, LAM
 from fjm_runtime.control.references import Sinusoid
 from fjm_runtime.sim.simulate import SimulationDivergedError, simulate
 
