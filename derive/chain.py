@@ -142,6 +142,32 @@ class ChainDescription:
 # Build-time numerics (floats)
 # --------------------------------------------------------------------------------------------
 
+# 3-vectors and 3x3 matrices are combined in plain Python floats, left to right: numpy's ``@``
+# goes through BLAS, whose kernel (FMA or not, summation order) depends on the processor and
+# changes the last bit of the baked numbers, and generated/ must be byte-identical everywhere.
+
+def mm(A, B) -> np.ndarray:
+    """``A @ B`` for 3x3 matrices, in a fixed order of float operations."""
+    return np.array([[float(A[r][0]) * float(B[0][k]) + float(A[r][1]) * float(B[1][k])
+                      + float(A[r][2]) * float(B[2][k]) for k in range(3)] for r in range(3)])
+
+
+def mv(A, v) -> np.ndarray:
+    """``A @ v`` for a 3x3 matrix and a 3-vector, in a fixed order of float operations."""
+    return np.array([float(A[r][0]) * float(v[0]) + float(A[r][1]) * float(v[1]) + float(A[r][2]) * float(v[2])
+                     for r in range(3)])
+
+
+def dot(a, b) -> float:
+    """``a . b`` for 3-vectors, in a fixed order of float operations."""
+    return float(a[0]) * float(b[0]) + float(a[1]) * float(b[1]) + float(a[2]) * float(b[2])
+
+
+def outer(a, b) -> np.ndarray:
+    """``a b^T`` for 3-vectors."""
+    return np.array([[float(a[r]) * float(b[k]) for k in range(3)] for r in range(3)])
+
+
 def snap(M: np.ndarray) -> np.ndarray:
     """A float copy of ``M`` with entries within :data:`SNAP` of 0, 1 or -1 made exact."""
     out = np.array(M, dtype=float)
@@ -162,13 +188,13 @@ def rpy_matrix(rpy: Sequence[float]) -> np.ndarray:
     Rx = np.array([[1, 0, 0], [0, cr, -sr], [0, sr, cr]])
     Ry = np.array([[cp, 0, sp_], [0, 1, 0], [-sp_, 0, cp]])
     Rz = np.array([[cy, -sy, 0], [sy, cy, 0], [0, 0, 1]])
-    return snap(snap(Rz) @ snap(Ry) @ snap(Rx))
+    return snap(mm(mm(snap(Rz), snap(Ry)), snap(Rx)))
 
 
 def _axis_frame(axis: Sequence[float]) -> np.ndarray:
     """A rotation ``Ra`` with ``Ra e_z = axis`` (exact for the coordinate axes)."""
     a = np.asarray(axis, float)
-    a = a / np.linalg.norm(a)
+    a = a / math.sqrt(dot(a, a))
     a = snap(a)
     if np.allclose(a, [0, 0, 1], atol=0):
         return np.eye(3)
@@ -184,10 +210,10 @@ def _axis_frame(axis: Sequence[float]) -> np.ndarray:
         return np.array([[1.0, 0, 0], [0, 0, -1], [0, 1, 0]])  # Rx(pi/2)
     # General axis: rotate e_z onto a about e_z x a (Rodrigues).
     k = np.cross([0.0, 0.0, 1.0], a)
-    s, c = np.linalg.norm(k), a[2]
+    s, c = math.sqrt(dot(k, k)), a[2]
     k = k / s
     Kx = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
-    return snap(np.eye(3) + s * Kx + (1 - c) * Kx @ Kx)
+    return snap(np.eye(3) + s * Kx + (1 - c) * mm(Kx, Kx))
 
 
 @dataclass(frozen=True)
@@ -248,10 +274,10 @@ def _walk_path(desc: ChainDescription) -> Tuple[Dict[str, Pose], List[dict], Lis
     parent = desc.base
     for j in desc.joints:
         k, R, p = pose[parent]
-        Ro, po = R @ rpy_matrix(j.rpy), p + R @ np.asarray(j.xyz, float)
+        Ro, po = mm(R, rpy_matrix(j.rpy)), p + mv(R, j.xyz)
         if j.kind == "revolute":
             Ra = _axis_frame(j.axis)
-            bodies.append({"R0": snap(Ro @ Ra), "p": po})
+            bodies.append({"R0": snap(mm(Ro, Ra)), "p": po})
             k, R, p = len(bodies), Ra.T.copy(), np.zeros(3)  # child link frame in the new body frame
         elif j.kind == "fixed":
             R, p = snap(Ro), po
@@ -273,7 +299,7 @@ def _attached_pieces(desc: ChainDescription, pose: Dict[str, Pose]) -> List[Piec
             raise ValueError(f"attached link {a.name!r}: parent {a.parent!r} is not on the chain")
         k, R, p = pose[a.parent]
         for xyz, rpy in a.origins:
-            R, p = snap(R @ rpy_matrix(rpy)), p + R @ np.asarray(xyz, float)
+            R, p = snap(mm(R, rpy_matrix(rpy))), p + mv(R, xyz)
         pieces.append((k, R, p, a.inertial, a.name))
     return pieces
 
@@ -316,13 +342,13 @@ def chain_numerics(desc: ChainDescription, symbolic: Sequence[str] = ()) -> Chai
             continue
         if inertial is None or inertial.mass == 0:
             continue
-        Rc = snap(R @ rpy_matrix(inertial.rpy))
-        c = p + R @ np.asarray(inertial.xyz, float)
+        Rc = snap(mm(R, rpy_matrix(inertial.rpy)))
+        c = p + mv(R, inertial.xyz)
         m = float(inertial.mass)
-        Ic = Rc @ _inertia_matrix(inertial.inertia) @ Rc.T
+        Ic = mm(mm(Rc, _inertia_matrix(inertial.inertia)), Rc.T)
         mass[k] += m
         first[k] = first[k] + m * c
-        inert[k] = inert[k] + Ic + m * (float(c @ c) * np.eye(3) - np.outer(c, c))
+        inert[k] = inert[k] + Ic + m * (dot(c, c) * np.eye(3) - outer(c, c))
     out = tuple(BodyNumerics(R0=b["R0"], p=b["p"], mass=mass[i + 1], first_moment=first[i + 1],
                              inertia_origin=(inert[i + 1] + inert[i + 1].T) / 2)
                 for i, b in enumerate(bodies))

@@ -33,7 +33,7 @@ from typing import Dict, List, Sequence, Tuple
 import numpy as np
 import sympy as sp
 
-from .chain import ChainDescription, ChainNumerics, chain_numerics, rpy_matrix, snap
+from .chain import ChainDescription, ChainNumerics, chain_numerics, dot, mm, outer, rpy_matrix, snap
 from .lie import DirectionalDerivative
 from .model_base import FlexibleJointModel, Param, elastic_param_names, state_symbols
 from .program import Program
@@ -146,7 +146,7 @@ def _body_inertias(d: _Namer, num: ChainNumerics, sym: Dict[str, sp.Symbol], pay
         cl = [sym[f"c{a}_{link}"] for a in "xyz"]
         c = [d(f"cB_{link}_{'xyz'[r]}", sp.Add(*[_num(Rl[r, j]) * cl[j] for j in range(3)]) + _num(pl[r]))
              for r in range(3)]
-        Rc = snap(Rl @ rpy_matrix(inertial.rpy))
+        Rc = snap(mm(Rl, rpy_matrix(inertial.rpy)))
         i6 = [sym[f"i{a}_{link}"] for a in ("xx", "xy", "xz", "yy", "yz", "zz")]
         Ic = [[i6[0], i6[1], i6[2]], [i6[1], i6[3], i6[4]], [i6[2], i6[4], i6[5]]]
         RIc = [[sp.Add(*[_num(Rc[r, a]) * Ic[a][b] * _num(Rc[j, b]) for a in range(3) for b in range(3)])
@@ -381,7 +381,7 @@ def make_spatial_jacobian(desc: ChainDescription, name: str, params: Tuple[Param
         com = b.first_moment / b.mass
         cms.append([d(f"cm{i + 1}{'xyz'[r]}", o[r] + sp.Add(*[W[r][k] * _num(com[k]) for k in range(3)]))
                     for r in range(3)])
-        Ic = b.inertia_origin - b.mass * (float(com @ com) * np.eye(3) - np.outer(com, com))
+        Ic = b.inertia_origin - b.mass * (dot(com, com) * np.eye(3) - outer(com, com))
         WI = [[sp.Add(*[W[r][a] * _num(Ic[a, k]) for a in range(3)]) for k in range(3)] for r in range(3)]
         Iws.append(_symmetric([[d(f"Iw{i + 1}_{r + 1}{k + 1}", sp.Add(*[WI[r][a] * W[k][a] for a in range(3)]))
                                 if k >= r else None for k in range(3)] for r in range(3)]))

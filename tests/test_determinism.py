@@ -46,3 +46,26 @@ def test_derive_is_byte_identical_across_hash_seeds(tmp_path):
     assert not differ, f"PYTHONHASHSEED {SEEDS[0]} vs {SEEDS[1]}: differing files {differ}"
     for name, data in a.items():  # no absolute paths / temp dirs leak into the outputs
         assert str(tmp_path).encode() not in data and str(REPO).encode() not in data, name
+
+
+def test_baked_urdf_numbers_do_not_depend_on_the_blas_kernel(tmp_path):
+    """The spatial models' baked numbers (frames, inertias) are the same bytes whatever BLAS
+    kernel numpy picks: OpenBLAS chooses it per processor (FMA or not), and generated/ must
+    not change from one machine to the next. Forcing two kernels stands in for two machines."""
+    outs, procs = [], []
+    for core in ("Prescott", "Haswell"):
+        out = tmp_path / core
+        env = dict(os.environ, OPENBLAS_CORETYPE=core,
+                   PYTHONPATH=str(REPO) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+        procs.append(subprocess.Popen([sys.executable, "-m", "derive", "--models", "elbow3", "--out", str(out)],
+                                      cwd=tmp_path, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                                      text=True))
+        outs.append(out)
+    for proc in procs:
+        log, _ = proc.communicate(timeout=300)
+        assert proc.returncode == 0, log
+    a, b = (tree_bytes(o) for o in outs)
+    assert a and set(a) == set(b)
+    assert [k for k in a if a[k] != b[k]] == []
+    committed = tree_bytes(REPO / "generated")
+    assert [k for k in a if committed.get(k) != a[k]] == [], "generated/elbow3 differs from a fresh derive"

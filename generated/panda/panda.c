@@ -852,7 +852,7 @@ static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a154=(a077*a154);
   a151=(a151+a154);
   a154=(a151*a093);
-  a155=3.9139128168424797e-04;
+  a155=3.9139128168424802e-04;
   a156=(a090*a082);
   a156=(a156*a077);
   a155=(a155-a156);
@@ -2946,7 +2946,7 @@ static int casadi_f2(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a041=(a048*a043);
   a047=(a047+a041);
   a041=-2.;
-  a038=3.9139128168424797e-04;
+  a038=3.9139128168424802e-04;
   a050=(a049*a039);
   a050=(a050*a036);
   a038=(a038-a050);
@@ -14980,7 +14980,7 @@ static int casadi_f3(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a218=(a097*a218);
   a215=(a215+a218);
   a218=(a215*a117);
-  a219=3.9139128168424797e-04;
+  a219=3.9139128168424802e-04;
   a220=(a112*a102);
   a220=(a220*a097);
   a219=(a219-a220);
@@ -18995,7 +18995,7 @@ static int casadi_f4(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a203=(a119*a203);
   a200=(a200+a203);
   a203=(a200*a140);
-  a204=3.9139128168424797e-04;
+  a204=3.9139128168424802e-04;
   a205=(a135*a124);
   a205=(a205*a119);
   a204=(a204-a205);
@@ -25834,7 +25834,7 @@ static int casadi_f5(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a12=(a19*a14);
   a18=(a18+a12);
   a12=-2.;
-  a09=3.9139128168424797e-04;
+  a09=3.9139128168424802e-04;
   a21=(a20*a10);
   a21=(a21*a07);
   a09=(a09-a21);
@@ -26919,7 +26919,7 @@ static int casadi_f6(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a42=(a40*a37);
   a39=(a39+a42);
   a42=-2.;
-  a43=3.9139128168424797e-04;
+  a43=3.9139128168424802e-04;
   a44=(a22*a19);
   a44=(a44*a32);
   a43=(a43-a44);
@@ -27758,7 +27758,7 @@ static int casadi_f7(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a12=(a19*a14);
   a18=(a18+a12);
   a12=-2.;
-  a09=3.9139128168424797e-04;
+  a09=3.9139128168424802e-04;
   a21=(a20*a10);
   a21=(a21*a07);
   a09=(a09-a21);
@@ -29227,7 +29227,7 @@ static int casadi_f8(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a218=(a097*a218);
   a215=(a215+a218);
   a218=(a215*a117);
-  a219=3.9139128168424797e-04;
+  a219=3.9139128168424802e-04;
   a220=(a112*a102);
   a220=(a220*a097);
   a219=(a219-a220);
