@@ -249,6 +249,7 @@ def plot(results, path: Path) -> Path:
                 axes[j, k + 1].set_title(f"torque, {lab} (dashed: URDF limit {lim:g} N m)", fontsize=9.5)
         if j == 0:
             axes[j, 0].set_title("tracking error, worst joint", fontsize=9.5)
+        axes[j, 0].set_ylim(bottom=1e-6)
     for a in axes[-1]:
         a.set_xlabel("t (s)")
     handles = []

@@ -88,8 +88,9 @@ def plot_paper_case(results: Dict[float, object], task: str, design, path: Path)
     if peak > s_lim:
         ax[1, 1].annotate(f"reaching phase t < {t_from:.2g} s: max abs(s) = {peak:.3g} (off scale)",
                           xy=(0.02, 0.04), xycoords="axes fraction", fontsize=8.5)
-    for a in ax.flat:
+    for a in ax.flat[:3]:
         a.legend(loc="best", ncol=1)
+    ax[1, 1].legend(loc="upper right", ncol=2, fontsize=8)  # clear of the off-scale note (lower left)
     fig.suptitle(f"link1 {task} ({TASKS[task][2]}): controller uses K_nom = {K_NOM:g}, "
                  f"beta_hat = {design.beta_hat:.4f}, k_s = {design.k_s:.0f} (Lemma 1), "
                  f"lambda = {LAM:g}", fontsize=11)
