@@ -1,0 +1,102 @@
+"""Compiled closed loop (fjm_runtime.sim.compiled): same trajectories as Python; a robust cache."""
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import fjm_runtime
+from fjm_runtime.ccache import cache_dir
+from fjm_runtime.sim.compiled import closed_loop_runner
+from fjm_runtime.control.factory import make_controller
+from fjm_runtime.control.references import Sinusoid
+from fjm_runtime.sim.simulate import simulate
+
+from support.paths import REPO  # noqa: E402
+
+
+pytestmark = pytest.mark.slow  # builds C, a wheel or derives in a subprocess: `pytest -m 'not slow'` skips it
+
+@pytest.fixture(autouse=True)
+def private_cache(tmp_path, monkeypatch):
+    monkeypatch.setenv("FJM_CACHE", str(tmp_path / "cache"))
+    return tmp_path / "cache"
+
+
+@pytest.mark.parametrize("name,kind,kw", [
+    ("link1", "smc", {"k_s": 300.0, "delta": 2.0}),
+    ("link1", "ismc", {"k_s": 300.0, "delta": 2.0, "u_max": 5.0}),
+    ("planar2", "smc", {"k_s": 100.0, "delta": 2.0}),
+])
+def test_compiled_equals_python(name, kind, kw):
+    m = fjm_runtime.load(name)
+    true = {"K": 110.0} if name == "link1" else {"K1": 120.0, "K2": 180.0}
+    ctrl = make_controller(kind, m, {}, lam=8.0, **kw)
+    ref = Sinusoid(0.5, 1.0, n=m.n)
+    a = simulate(m, ctrl, ref, duration=0.5, true_params=true, backend="python")
+    b = simulate(m, ctrl, ref, duration=0.5, true_params=true, backend="compiled")
+    assert np.max(np.abs(a.x - b.x)) < 1e-9
+    assert np.max(np.abs(a.u - b.u)) < 1e-9 * max(1.0, np.max(np.abs(a.u)))
+    assert np.max(np.abs(a.s - b.s)) < 1e-9 * max(1.0, np.max(np.abs(a.s)))
+    if a.z.size:
+        assert np.max(np.abs(a.z - b.z)) < 1e-9
+    for k, v in a.metrics.as_dict().items():
+        assert b.metrics.as_dict()[k] == pytest.approx(v, rel=1e-9, abs=1e-12)
+
+
+_CHILD = """
+import numpy as np, fjm_runtime
+from fjm_runtime.control.factory import make_controller
+from fjm_runtime.control.references import Sinusoid
+from fjm_runtime.sim.simulate import simulate
+m = fjm_runtime.load("link1")
+ctrl = make_controller("smc", m, {}, lam=8.0, k_s=300.0, delta=2.0)
+r = simulate(m, ctrl, Sinusoid(0.5, 1.0), duration=0.2, true_params={"K": 110.0}, backend="compiled")
+print(repr(float(r.x[-1, 0])))
+"""
+
+
+def _child(cache):
+    env = dict(os.environ, FJM_CACHE=str(cache), PYTHONPATH=str(REPO))
+    out = subprocess.run([sys.executable, "-c", _CHILD], env=env, cwd=str(REPO),
+                         capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    return float(out.stdout.strip().splitlines()[-1])
+
+
+def _entries(cache):
+    return sorted(cache.glob("*.so")), sorted(cache.glob("*.json"))
+
+
+def test_cache_is_reused_and_rebuilt_when_corrupt(private_cache):
+    ref_value = _child(private_cache)          # builds the entry
+    (so,), (meta,) = _entries(private_cache)
+    record = json.loads(meta.read_text())
+    stamp = so.stat().st_mtime_ns
+    assert _child(private_cache) == ref_value  # reused: not rebuilt
+    assert so.stat().st_mtime_ns == stamp
+
+    so.write_bytes(b"\x7fELF garbage, not a library")   # corrupt the library
+    assert _child(private_cache) == ref_value
+    assert json.loads(meta.read_text())["so_sha256"] == record["so_sha256"]  # rebuilt, same bytes
+
+    meta.write_text("{ not json")                       # corrupt the record
+    assert _child(private_cache) == ref_value
+    assert json.loads(meta.read_text())["key"] == record["key"]
+
+    so.unlink()                                         # missing library
+    assert _child(private_cache) == ref_value
+    assert len(_entries(private_cache)[0]) == 1
+
+
+def test_cache_key_changes_with_the_source(private_cache):
+    m = fjm_runtime.load("link1")
+    c1 = make_controller("smc", m, {}, lam=8.0, k_s=300.0, delta=2.0)
+    c2 = make_controller("smc", m, {}, lam=9.0, k_s=300.0, delta=2.0)
+    closed_loop_runner(m, c1, 1e-3, 10)
+    closed_loop_runner(m, c2, 1e-3, 10)
+    closed_loop_runner(m, c1, 1e-3, 10)
+    assert len(_entries(cache_dir())[0]) == 2

@@ -1,0 +1,1 @@
+"""Shared test helpers: independent references and numeric utilities (no tests here)."""
