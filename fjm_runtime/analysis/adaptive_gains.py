@@ -14,6 +14,7 @@ import numpy as np
 from .box import per_joint, stiffness_names, surface_coefficients
 from .certify import synthesize_gains
 from .evaluator import Evaluator
+from ..control.defaults import DEFAULT_LAYER_RATE
 
 __all__ = ["AdaptiveTuneResult", "synthesize_adaptive_gains"]
 
@@ -57,7 +58,7 @@ class AdaptiveTuneResult:
 
 def synthesize_adaptive_gains(model, nominal_params=None, *, K_bounds, param_box=None, reference_bounds,
                               error_bounds, lam=None, c=None, integral: bool = True, n_estimates: int = 3,
-                              eta=10.0, u_max=None, layer_rate: float = 200.0, budget: int = 60000,
+                              eta=10.0, u_max=None, layer_rate: float = DEFAULT_LAYER_RATE, budget: int = 60000,
                               n_grid: Optional[int] = None, n_gamma: int = 20000, seed: int = 0,
                               disturbance_bound=0.0) -> AdaptiveTuneResult:
     """Gains for the adaptive-stiffness law: frozen-estimate synthesis plus the ``K_hat'`` term.

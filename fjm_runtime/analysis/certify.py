@@ -73,6 +73,7 @@ from typing import Optional
 import numpy as np
 
 from .grid import BoxAnalysis, nominal_setup, solve_gain, witness_point
+from ..control.defaults import DEFAULT_LAYER_RATE
 
 __all__ = ["TuneResult", "InfeasibleGainError", "synthesize_gains", "certificate", "GUARANTEE"]
 
@@ -190,7 +191,7 @@ class TuneResult:
 
 def synthesize_gains(model, nominal_params=None, *, param_box=None, reference_bounds, error_bounds,
                      lam: Optional[float] = None, c=None, integral: bool = False, beta_hat=None,
-                     eta=10.0, u_max=None, delta=None, layer_rate: float = 200.0,
+                     eta=10.0, u_max=None, delta=None, layer_rate: float = DEFAULT_LAYER_RATE,
                      include_margin: bool = True, budget: int = 60000, n_grid: Optional[int] = None,
                      seed: int = 0, raise_infeasible: bool = False, disturbance_bound=0.0) -> TuneResult:
     """Per-joint switching gains for the law that is run (nominal coordinates), with a certificate.

@@ -15,6 +15,7 @@ from typing import Dict, List, Tuple
 from ..analysis.box import default_stiffness_box, param_box_from_ranges
 from ..analysis.certify import GUARANTEE, synthesize_gains
 from ..analysis.lemma1 import paper_beta_hat
+from ..control.defaults import DEFAULT_LAYER_RATE
 
 DEFAULT_ERROR_BOX = {"sine": [0.05, 0.5, 0.5, 0.5], "step": [0.05, 0.1, 0.5, 1.0]}
 
@@ -92,7 +93,7 @@ def add_parser(sub) -> None:
                          "chains always use beta(x; nominal) (default paper)")
     tp.add_argument("--eta", type=_number, default=10.0, help="reaching margin, rad/s^4 (default 10)")
     tp.add_argument("--u-max", type=_number, default=None, help="actuator limit, N m (default none)")
-    tp.add_argument("--layer-rate", type=_number, default=200.0,
+    tp.add_argument("--layer-rate", type=_number, default=DEFAULT_LAYER_RATE,
                     help="boundary layer delta = k_s / rate (default 200)")
     tp.add_argument("--budget", type=_integer, default=60000, help="approximate grid size (default 60000)")
     tp.add_argument("--disturbance-bound", type=_number, default=0.0, metavar="D",

@@ -1,4 +1,4 @@
-"""Finite-difference checks of every generated model (issue 3).
+"""Finite-difference checks of every generated model.
 
 Each identity of the feedback linearization is checked on random states and
 random physical parameters (with motor damping), using only the generated

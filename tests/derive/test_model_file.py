@@ -1,4 +1,4 @@
-"""User model files (issue 6 item 6): a TOML description of a planar chain derives and emits
+"""User model files: a TOML description of a planar chain derives and emits
 exactly like the built-in planar<n>, and every bad file is rejected with the key and its line."""
 
 from __future__ import annotations

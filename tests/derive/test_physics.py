@@ -1,4 +1,4 @@
-"""Physics identities and independent formulations of the generated models (issue 3)."""
+"""Physics identities and independent formulations of the generated models."""
 
 import numpy as np
 import pytest

@@ -1,4 +1,4 @@
-"""The generated models against references that share no code with ``derive/`` (issue 10).
+"""The generated models against references that share no code with ``derive/``.
 
 The planar chains are rebuilt from their physical description only
 (``tests/support/independent_chain.py``): once with Pinocchio's model-building API

@@ -1,4 +1,4 @@
-"""Spatial arms from URDF (issue 11) against Pinocchio on the very same URDF files.
+"""Spatial arms from URDF against Pinocchio on the very same URDF files.
 
 Pinocchio parses the URDF itself (urdfdom-style) and runs its own rigid-body
 algorithms (crba, rnea, aba); fixed joints, including the Panda's (fixed)

@@ -270,7 +270,7 @@ def random_control_inputs(model: fjm_runtime.Model, kind: str, rng: np.random.Ge
 
 @pytest.mark.parametrize("model", MODELS)
 def test_control_laws_c_equals_casadi(c_builds, model, record_property):
-    """Every emitted law (and its _zdot part) in C equals its CasADi Function (issue 12)."""
+    """Every emitted law (and its _zdot part) in C equals its CasADi Function."""
     m = fjm_runtime.load(model)
     lib = ctypes.CDLL(str(c_builds[(model, "double")].lib))
     lib_f = ctypes.CDLL(str(c_builds[(model, "float")].lib)) if model in FLOAT_MODELS else None

@@ -1,4 +1,4 @@
-"""The repository stands alone (issue 10, deliverable 6).
+"""The repository stands alone.
 
 * No tracked ``*.py``/``*.md`` file outside ``docs/`` points at the team's
   private design notes or at the paper's location outside the repository;

@@ -1,4 +1,4 @@
-"""Dask sweep on a local 2-worker cluster == simulate_batch on the same samples (issue 5)."""
+"""Dask sweep on a local 2-worker cluster == simulate_batch on the same samples."""
 
 import numpy as np
 import pytest

@@ -1,4 +1,4 @@
-"""Issue 7 item 3: online stiffness estimate (fjm_runtime.control.adaptive) on link1, K_nom = 150, bounds [100, 200]."""
+"""Online stiffness estimate (fjm_runtime.control.adaptive) on link1, K_nom = 150, bounds [100, 200]."""
 import json
 
 import numpy as np

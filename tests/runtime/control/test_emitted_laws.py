@@ -1,4 +1,4 @@
-"""Issue 12: the control laws emitted by ``make derive`` (generated/<model>/control_<kind>.casadi, C).
+"""The control laws emitted by ``make derive`` (generated/<model>/control_<kind>.casadi, C).
 
 * every runtime path (python, fused CasADi, compiled) gives the trajectories of an
   independent NumPy implementation of each law, written here from the formulas of the

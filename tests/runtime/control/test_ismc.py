@@ -1,4 +1,4 @@
-"""Issue 7: the regulation offset of the paper's SMC under nominal-only T_hat, and the integral surface."""
+"""The regulation offset of the paper's SMC under nominal-only T_hat, and the integral surface."""
 import numpy as np
 import pytest
 
