@@ -42,8 +42,9 @@ from typing import NamedTuple, Optional
 
 import numpy as np
 
-from ..validation import joint_vector
+from ..validation import FjmValueError, joint_vector
 from .defaults import DEFAULT_DELTA
+from .sensing import SENSING_KINDS, measurement_size
 
 MODES = ("sat", "sign", "fl")
 
@@ -154,13 +155,26 @@ class SlidingModeController:
     anti_windup : bool
         Enable the conditional integration above (default True; False only to
         demonstrate windup).
+    sensing : {'state', 'torque'}
+        What the controller reads (:mod:`fjm_runtime.control.sensing`): the plant state
+        ``x`` (4n; the emitted ``control_<kind>``) or the torque-sensed measurement
+        ``m = [q; dq; tau_J; dtau_J; dq_m]`` (5n; the emitted ``control_<kind>_tau``,
+        derived in torque coordinates, docs/torque-sensing.md). Every method's first
+        state argument is that measurement (:attr:`measurement_size` long).
     """
 
     def __init__(self, model, nominal_params, *, lam: Optional[float] = None, c=None,
                  k_s=0.0, delta=DEFAULT_DELTA, mode: str = "sat", beta_hat=None, k_lin=None,
-                 u_max=None, integral: bool = False, anti_windup: bool = True):
+                 u_max=None, integral: bool = False, anti_windup: bool = True, sensing: str = "state"):
         if mode not in MODES:
             raise ValueError(f"mode = {mode!r}: expected one of {', '.join(MODES)}")
+        if sensing not in SENSING_KINDS:
+            raise ValueError(f"sensing = {sensing!r}: expected one of {', '.join(SENSING_KINDS)}")
+        if sensing == "torque" and mode == "sign":
+            raise ValueError("sensing = 'torque' with mode = 'sign': the torque-sensed laws are emitted "
+                             "for smc (sat), ismc and fl; the sign law needs sensing = 'state'")
+        #: ``'state'`` (reads x, 4n) or ``'torque'`` (reads m, 5n).
+        self.sensing = sensing
         self.model = model
         self.n = n = int(model.n)
         self.mode = mode
@@ -202,11 +216,16 @@ class SlidingModeController:
 
     # -- the emitted law -----------------------------------------------------
     @property
+    def measurement_size(self) -> int:
+        """Length of the first state argument of every method: ``4n`` (x) or ``5n`` (m, torque-sensed)."""
+        return measurement_size(self.sensing, self.n)
+
+    @property
     def law_kind(self) -> str:
-        """Which emitted law runs: ``smc``, ``ismc``, ``fl`` or ``adaptive`` (``<model>_control_<kind>``)."""
-        if self.integral:
-            return "ismc"
-        return "fl" if self.mode == "fl" else "smc"
+        """Which emitted law runs (``<model>_control_<kind>``): ``smc``, ``ismc``, ``fl``, ``adaptive``,
+        or with ``sensing='torque'`` ``smc_tau``, ``ismc_tau``, ``fl_tau``."""
+        base = "ismc" if self.integral else ("fl" if self.mode == "fl" else "smc")
+        return base + ("_tau" if self.sensing == "torque" else "")
 
     def _law_z_offset(self) -> int:
         """Leading entries of the emitted law's ``z`` not held by this controller (always 0 here)."""
@@ -235,6 +254,15 @@ class SlidingModeController:
         k = self.law_kind
         return fns[f"control_{k}"], fns.get(f"control_{k}_zdot")
 
+    def _measurement(self, x) -> np.ndarray:
+        """``x`` as the float vector the law reads, checked to be :attr:`measurement_size` long."""
+        xa = np.asarray(x, dtype=float).ravel()
+        if xa.shape != (self.measurement_size,):
+            what = "x = [q; dq; q_m; dq_m]" if self.sensing == "state" else "m = [q; dq; tau_J; dtau_J; dq_m]"
+            raise FjmValueError(f"measurement with shape {np.shape(x)}: expected ({self.measurement_size},), "
+                                f"{what} (sensing = {self.sensing!r})")
+        return xa
+
     def _z_full(self, z):
         off = self._law_z_offset()
         return np.concatenate([np.zeros(off), z]) if off else z
@@ -251,8 +279,9 @@ class SlidingModeController:
         ----------
         t : float
             Time in s.
-        x : ndarray, shape (4n,)
-            Plant state (measured).
+        x : ndarray, shape (measurement_size,)
+            What the controller measures: the plant state ``x`` (4n) for ``sensing='state'``,
+            ``m = [q; dq; tau_J; dtau_J; dq_m]`` (5n) for ``sensing='torque'``.
         z : ndarray, shape (n_states,)
             Controller state.
         r : ndarray, shape (5, n)
@@ -262,7 +291,7 @@ class SlidingModeController:
         r = np.asarray(r, dtype=float)
         law, _ = self.law_functions()
         u, s, _, u_cmd, y_hat = (np.asarray(v).ravel() for v in law(
-            np.asarray(x, dtype=float), self._z_full(np.asarray(z, dtype=float)), r.reshape(-1),
+            self._measurement(x), self._z_full(np.asarray(z, dtype=float)), r.reshape(-1),
             self.p_nom, self.gains))
         y_hat = y_hat.reshape(4, n)
         saturated = np.zeros(n, dtype=bool) if self.u_max is None else np.abs(u_cmd) > self.u_max
@@ -279,7 +308,7 @@ class SlidingModeController:
         if self.n_states == 0:
             return np.zeros(0)
         _, zdot = self.law_functions()
-        out = np.asarray(zdot(np.asarray(x, dtype=float), self._z_full(np.asarray(z, dtype=float)),
+        out = np.asarray(zdot(self._measurement(x), self._z_full(np.asarray(z, dtype=float)),
                               np.asarray(r, dtype=float).reshape(-1), self.p_nom, self.gains,
                               sample.u_cmd, sample.u)).ravel()
         return out[self._law_z_offset():]
@@ -290,7 +319,8 @@ class SlidingModeController:
 
         Parameters
         ----------
-        x : casadi SX/MX, shape (4n, 1)
+        x : casadi SX/MX, shape (measurement_size, 1)
+            The measurement: ``x`` (4n) or, torque-sensed, ``m`` (5n).
         z : casadi SX/MX, shape (n_states, 1)
         r : casadi SX/MX, shape (5n, 1)
             Reference rows stacked: ``r.reshape(-1)`` of the (5, n) array.
