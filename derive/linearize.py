@@ -148,8 +148,31 @@ def brackets_implicit(m: FlexibleJointModel, W: sp.Matrix, d_time: DirectionalDe
     return sp.Matrix.hstack(*blocks)
 
 
+def complete_plant(m: FlexibleJointModel) -> Linearization:
+    """The plant pieces of a complete model (docs/complete-model.md); no T, alpha, beta.
+
+    ``outputs``: ``inertia`` = ``M = [[D, S], [S^T, J_m]]`` (2n, 2n), ``coupling`` = ``S`` (n, n),
+    ``rhs`` (2n, 1) = ``[-(h + K (q - q_m)); K (q - q_m) - B_m dq_m - c_m]`` (so that
+    ``M [ddq; ddq_m] = rhs + [0; u]``) and ``energy`` (1, 1); f and g are formed
+    numerically from them at emission (one LDL^T of M).
+    """
+    q, dq, qm, dqm = (sp.Matrix(b) for b in (m.q, m.dq, m.qm, m.dqm))
+    Kd, Jd, Bd = _diag(m.K), _diag(m.Jm), _diag(m.Bm)
+    S = m.coupling
+    M = sp.Matrix.vstack(sp.Matrix.hstack(m.D, S), sp.Matrix.hstack(S.T, Jd))
+    spring = q - qm
+    rhs = sp.Matrix.vstack(-(m.h + Kd * spring), Kd * spring - Bd * dqm - m.motor_bias)
+    energy = ((dq.T * m.D * dq)[0, 0] / 2 + (dq.T * S * dqm)[0, 0] + (dqm.T * Jd * dqm)[0, 0] / 2
+              + (spring.T * Kd * spring)[0, 0] / 2 + m.potential)
+    return Linearization(model=m, Y3=(), Y4=(), W=sp.zeros(0, 0), rhs3=rhs[:m.n, :], rhs4=rhs[m.n:, :],
+                         outputs={"inertia": M, "coupling": S, "rhs": rhs, "energy": sp.Matrix([[energy]])})
+
+
 def linearize(m: FlexibleJointModel) -> Linearization:
     """Derive f, g, T, alpha, beta and the brackets of a model (structured).
+
+    A complete model (``m.coupling`` set) has no static feedback linearization:
+    it gets :func:`complete_plant` instead.
 
     Parameters
     ----------
@@ -159,6 +182,8 @@ def linearize(m: FlexibleJointModel) -> Linearization:
     -------
     Linearization
     """
+    if m.coupling is not None:
+        return complete_plant(m)
     n = m.n
     q, dq, qm, dqm = (sp.Matrix(b) for b in (m.q, m.dq, m.qm, m.dqm))
     Kd, Jd, Bd = _diag(m.K), _diag(m.Jm), _diag(m.Bm)

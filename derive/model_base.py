@@ -23,13 +23,17 @@ from .program import Program
 
 __all__ = ["Param", "FlexibleJointModel", "state_symbols", "PLANAR_GROUPS", "ELASTIC_GROUPS",
            "planar_param_names", "elastic_param_names", "param_group", "coriolis_gravity",
-           "SPATIAL_NAMES", "MODEL_NAMES"]
+           "SPATIAL_NAMES", "MODEL_NAMES", "COMPLETE_NAMES"]
 
 #: Built-in spatial arms: each is the URDF model file ``derive/robots/<name>/<name>.toml``.
 SPATIAL_NAMES: Tuple[str, ...] = ("elbow3", "panda")
 
 #: Names of the built-in models (:func:`derive.registry.build` builds each one).
-MODEL_NAMES: Tuple[str, ...] = ("link1",) + tuple(f"planar{n}" for n in range(1, 8)) + SPATIAL_NAMES
+#: Built-in complete models (rotor gyroscopics, docs/complete-model.md) and their reduced models.
+COMPLETE_NAMES: Tuple[str, ...] = ("link1_complete", "planar2_complete", "panda_complete")
+
+MODEL_NAMES: Tuple[str, ...] = (("link1",) + tuple(f"planar{n}" for n in range(1, 8)) + SPATIAL_NAMES
+                                + COMPLETE_NAMES)
 
 #: Per-link parameter groups of ``planar<n>``, in ``param_names`` order (then ``g0``).
 PLANAR_GROUPS: Tuple[str, ...] = ("m", "l", "r", "I", "K", "Jm", "Bm")
@@ -79,6 +83,17 @@ class FlexibleJointModel:
         Where a model built from a URDF comes from (``urdf`` path relative to
         the repository root, its ``sha256``, ``base``, ``tip``, ``joints`` in q
         order); recorded in the manifest. None for the built-in formulas.
+    coupling : sympy.Matrix, shape (n, n), or None
+        Complete model only (docs/complete-model.md): the rotor spin coupling
+        ``S(q)`` of the inertia matrix ``[[D, S], [S^T, J_m]]``; ``h`` then
+        also holds the rotors' gyroscopic moments (it depends on ``dq_m``).
+        None for the reduced model.
+    motor_bias : sympy.Matrix, shape (n, 1), or None
+        Complete model only: the velocity terms ``(dS/dt)^T dq`` of the motor equations.
+    reduced_model : str or None
+        Complete model only: the name of the reduced model with the same state layout.
+    rotors : derive.rotors.Rotors or None
+        Complete model only: the rotor data (gear-ratio defaults, masses, transverse inertias).
     """
 
     name: str
@@ -97,6 +112,10 @@ class FlexibleJointModel:
     description: str
     program: Program = field(default_factory=Program)
     source: Optional[Dict[str, object]] = None
+    coupling: Optional[sp.Matrix] = None
+    motor_bias: Optional[sp.Matrix] = None
+    reduced_model: Optional[str] = None
+    rotors: Optional[object] = None  # complete model: its derive.rotors.Rotors (for chain.json)
 
     @property
     def state(self) -> Tuple[sp.Symbol, ...]:

@@ -8,14 +8,16 @@ D, h and their time derivatives stay O(n^2). Pure math: no I/O, no printing.
 
 from __future__ import annotations
 
-from typing import Callable, Dict, List, Tuple
+from dataclasses import replace
+from typing import Callable, Dict, List, Optional, Tuple
 
 import sympy as sp
 
 from .model_base import FlexibleJointModel, Param, state_symbols
 from .program import Program
+from .rotors import Rotors, gear_params, planar_carried
 
-__all__ = ["make_link1", "make_planar", "planar_params"]
+__all__ = ["make_link1", "make_planar", "planar_params", "make_link1_complete"]
 
 #: Per-link parameter groups of ``planar<n>``: prefix, default, meaning, unit (then ``g0``).
 PLANAR_TABLE: Tuple[Tuple[str, float, str, str], ...] = (
@@ -160,8 +162,23 @@ def _bias(d: Define, a, e, sin_rel, sth, omega, g0) -> sp.Matrix:
     return h
 
 
+def make_link1_complete(gear_ratio: float = 100.0) -> FlexibleJointModel:
+    """``link1`` as a complete model: its only rotor rides on the base, so ``S = 0``.
+
+    The base does not rotate, so the rotor's carried inertia and spin coupling
+    vanish and the dynamics are exactly ``link1``'s whatever the gear ratio
+    ``N1`` (a parameter appended to ``link1``'s): Spong's reduced model is
+    exact for a single joint.
+    """
+    base = make_link1()
+    return replace(base, name="link1_complete", params=base.params + gear_params([gear_ratio]),
+                   coupling=sp.zeros(1, 1), motor_bias=sp.zeros(1, 1), reduced_model="link1",
+                   description=base.description + " Complete model: the rotor rides on the base (S = 0).")
+
+
 def make_planar(n: int, name: str = None, defaults: Dict[str, float] = None,
-                description: str = None) -> FlexibleJointModel:
+                description: str = None, rotors: Optional[Rotors] = None,
+                reduced_model: Optional[str] = None) -> FlexibleJointModel:
     """Planar serial chain of ``n`` flexible joints with relative angles.
 
     q = 0 hangs straight down, gravity ``g0`` acts along -y. Link i has mass
@@ -191,24 +208,39 @@ def make_planar(n: int, name: str = None, defaults: Dict[str, float] = None,
         Overrides of parameter defaults (names as in the parameter table).
     description : str, optional
         Replaces the generated description.
+    rotors : Rotors, optional
+        The complete model (docs/complete-model.md): rotor ``i`` at the far end
+        of link ``i-1`` (its polar inertia ``J_m,i / N_i^2`` and mass join that
+        link), all axes parallel, so ``S_ji = J_m,i / N_i`` (``j < i``) is
+        constant and there are no gyroscopic terms. Appends ``N1..Nn``.
+    reduced_model : str, optional
+        Recorded in a complete model.
     """
     if not 1 <= n <= 7:
         raise ValueError(f"planar<n>: n must be in 1..7, got {n}")
     idx = range(1, n + 1)
-    params = planar_params(n, defaults)
+    params = planar_params(n, defaults) + (gear_params(rotors.gear_ratio) if rotors is not None else ())
     sym = {p.name: sp.Symbol(p.name, real=True) for p in params}
     m, l, r, inertia = ([sym[f"{g}{i}"] for i in idx] for g in ("m", "l", "r", "I"))
     g0 = sym["g0"]
     q, dq, qm, dqm = state_symbols(n)
     prog = Program()
     d = prog.define
+    complete = {}
+    if rotors is not None:
+        jm, gear = [sym[f"Jm{i}"] for i in idx], [sym[f"N{i}"] for i in idx]
+        m, r, inertia = planar_carried(m, l, r, inertia, [d(f"Ia{i + 1}", jm[i] / gear[i] ** 2) for i in range(n)],
+                                       rotors, d)
+        coef = [d(f"Sc{i + 1}", jm[i] / gear[i]) for i in range(n)]
+        complete = {"coupling": sp.Matrix(n, n, lambda j, i: coef[i] if j < i else 0),
+                    "motor_bias": sp.zeros(n, 1), "reduced_model": reduced_model, "rotors": rotors}
     e, a = _mass_distribution(d, m, l, r, inertia)
     omega, cth, sth, cos_rel, sin_rel = _kinematics(d, q, dq)
     D = _inertia_matrix(d, a, cos_rel)
     h = _bias(d, a, e, sin_rel, sth, omega, g0)
     V = -g0 * sp.Add(*[e[j] * cth[j] for j in range(n)])
     return FlexibleJointModel(
-        name=name or f"planar{n}", n=n, params=params, q=q, dq=dq, qm=qm, dqm=dqm,
+        **complete, name=name or f"planar{n}", n=n, params=params, q=q, dq=dq, qm=qm, dqm=dqm,
         D=D, h=h, potential=V,
         K=tuple(sym[f"K{i}"] for i in idx),
         Jm=tuple(sym[f"Jm{i}"] for i in idx),

@@ -12,10 +12,15 @@ from __future__ import annotations
 import re
 from pathlib import Path
 
-from .model_base import MODEL_NAMES, SPATIAL_NAMES, FlexibleJointModel
-from .planar import make_link1, make_planar
+from .model_base import COMPLETE_NAMES, MODEL_NAMES, SPATIAL_NAMES, FlexibleJointModel
+from .planar import make_link1, make_link1_complete, make_planar
+from .rotors import Rotors
 
-__all__ = ["MODEL_NAMES", "SPATIAL_NAMES", "ROBOTS", "build"]
+__all__ = ["MODEL_NAMES", "SPATIAL_NAMES", "COMPLETE_NAMES", "ROBOTS", "build", "PLANAR2_COMPLETE_ROTORS"]
+
+#: Rotors of ``planar2_complete``: gear ratio 10 (with planar2's J_m = 2 kg m^2: I_a = 0.02 kg m^2,
+#: S_12 = 0.2 kg m^2, next to link inertias ~1 kg m^2), massless, no transverse inertia (planar motion).
+PLANAR2_COMPLETE_ROTORS = Rotors(gear_ratio=(10.0, 10.0), mass=(0.0, 0.0), transverse_inertia=(0.0, 0.0))
 
 #: Where the built-in spatial arms' model files and URDFs are.
 ROBOTS = Path(__file__).resolve().parent / "robots"
@@ -34,7 +39,13 @@ def build(name: str) -> FlexibleJointModel:
     match = re.fullmatch(r"planar([1-7])", name or "")
     if match:
         return make_planar(int(match.group(1)))
-    if name in SPATIAL_NAMES:
+    if name == "link1_complete":
+        return make_link1_complete()
+    if name == "planar2_complete":
+        return make_planar(2, name="planar2_complete", rotors=PLANAR2_COMPLETE_ROTORS, reduced_model="planar2",
+                           description="planar2 with its rotors (complete elastic model): rotor 2 rides on link 1, "
+                                       "axes parallel, constant coupling S_12 = Jm2 / N2.")
+    if name in SPATIAL_NAMES or name == "panda_complete":
         # Imported here: model files need a TOML parser (tomli before Python 3.11), the formula models do not.
         from .model_file import load_model_file
         return load_model_file(ROBOTS / name / f"{name}.toml", builtin=True).build()

@@ -28,7 +28,7 @@ model, kept for cross-checks.
 from __future__ import annotations
 
 from dataclasses import replace
-from typing import Dict, List, Sequence, Tuple
+from typing import Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 import sympy as sp
@@ -37,6 +37,7 @@ from .chain import ChainDescription, ChainNumerics, chain_numerics, dot, mm, out
 from .lie import DirectionalDerivative
 from .model_base import FlexibleJointModel, Param, elastic_param_names, state_symbols
 from .program import Program
+from .rotors import Rotors, carry_rotors, coupling_matrix, motor_bias, spin_moments
 from .spatial_params import INERTIAL_FIELDS, PAYLOAD
 
 __all__ = ["make_spatial", "make_spatial_jacobian"]
@@ -172,11 +173,14 @@ def _body_inertias(d: _Namer, num: ChainNumerics, sym: Dict[str, sp.Symbol], pay
     return mass, hmom, Io
 
 
-def _rnea_forward(d: _Namer, R, P, dq, mass, hmom, Io, g0) -> Tuple[List[Vector], List[Vector]]:
-    """RNEA forward pass (``ddq = 0``, base accelerated by ``+g0 e_z``): each body's force and moment."""
+def _rnea_forward(d: _Namer, R, P, dq, mass, hmom, Io, g0) -> Tuple[List[Vector], List[Vector], list]:
+    """RNEA forward pass (``ddq = 0``, base accelerated by ``+g0 e_z``): each body's force, moment, rates.
+
+    The rates are ``(w_i, dw_i)``, body ``i``'s angular velocity and acceleration in its frame.
+    """
     zero = [sp.Integer(0)] * 3
     w_prev, dw_prev, a_prev = zero, zero, [sp.Integer(0), sp.Integer(0), g0]
-    forces, moments = [], []
+    forces, moments, rates = [], [], []
     for i in range(len(R)):
         Ri, p = R[i], P[i]
         acc = [a_prev[k] + t for k, t in enumerate(_cross(dw_prev, p))]
@@ -196,8 +200,9 @@ def _rnea_forward(d: _Namer, R, P, dq, mass, hmom, Io, g0) -> Tuple[List[Vector]
         n_i = [t + u + v for t, u, v in zip(_matvec(I_i, dw_i), _cross(w_i, Iw), _cross(h_i, a_i))]
         forces.append(d.vec(f"fb{i + 1}", f_i))
         moments.append(d.vec(f"nb{i + 1}", n_i))
+        rates.append((w_i, dw_i))
         w_prev, dw_prev, a_prev = w_i, dw_i, a_i
-    return forces, moments
+    return forces, moments, rates
 
 
 def _rnea_backward(d: _Namer, R, P, forces, moments) -> sp.Matrix:
@@ -297,7 +302,8 @@ def _potential(d: _Namer, R, P, mass, hmom, g0) -> sp.Expr:
 
 
 def make_spatial(desc: ChainDescription, name: str, params: Tuple[Param, ...],
-                 description: str, symbolic: Sequence[str] = ()) -> FlexibleJointModel:
+                 description: str, symbolic: Sequence[str] = (), rotors: Optional[Rotors] = None,
+                 reduced_model: Optional[str] = None) -> FlexibleJointModel:
     """Flexible-joint model of a spatial serial chain of revolute joints.
 
     Parameters
@@ -314,16 +320,26 @@ def make_spatial(desc: ChainDescription, name: str, params: Tuple[Param, ...],
         One paragraph for the report and manifest.
     symbolic : sequence of str
         Links whose inertials are runtime parameters instead of baked numbers.
+    rotors : Rotors or None
+        The complete model (docs/complete-model.md): rotor ``i`` on body ``i-1``;
+        ``params`` then end with the gear ratios ``N1..Nn`` (:func:`derive.rotors.gear_params`).
+        None: the reduced model.
+    reduced_model : str or None
+        Recorded in the complete model (the reduced model with the same state layout).
 
     Returns
     -------
     FlexibleJointModel
         ``D`` (n, n), ``h`` (n, 1) and the potential as symbols of its
-        :class:`Program` (see the module docstring for the algorithms).
+        :class:`Program` (see the module docstring for the algorithms); with
+        rotors also the coupling ``S`` (n, n) and the motor-side bias (n, 1).
     """
     num = chain_numerics(desc, symbolic)
     n = len(num.bodies)
-    payload = _check_params(num, name, params, symbolic)
+    gears = [f"N{i}" for i in range(1, n + 1)] if rotors is not None else []
+    if [p.name for p in params[len(params) - len(gears):]] != gears:
+        raise ValueError(f"{name}: a complete model's parameters must end with {gears}")
+    payload = _check_params(num, name, params[:len(params) - len(gears)], symbolic)
     sym = {p.name: sp.Symbol(p.name, real=True) for p in params}
     g0 = sym["g0"]
     q, dq, qm, dqm = state_symbols(n)
@@ -332,10 +348,22 @@ def make_spatial(desc: ChainDescription, name: str, params: Tuple[Param, ...],
     cs = _joint_trig(prog, q)
     R, P = _rotations(d, num, cs)
     mass, hmom, Io = _body_inertias(d, num, sym, payload)
-    h = _rnea_backward(d, R, P, *_rnea_forward(d, R, P, dq, mass, hmom, Io, g0))
+    if rotors is not None:
+        jm, gear = [sym[f"Jm{i}"] for i in range(1, n + 1)], [sym[g] for g in gears]
+        coef = [d(f"Sc{i + 1}", jm[i] / gear[i]) for i in range(n)]
+        carry_rotors(d, num.bodies, rotors, [d(f"Ia{i + 1}", jm[i] / gear[i] ** 2) for i in range(n)],
+                     mass, hmom, Io)
+    forces, moments, rates = _rnea_forward(d, R, P, dq, mass, hmom, Io, g0)
+    complete = {}
+    if rotors is not None:
+        spin_moments(d, num.bodies, coef, dqm, rates, moments)
+        complete = {"coupling": coupling_matrix(d, num.bodies, R, coef),
+                    "motor_bias": motor_bias(d, num.bodies, coef, rates), "reduced_model": reduced_model,
+                    "rotors": rotors}
+    h = _rnea_backward(d, R, P, forces, moments)
     Dm = _crba_entries(d, R, P, _composite_inertias(d, num, R, P, cs, mass, hmom, Io))
     V = _potential(d, R, P, mass, hmom, g0)
-    return FlexibleJointModel(
+    return FlexibleJointModel(**complete,
         name=name, n=n, params=tuple(params), q=q, dq=dq, qm=qm, dqm=dqm,
         D=Dm, h=h, potential=V,
         K=tuple(sym[f"K{i}"] for i in range(1, n + 1)),

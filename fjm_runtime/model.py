@@ -19,6 +19,8 @@ from .validation import FjmValueError, as_vector, params_vector
 
 #: Quantities every generated model provides (file ``<name>.casadi``).
 QUANTITIES = ("f", "g", "ad", "T", "alpha", "beta", "energy", "inertia")
+#: Quantities of a complete model (manifest ``"form": "complete"``; docs/complete-model.md).
+COMPLETE_QUANTITIES = ("f", "g", "energy", "inertia", "coupling")
 
 
 #: Environment variable naming a directory of user models (``<dir>/<model>/manifest.json``).
@@ -134,8 +136,12 @@ class Model:
         self.param_names: Tuple[str, ...] = tuple(p["name"] for p in self.manifest["parameters"])
         self.default_params: Dict[str, float] = {
             p["name"]: float(p["default"]) for p in self.manifest["parameters"]}
+        #: ``"complete"`` (rotor gyroscopics, no static feedback linearization) or ``"reduced"``.
+        self.form: str = self.manifest.get("form", "reduced")
+        self.reduced_model: Optional[str] = self.manifest.get("reduced_model")
+        names = COMPLETE_QUANTITIES if self.form == "complete" else QUANTITIES
         self.functions: Dict[str, ca.Function] = {
-            q: _read_function(self.directory / f"{q}.casadi") for q in QUANTITIES}
+            q: _read_function(self.directory / f"{q}.casadi") for q in names}
         self._controls: Optional[Dict[str, ca.Function]] = None
 
     @property
@@ -146,6 +152,7 @@ class Model:
         header of ``<model>.h``. Read on first use.
         """
         if self._controls is None:
+            self._require("controls")
             entries = self.manifest.get("controls")
             if not entries:
                 raise FjmValueError(f"model {self.name}: {self.directory} has no emitted control laws "
@@ -170,7 +177,15 @@ class Model:
         """``x`` as a validated vector of shape ``(nx,)``."""
         return as_vector(arg, x, self.nx)
 
+    def _require(self, quantity: str) -> None:
+        if quantity not in self.functions:
+            raise FjmValueError(
+                f"model {self.name} is a complete model (rotor spin coupling): it has no {quantity} (static "
+                f"feedback linearization does not exist for it); use the laws of its reduced model "
+                f"{self.reduced_model!r} (fjm_runtime.load({self.reduced_model!r})) with this model as the plant")
+
     def _eval(self, quantity: str, x, p) -> np.ndarray:
+        self._require(quantity)
         xv = self.state_array(x)
         pv = self.params_array(p)
         return self.functions[quantity](xv, pv).full()
@@ -205,8 +220,12 @@ class Model:
         return float(self._eval("energy", x, p)[0, 0])
 
     def inertia(self, x, p=None) -> np.ndarray:
-        """Link inertia matrix ``D(q)``, shape (n, n)."""
+        """Link inertia matrix ``D(q)``, shape (n, n); for a complete model the whole ``M(q)``, shape (2n, 2n)."""
         return self._eval("inertia", x, p)
+
+    def coupling(self, x, p=None) -> np.ndarray:
+        """Complete model only: the rotor spin coupling ``S(q)``, shape (n, n)."""
+        return self._eval("coupling", x, p)
 
     def xdot(self, x, u, p=None) -> np.ndarray:
         """Open-loop dynamics ``f(x) + g(x) u``, shape (4n,)."""

@@ -21,6 +21,11 @@ The format (see docs/spatial.md and examples/elbow_arm.toml)::
     com = [0.0, 0.0, 0.1]      # m, in the tip link frame
     [notes]                    # optional text appended to the parameter meanings
     K = "illustrative, see ..."
+    [rotors]                   # optional: the complete model (docs/complete-model.md)
+    gear_ratio = [100.0, 100.0]      # per joint, > 0: defaults of the parameters N1..Nn
+    mass = [0.0, 0.0]                # optional, kg, >= 0 (default 0): joins the carrying link
+    transverse_inertia = [1e-6, 1e-6]  # optional, kg m^2, >= 0 (default I_a / 2 = Jm / (2 N^2))
+    reduced_model = "arm"            # optional: the reduced model whose laws to use
 
 The URDF is read by :mod:`derive.urdf`; :meth:`UrdfModelSpec.build` builds
 the model with :func:`derive.spatial.make_spatial`.
@@ -35,6 +40,7 @@ from typing import Dict, List, Optional, Tuple
 
 from ..chain import chain_numerics
 from ..model_base import FlexibleJointModel
+from ..rotors import Rotors, gear_params
 from ..spatial import make_spatial
 from ..spatial_params import elastic_params, inertial_params, payload_params
 from ..urdf import UrdfChain, UrdfError, load_urdf
@@ -46,7 +52,9 @@ __all__ = ["UrdfModelSpec", "parse_urdf_form", "DEFAULT_G0"]
 #: The repository root (URDF paths in manifests are relative to it).
 REPO = Path(__file__).resolve().parent.parent.parent
 URDF_MODEL_KEYS = ("name", "urdf", "base", "tip", "description", "symbolic")
-URDF_TOP = ("model", "joints", "parameters", "payload", "notes")
+URDF_TOP = ("model", "joints", "parameters", "payload", "notes", "rotors")
+#: Keys of ``[rotors]``.
+ROTOR_KEYS = ("gear_ratio", "mass", "transverse_inertia", "reduced_model")
 #: Elastic parameters per joint: key -> (SI unit, bound kind, meaning, default or None = required).
 ELASTIC: Dict[str, Tuple[str, str, str, Optional[float]]] = {
     "K": ("N m/rad", ">0", "joint stiffness", None),
@@ -91,6 +99,8 @@ class UrdfModelSpec:
     source: str = "<model file>"
     payload: Optional[Tuple[float, Tuple[float, float, float]]] = None  # (mass, com in the tip frame)
     symbolic: Tuple[str, ...] = ()  # links whose inertials are runtime parameters
+    rotors: Optional[Rotors] = None  # the complete model's rotors ([rotors]), None: the reduced model
+    reduced_model: Optional[str] = None
 
     def build(self) -> FlexibleJointModel:
         """The symbolic model (:func:`derive.spatial.make_spatial` of the URDF chain)."""
@@ -101,11 +111,15 @@ class UrdfModelSpec:
         if self.payload is not None:
             params = params + payload_params(self.payload[0], self.payload[1], self.tip)
         params = params + inertial_params(chain.description, self.symbolic)
+        rotors = self.rotors.resolve(self.Jm) if self.rotors is not None else None
+        if rotors is not None:
+            params = params + gear_params(rotors.gear_ratio)
         description = self.description or (
             f"Spatial serial chain of {n} revolute joints from the URDF {_repo_relative(self.urdf)} "
             f"(robot {chain.robot}, {self.base} -> {self.tip}), flexible joints, gravity g0 along -z "
             f"of {self.base}.")
-        model = make_spatial(chain.description, self.name, params, description, symbolic=self.symbolic)
+        model = make_spatial(chain.description, self.name, params, description, symbolic=self.symbolic,
+                             rotors=rotors, reduced_model=self.reduced_model)
         src = {"urdf": _repo_relative(self.urdf), "sha256": chain.sha256, "base": self.base,
                "tip": self.tip, "joints": list(chain.joints)}
         if chain.ignored:
@@ -249,6 +263,36 @@ def _payload(chk: Checker, data: dict) -> Optional[Tuple[float, Tuple[float, ...
     return (mass, com)
 
 
+def _rotors(chk: Checker, data: dict, n: int) -> Tuple[Optional[Rotors], Optional[str]]:
+    """``[rotors]`` (optional): per-joint gear ratios, masses, transverse inertias; the reduced model's name."""
+    if "rotors" not in data:
+        return None, None
+    table = data["rotors"]
+    if not isinstance(table, dict):
+        raise chk.fail(("rotors",), f"expected a table with gear_ratio (and mass, transverse_inertia), {got(table)}")
+    for key in table:
+        if key not in ROTOR_KEYS:
+            raise chk.fail(("rotors", key), f"unknown key; [rotors] allows {', '.join(ROTOR_KEYS)}"
+                           + suggest(key, ROTOR_KEYS))
+    if "gear_ratio" not in table:
+        raise chk.fail(("rotors", "gear_ratio"), f"missing required key: gear_ratio = [...] ({n} numbers > 0)",
+                       line_path=("rotors",))
+
+    def per_joint(key: str, unit: str, kind: str, meaning: str, default):
+        values = table.get(key, [default] * n)
+        if not isinstance(values, list) or len(values) != n:
+            raise chk.fail(("rotors", key), f"expected an array of {n} numbers in {unit} (one per joint), "
+                                            f"{got(values)}")
+        return tuple(v if v is None else number(chk, ("rotors", key), v, unit, kind, meaning) for v in values)
+
+    reduced = table.get("reduced_model")
+    if reduced is not None and (not isinstance(reduced, str) or not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", reduced)):
+        raise chk.fail(("rotors", "reduced_model"), f"expected a model name (letters, digits, _), {got(reduced)}")
+    return Rotors(per_joint("gear_ratio", "1", ">0", "gear ratio", None),
+                  per_joint("mass", "kg", ">=0", "rotor mass", 0.0),
+                  per_joint("transverse_inertia", "kg m^2", ">=0", "rotor transverse inertia", None)), reduced
+
+
 def parse_urdf_form(data: dict, chk: Checker, base_dir: Path, builtin: bool) -> UrdfModelSpec:
     """The URDF form of a parsed model file (see the module docstring for the format).
 
@@ -265,7 +309,8 @@ def parse_urdf_form(data: dict, chk: Checker, base_dir: Path, builtin: bool) -> 
     per = _joint_values(chk, data, model, names)
     g0, notes = _gravity_and_notes(chk, data)
     payload = _payload(chk, data)
-    return UrdfModelSpec(name=model["name"], urdf=urdf, base=model["base"], tip=model["tip"], joints=names,
+    rotors, reduced = _rotors(chk, data, len(names))
+    return UrdfModelSpec(rotors=rotors, reduced_model=reduced,name=model["name"], urdf=urdf, base=model["base"], tip=model["tip"], joints=names,
                          K=tuple(per["K"]), Jm=tuple(per["Jm"]), Bm=tuple(per["Bm"]), g0=g0,
                          description=model.get("description"), notes=notes, source=chk.source,
                          payload=payload, symbolic=symbolic)
