@@ -1,0 +1,1 @@
+"""Exporters of generated models to other tools (MJCF for MuJoCo): text only, no SymPy, no MuJoCo import."""

@@ -1,0 +1,103 @@
+"""Run an exported MJCF in MuJoCo with fjm's state and input (``mujoco`` is imported on first use only).
+
+:class:`MujocoPlant` loads a file written by :func:`fjm_runtime.export.mjcf.write_mjcf`
+and maps by name (the MJCF contract): fjm's ``x = [q; dq; q_m; dq_m]`` to
+MuJoCo's ``qpos``/``qvel`` (link joints ``<j>``, rotor joints ``<j>_rotor`` at
+``theta = N q_m``) and ``u`` to the motors ``<j>_motor``. MuJoCo is an
+optional dependency of fjm (the ``dev`` extra); nothing in the runtime imports
+this module.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+import numpy as np
+
+from ..validation import FjmValueError, as_vector
+from .mjcf import gear_ratios, load_chain, resolve_params
+
+__all__ = ["MujocoPlant"]
+
+
+def _mujoco():
+    try:
+        import mujoco
+    except ImportError:  # pragma: no cover - mujoco is in the dev extra
+        raise FjmValueError("the mujoco package is not installed (expected `pip install mujoco`, or "
+                            "`pip install 'fjm[dev]'`)") from None
+    return mujoco
+
+
+class MujocoPlant:
+    """An exported MJCF loaded in MuJoCo, with fjm's state layout.
+
+    Parameters
+    ----------
+    model : fjm_runtime.Model
+        The model the file was exported from.
+    path : str or pathlib.Path
+        The MJCF file (loaded as it is, ``mujoco.MjModel.from_xml_path``).
+    params : dict or array, optional
+        The parameters it was exported with (for the gear ratios).
+    gear_ratio : float or sequence, optional
+        Reduced model: the gear ratio it was exported with (default 1).
+
+    Attributes
+    ----------
+    mj, data : mujoco.MjModel, mujoco.MjData
+    N : numpy.ndarray, shape (n,)
+        Gear ratios (rotor angle = ``N q_m``).
+    """
+
+    def __init__(self, model, path, params=None, gear_ratio=None):
+        mujoco = _mujoco()
+        self.model = model
+        self.mj = mujoco.MjModel.from_xml_path(str(Path(path)))
+        self.data = mujoco.MjData(self.mj)
+        chain = load_chain(model)
+        p = resolve_params(model, params)
+        self.N = gear_ratios(model, p, "rotors" in chain, gear_ratio)
+        joints = [e["joint"] for e in chain["elastic"]]
+        names = joints + [f"{j}_rotor" for j in joints]
+        self.qpos = np.array([self.mj.joint(j).qposadr[0] for j in names])
+        self.qvel = np.array([self.mj.joint(j).dofadr[0] for j in names])
+        self.ctrl = np.array([self.mj.actuator(f"{j}_motor").id for j in joints])
+        self.scale = np.concatenate([np.ones(model.n), self.N])
+
+    def set_state(self, x) -> None:
+        """Set MuJoCo's ``qpos``, ``qvel`` from fjm's ``x`` (shape (4n,))."""
+        n = self.model.n
+        xv = as_vector("x", x, 4 * n)
+        self.data.qpos[self.qpos] = self.scale * np.concatenate([xv[:n], xv[2 * n:3 * n]])
+        self.data.qvel[self.qvel] = self.scale * np.concatenate([xv[n:2 * n], xv[3 * n:]])
+
+    def state(self) -> np.ndarray:
+        """fjm's ``x = [q; dq; q_m; dq_m]`` from MuJoCo's state, shape (4n,)."""
+        n = self.model.n
+        pos = self.data.qpos[self.qpos] / self.scale
+        vel = self.data.qvel[self.qvel] / self.scale
+        return np.concatenate([pos[:n], vel[:n], pos[n:], vel[n:]])
+
+    def xdot(self, x, u) -> np.ndarray:
+        """``x'`` from MuJoCo's ``qacc`` (``mj_forward`` at ``x``, ``ctrl = u``), shape (4n,)."""
+        mujoco = _mujoco()
+        n = self.model.n
+        self.set_state(x)
+        self.data.ctrl[self.ctrl] = as_vector("u", u, n)
+        mujoco.mj_forward(self.mj, self.data)
+        acc = self.data.qacc[self.qvel] / self.scale
+        xv = as_vector("x", x, 4 * n)
+        return np.concatenate([xv[n:2 * n], acc[:n], xv[3 * n:], acc[n:]])
+
+    def step(self, u, steps: int = 1) -> np.ndarray:
+        """Hold ``ctrl = u`` over ``steps`` MuJoCo steps (``mj_step``); returns the new fjm state (4n,)."""
+        mujoco = _mujoco()
+        self.data.ctrl[self.ctrl] = as_vector("u", u, self.model.n)
+        for _ in range(int(steps)):
+            mujoco.mj_step(self.mj, self.data)
+        return self.state()
+
+    def sensors(self) -> dict:
+        """The named sensors ``<j>_q, _dq, _q_m, _dq_m, _tau_J`` after the last forward/step: name -> float."""
+        return {self.mj.sensor(i).name: float(self.data.sensordata[self.mj.sensor_adr[i]])
+                for i in range(self.mj.nsensor)}
