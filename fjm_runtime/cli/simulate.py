@@ -1,15 +1,24 @@
-"""``fjm simulate MODEL ...``: one closed loop, metrics as JSON on stdout, optionally a PNG."""
+"""``fjm simulate MODEL ...``: one sampled-data closed loop, metrics as JSON on stdout, optionally a PNG.
+
+``--json`` prints one object for scripts (docs/simulation.md): ``diverged``, per-joint
+``rms_second_half``, ``peak_torque``, ``time_at_limit``, ``torque_jitter``, and the settings used.
+"""
 from __future__ import annotations
 
 import json
+import math
 import sys
 from pathlib import Path
-from typing import Dict
+from typing import Dict, Optional
+
+import numpy as np
 
 from ..analysis.lemma1 import (FALLBACK_SWITCHING_GAIN, default_error_bounds, default_switching_gain,
                                paper_beta_hat, paper_bound_applies)
 from ..control.factory import CONTROLLER_KINDS, DEFAULT_LAYER_RATE, default_delta, make_controller
 from ..control.references import REFERENCE_KINDS, make_reference
+from ..sim.metrics import peak_torque, rms_second_half, time_at_limit, torque_jitter
+from ..sim.sensor import SensorModel
 from ..sim.simulate import SimulationDivergedError, simulate, stderr_progress
 from ..validation import FjmValueError
 from .common import check_output_file, finite_or_note, parse_assignments
@@ -22,18 +31,18 @@ def add_parser(sub) -> None:
                                      "metrics as JSON. Plant parameters: --K / --param; the controller uses "
                                      "the model defaults unless --nominal is given.")
     sim.add_argument("model", help="model name, e.g. link1, planar2 (see `fjm models`)")
-    sim.add_argument("--controller", default="smc", choices=CONTROLLER_KINDS,
+    sim.add_argument("--controller", default=None, choices=CONTROLLER_KINDS,
                      help="smc: paper's law with sat; sign: paper's discontinuous law; ismc: integral "
                           "sliding surface; fl: plain feedback linearization; adaptive: integral surface "
                           "with an online stiffness estimate projected onto [--k-min, --k-max] "
-                          "(default smc)")
+                          "(default: the kind of --gains, else smc)")
     sim.add_argument("--reference", default="sine", help=f"one of {', '.join(REFERENCE_KINDS)} (default sine)")
     sim.add_argument("--q-d", type=float, default=1.0, help="set point for step/constant, rad (default 1)")
     sim.add_argument("--rise-time", type=float, default=2.0, help="smooth step duration, s (default 2)")
     sim.add_argument("--amplitude", type=float, default=0.5, help="sine amplitude, rad (default 0.5)")
     sim.add_argument("--omega", type=float, default=1.0, help="sine frequency, rad/s (default 1)")
     sim.add_argument("--duration", type=float, default=10.0, help="simulated time, s (default 10)")
-    sim.add_argument("--dt", type=float, default=1e-3, help="RK4 step and control period, s (default 1e-3)")
+    sim.add_argument("--dt", type=float, default=None, help="control period, s (default 1e-3; or --rate)")
     sim.add_argument("--K", type=float, default=None,
                      help="TRUE joint stiffness of the plant, N m/rad (link1: K; planar<n>: every K_i)")
     sim.add_argument("--param", action="append", default=[], metavar="NAME=VALUE",
@@ -54,9 +63,50 @@ def add_parser(sub) -> None:
     sim.add_argument("--plot", type=Path, default=None,
                      help="write a PNG of angles, error, torque and s (its directory must exist)")
     sim.add_argument("--quiet", action="store_true", help="no progress on stderr")
+    _add_sampled_data_flags(sim)
 
 
-def _true_params(m, args) -> Dict[str, float]:
+def _add_sampled_data_flags(sim) -> None:
+    """The sampled-data and scripting flags (rate, substeps, sensing, noise, delay, scales, gains, --json)."""
+    sim.add_argument("--rate", type=float, default=None, help="control rate, Hz (same as --dt 1/HZ)")
+    sim.add_argument("--substeps", type=int, default=None,
+                     help="RK4 plant steps per control sample (default: the fastest-mode rule)")
+    sim.add_argument("--sensing", choices=("state", "torque"), default="state",
+                     help="what the controller measures: the state, or q, dq, tau_J, dtau_J, dq_m (default state)")
+    sim.add_argument("--delay-samples", type=int, default=0, help="computation delay in samples (default 0)")
+    sim.add_argument("--predict", action="store_true", help="predict the delayed measurement with the nominal model")
+    sim.add_argument("--noise", default="none",
+                     help="sensor model: none, panda, or a JSON file of SensorModel fields (default none)")
+    sim.add_argument("--seed", type=int, default=0, help="noise seed (default 0)")
+    sim.add_argument("--k-scale", default=None, metavar="A[,B,..]",
+                     help="TRUE stiffness = nominal x A (one value, or one per joint)")
+    sim.add_argument("--jm-scale", default=None, metavar="A[,B,..]",
+                     help="TRUE motor inertia = nominal x A (one value, or one per joint)")
+    sim.add_argument("--payload", type=float, default=None,
+                     help="TRUE payload mass, kg (models with an m_load parameter)")
+    sim.add_argument("--gains", type=Path, default=None,
+                     help='JSON {"kind": KIND, "gains": {lam, k_s, delta, k_lin, u_max, ...}} (docs/simulation.md)')
+    sim.add_argument("--json", action="store_true",
+                     help="print one JSON object for scripts (diverged, per-joint metrics, settings)")
+
+
+def _scales(text: Optional[str], n: int, flag: str) -> Optional[np.ndarray]:
+    """``'0.7,1.3'`` -> per-joint factors (one value broadcast); FjmValueError on anything else."""
+    if text is None:
+        return None
+    try:
+        vals = np.array([float(v) for v in text.split(",")], dtype=float)
+    except ValueError:
+        raise FjmValueError(f"{flag} {text!r}: expected numbers separated by commas, e.g. {flag} 0.7,1.3") from None
+    if vals.size == 1:
+        vals = np.full(n, vals[0])
+    if vals.size != n or not np.all(np.isfinite(vals)) or np.any(vals <= 0):
+        raise FjmValueError(f"{flag} {text!r}: expected one or {n} finite factors > 0")
+    return vals
+
+
+def _true_params(m, args, nominal) -> Dict[str, float]:
+    from ..sim.sample_step import stiffness_indices
     true = parse_assignments(args.param, "--param")
     if args.K is not None:
         if "K" in m.param_names:
@@ -64,64 +114,189 @@ def _true_params(m, args) -> Dict[str, float]:
         else:
             for i in range(m.n):
                 true.setdefault(f"K{i + 1}", args.K)
+    p_nom = m.params_array(nominal)
+    for flag, text, which in (("--k-scale", args.k_scale, 0), ("--jm-scale", args.jm_scale, 1)):
+        factors = _scales(text, m.n, flag)
+        if factors is not None:
+            idx = stiffness_indices(m)[which]
+            for j, i in enumerate(idx):
+                true[m.param_names[i]] = float(p_nom[i] * factors[j])
+    if args.payload is not None:
+        if "m_load" not in m.param_names:
+            raise FjmValueError(f"--payload: model {m.name} has no m_load parameter (expected a model with a payload)")
+        if not (math.isfinite(args.payload) and args.payload >= 0):
+            raise FjmValueError(f"--payload {args.payload}: expected a finite mass >= 0 kg")
+        true["m_load"] = float(args.payload)
     return true
 
 
-def run(args) -> int:
-    """Run ``fjm simulate``; returns the exit status (3: the simulation diverged)."""
-    from .. import load
-    if args.plot is not None:
-        check_output_file(args.plot, "--plot")
-    m = load(args.model)
-    true = _true_params(m, args)
-    nominal = parse_assignments(args.nominal, "--nominal")
-    ref_kw = {"sine": {"amplitude": args.amplitude, "omega": args.omega},
-              "step": {"q_d": args.q_d, "rise_time": args.rise_time},
-              "constant": {"q_d": args.q_d}}.get(args.reference, {})
-    ref = make_reference(args.reference, m.n, **ref_kw)
+def _sensor(args) -> SensorModel:
+    """``--noise none|panda|FILE`` with ``--seed``."""
+    if args.noise == "none":
+        return SensorModel.ideal(seed=args.seed)
+    if args.noise == "panda":
+        return SensorModel.panda(seed=args.seed)
+    path = Path(args.noise)
+    if path.suffix != ".json" or not path.is_file():
+        raise FjmValueError(f"--noise {args.noise!r}: expected none, panda or an existing .json file")
+    try:
+        fields = json.loads(path.read_text())
+    except ValueError as exc:
+        raise FjmValueError(f"--noise {path}: not valid JSON ({exc})") from None
+    if not isinstance(fields, dict):
+        raise FjmValueError(f"--noise {path}: expected a JSON object of SensorModel fields")
+    fields.setdefault("seed", args.seed)
+    try:
+        return SensorModel(**fields)
+    except TypeError as exc:
+        raise FjmValueError(f"--noise {path}: {exc} (fields: q, dq, q_m, dq_m, tau_J, dtau_J, q_quant, "
+                            "q_m_quant, dtau_mode, dtau_cutoff, seed)") from None
+
+
+def _gains_file(args) -> dict:
+    """``--gains FILE``: ``{"kind": ..., "gains": {...}}``; the kind checked against --controller."""
+    if args.gains is None:
+        return {"kind": args.controller or "smc", "gains": {}}
+    try:
+        spec = json.loads(Path(args.gains).read_text())
+    except (OSError, ValueError) as exc:
+        raise FjmValueError(f"--gains {args.gains}: cannot read a JSON object ({exc})") from None
+    if not isinstance(spec, dict) or not isinstance(spec.get("gains"), dict) or \
+            spec.get("kind") not in CONTROLLER_KINDS:
+        raise FjmValueError(f"--gains {args.gains}: expected {{\"kind\": one of {', '.join(CONTROLLER_KINDS)}, "
+                            "\"gains\": {...}}")
+    if args.controller is not None and args.controller != spec["kind"]:
+        raise FjmValueError(f"--gains {args.gains}: holds gains for {spec['kind']!r}, not --controller "
+                            f"{args.controller!r}")
+    return spec
+
+
+def _period(args) -> float:
+    if args.rate is not None and args.dt is not None:
+        raise FjmValueError("--rate and --dt: give one of them (the control period is 1 / rate)")
+    if args.rate is not None:
+        if not (math.isfinite(args.rate) and args.rate > 0):
+            raise FjmValueError(f"--rate {args.rate}: expected a finite rate > 0 Hz")
+        return 1.0 / args.rate
+    return 1e-3 if args.dt is None else args.dt
+
+
+def _build_controller(m, args, nominal, ref, kind, file_gains):
+    """The controller of the run and the Lemma 1 gain record (or None)."""
     k_bounds = (args.k_min, args.k_max)
     extra: Dict[str, object] = {}
-    if args.beta_hat == "paper" and paper_bound_applies(m):
+    if args.beta_hat == "paper" and paper_bound_applies(m) and args.sensing == "state":
         extra["beta_hat"] = paper_beta_hat(m, nominal, k_bounds)
     gain = None
-    k_s = args.k_s
+    k_s = file_gains.get("k_s", args.k_s)
+    lam = file_gains.get("lam", args.lam)
     if k_s is None:
-        gain = default_switching_gain(m, nominal, args.lam, ref.derivative_bounds(), k_bounds=k_bounds,
+        gain = default_switching_gain(m, nominal, lam, ref.derivative_bounds(), k_bounds=k_bounds,
                                       error_bounds=default_error_bounds(args.reference, args.amplitude, args.omega))
         k_s = FALLBACK_SWITCHING_GAIN if gain is None else gain.k_s
-    delta = args.delta if args.delta is not None else default_delta(k_s)
-    if args.controller == "adaptive":
+    delta = file_gains.get("delta", args.delta if args.delta is not None else default_delta(k_s))
+    if kind == "adaptive":
         # beta from the estimated stiffness (not the paper's constant); the bounds project K_hat
         extra.pop("beta_hat", None)
         if not (0 < args.k_min < args.k_max):
             raise FjmValueError(f"--k-min/--k-max = {args.k_min}/{args.k_max}: expected 0 < k_min < k_max "
                                 "for the adaptive controller")
         extra["K_bounds"] = k_bounds
-    ctrl = make_controller(args.controller, m, nominal, lam=args.lam, k_s=k_s, delta=delta,
-                           u_max=args.u_max, **extra)
-    progress = None if args.quiet else stderr_progress(f"simulating {args.model} ({args.duration:g} s)")
+    kw = {"lam": lam, "k_s": k_s, "delta": delta, "u_max": args.u_max, **extra}
+    kw.update({k: v for k, v in file_gains.items() if k not in ("lam", "k_s", "delta")})
+    if args.sensing != "state":
+        kw["sensing"] = args.sensing
     try:
-        res = simulate(m, ctrl, ref, duration=args.duration, dt=args.dt, true_params=true, progress=progress)
+        ctrl = make_controller(kind, m, nominal, **kw)
+    except TypeError as exc:
+        raise FjmValueError(f"--gains/--sensing: {exc}") from None
+    return ctrl, gain, k_s, delta
+
+
+def _per_joint(values) -> list:
+    """A per-joint array as a JSON list, ``None`` where not finite."""
+    return [float(v) if math.isfinite(float(v)) else None for v in np.asarray(values, dtype=float)]
+
+
+def _script_report(res, settings: dict, diverged: Optional[SimulationDivergedError]) -> dict:
+    """The ``--json`` object: diverged, per-joint metrics (null plus a reason), the settings."""
+    out: Dict[str, object] = {"diverged": diverged is not None}
+    names = ("rms_second_half", "peak_torque", "time_at_limit", "torque_jitter")
+    if diverged is not None:
+        out.update({k: None for k in names})
+        out["reason"] = str(diverged)
+        out["divergence_time"] = float(diverged.t)
+    else:
+        fns = (rms_second_half, peak_torque, time_at_limit, torque_jitter)
+        for k, fn in zip(names, fns):
+            out[k] = _per_joint(fn(res))
+            if any(v is None for v in out[k]):
+                out[k + "_note"] = "not finite (run shorter than the 20 ms jitter window?)"
+        out["metrics"] = {}
+        for k, v in res.metrics.as_dict().items():
+            finite_or_note(out["metrics"], k, v)
+    out["settings"] = settings
+    return out
+
+
+def run(args) -> int:
+    """Run ``fjm simulate``; returns the exit status (3: the simulation diverged, without --json)."""
+    from .. import load
+    if args.plot is not None:
+        check_output_file(args.plot, "--plot")
+    m = load(args.model)
+    nominal = parse_assignments(args.nominal, "--nominal")
+    true = _true_params(m, args, nominal)
+    sensor = _sensor(args)
+    spec = _gains_file(args)
+    kind, dt = spec["kind"], _period(args)
+    ref_kw = {"sine": {"amplitude": args.amplitude, "omega": args.omega},
+              "step": {"q_d": args.q_d, "rise_time": args.rise_time},
+              "constant": {"q_d": args.q_d}}.get(args.reference, {})
+    ref = make_reference(args.reference, m.n, **ref_kw)
+    ctrl, gain, k_s, delta = _build_controller(m, args, nominal, ref, kind, spec["gains"])
+    progress = None if (args.quiet or args.json) else stderr_progress(f"simulating {args.model} ({args.duration:g} s)")
+    settings = {"model": m.name, "controller": kind, "rate": 1.0 / dt, "dt": dt, "substeps": args.substeps,
+                "delay_samples": args.delay_samples, "predict": bool(args.predict), "sensing": args.sensing,
+                "seed": args.seed, "noise": args.noise, "duration": args.duration,
+                "true_params": dict(zip(m.param_names, m.params_array(true).tolist())),
+                "gains": None if args.gains is None else str(args.gains)}
+    try:
+        res = simulate(m, ctrl, ref, duration=args.duration, dt=dt, true_params=true, progress=progress,
+                       substeps=args.substeps, sensor=sensor, delay_samples=args.delay_samples,
+                       predict=args.predict)
     except SimulationDivergedError as exc:
+        if args.json:
+            print(json.dumps(_script_report(None, settings, exc), allow_nan=False))
+            return 0
         print(f"fjm: {exc}", file=sys.stderr)
         return 3
+    settings["substeps"] = res.settings["substeps"]
+    if args.json:
+        print(json.dumps(_script_report(res, settings, None), allow_nan=False))
+        return 0
+    return _legacy_report(m, args, res, kind, true, nominal, k_s, delta, gain, ctrl)
+
+
+def _legacy_report(m, args, res, kind, true, nominal, k_s, delta, gain, ctrl) -> int:
+    """The indented report (and the optional PNG) of ``fjm simulate`` without ``--json``."""
     metrics: Dict[str, object] = {}
     for k, v in res.metrics.as_dict().items():
         finite_or_note(metrics, k, v)
-    report = {"model": m.name, "controller": args.controller, "reference": args.reference,
+    report = {"model": m.name, "controller": kind, "reference": args.reference,
               "true_params": dict(zip(m.param_names, m.params_array(true).tolist())),
               "nominal_params": dict(zip(m.param_names, m.params_array(nominal).tolist())),
               "lam": args.lam, "k_s": k_s, "delta": delta,
               "lemma1": None if gain is None else {"k_s": gain.k_s, "k_s_tight": gain.k_s_tight, "W": gain.W,
                                                    "H": gain.H, "beta_hat": gain.beta_hat},
-              "metrics": metrics}
+              "settings": res.settings, "metrics": metrics}
     if hasattr(ctrl, "stiffness_estimate"):
         report["K_hat_final"] = ctrl.stiffness_estimate(res.z[-1]).tolist()
     print(json.dumps(report, indent=2, allow_nan=False))
     if args.plot is not None:
         from ..experiments.plots import plot_run
         mt = res.metrics
-        plot_run(res, f"{args.model}, {args.controller}, reference {args.reference}: final |e1| = "
+        plot_run(res, f"{args.model}, {kind}, reference {args.reference}: final |e1| = "
                       f"{mt.final_error:.3g} rad, RMS = {mt.rms_error:.3g} rad, max |u| = {mt.max_abs_u:.3g} N m",
                  args.plot)
     return 0

@@ -90,3 +90,50 @@ def compute_metrics(t, e1, u, s, delta) -> Metrics:
                           np.max(np.abs(u)), outside[-1] if outside.size else -1,
                           np.sum(np.abs(np.diff(u, axis=0))), e1.shape[1])
     return Metrics(**{k: float(v) for k, v in m.items()})
+
+
+# -- per-joint figures of a stored run (the ``fjm simulate --json`` report) ---------------------
+#
+# ``result`` is a :class:`fjm_runtime.sim.simulate.SimulationResult`; the torques are the ones
+# applied, ``u_0 .. u_{N-1}`` (each held over a sample; the last row ``u_N`` is never applied).
+
+def rms_second_half(result) -> np.ndarray:
+    """RMS of ``e1 = q - q_d`` per joint over the samples with ``t >= t_end / 2``, rad, shape (n,)."""
+    half = result.t >= 0.5 * result.t[-1]
+    return np.sqrt(np.mean(result.e1[half] ** 2, axis=0))
+
+
+def peak_torque(result) -> np.ndarray:
+    """``max_k |u_k|`` per joint over the applied torques, N m, shape (n,)."""
+    return np.max(np.abs(result.u[:-1]), axis=0)
+
+
+def time_at_limit(result, u_max=None) -> np.ndarray:
+    """Fraction of the applied samples with ``|u_k| >= u_max (1 - 1e-9)`` per joint, shape (n,).
+
+    ``u_max`` defaults to ``result.u_max`` (the controller's limit); without a limit: zeros.
+    """
+    limit = result.u_max if u_max is None else np.asarray(u_max, dtype=float)
+    u = np.abs(result.u[:-1])
+    if limit is None:
+        return np.zeros(u.shape[1])
+    return np.mean(u >= np.broadcast_to(limit, (u.shape[1],)) * (1.0 - 1e-9), axis=0)
+
+
+def torque_jitter(result, window: float = 0.02) -> np.ndarray:
+    """Standard deviation of ``u`` minus its centred moving mean, per joint, N m, shape (n,).
+
+    The mean is over ``2h + 1`` samples with ``h = round(window / (2 T))`` (20 ms by default),
+    taken where the whole window lies inside the run (``N - 2h`` samples); ``nan`` if the run is
+    shorter than the window.
+    """
+    u = result.u[:-1]
+    T = float(result.t[1] - result.t[0])
+    h = max(1, int(round(0.5 * window / T)))
+    width = 2 * h + 1
+    if u.shape[0] < width:
+        return np.full(u.shape[1], np.nan)
+    c = np.vstack([np.zeros((1, u.shape[1])), np.cumsum(u, axis=0)])
+    mean = (c[width:] - c[:-width]) / width
+    return np.std(u[h:u.shape[0] - h] - mean, axis=0)
+

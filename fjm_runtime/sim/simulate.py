@@ -1,22 +1,30 @@
-"""Closed-loop simulation: RK4 plant with TRUE parameters, controller with NOMINAL ones.
+"""Closed-loop simulation, sampled-data: TRUE plant on RK4 substeps, digital controller with NOMINAL parameters.
 
-The torque is computed once per step and held (zero-order hold, like a digital
-controller sampling at ``1/dt``); the plant state and the controller's internal
-state are integrated together by classical RK4.
+The controller samples at ``1/dt``: at ``t_k = k dt`` it reads the measurement (with the
+sensor model's noise, quantization and a computation delay of ``delay_samples``), computes
+the torque, which is held over ``[t_k, t_{k+1})`` (zero-order hold), and advances its own
+state once per sample (``z_{k+1} = z_k + dt z_dot_k``). The plant integrates over the sample
+on ``substeps`` classical RK4 steps (default: :mod:`fjm_runtime.sim.substeps`). The sample
+step is one definition (:mod:`fjm_runtime.sim.sample_step`) for every backend.
 """
 from __future__ import annotations
 
 import sys
-from dataclasses import dataclass
+from dataclasses import dataclass, field as dc_field
 from typing import Callable, Optional
 
 import numpy as np
 
+from ..sim.loops import LOOPS
 from ..sim.metrics import Metrics, compute_metrics
-from ..sim.rk4 import rk4_step
-from ..sim.step import SimulationDivergedError, assemble, build_fused_step, casadi_functions, check_divergence
+from ..sim.sample_step import initial_measurement, initial_step_state, make_layout
+from ..sim.sensor import SensorModel, noise_array
+from ..sim.step import SimulationDivergedError, casadi_functions
+from ..sim.substeps import CoarseIntegrationWarning, resolve_substeps
+from ..validation import FjmValueError
 
-__all__ = ["BACKENDS", "Metrics", "SimulationDivergedError", "SimulationResult", "simulate", "stderr_progress"]
+__all__ = ["BACKENDS", "CoarseIntegrationWarning", "Metrics", "SensorModel", "SimulationDivergedError",
+           "SimulationResult", "simulate", "stderr_progress"]
 
 
 @dataclass
@@ -46,6 +54,10 @@ class SimulationResult:
     delta : ndarray, shape (n,)
         Boundary-layer width used for the reaching time.
     metrics : Metrics
+    u_max : ndarray, shape (n,) or None
+        The controller's torque limit (for :func:`fjm_runtime.sim.metrics.time_at_limit`).
+    settings : dict
+        ``rate`` (Hz), ``dt``, ``substeps``, ``delay_samples``, ``predict``, ``sensing``, ``seed``.
     """
 
     t: np.ndarray
@@ -59,6 +71,8 @@ class SimulationResult:
     e1: np.ndarray
     delta: np.ndarray
     metrics: Metrics
+    u_max: Optional[np.ndarray] = None
+    settings: dict = dc_field(default_factory=dict)
 
 
 def _true_params_array(model, true_params) -> np.ndarray:
@@ -83,21 +97,24 @@ def _check_state(x, nx, field):
 
 def simulate(model, controller, reference, *, duration: float, dt: float = 1e-3,
              true_params=None, x0=None, progress: Optional[Callable[[float], None]] = None,
-             max_state: float = 1e6, backend: str = "auto") -> SimulationResult:
-    """Simulate the closed loop with the TRUE plant and the controller's NOMINAL model.
+             max_state: float = 1e6, backend: str = "auto", substeps: Optional[int] = None,
+             sensor: Optional[SensorModel] = None, delay_samples: int = 0,
+             predict: bool = False, loop: str = "sampled") -> SimulationResult:
+    """Simulate the sampled-data closed loop: TRUE plant, controller with its NOMINAL model.
 
     Parameters
     ----------
     model : Model
         ``fjm_runtime.load(name)``.
     controller : SlidingModeController
-        Holds its own nominal parameters (see :mod:`fjm_runtime.control.laws`).
+        Holds its own nominal parameters (see :mod:`fjm_runtime.control.laws`); its
+        ``sensing`` (``'state'``, the default, or ``'torque'``) decides what it measures.
     reference : Reference
         ``reference(t) -> (5, n)``.
     duration : float
         Simulated time in s, > 0.
     dt : float
-        RK4 step and control sample time in s, > 0 (default 1 ms).
+        Control sample time ``T`` in s, > 0 (default 1 ms): the torque is held over a sample.
     true_params : dict or array_like, optional
         Plant parameters (default: model defaults).
     x0 : array_like, shape (4n,), optional
@@ -107,14 +124,25 @@ def simulate(model, controller, reference, *, duration: float, dt: float = 1e-3,
     max_state : float
         ``|x|`` beyond this counts as divergence.
     backend : {'auto', 'casadi', 'compiled', 'python'}
-        ``'python'``: a plain loop calling ``model.f``, ``model.g`` and the
-        controller's :meth:`evaluate` (works for any controller object).
-        ``'casadi'``: the same zero-order-hold RK4 closed loop composed from the
-        model's CasADi Functions into one ``mapaccum`` (10-50x faster; needs
-        the controller's ``symbolic_evaluate``). ``'auto'`` picks ``'casadi'``
-        when possible. ``'compiled'``: that same closed loop code-generated to C,
-        compiled once and cached (:mod:`fjm_runtime.sim.compiled`). All give the
+        ``'python'``: a plain loop through ``model.f``, ``model.g`` and the controller's
+        ``evaluate`` (any controller object). ``'casadi'``: the CasADi sample step folded by
+        ``mapaccum`` (needs the controller's ``symbolic_evaluate``); ``'auto'`` picks it when
+        possible. ``'compiled'``: the same step in C, compiled once and cached. All give the
         same trajectories to rounding.
+    substeps : int, optional
+        RK4 steps of the plant per sample (default: the rule of :mod:`fjm_runtime.sim.substeps`;
+        a coarser forced value warns with :class:`CoarseIntegrationWarning`).
+    sensor : SensorModel, optional
+        Noise, quantization and the dtau_J mode (default :meth:`SensorModel.ideal`).
+    delay_samples : int
+        Computation delay ``d`` >= 0: the law at ``t_k`` sees the measurement of ``t_{k-d}``.
+    predict : bool
+        With ``d > 0``: predict the measurement ``d`` samples ahead with the NOMINAL model
+        under the torques already sent (see :mod:`fjm_runtime.sim.sample_step`).
+    loop : {'sampled', 'legacy'}
+        ``'legacy'``: the former loop (:mod:`fjm_runtime.sim.legacy`: one RK4 step per sample,
+        controller state integrated with the plant), only to compare with the batch engine;
+        it takes no substeps, sensor, delay or prediction.
 
     Returns
     -------
@@ -123,19 +151,73 @@ def simulate(model, controller, reference, *, duration: float, dt: float = 1e-3,
     Raises
     ------
     ValueError
-        Bad durations, steps, shapes or parameters (the message names the field).
+        Bad durations, steps, shapes, parameters or settings (the message names the field).
     SimulationDivergedError
         The state became non-finite or exceeded ``max_state``; ``.t`` is the time.
     """
-    p_true, x, z, n_steps = _initial_conditions(model, controller, reference, duration, dt, true_params, x0)
+    p_true, x, n_steps = _initial_conditions(model, controller, reference, duration, dt, true_params, x0)
+    if loop == "legacy":
+        return _simulate_legacy(model, controller, reference, p_true, x, dt, n_steps, progress, max_state,
+                                backend, (substeps, sensor, delay_samples, predict))
+    if loop != "sampled":
+        raise FjmValueError(f"loop = {loop!r}: expected 'sampled' or 'legacy'")
+    sensor, delay = _check_settings(sensor, delay_samples, predict)
+    subs = resolve_substeps(substeps, model, x, p_true, float(dt))
+    L = make_layout(model, controller, float(dt), subs, sensor, delay, predict)
+    t = dt * np.arange(n_steps + 1)
+    r0 = np.asarray(reference(0.0), dtype=float)
+    z = np.asarray(controller.initial_state(0.0, initial_measurement(model, L, x, p_true), r0), dtype=float)
+    w0 = initial_step_state(model, L, x, z, p_true)
+    R = _reference_rows(reference, t, L.n)
+    NOISE = noise_array(sensor, L.sensing, L.n, t.size)
     name = _choose_backend(backend, model, controller)
-    t, X, Z, U, S, Yh, R = BACKENDS[name](model, controller, reference, p_true, x, z, dt, n_steps,
-                                          progress, max_state)
-    return _finish(model, controller, p_true, t, X, Z, U, S, Yh, R)
+    W, AUX = LOOPS[name](model, controller, L, p_true, w0, t, R, NOISE, progress, max_state)
+    settings = {"rate": 1.0 / float(dt), "dt": float(dt), "substeps": subs, "delay_samples": delay,
+                "predict": bool(predict), "sensing": L.sensing, "seed": int(sensor.seed), "backend": name}
+    return _finish(model, controller, p_true, L, t, W, AUX, R.reshape(-1, 5, L.n), settings)
+
+
+def _simulate_legacy(model, controller, reference, p_true, x, dt, n_steps, progress, max_state, backend,
+                     extras) -> SimulationResult:
+    """The former loop (:mod:`fjm_runtime.sim.legacy`), without the sampled-data settings."""
+    from .legacy import LEGACY_LOOPS
+    if extras != (None, None, 0, False):
+        raise FjmValueError("loop = 'legacy' takes no substeps, sensor, delay_samples or predict")
+    z = np.asarray(controller.initial_state(0.0, x, np.asarray(reference(0.0), dtype=float)), dtype=float)
+    name = _choose_backend(backend, model, controller)
+    t, X, Z, U, S, Yh, R = LEGACY_LOOPS[name](model, controller, reference, p_true, x, z, dt, n_steps,
+                                              progress, max_state)
+    n, nz = int(model.n), z.size
+    W = np.hstack([X, Z])
+    AUX = np.hstack([U, S, Yh.reshape(-1, 4 * n)])
+    L = make_layout(model, controller, float(dt), 1, SensorModel.ideal(), 0, False)
+    settings = {"rate": 1.0 / float(dt), "dt": float(dt), "substeps": 1, "delay_samples": 0, "predict": False,
+                "sensing": L.sensing, "seed": 0, "backend": name, "loop": "legacy"}
+    return _finish(model, controller, p_true, L, t, W, AUX, R, settings)
+
+
+def _check_settings(sensor, delay_samples, predict):
+    """The sensor (default ideal) and the delay, checked; one-line FjmValueError otherwise."""
+    if sensor is None:
+        sensor = SensorModel.ideal()
+    if not isinstance(sensor, SensorModel):
+        raise FjmValueError(f"sensor = {sensor!r}: expected a SensorModel (e.g. SensorModel.panda())")
+    if isinstance(delay_samples, bool) or not isinstance(delay_samples, (int, np.integer)) or delay_samples < 0:
+        raise FjmValueError(f"delay_samples = {delay_samples!r}: expected an integer >= 0 (samples of delay)")
+    if not isinstance(predict, (bool, np.bool_)):
+        raise FjmValueError(f"predict = {predict!r}: expected True or False")
+    return sensor, int(delay_samples)
+
+
+def _reference_rows(reference, t, n):
+    """The reference at every sample time, shape (N+1, 5n)."""
+    if hasattr(reference, "sample"):
+        return np.asarray(reference.sample(t), dtype=float).reshape(t.size, 5 * n)
+    return np.stack([np.asarray(reference(tk), dtype=float).reshape(5 * n) for tk in t])
 
 
 def _initial_conditions(model, controller, reference, duration, dt, true_params, x0):
-    """Check the run's arguments; ``(p_true, x0, z0, n_steps)`` (x0 default: at rest on the reference)."""
+    """Check the run's arguments; ``(p_true, x0, n_steps)`` (x0 default: at rest on the reference)."""
     n, nx = int(model.n), int(model.nx)
     if not (np.isfinite(duration) and duration > 0):
         raise ValueError(f"duration = {duration!r}: expected a finite value > 0 s")
@@ -156,8 +238,7 @@ def _initial_conditions(model, controller, reference, duration, dt, true_params,
         x0[0:n] = r0[0]
         x0[2 * n:3 * n] = r0[0]
     x = _check_state(x0, nx, "x0")
-    z = np.asarray(controller.initial_state(0.0, x, r0), dtype=float)
-    return p_true, x, z, int(round(duration / dt))
+    return p_true, x, int(round(duration / dt))
 
 
 def _choose_backend(backend: str, model, controller) -> str:
@@ -173,55 +254,18 @@ def _choose_backend(backend: str, model, controller) -> str:
     return "casadi" if fused_ok else "python"
 
 
-def _run_python(model, controller, reference, p_true, x, z, dt, n_steps, progress, max_state):
-    """A plain loop calling ``model.f``, ``model.g`` and the controller; ``t, X, Z, U, S, Yh, R``."""
-    n, nx, nz = int(model.n), int(model.nx), z.size
-    t = dt * np.arange(n_steps + 1)
-    X = np.empty((n_steps + 1, nx)); Z = np.empty((n_steps + 1, nz))
-    U = np.empty((n_steps + 1, n)); S = np.empty((n_steps + 1, n))
-    Yh = np.empty((n_steps + 1, 4, n)); R = np.empty((n_steps + 1, 5, n))
-    report_every = max(1, n_steps // 20)
-
-    for k in range(n_steps + 1):
-        tk = t[k]
-        rk = reference(tk)
-        sample = controller.evaluate(tk, x, z, rk)
-        X[k], Z[k], U[k], S[k], Yh[k], R[k] = x, z, sample.u, sample.s, sample.y_hat, rk
-        if k == n_steps:
-            break
-        u = sample.u
-
-        def rhs(tau, w, u=u, sample=sample):
-            xs = w[:nx]
-            dx = np.asarray(model.f(xs, p_true), dtype=float).reshape(nx) + \
-                np.asarray(model.g(xs, p_true), dtype=float).reshape(nx, n) @ u
-            if nz == 0:
-                return dx
-            dz = controller.state_derivative(tau, xs, w[nx:], reference(tau), sample)
-            return np.concatenate([dx, dz])
-
-        w = rk4_step(rhs, tk, np.concatenate([x, z]), dt)
-        check_divergence([tk + dt], w[None], u[None], max_state)
-        x, z = w[:nx], w[nx:]
-        if progress is not None and (k + 1) % report_every == 0:
-            progress((k + 1) / n_steps)
-    return t, X, Z, U, S, Yh, R
-
-
-def _run_compiled(model, controller, reference, p_true, x, z, dt, n_steps, progress, max_state):
-    """The closed loop in C (:mod:`fjm_runtime.sim.compiled`, compiled once and cached); no progress."""
-    from ..sim.compiled import run_compiled
-    return run_compiled(model, controller, reference, p_true, x, z, dt, n_steps, max_state)
-
-
-def _finish(model, controller, p_true, t, X, Z, U, S, Yh, R) -> SimulationResult:
-    n = int(model.n)
+def _finish(model, controller, p_true, L, t, W, AUX, R, settings) -> SimulationResult:
+    n = L.n
+    sx, sz = L.slices()[:2]
+    X, Z = W[:, sx], W[:, sz]
+    U, S, Yh = AUX[:, :n], AUX[:, n:2 * n], AUX[:, 2 * n:].reshape(-1, 4, n)
     Y = _true_outputs(model, p_true, X)
     e1 = X[:, :n] - R[:, 0]
     delta = np.asarray(getattr(controller, "delta", np.full(n, np.inf)), dtype=float)
     metrics = compute_metrics(t, e1, U, S, delta)
-    return SimulationResult(t=t, x=X, z=Z, u=U, y=Y, y_hat=Yh, ref=R, s=S, e1=e1,
-                            delta=delta, metrics=metrics)
+    u_max = getattr(controller, "u_max", None)
+    return SimulationResult(t=t, x=X, z=Z, u=U, y=Y, y_hat=Yh, ref=R, s=S, e1=e1, delta=delta, metrics=metrics,
+                            u_max=None if u_max is None else np.asarray(u_max, dtype=float), settings=settings)
 
 
 _MAPPED: dict = {}
@@ -248,40 +292,8 @@ def _true_outputs(model, p_true, X):
     return np.stack([np.asarray(model.T(xk, p_true), dtype=float).reshape(4, n) for xk in X])
 
 
-def _run_fused(model, controller, reference, p_true, x0, z0, dt, n_steps, progress, max_state):
-    """The zero-order-hold RK4 loop as one CasADi ``mapaccum`` (in chunks for progress); ``t, X, ..., R``."""
-    nx, n, nz = int(model.nx), int(model.n), z0.size
-    fns = casadi_functions(model)
-    step = build_fused_step(fns, controller, nx, n, nz, p_true.size, dt)
-    t = dt * np.arange(n_steps + 1)
-    r_half = reference.sample(0.5 * dt * np.arange(2 * n_steps + 1)).reshape(2 * n_steps + 1, 5 * n)
-    R = r_half[0::2].reshape(n_steps + 1, 5, n)
-    n_chunks = 20 if (progress is not None and n_steps >= 200) else 1
-    chunk = -(-n_steps // n_chunks)
-    runners = {}
-    W = np.empty((n_steps + 1, nx + nz))
-    aux = np.empty((n_steps, 6 * n))
-    W[0] = np.concatenate([x0, z0])
-    k = 0
-    while k < n_steps:
-        m = min(chunk, n_steps - k)
-        if m not in runners:
-            runners[m] = step.mapaccum("closed_loop", m)
-        cols = slice(2 * k, 2 * (k + m) + 1)
-        rr = r_half[cols]
-        w_out, a_out = runners[m](W[k], rr[0:-1:2].T, rr[1::2].T, rr[2::2].T, p_true)
-        w_out, a_out = np.asarray(w_out).T, np.asarray(a_out).T
-        W[k + 1:k + m + 1], aux[k:k + m] = w_out, a_out
-        check_divergence(t[k + 1:k + m + 1], w_out, a_out[:, :n], max_state)
-        k += m
-        if progress is not None:
-            progress(k / n_steps)
-    return assemble(controller, t, W, aux, R, nx, n)
-
-
-#: The closed-loop runners by ``backend`` name, each
-#: ``(model, controller, reference, p_true, x0, z0, dt, n_steps, progress, max_state) -> (t, X, Z, U, S, Yh, R)``.
-BACKENDS = {"python": _run_python, "casadi": _run_fused, "compiled": _run_compiled}
+#: The closed-loop runners by ``backend`` name (:data:`fjm_runtime.sim.loops.LOOPS`).
+BACKENDS = LOOPS
 
 
 def stderr_progress(label: str) -> Callable[[float], None]:

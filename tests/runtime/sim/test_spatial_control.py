@@ -82,7 +82,7 @@ def test_batch_on_elbow3_rows_are_their_own_plants():
     batch = simulate_batch(m, ctrl, ref, P, duration=0.5, parallel=False)
     assert not batch.diverged.any()
     for i, row in enumerate(P):
-        single = simulate(m, ctrl, ref, duration=0.5, true_params=row, backend="compiled")
+        single = simulate(m, ctrl, ref, duration=0.5, true_params=row, backend="compiled", loop="legacy")
         for k in METRIC_NAMES:
             assert batch.metrics[k][i] == pytest.approx(getattr(single.metrics, k), rel=1e-9, abs=1e-12), k
         np.testing.assert_allclose(batch.x_final[i], single.x[-1], rtol=0, atol=1e-9)
