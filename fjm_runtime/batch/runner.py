@@ -141,7 +141,8 @@ def simulate_batch(model, controller, reference, params_true_array, *, duration:
     results = None
     if trajectories:
         results = [simulate(model, controller, reference, duration=duration, dt=dt, true_params=P[i],
-                            x0=x0, max_state=max_state, backend="compiled") if not diverged[i] else None
+                            x0=x0, max_state=max_state, backend="compiled", loop="legacy")
+                   if not diverged[i] else None
                    for i in range(P.shape[0])]
     return BatchResult(params=P, metrics=metrics, diverged=diverged,
                        divergence_time=np.where(diverged, first_bad * dt, np.nan),

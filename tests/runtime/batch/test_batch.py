@@ -38,7 +38,7 @@ def test_batch_of_one_equals_single_run():
     ctrl = _link1_ctrl(m)
     ref = Sinusoid(0.5, 1.0)
     p = m.params_array({"K": 120.0})
-    single = simulate(m, ctrl, ref, duration=2.0, true_params=p, backend="python")
+    single = simulate(m, ctrl, ref, duration=2.0, true_params=p, backend="python", loop="legacy")
     batch = simulate_batch(m, ctrl, ref, p[None], duration=2.0)
     _assert_same_metrics(single, batch, 0)
     assert np.max(np.abs(batch.x_final[0] - single.x[-1])) < 1e-9
@@ -58,7 +58,7 @@ def test_each_row_is_its_own_plant(parallel, simd):
     assert (batch.info["path"] != "scalar") == simd
     assert batch.info["threads"] == 1 or parallel
     for i, k in enumerate(Ks):
-        single = simulate(m, ctrl, ref, duration=1.0, true_params={"K": k}, backend="compiled")
+        single = simulate(m, ctrl, ref, duration=1.0, true_params={"K": k}, backend="compiled", loop="legacy")
         _assert_same_metrics(single, batch, i)
     assert len(set(np.round(batch.metrics["rms_error"], 12))) == len(Ks)
 
@@ -70,7 +70,7 @@ def test_planar2_batch_matches_single():
     P = np.array([m.params_array({"K1": 120.0}), m.params_array({"K2": 190.0})])
     batch = simulate_batch(m, ctrl, ref, P, duration=0.5)
     for i in range(2):
-        single = simulate(m, ctrl, ref, duration=0.5, true_params=P[i], backend="python")
+        single = simulate(m, ctrl, ref, duration=0.5, true_params=P[i], backend="python", loop="legacy")
         _assert_same_metrics(single, batch, i)
 
 
