@@ -43,6 +43,8 @@ from typing import Dict, List, Tuple
 
 import casadi as ca
 
+from .torque import pdg_gains_layout
+
 #: Emitted laws, in file order, with their meaning.
 KINDS: Tuple[Tuple[str, str], ...] = (
     ("smc", "paper's sliding-mode law (eqs 10-15), psi = sat(s/delta) or sign(s) (gains.sign)"),
@@ -50,6 +52,28 @@ KINDS: Tuple[Tuple[str, str], ...] = (
     ("fl", "plain feedback linearization, nu = y_d'''' - (c1 e2 + c2 e3 + c3 e4) - k_lin s"),
     ("adaptive", "integral sliding-mode law with an online least-squares stiffness estimate K_hat"),
 )
+
+#: Torque-sensed laws (first argument ``m = [q; dq; tau_J; dtau_J; dq_m]``, 5n), in file order:
+#: the state law of the same base kind with ``<model>_control_core_tau`` as its model part.
+TORQUE_KINDS: Tuple[Tuple[str, str], ...] = (
+    ("smc_tau", "torque-sensed smc: the smc law on T_tau, alpha_tau, beta_tau of m = [q; dq; tau_J; dtau_J; dq_m]"),
+    ("ismc_tau", "torque-sensed ismc: the ismc law on T_tau, alpha_tau, beta_tau of m"),
+    ("fl_tau", "torque-sensed fl: the fl law on T_tau, alpha_tau, beta_tau of m"),
+)
+
+#: The regulation law (motor PD + gravity compensation, Tomei), :func:`derive.emit.torque.build_pdg`.
+PDG_KIND: Tuple[str, str] = (
+    "pdg", "motor PD + gravity compensation (regulation to q_d = r[0:n]): "
+           "u = k_p (q_d + K^-1 G(q_d) - q_m) - k_d dq_m + G(q_d); reads only q_m, dq_m of x")
+
+#: Every emitted law, in file order: ``(kind, meaning)``.
+ALL_KINDS: Tuple[Tuple[str, str], ...] = KINDS + TORQUE_KINDS + (PDG_KIND,)
+
+
+def base_kind(kind: str) -> str:
+    """The state law a torque-sensed kind shares its arithmetic, gains and ``z`` with (``ismc_tau`` -> ``ismc``)."""
+    return kind[:-4] if kind.endswith("_tau") else kind
+
 
 #: Names of the blocks of the adaptive estimator state, in order (after z_int).
 ESTIMATOR_BLOCKS = ("K_hat", "u_f", "phi_f", "w_f", "P")
@@ -69,6 +93,9 @@ def gains_layout(kind: str, n: int) -> List[Tuple[str, int, str]]:
     -------
     list of (str, int, str)
     """
+    if kind == "pdg":
+        return pdg_gains_layout(n)
+    kind = base_kind(kind)
     integral = kind in ("ismc", "adaptive")
     out = [("c", 4 if integral else 3,
             "surface coefficients, lowest first: [c0, c1, c2, c3]" if integral else
@@ -93,6 +120,7 @@ def gains_layout(kind: str, n: int) -> List[Tuple[str, int, str]]:
 
 def state_layout(kind: str, n: int) -> List[Tuple[str, int, str]]:
     """Blocks of the controller state ``z`` of ``control_<kind>``: ``(name, size, meaning)``."""
+    kind = base_kind(kind)
     if kind == "ismc":
         return [("z_int", n, "integral of e1 = q - y_d (rad s)")]
     if kind == "adaptive":
@@ -212,14 +240,48 @@ def build_core(model, functions: Dict[str, ca.Function]) -> ca.Function:
                        ["x", "p_hat"], ["y_hat", "alpha", "beta"])
 
 
-def build_controls(model, functions: Dict[str, ca.Function]) -> Dict[str, ca.Function]:
-    """Every law of :data:`KINDS` (and the ``_zdot`` parts of stateful ones), and their shared core.
+def _law_pair(model, kind: str, core: ca.Function, n_meas: int, first: str, idx) -> Dict[str, ca.Function]:
+    """``control_<kind>`` (MX, calling ``core`` once) and, when stateful, ``control_<kind>_zdot`` (SX).
+
+    ``first`` names the first argument (``x``, 4n, or ``m``, 5n); ``kind`` may be a torque
+    kind, whose arithmetic, gains and ``z`` are those of :func:`base_kind`.
+    """
+    n = model.n
+    n_par = len(model.params)
+    base = base_kind(kind)
+    glay, zlay = gains_layout(kind, n), state_layout(kind, n)
+    nz, ng = sum(b[1] for b in zlay), sum(b[1] for b in glay)
+    x, z, r = ca.MX.sym(first, n_meas), ca.MX.sym("z", nz), ca.MX.sym("r", 5 * n)
+    p, gains = ca.MX.sym("p", n_par), ca.MX.sym("gains", ng)
+    g = _blocks(gains, glay)
+    u, s, u_cmd, y_hat = _law(base, n, core, x, z, r, p, g, idx)
+    z_dot = _zdot(base, n, x, z, r, p, g, u_cmd, u, idx)
+    out = {f"control_{kind}": ca.Function(
+        f"{model.name}_control_{kind}", [x, z, r, p, gains], [u, s, z_dot, u_cmd, y_hat],
+        [first, "z", "r", "p", "gains"], ["u", "s", "z_dot", "u_cmd", "y_hat"])}
+    if zlay:
+        xs, zs, rs = ca.SX.sym(first, n_meas), ca.SX.sym("z", nz), ca.SX.sym("r", 5 * n)
+        ps, gs = ca.SX.sym("p", n_par), ca.SX.sym("gains", ng)
+        uc, uu = ca.SX.sym("u_cmd", n), ca.SX.sym("u", n)
+        zd = ca.cse(_zdot(base, n, xs, zs, rs, ps, _blocks(gs, glay), uc, uu, idx))
+        out[f"control_{kind}_zdot"] = ca.Function(
+            f"{model.name}_control_{kind}_zdot", [xs, zs, rs, ps, gs, uc, uu], [zd],
+            [first, "z", "r", "p", "gains", "u_cmd", "u"], ["z_dot"])
+    return out
+
+
+def build_controls(model, functions: Dict[str, ca.Function],
+                   torque: Dict[str, ca.Function] = None) -> Dict[str, ca.Function]:
+    """Every law of :data:`ALL_KINDS` (and the ``_zdot`` parts of stateful ones), and their shared cores.
 
     Parameters
     ----------
     model : derive.model_base.FlexibleJointModel
     functions : dict str -> casadi.Function
         The model's SX Functions (``T``, ``alpha``, ``beta`` are used, inlined into the core).
+    torque : dict str -> casadi.Function, optional
+        ``control_core_tau`` and ``control_pdg`` (:mod:`derive.emit.torque`); without it only
+        the state laws of :data:`KINDS` are built.
 
     Returns
     -------
@@ -229,31 +291,21 @@ def build_controls(model, functions: Dict[str, ca.Function]) -> Dict[str, ca.Fun
         once, with the law's own arithmetic around the call (call it with SX arguments, or
         ``expand()`` it, to inline everything); for ``ismc`` and ``adaptive``,
         ``"control_<kind>_zdot"`` -> ``<model>_control_<kind>_zdot`` (SX, no model part).
+        With ``torque``: ``"control_core_tau"``, the laws of :data:`TORQUE_KINDS` (first
+        argument ``m``, 5n, calling ``control_core_tau``; ``ismc_tau`` with its ``_zdot``)
+        and ``"control_pdg"``.
     """
     n = model.n
-    n_par = len(model.params)
     idx = _stiffness_indices(model)
     core = build_core(model, functions)
     out: Dict[str, ca.Function] = {"control_core": core}
     for kind, _ in KINDS:
-        glay, zlay = gains_layout(kind, n), state_layout(kind, n)
-        nz, ng = sum(b[1] for b in zlay), sum(b[1] for b in glay)
-        x, z, r = ca.MX.sym("x", 4 * n), ca.MX.sym("z", nz), ca.MX.sym("r", 5 * n)
-        p, gains = ca.MX.sym("p", n_par), ca.MX.sym("gains", ng)
-        g = _blocks(gains, glay)
-        u, s, u_cmd, y_hat = _law(kind, n, core, x, z, r, p, g, idx)
-        z_dot = _zdot(kind, n, x, z, r, p, g, u_cmd, u, idx)
-        out[f"control_{kind}"] = ca.Function(
-            f"{model.name}_control_{kind}", [x, z, r, p, gains], [u, s, z_dot, u_cmd, y_hat],
-            ["x", "z", "r", "p", "gains"], ["u", "s", "z_dot", "u_cmd", "y_hat"])
-        if zlay:
-            xs, zs, rs = ca.SX.sym("x", 4 * n), ca.SX.sym("z", nz), ca.SX.sym("r", 5 * n)
-            ps, gs = ca.SX.sym("p", n_par), ca.SX.sym("gains", ng)
-            uc, uu = ca.SX.sym("u_cmd", n), ca.SX.sym("u", n)
-            zd = ca.cse(_zdot(kind, n, xs, zs, rs, ps, _blocks(gs, glay), uc, uu, idx))
-            out[f"control_{kind}_zdot"] = ca.Function(
-                f"{model.name}_control_{kind}_zdot", [xs, zs, rs, ps, gs, uc, uu], [zd],
-                ["x", "z", "r", "p", "gains", "u_cmd", "u"], ["z_dot"])
+        out.update(_law_pair(model, kind, core, 4 * n, "x", idx))
+    if torque is not None:
+        out["control_core_tau"] = torque["control_core_tau"]
+        for kind, _ in TORQUE_KINDS:
+            out.update(_law_pair(model, kind, torque["control_core_tau"], 5 * n, "m", idx))
+        out["control_pdg"] = torque["control_pdg"]
     return out
 
 
@@ -270,7 +322,14 @@ def layout_lines(n: int) -> List[str]:
         "  <model>_control_core(x, p_hat) -> (y_hat (4n), alpha (n), beta (n, n) column-major): the model",
         "  part every law calls (p_hat in p's layout: p, or K replaced by clip(K_hat) for adaptive).",
     ]
-    for kind, meaning in KINDS:
+    lines += [
+        "  torque-sensed laws <model>_control_<kind>_tau(m, z, r, p, gains) (smc, ismc, fl): first argument",
+        "  m = [q; dq; tau_J; dtau_J; dq_m] (5n), tau_J = K (q_m - q) measured; z, gains, outputs as control_<kind>;",
+        "  they call <model>_control_core_tau(m, p_hat) -> (y_hat (4n), alpha (n), beta (n, n)).",
+        "  <model>_control_pdg(x, z, r, p, gains): regulation to q_d = r[0:n]; z empty; s = q_md - q_m",
+        "  (motor set-point error); y_hat = [q; dq; 0; 0] (placeholder); u reads only q_m, dq_m.",
+    ]
+    for kind, meaning in ALL_KINDS:
         lines.append(f"  control_{kind}: {meaning}")
         zl = state_layout(kind, n)
         lines.append("    z: " + (_offsets(zl) if zl else "(empty)"))
@@ -294,4 +353,14 @@ def manifest_entry(kind: str, n: int) -> Dict[str, object]:
             rows.append({"name": name, "offset": k, "size": size, "meaning": meaning})
             k += size
         return rows
-    return {"z": table(state_layout(kind, n)), "gains": table(gains_layout(kind, n))}
+    entry: Dict[str, object] = {"z": table(state_layout(kind, n)), "gains": table(gains_layout(kind, n))}
+    if kind.endswith("_tau"):
+        entry["measurement"] = {"argument": "m", "size": 5 * n, "layout": "[q; dq; tau_J; dtau_J; dq_m]",
+                                "meaning": "first argument is the torque measurement m (5n), not the state x; "
+                                           "tau_J = K (q_m - q), dtau_J its rate, both measured",
+                                "state_law": base_kind(kind)}
+    if kind == "pdg":
+        entry["regulation"] = {"reads": "q_m, dq_m of x (motor side only)", "set_point": "r[0:n]",
+                               "s": "q_md - q_m, motor set-point error (rad)",
+                               "y_hat": "[q; dq; 0; 0], a placeholder for the linearizing coordinates"}
+    return entry

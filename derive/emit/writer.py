@@ -25,7 +25,7 @@ import shutil
 import signal
 import tempfile
 from pathlib import Path
-from typing import Dict, List
+from typing import Callable, Dict, List, Optional
 
 import casadi as ca
 import sympy as sp
@@ -218,7 +218,8 @@ def _control_entries(m, controls, control_ops, sizes) -> Dict[str, object]:
     return entries
 
 
-def write_model(lin: Linearization, outdir: Path) -> Dict[str, object]:
+def write_model(lin: Linearization, outdir: Path,
+                progress: Optional[Callable[[str], None]] = None) -> Dict[str, object]:
     """Emit every file of one model into ``outdir`` (created).
 
     Parameters
@@ -226,6 +227,8 @@ def write_model(lin: Linearization, outdir: Path) -> Dict[str, object]:
     lin : Linearization
     outdir : pathlib.Path
         ``.../<model>``; must not exist yet or be empty.
+    progress : callable, optional
+        Called with the name of each emission stage as it starts (a progress log).
 
     Returns
     -------
@@ -233,17 +236,22 @@ def write_model(lin: Linearization, outdir: Path) -> Dict[str, object]:
         The manifest written to ``manifest.json``.
     """
     m = lin.model
+    progress = progress or (lambda stage: None)
     outdir.mkdir(parents=True, exist_ok=True)
     complete = m.coupling is not None  # complete model: plant functions only, no static FL laws
     quantities = COMPLETE_QUANTITIES if complete else QUANTITIES
+    progress("CasADi functions")
     functions = build_complete_functions(lin) if complete else build_functions(lin)
+    progress("control laws")
     controls = {} if complete else _build_laws(lin, functions)
     versions = tool_versions()
     ops = {name: operation_count(functions[name]) for name, _ in quantities}
     # MX laws: the scalar operations of one call (the core's and the law's own), counted inlined
     control_ops = {name: operation_count(fn.expand() if fn.is_a("MXFunction") else fn)
                    for name, fn in controls.items()}
+    progress(".casadi files")
     sizes = _write_casadi_files(lin, outdir, functions, controls, ops, control_ops, versions, quantities)
+    progress("C sources")
     sources = _write_c_sources(lin, outdir, functions, controls, ops, control_ops, versions)
     manifest = {
         "header": HEADER,
@@ -275,6 +283,7 @@ def write_model(lin: Linearization, outdir: Path) -> Dict[str, object]:
         "tools": versions,
         "derivation_seconds": "not stored here (would break byte-identity); see build/derive-timings.json",
     }
+    progress("report")
     render = render_complete_report if complete else render_report
     (outdir / "REPORT.md").write_text(render(lin, functions, ops, HEADER))
     write_chain_json(m, outdir)  # the rigid-body tree for exporters (MJCF), if the model has one
