@@ -8,6 +8,7 @@ Examples
 ``fjm figures --out out`` (``--quick``: a fast smoke run of the same pipeline)
 ``fjm sweep link1 --samples 1000 --chunk 250 --out out/sweep.csv`` (Dask; ``--scheduler ADDRESS``)
 ``fjm derive --model-file arm.toml --out DIR`` (needs ``pip install '.[derive]'``)
+``fjm export mjcf panda --out panda.xml [--complete]`` (a MuJoCo model, docs/mujoco.md)
 
 Every error a user can cause is one line on stderr (``fjm: error: ...``) and exit status 2.
 """
@@ -19,11 +20,11 @@ import importlib.util
 import sys
 from typing import List, Optional
 
-from . import derive, figures, models, simulate, sweep
+from . import derive, export, figures, models, simulate, sweep
 from ..validation import FjmValueError
 
 #: Sub-commands with an ``add_parser(sub)`` and a ``run(args)``, in ``--help`` order.
-COMMANDS = {"simulate": simulate, "sweep": sweep, "figures": figures, "models": models}
+COMMANDS = {"simulate": simulate, "sweep": sweep, "figures": figures, "models": models, "export": export}
 
 
 def _tune_module():
@@ -58,6 +59,7 @@ def build_parser() -> argparse.ArgumentParser:
     sweep.add_parser(sub)
     figures.add_parser(sub)
     models.add_parser(sub)
+    export.add_parser(sub)
     tune = _tune_module()
     if tune is not None:
         tune.add_parser(sub)

@@ -101,3 +101,57 @@ class MujocoPlant:
         """The named sensors ``<j>_q, _dq, _q_m, _dq_m, _tau_J`` after the last forward/step: name -> float."""
         return {self.mj.sensor(i).name: float(self.data.sensordata[self.mj.sensor_adr[i]])
                 for i in range(self.mj.nsensor)}
+
+
+def run_closed_loop(plant: MujocoPlant, controller, reference, *, duration: float, dt: float, substeps: int,
+                    x0=None):
+    """The sampled-data loop of :func:`fjm_runtime.simulate` with MuJoCo as the plant.
+
+    At ``t_k = k dt`` the law sees the state ``x_k`` (ideal state sensing, no delay), its
+    state advances once per sample (``z += dt z_dot``), and ``ctrl = u_k`` is held over
+    ``substeps`` MuJoCo steps -- the file's timestep must be ``dt / substeps``.
+
+    Parameters
+    ----------
+    plant : MujocoPlant
+    controller : a controller of :func:`fjm_runtime.make_controller`
+    reference : Reference
+    duration, dt : float
+        s; ``round(duration / dt)`` samples.
+    substeps : int
+        MuJoCo steps per sample.
+    x0 : array_like, shape (4n,), optional
+        Default: at rest with ``q = q_m = q_d(0)``.
+
+    Returns
+    -------
+    t : numpy.ndarray, shape (N+1,)
+    x : numpy.ndarray, shape (N+1, 4n)
+    u : numpy.ndarray, shape (N+1, n)
+        The torque held over ``[t_k, t_k + dt)``.
+    """
+    n = plant.model.n
+    step = float(plant.mj.opt.timestep)
+    if abs(step * substeps - dt) > 1e-12 * dt:
+        raise FjmValueError(f"MuJoCo timestep {step!r} s x {substeps} substeps != dt = {dt!r} s (expected "
+                            "timestep = dt / substeps: export with --timestep)")
+    steps = int(round(duration / dt))
+    r0 = np.asarray(reference(0.0), dtype=float).reshape(5, n)
+    if x0 is None:
+        x0 = np.concatenate([r0[0], np.zeros(n), r0[0], np.zeros(n)])
+    x = as_vector("x0", x0, 4 * n)
+    plant.set_state(x)
+    z = np.asarray(controller.initial_state(0.0, x, r0), dtype=float)
+    t = np.arange(steps + 1) * dt
+    X, U = np.zeros((steps + 1, 4 * n)), np.zeros((steps + 1, n))
+    for k in range(steps + 1):
+        x = plant.state()
+        r = np.asarray(reference(t[k]), dtype=float).reshape(5, n)
+        sample = controller.evaluate(t[k], x, z, r)
+        X[k], U[k] = x, np.asarray(sample.u, dtype=float)
+        if k == steps:
+            break
+        if z.size:
+            z = z + dt * np.asarray(controller.state_derivative(t[k], x, z, r, sample), dtype=float)
+        plant.step(U[k], substeps)
+    return t, X, U

@@ -256,7 +256,7 @@ def _rotor_inertia(chain: dict, k: int, p: Dict[str, float], polar: float, joint
     it = float(r["transverse_inertia"])
     if 2 * it < polar * (1 - 1e-12):
         raise FjmValueError(f"rotor {joint}_rotor: transverse inertia {it!r} kg m^2 < half its polar inertia "
-                            f"J_m / N^2 = {polar!r} (no rigid rotor has that, MuJoCo refuses it); expected "
+                            f"(J_m / N^2 = {polar!r} kg m^2; no rigid rotor has that, MuJoCo refuses it); expected "
                             "J_m / N^2 <= 2 I_t: lower J_m or raise N")
     return mass, max(it, polar / 2)
 

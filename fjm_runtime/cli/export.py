@@ -1,0 +1,64 @@
+"""``fjm export mjcf MODEL --out FILE``: write a MuJoCo model (MJCF) of a generated model."""
+from __future__ import annotations
+
+from pathlib import Path
+
+from ..export.mjcf import is_complete, write_mjcf
+from ..validation import FjmValueError
+from .common import check_output_file, parse_assignments
+
+
+def add_parser(sub) -> None:
+    """Add ``export`` (format ``mjcf``) to the sub-command set ``sub``."""
+    ex = sub.add_parser("export", help="write a model for another tool (mjcf: MuJoCo)",
+                        description="Write a generated model as an MJCF file that MuJoCo loads as it is: the "
+                                    "links, a rotor hinge <joint>_rotor per joint (angle N q_m), a tendon spring "
+                                    "<joint>_spring, a motor <joint>_motor (ctrl = u) and sensors <joint>_q, _dq, "
+                                    "_q_m, _dq_m, _tau_J. Parameters at full precision (see docs/mujoco.md).")
+    ex.add_argument("format", choices=("mjcf",), help="output format (mjcf: MuJoCo XML)")
+    ex.add_argument("model", help="model name, e.g. panda, elbow3, link1, planar2 (see `fjm models`)")
+    ex.add_argument("--out", type=Path, required=True, help="output file, e.g. panda.xml (its directory must exist)")
+    ex.add_argument("--complete", action="store_true",
+                    help="the complete model (rotor i on link i-1, spin coupling; gear ratios N1..Nn from "
+                         "<model>_complete): needs a generated <model>_complete")
+    ex.add_argument("--K", type=float, default=None,
+                    help="joint stiffness, N m/rad (link1: K; others: every K_i)")
+    ex.add_argument("--param", action="append", default=[], metavar="NAME=VALUE",
+                    help="parameter value (repeatable), e.g. --param Jm7=0.2 --param m_load=1.5 --param N7=300")
+    ex.add_argument("--gear-ratio", type=float, default=None,
+                    help="reduced model: rotor angle = GEAR_RATIO * q_m for every joint (default 1; complete "
+                         "models take N1..Nn via --param)")
+    ex.add_argument("--timestep", type=float, default=1e-4, help="MuJoCo step, s (integrator RK4; default 1e-4)")
+
+
+def _model(args):
+    from .. import load, available_models
+    name = args.model
+    if args.complete and not name.endswith("_complete"):
+        if f"{name}_complete" not in available_models():
+            raise FjmValueError(f"--complete: no complete model {name}_complete (expected one of "
+                                f"{', '.join(m for m in available_models() if m.endswith('_complete')) or 'none'})")
+        name = f"{name}_complete"
+    m = load(name)
+    if args.complete and not is_complete(m):
+        raise FjmValueError(f"--complete: model {name} is not a complete model")
+    return m
+
+
+def run(args) -> int:
+    """Run ``fjm export``; returns the exit status."""
+    check_output_file(args.out, "--out")
+    m = _model(args)
+    params = parse_assignments(args.param, "--param")
+    if args.K is not None:
+        for name in (["K"] if "K" in m.param_names else [f"K{i + 1}" for i in range(m.n)]):
+            params.setdefault(name, args.K)
+    m.params_array(params, arg="--param")  # unknown names and bad values: one line naming --param
+    complete = is_complete(m)
+    if complete and args.gear_ratio is not None:
+        raise FjmValueError(f"--gear-ratio: model {m.name} takes its gear ratios as parameters N1..N{m.n} "
+                            "(e.g. --param N1=100)")
+    write_mjcf(m, args.out, params, complete=complete, gear_ratio=args.gear_ratio, timestep=args.timestep)
+    print(f"wrote {args.out} (model {m.name}, {'complete' if complete else 'reduced'}, {m.n} joints; "
+          "load it with mujoco.MjModel.from_xml_path)")
+    return 0
