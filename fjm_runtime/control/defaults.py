@@ -18,7 +18,7 @@ from __future__ import annotations
 import numpy as np
 
 __all__ = ["DEFAULT_DELTA", "DEFAULT_FILTER_RATE", "DEFAULT_LAYER_RATE", "DEFAULT_LS_GAIN",
-           "default_K_bounds", "default_delta"]
+           "PANDA_ISMC_TAU_START", "default_K_bounds", "default_delta"]
 
 #: Slope ``k_s / delta`` of the boundary layer, 1/s (see :func:`default_delta`).
 DEFAULT_LAYER_RATE = 200.0
@@ -31,6 +31,13 @@ DEFAULT_FILTER_RATE = 20.0
 
 #: Initial least-squares covariance ``P(0)`` of the adaptive estimator, 1/(rad^2 s).
 DEFAULT_LS_GAIN = 1e5
+
+#: A STARTING POINT for the torque-sensed integral law on the Panda at 1 kHz
+#: (``make_controller('ismc', panda, nominal, sensing='torque', **PANDA_ISMC_TAU_START)``):
+#: quadruple pole at 80 1/s, ``k_lin`` 400 1/s, ``k_s`` 2000 rad/s^4, ``delta`` 10. Found by hand,
+#: not by a search: the window around it is narrow and a computation delay or sensor noise
+#: moves it; do not read it as tuned or certified gains.
+PANDA_ISMC_TAU_START = {"lam": 80.0, "k_lin": 400.0, "k_s": 2000.0, "delta": 10.0}
 
 
 def default_delta(k_s, layer_rate: float = DEFAULT_LAYER_RATE):
