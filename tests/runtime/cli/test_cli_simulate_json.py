@@ -1,0 +1,58 @@
+"""`fjm simulate --json`: the scripting keys and their types (one short run), and bad input in one line."""
+import json
+
+import pytest
+
+import fjm_runtime
+
+from fjm_runtime.cli.main import main
+
+
+def _run(capsys, argv):
+    status = main(argv)
+    out = capsys.readouterr()
+    return status, out.out, out.err
+
+
+def test_json_keys_and_types(capsys, tmp_path):
+    gains = tmp_path / "g.json"
+    gains.write_text(json.dumps({"kind": "ismc", "gains": {"lam": 8.0, "k_s": 100.0, "delta": 2.0, "u_max": 40.0}}))
+    status, out, _ = _run(capsys, ["simulate", "planar2", "--gains", str(gains), "--rate", "1000",
+                                   "--delay-samples", "1", "--predict", "--noise", "panda", "--seed", "5",
+                                   "--k-scale", "0.8,1.2", "--jm-scale", "1.1", "--duration", "0.1", "--json"])
+    assert status == 0
+    rep = json.loads(out)
+    assert rep["diverged"] is False
+    for k in ("rms_second_half", "peak_torque", "time_at_limit", "torque_jitter"):
+        assert isinstance(rep[k], list) and len(rep[k]) == 2 and all(isinstance(v, float) for v in rep[k]), k
+    assert all(0.0 <= v <= 1.0 for v in rep["time_at_limit"])
+    assert max(rep["peak_torque"]) <= 40.0 + 1e-9
+    s = rep["settings"]
+    assert (s["rate"], s["delay_samples"], s["sensing"], s["seed"], s["predict"]) == (1000.0, 1, "state", 5, True)
+    assert isinstance(s["substeps"], int) and s["substeps"] >= 1
+    nominal = fjm_runtime.load("planar2").default_params
+    assert s["true_params"]["K1"] == pytest.approx(0.8 * nominal["K1"], rel=1e-12)
+    assert s["true_params"]["K2"] == pytest.approx(1.2 * nominal["K2"], rel=1e-12)
+    assert s["true_params"]["Jm2"] == pytest.approx(1.1 * nominal["Jm2"], rel=1e-12)
+    assert "NaN" not in out and "Infinity" not in out
+
+
+@pytest.mark.parametrize("argv, text", [
+    (["--delay-samples", "-1"], "delay_samples"),
+    (["--substeps", "0"], "substeps"),
+    (["--noise", "loud"], "--noise"),
+    (["--k-scale", "1,2,3"], "--k-scale"),
+    (["--payload", "1"], "--payload"),
+])
+def test_bad_input_is_one_line_exit_2(capsys, argv, text):
+    status, _, err = _run(capsys, ["simulate", "planar2", "--duration", "0.01", "--json", *argv])
+    assert status == 2
+    lines = [ln for ln in err.splitlines() if ln.strip()]
+    assert len(lines) == 1 and text in lines[0]
+
+
+def test_non_finite_noise_level_in_a_file(capsys, tmp_path):
+    f = tmp_path / "noise.json"
+    f.write_text('{"q": 1e999}')
+    status, _, err = _run(capsys, ["simulate", "link1", "--duration", "0.01", "--json", "--noise", str(f)])
+    assert status == 2 and "SensorModel.q" in err and len(err.strip().splitlines()) == 1
