@@ -139,3 +139,15 @@ def test_c_example_single_precision(tmp_path):
     assert alpha == pytest.approx(m.alpha(x)[0], rel=1e-5)
     assert beta == pytest.approx(m.beta(x)[0, 0], rel=1e-5)
     assert alpha != m.alpha(x)[0], "single-precision build gave the double result: casadi_real=float ignored?"
+
+
+def test_mujoco_closed_loop_example(capsys):
+    """examples/mujoco_closed_loop.py (short run): the loop tracks, and MuJoCo's trajectory is fjm's plant's."""
+    import importlib.util
+    spec = importlib.util.spec_from_file_location("mujoco_closed_loop", EXAMPLES / "mujoco_closed_loop.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    out = mod.main(["--duration", "0.3"])
+    assert out["gap"] < 1e-8
+    assert np.all(out["rms"][:4] < 1e-2) and out["max_error"] < 0.5
+    assert "RMS tracking error" in capsys.readouterr().out
