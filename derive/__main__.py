@@ -8,6 +8,13 @@ the default ``--out`` only in a source checkout; from an installed package
 ``FJM_GENERATED=DIR`` makes ``fjm_runtime.load()`` read the result. An interrupted run
 (Ctrl-C, SIGTERM, crash) leaves the previous ``generated/`` untouched.
 
+Before any symbolic work every model's cost is estimated from its chain
+(:mod:`derive.cost`); a model over the limits (estimated peak memory 2 GB,
+300 s) is refused with the estimate and exit code 2, unless
+``--no-cost-limit`` or ``--max-cost SECONDS`` is given. Long derivations print
+one line per stage on stderr. The symbolic work runs in a child process
+(:mod:`derive.guard`): SIGINT and SIGTERM end it at once, nothing written.
+
 ``--check`` regenerates every model into a temp dir and compares with
 ``generated/`` byte for byte; it exits 1 with a summary of what differs.
 
@@ -29,10 +36,13 @@ import time
 from pathlib import Path
 from typing import Callable, Dict, List, Optional
 
-from .linearize import linearize
-from .model_base import FlexibleJointModel
-from .registry import MODEL_NAMES, build
-from .emit.writer import recover, swap_in, write_model
+from typing import TYPE_CHECKING
+
+from .cost import MAX_PEAK_BYTES, MAX_SECONDS, Estimate, check_limits, estimate
+from .guard import LONG_SECONDS, Interrupted, StageLog, prescan_model_file, run_interruptible
+
+if TYPE_CHECKING:  # SymPy and CasADi are imported only after the cost pre-scan (a refusal is fast)
+    from .model_base import FlexibleJointModel
 
 REPO = Path(__file__).resolve().parent.parent
 TIMINGS = REPO / "build" / "derive-timings.json"
@@ -92,32 +102,82 @@ def no_default_out_message(repo: Path) -> str:
             "from there")
 
 
-def _sigterm_to_exit(signum, frame):  # pragma: no cover - exercised by the interrupt test
-    raise SystemExit(128 + signum)
+def _interrupt(signum, frame):  # pragma: no cover - exercised by the interrupt tests
+    raise Interrupted(signum)
 
 
 def derive_into(root: Path, models: List[str], log=print,
                 builders: Optional[Dict[str, Callable[[], FlexibleJointModel]]] = None,
+                estimates: Optional[Dict[str, Estimate]] = None,
                 ) -> Dict[str, Dict[str, float]]:
     """Derive and emit ``models`` into ``root/<model>/``; returns per-model timings (s).
 
     ``builders`` maps extra (user, e.g. model-file) names to functions that
     build them; other names come from the registry (:func:`derive.registry.build`).
+    ``estimates`` (from :func:`model_estimates`): a model estimated to take
+    longer than :data:`derive.guard.LONG_SECONDS` prints its estimate and one
+    stderr line per stage (model, linearize, emit: ...); the others print one line.
     """
+    from .emit.writer import write_model
+    from .linearize import linearize
+    from .registry import build
+
     timings: Dict[str, Dict[str, float]] = {}
-    builders = builders or {}
+    builders, estimates = builders or {}, estimates or {}
     for i, name in enumerate(models, 1):
-        log(f"[{i}/{len(models)}] {name}: deriving ...", end="", flush=True)
+        est = estimates.get(name)
+        long = est is not None and est.seconds > LONG_SECONDS
+        head = f"[{i}/{len(models)}] {name}:"
+        if long:
+            log(f"{head} deriving (estimated {est.summary()}) ...", flush=True)
+        else:
+            log(f"{head} deriving ...", end="", flush=True)
+        stage = StageLog(name, long)
         t0 = time.perf_counter()
-        lin = linearize(builders[name]() if name in builders else build(name))
+        stage("model (kinematics, dynamics)")
+        model = builders[name]() if name in builders else build(name)
+        stage("linearize (Lie derivatives, T, alpha, beta, brackets)")
+        lin = linearize(model)
         t1 = time.perf_counter()
-        manifest = write_model(lin, root / name)
+        extra = {"progress": lambda what: stage(f"emit: {what}")} if long else {}
+        manifest = write_model(lin, root / name, **extra)
+        stage.done()
         t2 = time.perf_counter()
         ops = sum(f["operations"] for f in manifest["functions"].values())
         timings[name] = {"derive_seconds": t1 - t0, "emit_seconds": t2 - t1, "seconds": t2 - t0,
                          "operations": ops}
-        log(f" {t2 - t0:.2f} s (symbolic {t1 - t0:.2f} s, emit {t2 - t1:.2f} s), {ops} ops")
+        log(f"{head} " if long else " ", end="")
+        log(f"{t2 - t0:.2f} s (symbolic {t1 - t0:.2f} s, emit {t2 - t1:.2f} s), {ops} ops", flush=True)
     return timings
+
+
+def chain_size(spec) -> tuple:
+    """``(n, form)`` of a parsed model file: URDF form -> ``(joints, "spatial")``, else ``(links, "planar")``."""
+    joints = getattr(spec, "joints", None)
+    return (len(joints), "spatial") if joints is not None else (int(spec.links), "planar")
+
+
+def model_estimates(models: List[str], specs: Dict[str, object]) -> Dict[str, Estimate]:
+    """The cost estimate (:func:`derive.cost.estimate`) of every model, from its chain only.
+
+    ``specs``: parsed model files by name; the other names are built-in (``link1``,
+    ``planar<n>``, or a spatial arm whose model file ships in ``derive/robots``).
+    """
+    from .registry import ROBOTS
+
+    out: Dict[str, Estimate] = {}
+    for name in models:
+        if name in specs:
+            n, form = chain_size(specs[name])
+        elif name in ("link1", "link1_complete") or name.startswith("planar"):
+            n, form = (1 if name.startswith("link1") else int(name[len("planar"):].split("_")[0])), "planar"
+        else:
+            scanned = prescan_model_file(ROBOTS / name / f"{name}.toml")
+            if scanned is None:
+                continue  # the build reports what is wrong with it
+            _, n, form = scanned
+        out[name] = estimate(n, form)
+    return out
 
 
 def diff_trees(expected: Path, actual: Path, start: Path = Path(".")) -> List[str]:
@@ -149,7 +209,28 @@ def diff_trees(expected: Path, actual: Path, start: Path = Path(".")) -> List[st
     return problems
 
 
+def _positive_seconds(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        value = float("nan")
+    if not value > 0 or value == float("inf"):
+        raise argparse.ArgumentTypeError(f"{text!r}: expected a positive number of seconds, e.g. --max-cost 600")
+    return value
+
+
+def _cost_options(ap: argparse.ArgumentParser) -> None:
+    ap.add_argument("--no-cost-limit", action="store_true",
+                    help="derive even if a model's estimated cost is over the limits (estimated peak memory "
+                         f"{MAX_PEAK_BYTES / 1024 ** 3:g} GB, {MAX_SECONDS:g} s; see docs/derivation.md)")
+    ap.add_argument("--max-cost", type=_positive_seconds, default=None, metavar="SECONDS",
+                    help="refuse only models whose estimated derive takes longer than SECONDS "
+                         "(replaces the default limits)")
+
+
 def _parser(prog: str) -> argparse.ArgumentParser:
+    from .registry import MODEL_NAMES
+
     ap = argparse.ArgumentParser(prog=prog, description=__doc__.split("\n\n")[0])
     ap.add_argument("--models", nargs="+", metavar="MODEL",
                     help=f"models to derive (default: all): {' '.join(MODEL_NAMES)}")
@@ -165,14 +246,42 @@ def _parser(prog: str) -> argparse.ArgumentParser:
                          "when writing generated/; they are kept out of generated/ for byte-identity)")
     ap.add_argument("--check", action="store_true",
                     help="regenerate into a temp dir and fail if --out differs")
+    _cost_options(ap)
     return ap
 
 
-def _model_file_builders(ap: argparse.ArgumentParser, args) -> Optional[Dict[str, Callable[[], FlexibleJointModel]]]:
-    """Builders of the ``--model-file`` models by name; None after an error was printed (exit 2)."""
-    builders: Dict[str, Callable[[], FlexibleJointModel]] = {}
+class _QuietParser(argparse.ArgumentParser):
+    def error(self, message):  # the full parser reports bad arguments
+        raise ValueError(message)
+
+
+def _early_refusal(argv, prog: str) -> Optional[int]:
+    """Refuse an over-limit ``--model-file`` before SymPy and CasADi are imported (exit 2), else None."""
+    pre = _QuietParser(add_help=False)
+    pre.add_argument("--model-file", action="append", type=Path, default=[])
+    _cost_options(pre)
+    try:
+        args, _ = pre.parse_known_args(argv)
+    except ValueError:
+        return None
+    if args.no_cost_limit:
+        return None
+    for path in args.model_file:
+        scanned = prescan_model_file(path)
+        if scanned is not None:
+            name, n, form = scanned
+            refusal = check_limits(name, estimate(n, form), args.max_cost)
+            if refusal:
+                print(f"{prog}: error: {refusal}", file=sys.stderr)
+                return 2
+    return None
+
+
+def _model_file_specs(ap: argparse.ArgumentParser, args) -> Optional[Dict[str, object]]:
+    """The parsed ``--model-file`` specs by model name; None after an error was printed (exit 2)."""
+    specs: Dict[str, object] = {}
     if not args.model_file:
-        return builders
+        return specs
     if args.out is None:
         ap.error("--model-file needs --out DIR (user models are not written into generated/)")
     try:
@@ -185,18 +294,22 @@ def _model_file_builders(ap: argparse.ArgumentParser, args) -> Optional[Dict[str
         except (ModelFileError, OSError) as exc:
             print(f"{ap.prog}: error: {exc}", file=sys.stderr)
             return None
-        if spec.name in builders:
+        if spec.name in specs:
             ap.error(f"two model files define the model name {spec.name!r}")
-        builders[spec.name] = spec.build
-    return builders
+        specs[spec.name] = spec
+    return specs
 
 
-def _check(out: Path, models: List[str], requested: bool, builders) -> int:
+def _check(out: Path, models: List[str], requested: bool, builders, estimates) -> int:
     """``--check``: regenerate into a temp dir and compare with ``out`` (all models, or the requested ones)."""
+    from .emit.writer import recover
+
     with tempfile.TemporaryDirectory(prefix="fjm-check-") as tmp:
         fresh = Path(tmp) / "generated"
         fresh.mkdir()
-        derive_into(fresh, list(MODEL_NAMES) if not requested else models, builders=builders)
+        code, _ = run_interruptible(lambda: derive_into(fresh, models, builders=builders, estimates=estimates))
+        if code != 0:
+            return code
         recover(out)
         if not out.exists():
             print(f"check-generated: {out} does not exist; run `make derive`", file=sys.stderr)
@@ -214,8 +327,14 @@ def _check(out: Path, models: List[str], requested: bool, builders) -> int:
     return 0
 
 
-def _write(out: Path, models: List[str], builders, timings_file: Optional[Path]) -> int:
-    """Derive ``models`` into a sibling staging directory, keep the others, swap it in as ``out``."""
+def _write(out: Path, models: List[str], builders, timings_file: Optional[Path], estimates) -> int:
+    """Derive ``models`` into a sibling staging directory, keep the others, swap it in as ``out``.
+
+    The derivation runs in a child process (:func:`derive.guard.run_interruptible`); a signal
+    before the swap removes the staging directory and leaves ``out`` as it was.
+    """
+    from .emit.writer import recover, swap_in
+
     out.parent.mkdir(parents=True, exist_ok=True)
     recover(out)
     staging = Path(tempfile.mkdtemp(prefix=f".{out.name}-tmp-", dir=out.parent))
@@ -227,9 +346,16 @@ def _write(out: Path, models: List[str], builders, timings_file: Optional[Path])
                     shutil.copytree(old, staging / old.name)
                 elif old.is_file():
                     shutil.copy2(old, staging / old.name)
-        timings = derive_into(staging, models, builders=builders)
+        code, timings = run_interruptible(
+            lambda: derive_into(staging, models, builders=builders, estimates=estimates))
+        if code != 0:
+            return code
         total = time.perf_counter() - t0
-        swap_in(staging, out)
+        try:
+            swap_in(staging, out)
+        except Interrupted as exc:  # swap_in defers the signal until the new tree is in place
+            exc.after_swap = True
+            raise
     finally:
         if staging.exists():
             shutil.rmtree(staging, ignore_errors=True)
@@ -244,17 +370,14 @@ def _write(out: Path, models: List[str], builders, timings_file: Optional[Path])
     return 0
 
 
-def main(argv=None, prog: str = "python -m derive") -> int:
-    sys.setrecursionlimit(max(sys.getrecursionlimit(), 20000))  # deep program chains at n = 7
-    ap = _parser(prog)
-    args = ap.parse_args(argv)
-    builders = _model_file_builders(ap, args)
-    if builders is None:
-        return 2
-    if builders:
-        args.models = (args.models or []) + list(builders)
+def _resolve_models(ap: argparse.ArgumentParser, args, specs) -> List[str]:
+    """The models to derive (``--models``, then the model files; default: all built-in) and ``args.out``."""
+    from .registry import MODEL_NAMES
+
+    if specs:
+        args.models = (args.models or []) + list(specs)
     models = args.models or list(MODEL_NAMES)
-    unknown = [m for m in models if m not in MODEL_NAMES and m not in builders]
+    unknown = [m for m in models if m not in MODEL_NAMES and m not in specs]
     if unknown:
         ap.error(f"unknown model(s) {', '.join(unknown)}; available models: {', '.join(MODEL_NAMES)}")
     if args.out is None:
@@ -262,11 +385,42 @@ def main(argv=None, prog: str = "python -m derive") -> int:
         if fallback is None:
             ap.error(no_default_out_message(REPO))
         args.out = fallback
-    signal.signal(signal.SIGTERM, _sigterm_to_exit)
-    out: Path = args.out.resolve()
-    if args.check:
-        return _check(out, models, bool(args.models), builders)
-    return _write(out, models, builders, args.timings)
+    return models
+
+
+def main(argv=None, prog: str = "python -m derive") -> int:
+    sys.setrecursionlimit(max(sys.getrecursionlimit(), 20000))  # deep program chains at n = 7
+    saved = {s: signal.signal(s, _interrupt) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        early = _early_refusal(sys.argv[1:] if argv is None else argv, prog)
+        if early is not None:
+            return early
+        ap = _parser(prog)
+        args = ap.parse_args(argv)
+        specs = _model_file_specs(ap, args)
+        if specs is None:
+            return 2
+        models = _resolve_models(ap, args, specs)
+        estimates = model_estimates(models, specs)
+        if not args.no_cost_limit:
+            for name, est in estimates.items():
+                refusal = check_limits(name, est, args.max_cost)
+                if refusal:
+                    print(f"{prog}: error: {refusal}", file=sys.stderr)
+                    return 2
+        builders = {name: spec.build for name, spec in specs.items()}
+        out: Path = args.out.resolve()
+        if args.check:
+            return _check(out, models, bool(args.models), builders, estimates)
+        return _write(out, models, builders, args.timings, estimates)
+    except Interrupted as exc:
+        where = ("after the new tree was swapped in" if getattr(exc, "after_swap", False)
+                 else "nothing was written")
+        print(f"\n{prog}: {exc}; {where}", file=sys.stderr)
+        return 128 + exc.signum
+    finally:
+        for s, handler in saved.items():
+            signal.signal(s, handler)
 
 
 if __name__ == "__main__":

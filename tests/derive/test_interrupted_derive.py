@@ -66,8 +66,8 @@ def pause(what, seconds):
 if hook.startswith("model:"):
     import derive.emit.writer as writer
     real_write = writer.write_model
-    def write_model(lin, outdir):
-        manifest = real_write(lin, outdir)
+    def write_model(lin, outdir, **kw):
+        manifest = real_write(lin, outdir, **kw)
         if outdir.name == hook[6:]:
             pause(hook, 60)
         return manifest

@@ -1,0 +1,95 @@
+"""``python -m bench.derive_cost``: measure ``python -m derive`` on synthetic chains, fit the cost model.
+
+For each size n it writes a synthetic URDF chain (:mod:`derive.synthetic`) or
+picks the built-in ``planar<n>``, runs ``/usr/bin/time -v python -m derive
+... --out TMP --no-cost-limit`` in a fresh process, and records the
+wall-clock seconds, the peak resident memory and the operation count (all
+generated functions, from ``--timings``). It then fits ``value = c n^e`` by
+least squares on log-log axes per quantity and prints the measurements and
+the fitted coefficients as JSON, ready to be copied into
+:data:`derive.cost.CALIBRATION` (which states the run they come from).
+
+``--repo DIR`` measures another checkout's derive (e.g. a clean
+``git archive HEAD`` export), using this checkout's synthetic chains.
+``--compare`` prints, beside each measurement, the estimate of the current
+:mod:`derive.cost` model (the accuracy of the guard).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import re
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Dict, List
+
+HERE = Path(__file__).resolve().parent
+REPO = HERE.parent
+sys.path.insert(0, str(REPO))
+
+from derive.cost import estimate, fit_power_law  # noqa: E402
+from derive.synthetic import write_synthetic_chain  # noqa: E402
+
+_RSS = re.compile(r"Maximum resident set size \(kbytes\): (\d+)")
+
+
+def measure(n: int, form: str, repo: Path, python: str, guard_flag: bool) -> Dict[str, float]:
+    """One derive of an n-joint chain (``form``: "spatial" or "planar") in a fresh process."""
+    with tempfile.TemporaryDirectory(prefix="fjm-cost-") as tmp:
+        tmp = Path(tmp)
+        if form == "spatial":
+            toml, _ = write_synthetic_chain(n, tmp / "model")
+            what = ["--model-file", str(toml)]
+        else:
+            what = ["--models", f"planar{n}"]
+        timings = tmp / "timings.json"
+        cmd = ["/usr/bin/time", "-v", python, "-m", "derive", *what, "--out", str(tmp / "out"),
+               "--timings", str(timings)] + (["--no-cost-limit"] if guard_flag else [])
+        t0 = time.perf_counter()
+        proc = subprocess.run(cmd, cwd=repo, capture_output=True, text=True)
+        seconds = time.perf_counter() - t0
+        if proc.returncode != 0:
+            raise RuntimeError(f"derive of n = {n} ({form}) failed:\n{proc.stdout}\n{proc.stderr}")
+        rss = int(_RSS.search(proc.stderr).group(1)) * 1024
+        ops = sum(m["operations"] for m in json.loads(timings.read_text())["models"].values())
+    return {"n": n, "form": form, "seconds": seconds, "peak_bytes": rss, "operations": ops}
+
+
+def main(argv: List[str] = None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m bench.derive_cost", description=__doc__.split("\n\n")[0])
+    ap.add_argument("--spatial", type=int, nargs="*", default=[3, 5, 7, 10, 14, 21], metavar="N")
+    ap.add_argument("--planar", type=int, nargs="*", default=[2, 3, 4, 5, 6, 7], metavar="N")
+    ap.add_argument("--repo", type=Path, default=REPO, help="checkout whose `python -m derive` is measured")
+    ap.add_argument("--python", default=sys.executable)
+    ap.add_argument("--old-cli", action="store_true", help="the measured derive has no --no-cost-limit flag")
+    ap.add_argument("--compare", action="store_true", help="print the current estimate beside each run")
+    args = ap.parse_args(argv)
+    base = measure(1, "planar", args.repo.resolve(), args.python, not args.old_cli)
+    print(json.dumps({"baseline": base}), file=sys.stderr, flush=True)
+    runs = []
+    for form, sizes in (("spatial", args.spatial), ("planar", args.planar)):
+        for n in sizes:
+            run = measure(n, form, args.repo.resolve(), args.python, not args.old_cli)
+            if args.compare:
+                est = estimate(n, form)
+                run["estimate"] = {"seconds": est.seconds, "peak_bytes": est.peak_bytes,
+                                   "operations": est.operations}
+            print(json.dumps(run), file=sys.stderr, flush=True)
+            runs.append(run)
+    fits = {}
+    for form in ("spatial", "planar"):
+        sub = [r for r in runs if r["form"] == form]
+        if len(sub) >= 2:
+            offsets = {"operations": 0.0, "peak_bytes": base["peak_bytes"], "seconds": base["seconds"]}
+            fits[form] = {q: fit_power_law([r["n"] for r in sub], [r[q] for r in sub], offsets[q])
+                          for q in offsets}
+    print(json.dumps({"baseline": base, "runs": runs, "fits": fits}, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,207 @@
+"""Cost of a derivation estimated from the chain alone, before any symbolic work.
+
+The symbolic derivation of an n-joint chain grows fast with n (the bracket
+matrix ``ad`` and ``alpha`` dominate). To refuse a runaway input (a mistyped
+``tip`` link, a snake robot) before it takes the machine's memory, the cost is
+estimated from ``n`` and the kind of chain (``"planar"``: the closed-form
+planar chains; ``"spatial"``: URDF arms) with power laws fitted to measured
+derives::
+
+    operations(n)  = c_ops  n^e_ops                      (all generated functions)
+    peak_bytes(n)  = base_bytes   + c_mem n^e_mem        (resident memory of the process)
+    seconds(n)     = base_seconds + c_s   n^e_s          (wall clock of `python -m derive`)
+
+``base_*`` is a trivial derive (interpreter, SymPy and CasADi imports); the
+exponents and factors come from least squares on log-log axes of the measured
+excess over it (:func:`fit_power_law`). :data:`CALIBRATION` records the
+measurement they come from; ``python -m bench.derive_cost`` repeats it.
+
+:func:`check_limits` compares an estimate with the limits (:data:`MAX_PEAK_BYTES`,
+:data:`MAX_SECONDS`, or a user's ``--max-cost SECONDS``) and returns the
+one-line refusal, or None. Pure functions: no I/O.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Dict, Optional, Sequence, Tuple
+
+__all__ = ["Estimate", "estimate", "check_limits", "fit_power_law", "CALIBRATION", "MAX_PEAK_BYTES",
+           "MAX_SECONDS", "FORMS"]
+
+#: Default limits: an estimate above either is refused unless ``--no-cost-limit`` or ``--max-cost``.
+MAX_PEAK_BYTES = 2 * 1024 ** 3
+MAX_SECONDS = 300.0
+FORMS = ("planar", "spatial")
+
+#: The cost model: per form, ``(factor, exponent)`` of each quantity's excess over the trivial derive
+#: (``base_bytes``, ``base_seconds``: ``python -m derive --models planar1``), fitted by
+#: :func:`fit_power_law` to ``runs``. Measured 2026-12-01 on the project machine (2 cores, Intel Xeon,
+#: 23 GB, shared with other jobs: seconds vary by up to 1.5x between runs), commit bef8005 (a clean
+#: ``git archive`` export), CPython 3 venv with the pinned SymPy and CasADi, by
+#: ``python -m bench.derive_cost --repo EXPORT --old-cli`` run twice (per n: the faster run's seconds,
+#: the larger peak memory). ``spatial``: synthetic URDF chains (:mod:`derive.synthetic`) derived with
+#: ``--model-file``; ``planar``: the built-in ``planar<n>``. Peak memory is the process's maximum
+#: resident set size (``/usr/bin/time -v``); seconds are the wall clock of the whole command.
+#: Planar derives stay within a few seconds of the baseline (the control-law emission dominates, and
+#: load noise), so their seconds fit is nearly flat; the planar form is capped at 7 links anyway.
+CALIBRATION: Dict[str, object] = {
+    "measured": "2026-12-01, 2 cores, commit bef8005, python -m bench.derive_cost",
+    "base_bytes": 102285312,
+    "base_seconds": 0.93,
+    "spatial": {"operations": (482.1171945572871, 2.121914251472184),
+                "peak_bytes": (306886.5073601743, 2.5425604330636014),
+                "seconds": (0.03459418261171506, 2.404643483036551)},
+    "planar": {"operations": (129.50254107657673, 2.1568207517431874),
+               "peak_bytes": (133648.98124167314, 2.2086597392267513),
+               "seconds": (0.4662896071482834, 0.8207445020068006)},
+    "runs": [
+        {"form": "spatial", "n": 3, "operations": 4734, "peak_bytes": 108478464, "seconds": 1.51},
+        {"form": "spatial", "n": 5, "operations": 15367, "peak_bytes": 119377920, "seconds": 2.26},
+        {"form": "spatial", "n": 7, "operations": 30822, "peak_bytes": 138874880, "seconds": 4.96},
+        {"form": "spatial", "n": 10, "operations": 63813, "peak_bytes": 194842624, "seconds": 10.01},
+        {"form": "spatial", "n": 14, "operations": 128059, "peak_bytes": 343736320, "seconds": 14.91},
+        {"form": "spatial", "n": 21, "operations": 304961, "peak_bytes": 977326080, "seconds": 69.83},
+        {"form": "planar", "n": 2, "operations": 590, "peak_bytes": 103018496, "seconds": 1.49},
+        {"form": "planar", "n": 3, "operations": 1367, "peak_bytes": 103591936, "seconds": 3.93},
+        {"form": "planar", "n": 4, "operations": 2522, "peak_bytes": 104792064, "seconds": 1.82},
+        {"form": "planar", "n": 5, "operations": 4110, "peak_bytes": 106737664, "seconds": 2.40},
+        {"form": "planar", "n": 6, "operations": 6189, "peak_bytes": 109228032, "seconds": 3.00},
+        {"form": "planar", "n": 7, "operations": 8817, "peak_bytes": 113836032, "seconds": 3.40},
+    ],
+}
+
+
+@dataclass(frozen=True)
+class Estimate:
+    """Estimated cost of deriving and emitting one model.
+
+    Attributes
+    ----------
+    n : int
+        Number of (revolute) joints.
+    form : str
+        ``"planar"`` or ``"spatial"``.
+    operations : float
+        Scalar operations of all generated functions.
+    peak_bytes : float
+        Peak resident memory of ``python -m derive`` for this model.
+    seconds : float
+        Wall-clock seconds of ``python -m derive`` for this model.
+    """
+
+    n: int
+    form: str
+    operations: float
+    peak_bytes: float
+    seconds: float
+
+    def summary(self) -> str:
+        """``"~25k operations, ~0.31 GB peak memory, ~4 s"``."""
+        return (f"~{_si(self.operations)} operations, ~{self.peak_bytes / 1024 ** 3:.3g} GB peak memory, "
+                f"~{_seconds(self.seconds)}")
+
+
+def _si(x: float) -> str:
+    for div, suffix in ((1e9, "G"), (1e6, "M"), (1e3, "k")):
+        if x >= div:
+            return f"{x / div:.3g}{suffix}"
+    return f"{x:.0f}"
+
+
+def _seconds(s: float) -> str:
+    if s >= 86400 * 365:
+        return f"{s / (86400 * 365):.2g} years"
+    if s >= 86400:
+        return f"{s / 86400:.2g} days"
+    if s >= 3600:
+        return f"{s / 3600:.2g} h"
+    return f"{s:.0f} s" if s >= 10 else f"{s:.2g} s"
+
+
+def estimate(n: int, form: str) -> Estimate:
+    """Cost of an ``n``-joint chain of kind ``form`` from :data:`CALIBRATION`.
+
+    Parameters
+    ----------
+    n : int
+        Number of joints (>= 1).
+    form : str
+        ``"planar"`` (:mod:`derive.planar` chains and ``link1``) or ``"spatial"`` (URDF arms).
+
+    Returns
+    -------
+    Estimate
+    """
+    if form not in FORMS:
+        raise ValueError(f"form {form!r}; expected one of {', '.join(FORMS)}")
+    if int(n) != n or n < 1:
+        raise ValueError(f"n = {n!r}; expected an integer number of joints >= 1")
+    fit = CALIBRATION[form]
+
+    def power(q: str) -> float:
+        c, e = fit[q]
+        return c * float(n) ** e
+
+    return Estimate(n=int(n), form=form, operations=power("operations"),
+                    peak_bytes=CALIBRATION["base_bytes"] + power("peak_bytes"),
+                    seconds=CALIBRATION["base_seconds"] + power("seconds"))
+
+
+def check_limits(name: str, est: Estimate, max_seconds: Optional[float] = None,
+                 max_peak_bytes: float = MAX_PEAK_BYTES) -> Optional[str]:
+    """The one-line refusal of ``est`` beyond the limits, or None if it is within them.
+
+    Parameters
+    ----------
+    name : str
+        Model name, for the message.
+    est : Estimate
+    max_seconds : float, optional
+        Limit on the estimated seconds (default :data:`MAX_SECONDS`). Given by ``--max-cost``,
+        it replaces both default limits (memory is then not limited).
+    max_peak_bytes : float
+        Limit on the estimated peak memory (used when ``max_seconds`` is None).
+    """
+    if max_seconds is not None:
+        if est.seconds <= max_seconds:
+            return None
+        over = f"over --max-cost {max_seconds:g} s"
+    else:
+        reasons = []
+        if est.peak_bytes > max_peak_bytes:
+            reasons.append(f"memory over {max_peak_bytes / 1024 ** 3:g} GB")
+        if est.seconds > MAX_SECONDS:
+            reasons.append(f"time over {MAX_SECONDS:g} s")
+        if not reasons:
+            return None
+        over = " and ".join(reasons)
+    return (f"{name}: refusing to derive a {est.n}-joint {est.form} chain: estimated {est.summary()} "
+            f"({over}); pass --no-cost-limit, or --max-cost SECONDS, to derive it anyway")
+
+
+def fit_power_law(ns: Sequence[float], values: Sequence[float], offset: float = 0.0) -> Tuple[float, float]:
+    """Least squares fit of ``values - offset = c n^e`` on log-log axes.
+
+    Parameters
+    ----------
+    ns : sequence of float, length m >= 2
+    values : sequence of float, length m
+        Measured quantities; ``values - offset`` must be positive.
+    offset : float
+        Subtracted before the fit (the cost of a trivial derive).
+
+    Returns
+    -------
+    (float, float)
+        ``(c, e)``.
+    """
+    if len(ns) < 2 or len(ns) != len(values) or any(v <= offset for v in values):
+        raise ValueError("fit_power_law needs >= 2 points (n, value) with every value above the offset")
+    pts = [(math.log(n), math.log(v - offset)) for n, v in zip(ns, values)]
+    mx = sum(x for x, _ in pts) / len(pts)
+    my = sum(y for _, y in pts) / len(pts)
+    sxx = sum((x - mx) ** 2 for x, _ in pts)
+    e = sum((x - mx) * (y - my) for x, y in pts) / sxx
+    return math.exp(my - e * mx), e

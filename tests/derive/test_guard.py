@@ -1,0 +1,192 @@
+"""The derivation guard: cost estimate and refusal, per-stage progress, and interrupts that write nothing.
+
+Quick tests check the cost model against its own calibration record (the fit
+reproduces the stored runs, the estimate grows with n, a 60-joint chain is
+over the limit and a 7-joint arm is not), the power-law fit on exact data,
+the synthetic chain (read back by the URDF importer: n joints, axes z, y, x),
+and the one-line refusal of ``python -m derive`` (exit 2, estimate and flags
+named, nothing written) in-process. Slow tests run ``python -m derive`` in a
+subprocess: a 60-joint model file is refused; a big synthetic chain derived
+with ``--no-cost-limit`` is signalled (SIGTERM, SIGINT) while the symbolic work
+runs, must end within 1 s of the signal with a non-zero code, and leave a copy of
+generated/ byte-identical with nothing next to it.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import select
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from derive import cost
+from derive.__main__ import main as derive_main, model_estimates
+from derive.guard import StageLog, prescan_model_file
+from derive.synthetic import write_synthetic_chain
+from derive.urdf import load_urdf
+from support.paths import REPO
+
+
+def test_fit_power_law_recovers_exact_coefficients():
+    ns = [3, 5, 7, 10, 14]
+    c, e = cost.fit_power_law(ns, [2.5 + 0.7 * n ** 2.3 for n in ns], offset=2.5)
+    assert c == pytest.approx(0.7, rel=1e-12) and e == pytest.approx(2.3, rel=1e-12)
+    with pytest.raises(ValueError):
+        cost.fit_power_law(ns, [1.0] * len(ns), offset=2.0)  # nothing above the offset
+
+
+def test_calibration_reproduces_its_own_measurements():
+    """The stored coefficients are the fit of the stored runs (not hand-tuned), and fit them to 2x."""
+    rec = cost.CALIBRATION
+    for form in cost.FORMS:
+        runs = [r for r in rec["runs"] if r["form"] == form]
+        assert len(runs) >= 3, form
+        offsets = {"operations": 0.0, "peak_bytes": rec["base_bytes"], "seconds": rec["base_seconds"]}
+        for q, off in offsets.items():
+            c, e = cost.fit_power_law([r["n"] for r in runs], [r[q] for r in runs], off)
+            assert (c, e) == pytest.approx(tuple(rec[form][q]), rel=1e-9), (form, q)
+        for r in runs:
+            est = cost.estimate(r["n"], form)
+            assert 0.5 < est.operations / r["operations"] < 2, (form, r)
+            assert 0.5 < est.peak_bytes / r["peak_bytes"] < 2, (form, r)
+
+
+def test_estimate_grows_and_limits_split_small_from_runaway():
+    small, big = cost.estimate(7, "spatial"), cost.estimate(60, "spatial")
+    assert big.operations > 10 * small.operations and big.seconds > 10 * small.seconds
+    assert big.peak_bytes > small.peak_bytes
+    assert cost.check_limits("panda", small) is None
+    msg = cost.check_limits("snake", big)
+    assert msg is not None and "\n" not in msg
+    for needle in ("snake", "60-joint", "operations", "GB", " s ", "--no-cost-limit", "--max-cost"):
+        assert needle in msg, (needle, msg)
+    assert cost.check_limits("snake", big, max_seconds=2 * big.seconds) is None
+    assert cost.check_limits("panda", small, max_seconds=small.seconds / 2) is not None
+    with pytest.raises(ValueError):
+        cost.estimate(0, "spatial")
+    with pytest.raises(ValueError):
+        cost.estimate(3, "tree")
+
+
+def test_synthetic_chain_is_what_it_says(tmp_path):
+    toml, urdf = write_synthetic_chain(5, tmp_path)
+    chain = load_urdf(urdf, "base_link", "link5")
+    assert len(chain.joints) == 5
+    axes = [np.asarray(j.axis, float) for j in chain.description.joints]
+    expected = [(0, 0, 1), (0, 1, 0), (1, 0, 0), (0, 0, 1), (0, 1, 0)]
+    assert all(np.allclose(a, e) for a, e in zip(axes, expected)), axes
+    assert prescan_model_file(toml) == ("chain5", 5, "spatial")
+    from derive.model_file import load_model_file
+    spec = load_model_file(toml)
+    assert spec.K == (1000.0,) * 5 and spec.Jm == (0.1,) * 5
+    assert model_estimates(["chain5", "planar3", "link1"], {"chain5": spec}) == {
+        "chain5": cost.estimate(5, "spatial"), "planar3": cost.estimate(3, "planar"),
+        "link1": cost.estimate(1, "planar")}
+
+
+def test_prescan_leaves_unreadable_files_to_the_parser(tmp_path):
+    bad = tmp_path / "bad.toml"
+    bad.write_text('[model]\nname = "x"\nurdf = "missing.urdf"\nbase = "a"\ntip = "b"\n')
+    assert prescan_model_file(bad) is None
+    bad.write_text("not toml [")
+    assert prescan_model_file(bad) is None
+
+
+def test_stage_log_prints_one_line_per_stage(capsys):
+    log = StageLog("m", True)
+    log("linearize")
+    log("emit")
+    log.done()
+    lines = capsys.readouterr().err.splitlines()
+    assert [line.split(" ...")[0] for line in lines] == ["m: linearize", "m: emit"]
+    assert all(math.isfinite(float(line.split("... ")[1].split(" s")[0])) for line in lines)
+    quiet = StageLog("m", False)
+    quiet("x")
+    quiet.done()
+    assert capsys.readouterr().err == ""
+
+
+def test_over_limit_model_file_is_refused_with_exit_2(tmp_path, capsys):
+    toml, _ = write_synthetic_chain(60, tmp_path / "model")
+    out = tmp_path / "out"
+    code = derive_main(["--model-file", str(toml), "--out", str(out)])
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and not out.exists()
+    assert len(err.splitlines()) == 1 and "--no-cost-limit" in err and "chain60" in err, err
+    # --max-cost replaces the default limits: below the estimate it refuses, naming itself
+    assert derive_main(["--model-file", str(toml), "--out", str(out), "--max-cost", "1e-3"]) == 2
+    assert "--max-cost 0.001 s" in capsys.readouterr().err
+
+
+# ----------------------------------------------------------------------------- subprocess tests
+
+def _env():
+    return dict(os.environ, PYTHONPATH=str(REPO) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+
+
+@pytest.mark.slow
+def test_sixty_joint_chain_is_refused_by_the_cli(tmp_path):
+    toml, _ = write_synthetic_chain(60, tmp_path / "model")
+    proc = subprocess.run([sys.executable, "-m", "derive", "--model-file", str(toml), "--out",
+                           str(tmp_path / "out")], cwd=tmp_path, env=_env(), capture_output=True,
+                          text=True, timeout=120)
+    assert proc.returncode == 2, proc.stderr
+    assert proc.stderr.count("\n") == 1 and "--no-cost-limit" in proc.stderr, proc.stderr
+    assert "60-joint spatial chain" in proc.stderr and not (tmp_path / "out").exists()
+
+
+def _tree_bytes(root: Path):
+    return {str(p.relative_to(root)): p.read_bytes() for p in sorted(root.rglob("*")) if p.is_file()}
+
+
+def _wait_for(proc, marker: bytes, timeout: float) -> bytes:
+    buf, deadline = b"", time.monotonic() + timeout
+    while marker not in buf:
+        left = deadline - time.monotonic()
+        if left <= 0 or proc.poll() is not None:
+            proc.kill()
+            pytest.fail(f"no {marker!r} from derive; output:\n{buf.decode(errors='replace')}")
+        if select.select([proc.stdout], [], [], min(left, 0.5))[0]:
+            buf += os.read(proc.stdout.fileno(), 4096)
+    return buf
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT], ids=["SIGTERM", "SIGINT"])
+def test_signal_ends_a_long_derivation_within_a_second(tmp_path, sig):
+    toml, _ = write_synthetic_chain(14, tmp_path / "model")
+    parent = tmp_path / "work"
+    parent.mkdir()
+    out = parent / "generated"
+    shutil.copytree(REPO / "generated" / "link1", out / "link1")
+    shutil.copytree(REPO / "generated" / "elbow3", out / "elbow3")
+    before = _tree_bytes(out)
+    proc = subprocess.Popen([sys.executable, "-u", "-m", "derive", "--model-file", str(toml), "--out",
+                             str(out), "--no-cost-limit"], cwd=tmp_path, env=_env(),
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
+    # the per-stage progress of a long derivation: wait until the symbolic work is under way
+    log = _wait_for(proc, b"chain14: linearize", timeout=120)
+    time.sleep(1.5)
+    assert proc.poll() is None, "the derivation ended before the signal; use a bigger chain"
+    sent = time.monotonic()
+    proc.send_signal(sig)
+    try:
+        proc.wait(timeout=10)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        pytest.fail(f"derive still running 10 s after {sig.name}")
+    elapsed = time.monotonic() - sent
+    text = (log + proc.stdout.read()).decode(errors="replace")
+    assert elapsed < 1.0, f"derive took {elapsed:.2f} s to end after {sig.name}:\n{text}"
+    assert proc.returncode != 0, text
+    assert sig.name in text and "nothing was written" in text, text
+    assert _tree_bytes(out) == before
+    assert sorted(p.name for p in parent.iterdir()) == ["generated"]
