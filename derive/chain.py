@@ -82,6 +82,10 @@ class Joint:
         Child link name.
     inertial : Inertial or None
         The child link's inertial; None for a massless link.
+    parent : str or None
+        Parent link name; None: the previous joint's child (the base for the
+        first joint), i.e. a serial path. A tree names it (it must be the base
+        or the child of an earlier joint).
     """
 
     name: str
@@ -91,6 +95,7 @@ class Joint:
     axis: Vec3
     child: str
     inertial: Optional[Inertial] = None
+    parent: Optional[str] = None
 
 
 @dataclass(frozen=True)
@@ -116,21 +121,27 @@ class Attached:
 
 @dataclass(frozen=True)
 class ChainDescription:
-    """Kinematic and inertial description of a serial chain (URDF conventions).
+    """Kinematic and inertial description of a serial chain or a tree (URDF conventions).
 
     Attributes
     ----------
     base : str
         Base link name; fixed; gravity acts along -z of its frame.
     joints : tuple of Joint
-        Path from the base to the tip, in order.
+        Path from the base to the tip, in order; for a tree (joints naming
+        their ``parent``), every parent comes before its children, and q
+        follows this order (see :func:`derive.urdf.parse_urdf`: depth-first,
+        tips in the order listed, shared joints first).
     attached : tuple of Attached
         Links rigidly fixed to path links but not on the path.
+    tips : tuple of str
+        The tip links of a tree (several); empty for a serial path.
     """
 
     base: str
     joints: Tuple[Joint, ...]
     attached: Tuple[Attached, ...] = ()
+    tips: Tuple[str, ...] = ()
 
     @property
     def revolute_names(self) -> Tuple[str, ...]:
@@ -242,10 +253,16 @@ class BodyNumerics:
 
 @dataclass(frozen=True)
 class ChainNumerics:
-    """All build-time numbers of a chain: one :class:`BodyNumerics` per revolute joint."""
+    """All build-time numbers of a chain: one :class:`BodyNumerics` per revolute joint.
+
+    ``parents[i]`` is the index of body ``i``'s parent body (-1: the base);
+    ``parents[i] < i``. A serial path has ``parents[i] = i - 1``; body ``i``'s
+    ``R0`` and ``p`` are relative to its parent body's frame.
+    """
 
     joint_names: Tuple[str, ...]
     bodies: Tuple[BodyNumerics, ...] = field(default_factory=tuple)
+    parents: Tuple[int, ...] = ()
     #: Pose of the tip link frame in the last body frame: rotation (3, 3) and origin (3,).
     tip_R: np.ndarray = field(default_factory=lambda: np.eye(3))
     tip_p: np.ndarray = field(default_factory=lambda: np.zeros(3))
@@ -273,11 +290,15 @@ def _walk_path(desc: ChainDescription) -> Tuple[Dict[str, Pose], List[dict], Lis
     pieces: List[Piece] = []
     parent = desc.base
     for j in desc.joints:
+        parent = parent if j.parent is None else j.parent
+        if parent not in pose:
+            raise ValueError(f"joint {j.name!r}: parent link {parent!r} is neither the base nor the child of an "
+                             "earlier joint; expected the joints in tree order (parents first)")
         k, R, p = pose[parent]
         Ro, po = mm(R, rpy_matrix(j.rpy)), p + mv(R, j.xyz)
         if j.kind == "revolute":
             Ra = _axis_frame(j.axis)
-            bodies.append({"R0": snap(mm(Ro, Ra)), "p": po})
+            bodies.append({"R0": snap(mm(Ro, Ra)), "p": po, "parent": k - 1})
             k, R, p = len(bodies), Ra.T.copy(), np.zeros(3)  # child link frame in the new body frame
         elif j.kind == "fixed":
             R, p = snap(Ro), po
@@ -305,7 +326,7 @@ def _attached_pieces(desc: ChainDescription, pose: Dict[str, Pose]) -> List[Piec
 
 
 def chain_numerics(desc: ChainDescription, symbolic: Sequence[str] = ()) -> ChainNumerics:
-    """Merge fixed joints and attached links; align body frames with the joint axes.
+    """Merge fixed joints and attached links; align body frames with the joint axes (path or tree).
 
     Parameters
     ----------
@@ -318,13 +339,14 @@ def chain_numerics(desc: ChainDescription, symbolic: Sequence[str] = ()) -> Chai
     Returns
     -------
     ChainNumerics
-        One body per revolute joint, in q order.
+        One body per revolute joint, in q order, with its parent body index.
 
     Raises
     ------
     ValueError
-        If the chain has no revolute joint, a joint kind is unknown, or an
-        attached link names a parent that is not on the path.
+        If the chain has no revolute joint, a joint kind is unknown, a joint's
+        parent link comes later, or an attached link names a parent that is
+        not on the chain.
     """
     pose, bodies, pieces, parent = _walk_path(desc)
     pieces += _attached_pieces(desc, pose)
@@ -357,8 +379,9 @@ def chain_numerics(desc: ChainDescription, symbolic: Sequence[str] = ()) -> Chai
         raise ValueError(f"symbolic inertial of link(s) {missing}: not a link of the chain "
                          f"(expected among {[pc[4] for pc in pieces if pc[0] > 0 and pc[3] is not None]})")
     tip_k, tip_R, tip_p = pose[parent]
-    assert tip_k == len(bodies)
-    return ChainNumerics(joint_names=desc.revolute_names, bodies=out, tip_R=tip_R, tip_p=tip_p,
+    parents = tuple(b["parent"] for b in bodies)
+    assert desc.tips or tip_k == len(bodies)
+    return ChainNumerics(joint_names=desc.revolute_names, bodies=out, parents=parents, tip_R=tip_R, tip_p=tip_p,
                          symbolic=tuple((link, *sym_pieces[link]) for link in symbolic))
 
 

@@ -26,7 +26,7 @@ __all__ = ["Param", "FlexibleJointModel", "state_symbols", "PLANAR_GROUPS", "ELA
            "SPATIAL_NAMES", "MODEL_NAMES", "COMPLETE_NAMES"]
 
 #: Built-in spatial arms: each is the URDF model file ``derive/robots/<name>/<name>.toml``.
-SPATIAL_NAMES: Tuple[str, ...] = ("elbow3", "panda")
+SPATIAL_NAMES: Tuple[str, ...] = ("elbow3", "panda", "baxter")
 
 #: Names of the built-in models (:func:`derive.registry.build` builds each one).
 #: Built-in complete models (rotor gyroscopics, docs/complete-model.md) and their reduced models.

@@ -122,6 +122,11 @@ def _check_params(num: ChainNumerics, name: str, params: Tuple[Param, ...],
     return payload
 
 
+def _is_tree(num: ChainNumerics) -> bool:
+    """True unless every body's parent is the previous body (a serial path)."""
+    return any(pa != i - 1 for i, pa in enumerate(num.parents))
+
+
 def _rotations(d: _Namer, num: ChainNumerics, cs) -> Tuple[List[Matrix3], List[Vector]]:
     """``R_i = R0_i Rz(q_i)`` (linear in ``c_i``, ``s_i``) and the joint origins ``p_i``."""
     R: List[Matrix3] = []
@@ -173,16 +178,20 @@ def _body_inertias(d: _Namer, num: ChainNumerics, sym: Dict[str, sp.Symbol], pay
     return mass, hmom, Io
 
 
-def _rnea_forward(d: _Namer, R, P, dq, mass, hmom, Io, g0) -> Tuple[List[Vector], List[Vector], list]:
+def _rnea_forward(d: _Namer, R, P, dq, mass, hmom, Io, g0,
+                  parents: Sequence[int]) -> Tuple[List[Vector], List[Vector], list]:
     """RNEA forward pass (``ddq = 0``, base accelerated by ``+g0 e_z``): each body's force, moment, rates.
 
+    Each body starts from its parent's rates (``parents[i]``, -1: the base).
     The rates are ``(w_i, dw_i)``, body ``i``'s angular velocity and acceleration in its frame.
     """
     zero = [sp.Integer(0)] * 3
-    w_prev, dw_prev, a_prev = zero, zero, [sp.Integer(0), sp.Integer(0), g0]
-    forces, moments, rates = [], [], []
+    base = (zero, zero, [sp.Integer(0), sp.Integer(0), g0])
+    forces, moments, rates, accs = [], [], [], []
     for i in range(len(R)):
         Ri, p = R[i], P[i]
+        pa = parents[i]
+        w_prev, dw_prev, a_prev = base if pa < 0 else (rates[pa][0], rates[pa][1], accs[pa])
         acc = [a_prev[k] + t for k, t in enumerate(_cross(dw_prev, p))]
         if any(v != 0 for v in w_prev):
             wxp = d.vec(f"wp{i + 1}", _cross(w_prev, p))
@@ -201,23 +210,31 @@ def _rnea_forward(d: _Namer, R, P, dq, mass, hmom, Io, g0) -> Tuple[List[Vector]
         forces.append(d.vec(f"fb{i + 1}", f_i))
         moments.append(d.vec(f"nb{i + 1}", n_i))
         rates.append((w_i, dw_i))
-        w_prev, dw_prev, a_prev = w_i, dw_i, a_i
+        accs.append(a_i)
     return forces, moments, rates
 
 
-def _rnea_backward(d: _Namer, R, P, forces, moments) -> sp.Matrix:
-    """RNEA backward pass: carry the forces to the base; ``h_i`` is the moment about joint axis i."""
+def _rnea_backward(d: _Namer, R, P, forces, moments, parents: Sequence[int]) -> sp.Matrix:
+    """RNEA backward pass: each body's force joins its parent's; ``h_i`` is the moment about joint axis i.
+
+    Bodies are visited from the last to the first (children come after their
+    parents), so a body's force is complete when it is carried to its parent.
+    """
     n = len(R)
     h = sp.zeros(n, 1)
-    F, N = forces[-1], moments[-1]
-    h[n - 1] = N[2]
-    for i in reversed(range(n - 1)):
-        RF = d.vec(f"RF{i + 2}", _matvec(R[i + 1], F))
-        RN = _matvec(R[i + 1], N)
-        pxf = _cross(P[i + 1], RF)
-        F = d.vec(f"F{i + 1}", [forces[i][k] + RF[k] for k in range(3)])
-        N = d.vec(f"N{i + 1}", [moments[i][k] + RN[k] + pxf[k] for k in range(3)])
+    carried: List[list] = [[] for _ in range(n)]  # per body: (R F, R N, p x R F) of each child
+    for i in reversed(range(n)):
+        F, N = forces[i], moments[i]
+        if carried[i]:
+            F, N = list(F), list(N)
+            for RF, RN, pxf in carried[i]:
+                F = [F[k] + RF[k] for k in range(3)]
+                N = [N[k] + RN[k] + pxf[k] for k in range(3)]
+            F, N = d.vec(f"F{i + 1}", F), d.vec(f"N{i + 1}", N)
         h[i] = N[2]
+        if parents[i] >= 0:
+            RF = d.vec(f"RF{i + 1}", _matvec(R[i], F))
+            carried[parents[i]].append((RF, _matvec(R[i], N), _cross(P[i], RF)))
     return h
 
 
@@ -236,34 +253,49 @@ def _rotate_z_inertia(d: _Namer, i: int, A: Matrix3, c, s) -> Matrix3:
 
 
 def _composite_inertias(d: _Namer, num: ChainNumerics, R, P, cs, mass, hmom, Io) -> list:
-    """CRBA backward pass: composite ``(m, h, I_o)`` of bodies i..n about the origin of ``B_i``, in ``B_i``."""
+    """CRBA backward pass: composite ``(m, h, I_o)`` of body i and its subtree about the origin of ``B_i``, in ``B_i``.
+
+    A leaf's composite is its own inertia; a parent adds each child's composite
+    carried into its frame (children in q order).
+    """
     n = len(R)
-    cm, ch, cI = mass[n - 1], hmom[n - 1], Io[n - 1]
+    children: List[List[int]] = [[] for _ in range(n)]
+    for c, pa in enumerate(num.parents):
+        if pa >= 0:
+            children[pa].append(c)
     composite = [None] * n
-    composite[n - 1] = (cm, ch, cI)
-    for i in reversed(range(n - 1)):
-        Rn, p = R[i + 1], P[i + 1]
-        c, s = cs[i + 1]
-        # Rz(q) I Rz(q)^T, then the constant R0 (exact zeros/ones keep it sparse).
-        B = _rotate_z_inertia(d, i, cI, c, s)
-        R0 = [[_num(num.bodies[i + 1].R0[r, k]) for k in range(3)] for r in range(3)]
-        RIR = [[sp.Add(*[R0[r][a] * B[a][b] * R0[k][b] for a in range(3) for b in range(3)])
-                for k in range(3)] for r in range(3)]
-        hR = d.vec(f"hR{i + 2}", _matvec(Rn, ch))
-        pn = sum(float(v) ** 2 for v in num.bodies[i + 1].p)
-        diag = d(f"hp{i + 2}", 2 * _dot(p, hR) + cm * _num(pn))
-        I_new = [[Io[i][r][k] + RIR[r][k] + (diag if r == k else 0)
-                  - (p[r] * hR[k] + hR[r] * p[k] + cm * p[r] * p[k]) for k in range(3)] for r in range(3)]
-        cI = _symmetric([[d(f"Ic{i + 1}_{r + 1}{k + 1}", I_new[r][k]) if k >= r else None for k in range(3)]
-                         for r in range(3)])
-        ch = d.vec(f"hc{i + 1}", [hmom[i][k] + hR[k] + cm * p[k] for k in range(3)])
-        cm = mass[i] + cm
+    for i in reversed(range(n)):
+        cm, ch, cI = mass[i], hmom[i], Io[i]
+        for c in children[i]:
+            m_c, h_c, I_c = composite[c]
+            Rn, p = R[c], P[c]
+            co, si = cs[c]
+            # Rz(q) I Rz(q)^T, then the constant R0 (exact zeros/ones keep it sparse).
+            B = _rotate_z_inertia(d, c - 1, I_c, co, si)
+            R0 = [[_num(num.bodies[c].R0[r, k]) for k in range(3)] for r in range(3)]
+            RIR = [[sp.Add(*[R0[r][a] * B[a][b] * R0[k][b] for a in range(3) for b in range(3)])
+                    for k in range(3)] for r in range(3)]
+            hR = d.vec(f"hR{c + 1}", _matvec(Rn, h_c))
+            pn = sum(float(v) ** 2 for v in num.bodies[c].p)
+            diag = d(f"hp{c + 1}", 2 * _dot(p, hR) + m_c * _num(pn))
+            cI = [[cI[r][k] + RIR[r][k] + (diag if r == k else 0)
+                   - (p[r] * hR[k] + hR[r] * p[k] + m_c * p[r] * p[k]) for k in range(3)] for r in range(3)]
+            ch = [ch[k] + hR[k] + m_c * p[k] for k in range(3)]
+            cm = cm + m_c
+        if children[i]:
+            cI = _symmetric([[d(f"Ic{i + 1}_{r + 1}{k + 1}", cI[r][k]) if k >= r else None for k in range(3)]
+                             for r in range(3)])
+            ch = d.vec(f"hc{i + 1}", ch)
         composite[i] = (cm, ch, cI)
     return composite
 
 
-def _crba_entries(d: _Namer, R, P, composite) -> sp.Matrix:
-    """CRBA forward pass: ``D_ij`` by carrying the unit-rate force of joint i down to joint j."""
+def _crba_entries(d: _Namer, R, P, composite, parents: Sequence[int]) -> sp.Matrix:
+    """CRBA forward pass: ``D_ij`` by carrying the unit-rate force of joint i down to each ancestor j.
+
+    ``D_ij`` is zero unless one of the joints is an ancestor of the other; only
+    the ancestors are visited.
+    """
     n = len(R)
     Dm = sp.zeros(n, n)
     for i in range(n):
@@ -271,16 +303,18 @@ def _crba_entries(d: _Namer, R, P, composite) -> sp.Matrix:
         nv = [Ic[0][2], Ic[1][2], Ic[2][2]]
         fv = [-hc[1], hc[0], sp.Integer(0)]  # e_z x ... : force of the unit joint rate, -h x e_z
         Dm[i, i] = Ic[2][2]
-        for j in reversed(range(i)):
-            Rn, p = R[j + 1], P[j + 1]
+        cur, j = i, parents[i]
+        while j >= 0:
+            Rn, p = R[cur], P[cur]
             fv2 = _matvec(Rn, fv)
             nv2 = [a + b for a, b in zip(_matvec(Rn, nv), _cross(p, fv2))]
-            if j > 0:
+            if parents[j] >= 0:
                 fv = d.vec(f"cf{i + 1}_{j + 1}", fv2)
                 nv = d.vec(f"cn{i + 1}_{j + 1}", nv2)
                 Dm[i, j] = Dm[j, i] = nv[2]
             else:
                 Dm[i, j] = Dm[j, i] = d(f"D{i + 1}_{j + 1}", nv2[2])
+            cur, j = j, parents[j]
     prog = d.prog
     for i in range(n):  # name every entry (the derivations differentiate D entry by entry)
         for j in range(i + 1):
@@ -290,13 +324,16 @@ def _crba_entries(d: _Namer, R, P, composite) -> sp.Matrix:
     return Dm
 
 
-def _potential(d: _Namer, R, P, mass, hmom, g0) -> sp.Expr:
+def _potential(d: _Namer, R, P, mass, hmom, g0, parents: Sequence[int]) -> sp.Expr:
     """``g0`` times the height of every centre of mass (world z of the first moments)."""
-    zrow, zpos = [sp.Integer(0), sp.Integer(0), sp.Integer(1)], sp.Integer(0)
+    base = ([sp.Integer(0), sp.Integer(0), sp.Integer(1)], sp.Integer(0))
+    up: list = []  # per body: (world z row in its frame, height of its origin)
     V = sp.Integer(0)
     for i in range(len(R)):
+        zrow, zpos = base if parents[i] < 0 else up[parents[i]]
         zpos = d(f"zo{i + 1}", zpos + _dot(zrow, P[i]))
         zrow = d.vec(f"zr{i + 1}", [sp.Add(*[zrow[k] * R[i][k][c] for k in range(3)]) for c in range(3)])
+        up.append((zrow, zpos))
         V += mass[i] * zpos + _dot(zrow, hmom[i])
     return g0 * d("Vg", V)
 
@@ -336,10 +373,15 @@ def make_spatial(desc: ChainDescription, name: str, params: Tuple[Param, ...],
     """
     num = chain_numerics(desc, symbolic)
     n = len(num.bodies)
+    if rotors is not None and _is_tree(num):
+        raise ValueError(f"{name}: the complete model (rotors) is built for serial chains; the joints form a tree")
     gears = [f"N{i}" for i in range(1, n + 1)] if rotors is not None else []
     if [p.name for p in params[len(params) - len(gears):]] != gears:
         raise ValueError(f"{name}: a complete model's parameters must end with {gears}")
     payload = _check_params(num, name, params[:len(params) - len(gears)], symbolic)
+    if payload and _is_tree(num):
+        raise ValueError(f"{name}: a payload rides on the tip of a serial chain; the joints form a tree "
+                         f"(tips {list(desc.tips)}): leave out the payload parameters")
     sym = {p.name: sp.Symbol(p.name, real=True) for p in params}
     g0 = sym["g0"]
     q, dq, qm, dqm = state_symbols(n)
@@ -353,16 +395,16 @@ def make_spatial(desc: ChainDescription, name: str, params: Tuple[Param, ...],
         coef = [d(f"Sc{i + 1}", jm[i] / gear[i]) for i in range(n)]
         carry_rotors(d, num.bodies, rotors, [d(f"Ia{i + 1}", jm[i] / gear[i] ** 2) for i in range(n)],
                      mass, hmom, Io)
-    forces, moments, rates = _rnea_forward(d, R, P, dq, mass, hmom, Io, g0)
+    forces, moments, rates = _rnea_forward(d, R, P, dq, mass, hmom, Io, g0, num.parents)
     complete = {}
     if rotors is not None:
         spin_moments(d, num.bodies, coef, dqm, rates, moments)
         complete = {"coupling": coupling_matrix(d, num.bodies, R, coef),
                     "motor_bias": motor_bias(d, num.bodies, coef, rates), "reduced_model": reduced_model,
                     "rotors": rotors}
-    h = _rnea_backward(d, R, P, forces, moments)
-    Dm = _crba_entries(d, R, P, _composite_inertias(d, num, R, P, cs, mass, hmom, Io))
-    V = _potential(d, R, P, mass, hmom, g0)
+    h = _rnea_backward(d, R, P, forces, moments, num.parents)
+    Dm = _crba_entries(d, R, P, _composite_inertias(d, num, R, P, cs, mass, hmom, Io), num.parents)
+    V = _potential(d, R, P, mass, hmom, g0, num.parents)
     return FlexibleJointModel(**complete,
         name=name, n=n, params=tuple(params), q=q, dq=dq, qm=qm, dqm=dqm,
         D=Dm, h=h, potential=V,
@@ -389,6 +431,8 @@ def make_spatial_jacobian(desc: ChainDescription, name: str, params: Tuple[Param
         raise ValueError(f"{name}: the Jacobian form takes no payload parameters")
     base = make_spatial(desc, name, params, description)  # for the parameters and state symbols
     num = chain_numerics(desc)
+    if _is_tree(num):
+        raise ValueError(f"{name}: the Jacobian form is built for serial chains; the joints form a tree")
     n = base.n
     prog = Program()
     q, dq = base.q, base.dq

@@ -12,7 +12,8 @@ any other elements are ignored (they do not enter the dynamics).
 Rules (each violation raises :class:`UrdfError` naming the file, the line,
 the element and what was expected):
 
-* ``base`` and ``tip`` must be links, the tip a descendant of the base; every
+* ``base`` and ``tip`` must be links, the tip a descendant of the base (or
+  several tips, each a descendant: the union of their paths is a tree); every
   link has at most one parent joint (a second one closes a loop) and the
   joint graph has no cycle;
 * joints on the base -> tip path are ``revolute``, ``continuous`` (both:
@@ -23,8 +24,9 @@ the element and what was expected):
   with mass > 0 and a positive definite inertia tensor;
 * links fixed to moving links (through fixed joints, on or off the path) may
   omit ``<inertial>`` -- a massless frame, as URDF allows (``tool0``,
-  ``panda_link8``), as does mass 0 with an all-zero tensor; otherwise the
-  same mass and tensor checks apply;
+  ``panda_link8``), as does mass 0 with an all-zero tensor; a mass > 0 with
+  an all-zero tensor is a point mass; otherwise the same mass and tensor
+  checks apply;
 * a branch leaving a moving link through a non-fixed joint (off the path,
   or beyond the tip) is refused if any of its links carries mass (the
   chain's dynamics would be wrong without it); massless branches are
@@ -41,7 +43,7 @@ import math
 import xml.parsers.expat
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Dict, List, Optional, Tuple, Union
+from typing import Dict, List, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
@@ -195,7 +197,8 @@ class _Reader:
             return None
         ixx, ixy, ixz, iyy, iyz, izz = tensor
         eig = np.linalg.eigvalsh(np.array([[ixx, ixy, ixz], [ixy, iyy, iyz], [ixz, iyz, izz]]))
-        if not eig.min() > 0:
+        point_mass = not required and all(v == 0 for v in tensor)  # a fixed link's point mass (Baxter's endpoints)
+        if not eig.min() > 0 and not point_mass:
             raise UrdfError(f"inertia tensor is not positive definite (eigenvalues "
                             f"{', '.join(f'{v:.3g}' for v in eig)}); expected a symmetric positive "
                             "definite tensor about the centre of mass", self.source, inertia_node.line,
@@ -282,13 +285,18 @@ def _base_to_tip(robot: _Node, rd: _Reader, links: Dict[str, _Node], parent_of: 
 
 
 def _path_joints(rd: _Reader, links: Dict[str, _Node], path: List[Edge], base: str,
-                 tip: str) -> Tuple[List[Joint], List[str]]:
-    """The joints on the path (checked), and the links that move (beyond the first moving joint)."""
+                 tips: Sequence[str], tree: bool = False) -> Tuple[List[Joint], List[str]]:
+    """The joints on the path or tree (checked), and the links that move (beyond a moving joint).
+
+    ``path`` lists every parent before its children; with ``tree`` the joints name their parent link.
+    """
     chain: List[Joint] = []
-    moving = False
     moving_links: List[str] = []
+    tip = ", ".join(tips)
     for jnode, child in path:
         kind = jnode.attrs["type"]
+        parent = jnode.find("parent").attrs["link"]
+        moving = parent in moving_links
         if kind in ("prismatic", "planar", "floating"):
             raise rd.fail(jnode, f"type \"{kind}\" on the chain {base} -> {tip}; expected revolute, "
                                  "continuous or fixed (spatial chains of revolute joints only)")
@@ -308,10 +316,12 @@ def _path_joints(rd: _Reader, links: Dict[str, _Node], path: List[Edge], base: s
             moving_links.append(child)
         chain.append(Joint(name=jnode.attrs["name"], kind="fixed" if kind == "fixed" else "revolute",
                            xyz=xyz, rpy=rpy, axis=axis, child=child,
-                           inertial=rd.inertial(links[child], required=kind != "fixed") if moving else None))
-    if not moving:
-        raise UrdfError(f"no revolute or continuous joint between base {base!r} and tip {tip!r}; expected "
-                        "at least one", rd.source, links[tip].line, links[tip].label())
+                           inertial=rd.inertial(links[child], required=kind != "fixed") if moving else None,
+                           parent=parent if tree else None))
+    for end in tips:
+        if end not in moving_links:
+            raise UrdfError(f"no revolute or continuous joint between base {base!r} and tip {end!r}; expected "
+                            "at least one", rd.source, links[end].line, links[end].label())
     return chain, moving_links
 
 
@@ -361,15 +371,36 @@ def _off_path(rd: _Reader, links: Dict[str, _Node], children: Dict[str, List[Edg
     return attached, ignored
 
 
-def parse_urdf(text: Union[str, bytes], base: str, tip: str, source: str = "<urdf>") -> UrdfChain:
-    """Select the serial chain from ``base`` to ``tip`` of a URDF document.
+def _tree_edges(robot: _Node, rd: _Reader, links: Dict[str, _Node], parent_of: Dict[str, Edge], base: str,
+                tips: Sequence[str]) -> List[Edge]:
+    """The union of the base -> tip paths, depth-first in the order of ``tips`` (shared joints once, first)."""
+    if not tips or len(set(tips)) != len(tips) or not all(isinstance(t, str) and t for t in tips):
+        raise UrdfError(f"tips {list(tips)!r}; expected distinct link names (at least one)", rd.source,
+                        robot.line, robot.label())
+    edges: List[Edge] = []
+    seen = set()
+    for t in tips:
+        for jnode, child in _base_to_tip(robot, rd, links, parent_of, base, t):
+            if child not in seen:
+                seen.add(child)
+                edges.append((jnode, child))
+    return edges
+
+
+def parse_urdf(text: Union[str, bytes], base: str, tip: Union[str, Sequence[str]],
+               source: str = "<urdf>") -> UrdfChain:
+    """Select the serial chain from ``base`` to ``tip`` (or the tree to several tips) of a URDF document.
 
     Parameters
     ----------
     text : str or bytes
         The URDF document.
-    base, tip : str
-        Link names.
+    base : str
+        Link name.
+    tip : str or sequence of str
+        The tip link, or several: the tree of the paths from ``base`` to each
+        (q order: depth-first in the order the tips are listed, joints shared
+        with an earlier path counted once, where they first occur).
     source : str
         File name for messages.
 
@@ -387,16 +418,21 @@ def parse_urdf(text: Union[str, bytes], base: str, tip: str, source: str = "<urd
     rd = _Reader(source)
     links = _index_links(robot, rd)
     parent_of, children = _index_joints(robot, rd, links)
-    path = _base_to_tip(robot, rd, links, parent_of, base, tip)
-    chain, moving_links = _path_joints(rd, links, path, base, tip)
-    attached, ignored = _off_path(rd, links, children, path, moving_links, base, tip)
-    desc = ChainDescription(base=base, joints=tuple(chain), attached=tuple(attached))
+    tips = (tip,) if isinstance(tip, str) else tuple(tip)
+    tree = len(tips) > 1
+    if tree:
+        path = _tree_edges(robot, rd, links, parent_of, base, tips)
+    else:
+        path = _base_to_tip(robot, rd, links, parent_of, base, tips[0] if tips else "")
+    chain, moving_links = _path_joints(rd, links, path, base, tips, tree)
+    attached, ignored = _off_path(rd, links, children, path, moving_links, base, ", ".join(tips))
+    desc = ChainDescription(base=base, joints=tuple(chain), attached=tuple(attached), tips=tips if tree else ())
     return UrdfChain(description=desc, robot=robot.attrs.get("name", ""), joints=desc.revolute_names,
                      ignored=tuple(sorted(set(ignored))), sha256=hashlib.sha256(data).hexdigest())
 
 
-def load_urdf(path: Union[str, Path], base: str, tip: str, source: str = None) -> UrdfChain:
-    """Read a URDF file and select the ``base`` -> ``tip`` chain (see :func:`parse_urdf`).
+def load_urdf(path: Union[str, Path], base: str, tip: Union[str, Sequence[str]], source: str = None) -> UrdfChain:
+    """Read a URDF file and select the ``base`` -> ``tip`` chain or tree (see :func:`parse_urdf`).
 
     Raises
     ------

@@ -118,6 +118,8 @@ def _urdf_bodies(desc: ChainDescription, symbolic: Sequence[str]) -> List[dict]:
     bodies = []
     parent = "world"
     for j in desc.joints:
+        if j.parent is not None:  # a tree names each joint's parent link
+            parent = "world" if j.parent == desc.base else j.parent
         revolute = j.kind == "revolute"
         norm = math.sqrt(sum(float(a) * float(a) for a in j.axis))
         bodies.append({"name": j.child, "parent": parent, "joint": j.name if revolute else None,
@@ -141,7 +143,7 @@ def _urdf(m: FlexibleJointModel) -> Optional[dict]:
     path = _REPO / str(src["urdf"])
     if not path.is_file() or hashlib.sha256(path.read_bytes()).hexdigest() != src.get("sha256"):
         return None  # a model file outside the repository: its URDF is not at a known place
-    chain = load_urdf(path, str(src["base"]), str(src["tip"]), source=str(src["urdf"]))
+    chain = load_urdf(path, str(src["base"]), src.get("tips") or str(src["tip"]), source=str(src["urdf"]))
     names = set(m.param_names)
     symbolic = sorted(p[2:] for p in names if p.startswith("m_") and p != "m_load" and f"izz_{p[2:]}" in names)
     bodies = _urdf_bodies(chain.description, symbolic)

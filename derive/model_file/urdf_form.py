@@ -6,7 +6,7 @@ The format (see docs/spatial.md and examples/elbow_arm.toml)::
     name = "arm"
     urdf = "arm.urdf"          # relative to the model file
     base = "base_link"
-    tip = "tool0"
+    tip = "tool0"              # or several: tips = ["left_hand", "right_hand"] (a tree, see below)
     symbolic = ["link3"]       # optional: links whose inertials are runtime parameters
     [joints.default]           # every chain joint, unless overridden
     K = 5000.0                 # N m/rad
@@ -26,6 +26,12 @@ The format (see docs/spatial.md and examples/elbow_arm.toml)::
     mass = [0.0, 0.0]                # optional, kg, >= 0 (default 0): joins the carrying link
     transverse_inertia = [1e-6, 1e-6]  # optional, kg m^2, >= 0 (default I_a / 2 = Jm / (2 N^2))
     reduced_model = "arm"            # optional: the reduced model whose laws to use
+
+A tree: ``tips = [...]`` names several tip links (``tip``, if given as well,
+must be one of them); the joints on the paths from the base to each tip form
+the model, in q order depth-first in the order of ``tips`` (joints shared with
+an earlier tip's path first, once). A tree takes no ``[payload]`` and no
+``[rotors]``.
 
 The URDF is read by :mod:`derive.urdf`; :meth:`UrdfModelSpec.build` builds
 the model with :func:`derive.spatial.make_spatial`.
@@ -51,7 +57,7 @@ __all__ = ["UrdfModelSpec", "parse_urdf_form", "DEFAULT_G0"]
 
 #: The repository root (URDF paths in manifests are relative to it).
 REPO = Path(__file__).resolve().parent.parent.parent
-URDF_MODEL_KEYS = ("name", "urdf", "base", "tip", "description", "symbolic")
+URDF_MODEL_KEYS = ("name", "urdf", "base", "tip", "tips", "description", "symbolic")
 URDF_TOP = ("model", "joints", "parameters", "payload", "notes", "rotors")
 #: Keys of ``[rotors]``.
 ROTOR_KEYS = ("gear_ratio", "mass", "transverse_inertia", "reduced_model")
@@ -101,10 +107,12 @@ class UrdfModelSpec:
     symbolic: Tuple[str, ...] = ()  # links whose inertials are runtime parameters
     rotors: Optional[Rotors] = None  # the complete model's rotors ([rotors]), None: the reduced model
     reduced_model: Optional[str] = None
+    tips: Tuple[str, ...] = ()  # several tips: a tree (``tip`` is then one of them or empty)
 
     def build(self) -> FlexibleJointModel:
-        """The symbolic model (:func:`derive.spatial.make_spatial` of the URDF chain)."""
-        chain = load_urdf(self.urdf, self.base, self.tip, source=_repo_relative(self.urdf))
+        """The symbolic model (:func:`derive.spatial.make_spatial` of the URDF chain or tree)."""
+        ends = self.tips or self.tip
+        chain = load_urdf(self.urdf, self.base, ends, source=_repo_relative(self.urdf))
         n = len(chain.joints)
         params = elastic_params(n, self.K, self.Jm, self.Bm, self.g0, chain.joints,
                                 {k: f"; {v}" for k, v in self.notes.items()})
@@ -116,12 +124,13 @@ class UrdfModelSpec:
             params = params + gear_params(rotors.gear_ratio)
         description = self.description or (
             f"Spatial serial chain of {n} revolute joints from the URDF {_repo_relative(self.urdf)} "
-            f"(robot {chain.robot}, {self.base} -> {self.tip}), flexible joints, gravity g0 along -z "
+            f"(robot {chain.robot}, {self.base} -> {', '.join(self.tips) or self.tip}), flexible joints, "
+            "gravity g0 along -z "
             f"of {self.base}.")
         model = make_spatial(chain.description, self.name, params, description, symbolic=self.symbolic,
                              rotors=rotors, reduced_model=self.reduced_model)
         src = {"urdf": _repo_relative(self.urdf), "sha256": chain.sha256, "base": self.base,
-               "tip": self.tip, "joints": list(chain.joints)}
+               **({"tips": list(self.tips)} if self.tips else {"tip": self.tip}), "joints": list(chain.joints)}
         if chain.ignored:
             src["ignored_links"] = list(chain.ignored)
         return replace(model, source=src)
@@ -147,15 +156,34 @@ def _model_table(data: dict, chk: Checker, builtin: bool) -> dict:
         if key not in URDF_MODEL_KEYS:
             raise chk.fail(("model", key), f"unknown key; [model] of the URDF form allows "
                                            f"{', '.join(URDF_MODEL_KEYS)}" + suggest(key, URDF_MODEL_KEYS))
-    for key in ("name", "urdf", "base", "tip"):
+    for key in ("name", "urdf", "base") + (() if "tips" in model else ("tip",)):
         if key not in model:
             raise chk.fail(("model", key), f"missing required key: {key} = \"...\" (a string)",
                            line_path=("model",))
         if not isinstance(model[key], str) or not model[key]:
             raise chk.fail(("model", key), f"expected a non-empty string, {got(model[key])}")
+    _tips(chk, model)
     check_name(chk, model["name"], builtin)
     check_description(chk, model.get("description"))
     return model
+
+
+def _tips(chk: Checker, model: dict) -> None:
+    """``[model] tips`` (optional): distinct link names, at least two; ``tip`` beside it must be one of them."""
+    if "tips" not in model:
+        return
+    tips = model["tips"]
+    if (not isinstance(tips, list) or len(tips) < 2 or not all(isinstance(t, str) and t for t in tips)
+            or len(set(tips)) != len(tips)):
+        raise chk.fail(("model", "tips"), f"expected an array of at least two distinct link names, {got(tips)}")
+    if "tip" in model and model["tip"] not in tips:
+        raise chk.fail(("model", "tip"), f"{show(model['tip'])} is not among tips {tips}; expected one of them "
+                                         "(or leave tip out)")
+
+
+def _ends(model: dict):
+    """The tip link, or the tuple of tips of a tree."""
+    return tuple(model["tips"]) if "tips" in model else model["tip"]
 
 
 def _load_chain(chk: Checker, model: dict, base_dir: Path) -> Tuple[Path, UrdfChain]:
@@ -165,7 +193,7 @@ def _load_chain(chk: Checker, model: dict, base_dir: Path) -> Tuple[Path, UrdfCh
         raise chk.fail(("model", "urdf"), f"URDF file {model['urdf']!r} not found (looked for {urdf}); "
                                           "expected a path relative to the model file")
     try:
-        chain = load_urdf(urdf, model["base"], model["tip"], source=str(urdf))
+        chain = load_urdf(urdf, model["base"], _ends(model), source=str(urdf))
     except UrdfError as exc:
         raise chk.fail(("model", "urdf"), f"cannot use the URDF: {exc}") from None
     return urdf, chain
@@ -196,7 +224,8 @@ def _joint_values(chk: Checker, data: dict, model: dict, names: Tuple[str, ...])
     for jname, entry in joints.items():
         path: KeyPath = ("joints", jname)
         if jname != "default" and jname not in names:
-            raise chk.fail(path, f"no revolute joint {jname!r} on the chain {model['base']} -> {model['tip']}; "
+            raise chk.fail(path, f"no revolute joint {jname!r} on the chain {model['base']} -> "
+                                 f"{', '.join(model['tips']) if 'tips' in model else model['tip']}; "
                                  f"expected 'default' or one of {', '.join(names)}" + suggest(jname, names))
         if not isinstance(entry, dict):
             raise chk.fail(path, f"expected a table with K, Jm, Bm, {got(entry)}")
@@ -310,7 +339,12 @@ def parse_urdf_form(data: dict, chk: Checker, base_dir: Path, builtin: bool) -> 
     g0, notes = _gravity_and_notes(chk, data)
     payload = _payload(chk, data)
     rotors, reduced = _rotors(chk, data, len(names))
-    return UrdfModelSpec(rotors=rotors, reduced_model=reduced,name=model["name"], urdf=urdf, base=model["base"], tip=model["tip"], joints=names,
+    if "tips" in model:
+        for key in ("payload", "rotors"):
+            if key in data:
+                raise chk.fail((key,), f"[{key}] is for a serial chain; this model names several tips (a tree)")
+    return UrdfModelSpec(rotors=rotors, reduced_model=reduced, name=model["name"], urdf=urdf, base=model["base"],
+                         tip=model.get("tip", ""), tips=tuple(model.get("tips", ())), joints=names,
                          K=tuple(per["K"]), Jm=tuple(per["Jm"]), Bm=tuple(per["Bm"]), g0=g0,
                          description=model.get("description"), notes=notes, source=chk.source,
                          payload=payload, symbolic=symbolic)
