@@ -28,6 +28,7 @@ from __future__ import annotations
 import argparse
 import filecmp
 import json
+import re
 import shutil
 import signal
 import sys
@@ -126,7 +127,7 @@ def derive_into(root: Path, models: List[str], log=print,
     builders, estimates = builders or {}, estimates or {}
     for i, name in enumerate(models, 1):
         est = estimates.get(name)
-        long = est is not None and est.seconds > LONG_SECONDS
+        long = est is not None and est.model_seconds > LONG_SECONDS
         head = f"[{i}/{len(models)}] {name}:"
         if long:
             log(f"{head} deriving (estimated {est.summary()}) ...", flush=True)
@@ -152,7 +153,11 @@ def derive_into(root: Path, models: List[str], log=print,
 
 
 def chain_size(spec) -> tuple:
-    """``(n, form)`` of a parsed model file: URDF form -> ``(joints, "spatial")``, else ``(links, "planar")``."""
+    """``(n, form)`` of a parsed model file: URDF form -> ``(joints, "spatial")``, else ``(links, "planar")``.
+
+    A tree (several tips) counts all its joints and is estimated as a serial chain of that many: an
+    over-estimate (its branches are shorter than the chain).
+    """
     joints = getattr(spec, "joints", None)
     return (len(joints), "spatial") if joints is not None else (int(spec.links), "planar")
 
@@ -169,12 +174,13 @@ def model_estimates(models: List[str], specs: Dict[str, object]) -> Dict[str, Es
     for name in models:
         if name in specs:
             n, form = chain_size(specs[name])
-        elif name in ("link1", "link1_complete") or name.startswith("planar"):
-            n, form = (1 if name.startswith("link1") else int(name[len("planar"):].split("_")[0])), "planar"
+        elif re.fullmatch(r"(link1|planar\d+)(_\w+)?", name):  # link1, planar<n> and their variants
+            n, form = int(re.match(r"(?:link|planar)(\d+)", name).group(1)), "planar"
         else:
             scanned = prescan_model_file(ROBOTS / name / f"{name}.toml")
-            if scanned is None:
-                continue  # the build reports what is wrong with it
+            if scanned is None:  # e.g. a tree (tips = [...]): the full parser counts its joints
+                from .model_file import load_model_file
+                scanned = (name,) + chain_size(load_model_file(ROBOTS / name / f"{name}.toml", builtin=True))
             _, n, form = scanned
         out[name] = estimate(n, form)
     return out

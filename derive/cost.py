@@ -97,6 +97,11 @@ class Estimate:
     peak_bytes: float
     seconds: float
 
+    @property
+    def model_seconds(self) -> float:
+        """The estimated seconds of this model's own work (over a trivial derive's startup)."""
+        return self.seconds - CALIBRATION["base_seconds"]
+
     def summary(self) -> str:
         """``"~25k operations, ~0.31 GB peak memory, ~4 s"``."""
         return (f"~{_si(self.operations)} operations, ~{self.peak_bytes / 1024 ** 3:.3g} GB peak memory, "
