@@ -193,7 +193,8 @@ def synthesize_gains(model, nominal_params=None, *, param_box=None, reference_bo
                      lam: Optional[float] = None, c=None, integral: bool = False, beta_hat=None,
                      eta=10.0, u_max=None, delta=None, layer_rate: float = DEFAULT_LAYER_RATE,
                      include_margin: bool = True, budget: int = 60000, n_grid: Optional[int] = None,
-                     seed: int = 0, raise_infeasible: bool = False, disturbance_bound=0.0) -> TuneResult:
+                     seed: int = 0, raise_infeasible: bool = False, disturbance_bound=0.0,
+                     evaluator=None) -> TuneResult:
     """Per-joint switching gains for the law that is run (nominal coordinates), with a certificate.
 
     Parameters
@@ -232,6 +233,10 @@ def synthesize_gains(model, nominal_params=None, *, param_box=None, reference_bo
         ``D_j >= |d_j|`` of a matched motor torque disturbance (plant ``x' = f + g (u + d)``,
         e.g. Coulomb friction, :mod:`fjm_runtime.control.disturbance`), N m; adds
         ``sum_j |(C J g)_ij| D_j`` to the drift bound.
+    evaluator : callable, optional
+        ``evaluator(model, p_nom, c_last, beta_hat) -> Evaluator`` of the same outputs for
+        another law (the torque-sensed one: :mod:`fjm_runtime.analysis.certify_tau`);
+        default the state-feedback law above.
 
     Returns
     -------
@@ -241,7 +246,7 @@ def synthesize_gains(model, nominal_params=None, *, param_box=None, reference_bo
     p_nom, box, cc, R, E, Ybox, W, bh = nominal_setup(model, nominal_params, param_box, reference_bounds,
                                                        error_bounds, lam, c, integral, beta_hat)
     eta, umax, D = _check_vectors(n, eta, u_max, disturbance_bound)
-    an = BoxAnalysis(model, p_nom, box, cc, Ybox, W, bh, budget, seed, n_grid, D)
+    an = BoxAnalysis(model, p_nom, box, cc, Ybox, W, bh, budget, seed, n_grid, D, evaluator=evaluator)
     k, reason, extra_pts, margin = _refined_gain(an, eta, include_margin)
     out = _certify_gain(an, k, reason, extra_pts, margin)
     dl = (k / layer_rate) if delta is None else np.broadcast_to(np.asarray(delta, dtype=float), (n,)).copy()
@@ -340,12 +345,14 @@ def _grid_summary(an: BoxAnalysis, extra_pts: np.ndarray) -> dict:
 
 def certificate(model, k_s, nominal_params=None, *, param_box=None, reference_bounds, error_bounds,
                 lam: Optional[float] = None, c=None, integral: bool = False, beta_hat=None,
-                budget: int = 60000, n_grid: Optional[int] = None, seed: int = 0, disturbance_bound=0.0) -> dict:
+                budget: int = 60000, n_grid: Optional[int] = None, seed: int = 0, disturbance_bound=0.0,
+                evaluator=None) -> dict:
     """Worst ``sgn(s_i) s_i'`` bound on the box for a GIVEN gain (e.g. a hand-picked or Lemma 1 gain).
 
     Same box and method as :func:`synthesize_gains`. Returns a dict with
     ``certificate`` (n,) (grid + local refinement), ``grid_bound`` (n,) (grid
-    supremum + curvature margin), ``margin`` (n,) and ``witness`` (list of dict).
+    supremum + curvature margin), ``margin`` (n,) and ``witness`` (list of dict). ``evaluator``:
+    as in :func:`synthesize_gains`.
     """
     n = int(model.n)
     p_nom, box, cc, R, E, Ybox, W, bh = nominal_setup(model, nominal_params, param_box, reference_bounds,
@@ -354,7 +361,7 @@ def certificate(model, k_s, nominal_params=None, *, param_box=None, reference_bo
     if not np.all(np.isfinite(k)) or np.any(k < 0):
         raise ValueError(f"k_s = {k.tolist()}: expected finite values >= 0")
     D = np.broadcast_to(np.asarray(disturbance_bound, dtype=float), (n,)).copy()
-    an = BoxAnalysis(model, p_nom, box, cc, Ybox, W, bh, budget, seed, n_grid, D)
+    an = BoxAnalysis(model, p_nom, box, cc, Ybox, W, bh, budget, seed, n_grid, D, evaluator=evaluator)
     Phi = an.phi(an.F0, an.G, W, k)
     margin = an.margin(Phi)
     pts, ph = an.refine(Phi, k)

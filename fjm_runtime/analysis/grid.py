@@ -56,12 +56,16 @@ class BoxAnalysis:
     """Grid of the box and the values ``F0``, ``G``, ``alpha_hat``, ``B`` on it (one model, one setting)."""
 
     def __init__(self, model, p_nom, box, cc, Ybox, W, beta_hat, budget: int, seed: int, n_grid=None,
-                 D=None):
+                 D=None, evaluator=None):
         self.model, self.n = model, int(model.n)
         self.D = np.zeros(self.n) if D is None else np.asarray(D, dtype=float)
         self.p_nom, self.W, self.Ybox = p_nom, W, Ybox
-        self.fn = build_nominal_fn(model, p_nom, cc[-3:], beta_hat)
-        self.ev = Evaluator(model, self.fn, p_inverse=p_nom)
+        if evaluator is None:       # the state-feedback law; else evaluator(model, p_nom, c_last, beta_hat)
+            self.fn = build_nominal_fn(model, p_nom, cc[-3:], beta_hat)
+            self.ev = Evaluator(model, self.fn, p_inverse=p_nom)
+        else:
+            self.ev = evaluator(model, p_nom, cc[-3:], beta_hat)
+            self.fn = self.ev.fn
         self.rng = np.random.default_rng(seed)
         self.dims = box_dims(model, Ybox, p_nom, box)
         n = self.n

@@ -14,6 +14,7 @@ from typing import Dict, List, Tuple
 
 from ..analysis.box import default_stiffness_box, param_box_from_ranges
 from ..analysis.certify import GUARANTEE, synthesize_gains
+from ..analysis.certify_tau import GUARANTEE_TAU, synthesize_torque_gains, torque_param_box
 from ..analysis.lemma1 import paper_beta_hat
 from ..control.defaults import DEFAULT_LAYER_RATE
 
@@ -62,8 +63,20 @@ def add_parser(sub) -> None:
                     "a grid (vertices along affine coordinates), not a proof; the box is assumed invariant. "
                     "Exit status 1 when no admissible gain exists (the JSON says why).")
     tp.add_argument("model", help="model name, e.g. link1, planar2")
-    tp.add_argument("--controller", choices=("smc", "sign", "ismc"), default="smc",
-                    help="law to certify: smc/sign = paper surface, ismc = integral surface (default smc)")
+    tp.add_argument("--controller", choices=("smc", "sign", "ismc"), default=None,
+                    help="law to certify: smc/sign = paper surface, ismc = integral surface (default smc; "
+                         "ismc with --sensing torque)")
+    tp.add_argument("--sensing", choices=("state", "torque"), default="state",
+                    help="state: the law on x = [q; dq; q_m; dq_m]; torque: the torque-sensed law on "
+                         "m = [q; dq; tau_J; dtau_J; dq_m] (control_<kind>_tau), certified on a box of the stiffness "
+                         "ratio K/K_nom (--gamma-range), J_m (--jm-ratio) and payload (--payload) (default state)")
+    tp.add_argument("--gamma-range", type=_number, nargs=2, default=(0.7, 1.3), metavar=("LO", "HI"),
+                    help="--sensing torque: true stiffness ratio K/K_nom of every joint (default 0.7 1.3)")
+    tp.add_argument("--jm-ratio", type=_number, nargs=2, default=(0.8, 1.2), metavar=("LO", "HI"),
+                    help="--sensing torque: true motor inertia ratio J_m/J_m,nom of every joint (default 0.8 1.2)")
+    tp.add_argument("--payload", type=_number, default=1.0, metavar="KG",
+                    help="--sensing torque: unknown payload 0..KG kg (m_load; planar chains: added to the last "
+                         "link's mass) (default 1)")
     tp.add_argument("--lam", type=_number, default=8.0, help="pole magnitude lambda, 1/s (default 8)")
     tp.add_argument("--nominal", action="append", default=[], metavar="NAME=VALUE",
                     help="NOMINAL controller parameter (repeatable); default: model defaults")
@@ -92,7 +105,9 @@ def add_parser(sub) -> None:
                     help="link1: the paper's constant (beta_max + beta_min)/2 over --k-range, or beta(x; nominal); "
                          "chains always use beta(x; nominal) (default paper)")
     tp.add_argument("--eta", type=_number, default=10.0, help="reaching margin, rad/s^4 (default 10)")
-    tp.add_argument("--u-max", type=_number, default=None, help="actuator limit, N m (default none)")
+    tp.add_argument("--u-max", default=None, metavar="U[,U2,..]",
+                    help="actuator limit, N m: one number for every joint or one per joint, e.g. "
+                         "87,87,87,87,12,12,12 (default none)")
     tp.add_argument("--layer-rate", type=_number, default=DEFAULT_LAYER_RATE,
                     help="boundary layer delta = k_s / rate (default 200)")
     tp.add_argument("--budget", type=_integer, default=60000, help="approximate grid size (default 60000)")
@@ -159,6 +174,36 @@ def _reference(args, n):
             f"smooth step to {args.q_d:g} rad in {args.rise_time:g} s")
 
 
+def _u_max(args, n: int):
+    if args.u_max is None:
+        return None
+    try:
+        vals = [float(v) for v in str(args.u_max).replace(",", " ").split()]
+    except ValueError:
+        vals = []
+    if len(vals) not in (1, n) or not all(v > 0 for v in vals):
+        raise ValueError(f"--u-max {args.u_max!r}: expected one limit > 0 (N m) or {n} separated by commas")
+    return vals[0] if len(vals) == 1 else vals
+
+
+def _run_torque(m, args, nominal, R, E, u_max):
+    """``fjm tune --sensing torque``: the certificate of the torque-sensed law (or its obstacle)."""
+    if args.controller == "sign":
+        raise ValueError("--controller sign with --sensing torque: expected smc or ismc (the torque-sensed "
+                         "laws are emitted for sat, integral and fl)")
+    lo, hi = args.gamma_range
+    jlo, jhi = args.jm_ratio
+    if not (0 < lo <= hi and 0 < jlo <= jhi and args.payload >= 0):
+        raise ValueError(f"--gamma-range {lo} {hi} / --jm-ratio {jlo} {jhi} / --payload {args.payload}: expected "
+                         "0 < LO <= HI and a payload >= 0 kg")
+    box = torque_param_box(m, nominal, (lo, hi), (jlo, jhi), args.payload)
+    box.update(_intervals(args.param_box))
+    return synthesize_torque_gains(m, nominal, param_box=box, reference_bounds=R, error_bounds=E, lam=args.lam,
+                                   integral=(args.controller or "ismc") == "ismc", eta=args.eta, u_max=u_max,
+                                   layer_rate=args.layer_rate, include_margin=not args.no_margin,
+                                   budget=args.budget)
+
+
 def run(args) -> int:
     """``fjm tune``: print the :class:`~fjm_runtime.analysis.certify.TuneResult` as JSON.
 
@@ -173,19 +218,25 @@ def run(args) -> int:
     box = _box(m, args, nominal)
     R, ref_label = _reference(args, int(m.n))
     E = _floats(args.error_box, 4, "--error-box") if args.error_box is not None else DEFAULT_ERROR_BOX[args.reference]
-    beta_hat = paper_beta_hat(m, nominal, box=box) if args.beta_hat == "paper" else None
-    res = synthesize_gains(m, nominal, param_box=box, reference_bounds=R, error_bounds=E, lam=args.lam,
-                           integral=(args.controller == "ismc"), beta_hat=beta_hat, eta=args.eta,
-                           u_max=args.u_max, layer_rate=args.layer_rate, include_margin=not args.no_margin,
-                           budget=args.budget, disturbance_bound=args.disturbance_bound)
+    u_max = _u_max(args, int(m.n))
+    torque = args.sensing == "torque"
+    if torque:
+        res = _run_torque(m, args, nominal, R, E, u_max)
+    else:
+        beta_hat = paper_beta_hat(m, nominal, box=box) if args.beta_hat == "paper" else None
+        res = synthesize_gains(m, nominal, param_box=box, reference_bounds=R, error_bounds=E, lam=args.lam,
+                               integral=(args.controller == "ismc"), beta_hat=beta_hat, eta=args.eta,
+                               u_max=u_max, layer_rate=args.layer_rate, include_margin=not args.no_margin,
+                               budget=args.budget, disturbance_bound=args.disturbance_bound)
     s0 = res.max_sliding_variable()
     report = res.as_dict()
-    report.update({"controller": args.controller, "lam": args.lam, "reference": ref_label,
-                   "s0_max": s0.tolist(),
+    report.update({"controller": args.controller or ("ismc" if torque else "smc"), "sensing": args.sensing,
+                   "lam": args.lam, "reference": ref_label, "s0_max": s0.tolist(),
                    "reaching_time_bound": None if not res.feasible else res.reaching_time_bound(s0).tolist(),
-                   "guarantee": GUARANTEE})
+                   "guarantee": GUARANTEE_TAU if torque else GUARANTEE})
     print(json.dumps(report, indent=2))
     if not res.feasible:
-        print(f"fjm tune: no admissible gain: {res.reason}", file=sys.stderr)
+        why = res.settings.get("obstacle") or res.reason
+        print(f"fjm tune: no admissible gain: {why}", file=sys.stderr)
         return 1
     return 0
