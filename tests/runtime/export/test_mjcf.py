@@ -22,7 +22,7 @@ from fjm_runtime.export.bridge import MujocoPlant, run_closed_loop
 from fjm_runtime.export.mjcf import mjcf_text, write_mjcf
 from fjm_runtime.validation import FjmValueError
 
-REDUCED = ["link1", "planar2", "elbow3", "panda"]
+REDUCED = ["link1", "planar2", "elbow3", "panda", "baxter"]  # baxter: a tree (head pan, two arms)
 COMPLETE = ["link1_complete", "planar2_complete", "panda_complete"]
 TOL = 1e-12
 
