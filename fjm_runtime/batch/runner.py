@@ -1,6 +1,8 @@
 """Batch closed-loop runs: many TRUE plants, one controller, one compiled call.
 
-:func:`simulate_batch` folds the closed-loop step of :mod:`fjm_runtime.sim.step`
+:func:`simulate_batch` folds THE sample step of :mod:`fjm_runtime.sim.sample_step`
+(:mod:`fjm_runtime.batch.sampled`, noise generated in C per run and sample);
+``loop='legacy'`` folds the former closed-loop step of :mod:`fjm_runtime.sim.step`
 over all samples while accumulating the per-run metrics of
 :func:`fjm_runtime.sim.metrics.compute_metrics` (so no trajectory is stored), maps
 that over the runs (OpenMP when the compiler supports it) and compiles the
@@ -21,6 +23,7 @@ from typing import Dict, List, Optional
 import numpy as np
 
 from ..ccache import DEFAULT_FLAGS
+from ..validation import FjmValueError
 from ..sim.metrics import metrics_from_sums
 from . import simd
 from .scalar import BatchRunner, batch_runner, metric_step, scalar_runner, threads_arg
@@ -58,6 +61,12 @@ class BatchResult:
     x_final : ndarray, shape (B, 4n)
     results : list of SimulationResult or None
         Full trajectories, only with ``trajectories=True``.
+    joint_metrics : dict str -> ndarray, shape (B, n)
+        Per joint (sampled loop): ``rms_second_half`` (rad), ``peak_torque`` (N m),
+        ``time_at_limit`` (fraction), ``torque_jitter`` (N m; NaN if the run is shorter than the
+        20 ms window); NaN rows for diverged runs.
+    seeds : ndarray of uint64, shape (B,) or None
+        The noise seed of each run (sampled loop).
     info : dict
         How the batch ran: ``path`` (one of :data:`PATHS`), ``reason`` (why the
         scalar loop ran; ``None`` on a SIMD path), ``threads`` (OpenMP threads
@@ -73,6 +82,8 @@ class BatchResult:
     x_final: np.ndarray
     results: Optional[list] = None
     info: dict = field(default_factory=dict)
+    joint_metrics: Dict[str, np.ndarray] = field(default_factory=dict)
+    seeds: Optional[np.ndarray] = None
 
     def table(self) -> List[dict]:
         """One dict per run: parameters by name are not known here; index, metrics, diverged."""
@@ -83,44 +94,76 @@ class BatchResult:
 
 
 def simulate_batch(model, controller, reference, params_true_array, *, duration: float,
-                   dt: float = 1e-3, x0=None, max_state: float = 1e6, trajectories: bool = False,
-                   parallel: bool = True, simd: bool = True,
-                   threads: Optional[int] = None) -> BatchResult:
-    """Run ``B`` closed loops (one per row of ``params_true_array``) in one compiled call.
+                   dt: float = 1e-3, substeps: Optional[int] = None, sensor=None, delay_samples: int = 0,
+                   predict: bool = False, seeds=None, gains=None, x0=None, max_state: float = 1e6,
+                   trajectories: bool = False, parallel: bool = True, simd: bool = True,
+                   threads: Optional[int] = None, loop: str = "sampled") -> BatchResult:
+    """Run ``B`` sampled-data closed loops (one per row of ``params_true_array``) in one compiled call.
+
+    Each run is :func:`fjm_runtime.sim.simulate.simulate` with the same settings (THE sample
+    step of :mod:`fjm_runtime.sim.sample_step`: sensor noise, delay, prediction, ZOH, plant on
+    RK4 substeps), so a row equals the single run on the same TRUE parameters and seed to rounding.
 
     Parameters
     ----------
     model, controller, reference
-        As for :func:`fjm_runtime.sim.simulate.simulate`; the controller (nominal
-        parameters) and the reference are shared by all runs.
+        As for :func:`simulate`; the controller (NOMINAL parameters) and the reference are shared.
     params_true_array : array_like, shape (B, n_params)
         TRUE plant parameters per run, columns in ``model.param_names`` order.
-    duration, dt, x0, max_state
+    duration, dt, x0, max_state, delay_samples, predict
         As for :func:`simulate` (``x0`` shared by all runs).
+    substeps : int, optional
+        RK4 plant steps per sample; default the largest of the rule of
+        :mod:`fjm_runtime.sim.substeps` over the rows (one value for the whole batch).
+    sensor : SensorModel, optional
+        Noise levels, quantization and dtau_J mode shared by all runs (default ideal).
+    seeds : array_like of int, shape (B,), optional
+        Noise seed per run; default ``sensor.seed + i`` for run ``i``.
+    gains : array_like, shape (B, n_gains), optional
+        The emitted law's ``gains`` vector per run (a sliding-mode controller only; default
+        ``controller.gains`` for every run): one build serves every candidate of a gain search.
     trajectories : bool
-        Also return every run's :class:`SimulationResult` (compiled backend, one
-        run at a time; memory grows with ``B * duration / dt``).
-    parallel : bool
-        Spread the runs over cores with OpenMP (serial if ``-fopenmp`` fails).
-    simd : bool
-        Evaluate 8 runs per instruction with vector instructions (AVX-512, AVX2
-        or SSE2, whatever this CPU has) and vector sin/cos (glibc libmvec); the
-        per-run constants (TRUE parameters) are hoisted out of the time loop.
-        Agrees with the scalar code to rounding. ``False``: the scalar C loop.
-        If the SIMD form cannot be used (the step is larger than
-        :data:`SIMD_MAX_INSTRUCTIONS`, an operation it does not support, a
-        failed build) the scalar loop runs and a :class:`SimdFallbackWarning`
-        names the reason (also in ``info["reason"]``).
-    threads : int, optional
-        OpenMP threads for this call (default: ``OMP_NUM_THREADS`` or all
-        cores); ignored when ``parallel`` is false. ``info["threads"]`` is the
-        number actually used.
+        Also return every run's :class:`SimulationResult` (compiled backend, one run at a time).
+    parallel, simd, threads
+        OpenMP across runs; vector lanes across runs (falls back to the scalar loop with a
+        :class:`SimdFallbackWarning`); threads for this call (default all cores).
+    loop : {'sampled', 'legacy'}
+        ``'legacy'``: the former batch (one RK4 step per sample, no sensor, delay or substeps),
+        kept for the benchmark peers written against it.
 
     Returns
     -------
     BatchResult
-        ``info["path"]`` says which code ran (one of :data:`PATHS`).
+        ``metrics`` (the :class:`Metrics` fields) and ``joint_metrics`` (per joint, shape (B, n):
+        ``rms_second_half``, ``peak_torque``, ``time_at_limit``, ``torque_jitter``).
     """
+    if loop == "legacy":
+        if (substeps, sensor, delay_samples, predict, seeds, gains) != (None, None, 0, False, None, None):
+            raise FjmValueError("loop = 'legacy' takes no substeps, sensor, delay_samples, predict, seeds or gains")
+        return _simulate_batch_legacy(model, controller, reference, params_true_array, duration=duration, dt=dt,
+                                      x0=x0, max_state=max_state, trajectories=trajectories, parallel=parallel,
+                                      simd=simd, threads=threads)
+    if loop != "sampled":
+        raise FjmValueError(f"loop = {loop!r}: expected 'sampled' or 'legacy'")
+    from .sampled_runner import run_sampled_batch
+    P = _true_params_rows(model, params_true_array)
+    threads_arg(threads)
+    return run_sampled_batch(model, controller, reference, P, duration=duration, dt=dt, substeps=substeps,
+                             sensor=sensor, delay=delay_samples, predict=predict, seeds=seeds, gains=gains, x0=x0,
+                             max_state=max_state, trajectories=trajectories, parallel=parallel, simd=simd,
+                             threads=threads, result_cls=BatchResult, want_simd_runner=_warn_fallback)
+
+
+def _warn_fallback(reason: str) -> None:
+    warnings.warn(f"simulate_batch: scalar loop instead of SIMD: {reason}", SimdFallbackWarning, stacklevel=4)
+
+
+def _simulate_batch_legacy(model, controller, reference, params_true_array, *, duration: float,
+                           dt: float = 1e-3, x0=None, max_state: float = 1e6, trajectories: bool = False,
+                           parallel: bool = True, simd: bool = True,
+                           threads: Optional[int] = None) -> BatchResult:
+    """The former batch (``loop='legacy'``: one RK4 step per sample, the controller state
+    integrated with the plant, no sensor): :func:`simulate_batch` before the sampled-data step."""
     from ..sim.simulate import simulate
     n = int(model.n)
     P = _true_params_rows(model, params_true_array)

@@ -155,8 +155,9 @@ def soa_source(step: ca.Function, lanes: int, varying=(0,), invariant_from: int 
     prog = SoaProgram(varying, invariant_from)
     for k in range(step.n_instructions()):
         prog.add(step, k)
+    from .scalar import noise_source
     return simd_template().substitute(
-        lanes=int(lanes), n_inv=max(1, prog.n_inv),
+        lanes=int(lanes), noise=noise_source(), n_inv=max(1, prog.n_inv),
         prologue="".join("\n  " + ln for ln in prog.prologue),
         declarations=", ".join(f"w{j}" for j in sorted(prog.used)) or "w_unused",
         body="".join("\n  " + ln for ln in prog.body))
@@ -249,7 +250,22 @@ def simd_batch_runner(model, controller, dt: float, max_state: float = 1e6,
     return simd_runner(step, len(model.param_names), flags, lanes, parallel)
 
 
-def simd_runner_or_reason(step: ca.Function, n_par: int, parallel: bool):
+def sampled_simd_runner(step: ca.Function, n_par: int, nm: int, flags: Sequence[str], lanes: Optional[int],
+                        parallel: bool = True):
+    """Compile (cached) a :func:`~fjm_runtime.batch.sampled.sampled_metric_step` in SIMD form (driver
+    ``fjm_sampled_batch_soa``: the noise generated per lane in C); the last ``n_par`` accumulator
+    entries (TRUE parameters) are hoisted into the prologue."""
+    from .scalar import SampledBatchRunner
+    lanes = int(lanes) if lanes else 8
+    isa, vflags = vector_isa()
+    extra = ("-fno-math-errno", "-ffp-contract=off") + (("-fopenmp",) if parallel else ()) + vflags
+    source = soa_source(step, lanes, varying=(0, 2), invariant_from=step.size1_in(0) - n_par)
+    so = compile_library(source, "fjm_sampled_batch_soa", tuple(flags) + extra)
+    return SampledBatchRunner(so, step.size1_in(0), step.size1_in(1), nm, step.size1_in(3), lanes, isa,
+                              openmp=parallel)
+
+
+def simd_runner_or_reason(step: ca.Function, n_par: int, parallel: bool, nm: Optional[int] = None):
     """``(runner, None)`` with the SIMD form of ``step``, or ``(None, reason)`` when it cannot be used.
 
     Reasons: the step exceeds :data:`SIMD_MAX_INSTRUCTIONS`, an operation
@@ -259,6 +275,8 @@ def simd_runner_or_reason(step: ca.Function, n_par: int, parallel: bool):
         return None, (f"the step has {step.n_instructions()} SX instructions > "
                       f"SIMD_MAX_INSTRUCTIONS = {SIMD_MAX_INSTRUCTIONS}")
     try:
+        if nm is not None:
+            return sampled_simd_runner(step, n_par, nm, DEFAULT_FLAGS, None, parallel), None
         return simd_runner(step, n_par, DEFAULT_FLAGS, None, parallel), None
     except (CompileError, ValueError) as exc:
         return None, f"SIMD build failed: {type(exc).__name__}: {str(exc)[:2000]}"

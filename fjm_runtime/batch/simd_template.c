@@ -24,6 +24,7 @@ static inline vd v_acos(vd x) { double a[LANES], r[LANES]; memcpy(a, &x, sizeof 
 static inline vd v_pow(vd x, vd y) { double a[LANES], b[LANES], r[LANES]; memcpy(a, &x, sizeof x); memcpy(b, &y, sizeof y); for (int l = 0; l < LANES; ++l) r[l] = pow(a[l], b[l]); memcpy(&x, r, sizeof x); return x; }
 static inline vd v_atan2(vd x, vd y) { double a[LANES], b[LANES], r[LANES]; memcpy(a, &x, sizeof x); memcpy(b, &y, sizeof y); for (int l = 0; l < LANES; ++l) r[l] = atan2(a[l], b[l]); memcpy(&x, r, sizeof x); return x; }
 static inline vd v_copysign(vd x, vd y) { double a[LANES], b[LANES], r[LANES]; memcpy(a, &x, sizeof x); memcpy(b, &y, sizeof y); for (int l = 0; l < LANES; ++l) r[l] = copysign(a[l], b[l]); memcpy(&x, r, sizeof x); return x; }
+${noise}
 #define SZ_INV ${n_inv}
 static void fjm_prologue(const double* restrict acc, vd* restrict inv) {${prologue}
 }
@@ -60,6 +61,52 @@ int fjm_batch_soa(int n_groups, int n_samples, int nacc, int nr, double* acc,
       for (int k = 0; k < n_samples; ++k) {
         arg[0] = cur; arg[1] = R0 + (size_t)k * nr; arg[2] = RH + (size_t)k * nr;
         arg[3] = R1 + (size_t)k * nr; arg[4] = FL + (size_t)k * 4;
+        res[0] = nxt;
+        fjm_step_soa(inv, arg, res);
+        double* t = cur; cur = nxt; nxt = t;
+      }
+      memcpy(acc + (size_t)g * nacc * LANES, cur, sizeof(double) * nacc * LANES);
+      free(inv); free(buf);
+    }
+  }
+  *threads_used = used;
+  return 0;
+}
+
+/* The sampled-data batch: per group of LANES runs, the noise rows of each sample from the runs'
+ * seeds (noise.c), then the step on [nacc][LANES] (input 2, the noise, varies per lane). */
+int fjm_sampled_batch_soa(int n_groups, int n_samples, int nacc, int nr, int nm, int nf, double* acc,
+                          const double* R, const double* FL, const double* levels, const long long* chan,
+                          const unsigned long long* seeds, int n_threads, int* threads_used) {
+  int used = 1, nt = 1;
+#ifdef _OPENMP
+  nt = n_threads > 0 ? n_threads : omp_get_max_threads();
+#endif
+  (void)nt; (void)n_threads;
+  #pragma omp parallel num_threads(nt)
+  {
+#ifdef _OPENMP
+    #pragma omp single
+    used = omp_get_num_threads();
+#endif
+    #pragma omp for schedule(dynamic, 1)
+    for (int g = 0; g < n_groups; ++g) {
+      vd* inv = aligned_alloc(64, sizeof(vd) * SZ_INV);
+      double* buf = malloc(sizeof(double) * (2 * nacc + nm + 1) * LANES + sizeof(double) * nm);
+      double *cur = buf, *nxt = buf + nacc * LANES, *noise = buf + 2 * nacc * LANES;
+      double* row = noise + nm * LANES;
+      uint64_t key[LANES];
+      for (int l = 0; l < LANES; ++l) key[l] = fjm_splitmix64((uint64_t)seeds[(size_t)g * LANES + l]);
+      memcpy(cur, acc + (size_t)g * nacc * LANES, sizeof(double) * nacc * LANES);
+      fjm_prologue(cur, inv);
+      const double* arg[4];
+      double* res[1];
+      for (int k = 0; k < n_samples; ++k) {
+        for (int l = 0; l < LANES; ++l) {
+          fjm_noise_row(key[l], (uint64_t)k, nm, levels, chan, row);
+          for (int j = 0; j < nm; ++j) noise[j * LANES + l] = row[j];
+        }
+        arg[0] = cur; arg[1] = R + (size_t)k * nr; arg[2] = noise; arg[3] = FL + (size_t)k * nf;
         res[0] = nxt;
         fjm_step_soa(inv, arg, res);
         double* t = cur; cur = nxt; nxt = t;
