@@ -1,0 +1,38 @@
+"""``fjm derive`` passes SIGTERM/SIGINT on to the derivation it runs in a subprocess: it ends
+within a second and writes nothing (without forwarding, the child went on deriving)."""
+
+from __future__ import annotations
+
+import signal
+import subprocess
+import sys
+import time
+
+import pytest
+
+pytestmark = pytest.mark.slow  # derives in a subprocess
+
+
+@pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGINT])
+def test_fjm_derive_ends_on_a_signal_and_writes_nothing(tmp_path, signum):
+    out = tmp_path / "out"
+    proc = subprocess.Popen([sys.executable, "-m", "fjm_runtime.cli", "derive", "--models", "panda", "--out", str(out)],
+                            stderr=subprocess.PIPE, text=True)
+    seen = []
+    deadline = time.time() + 120
+    for line in proc.stderr:  # wait until the symbolic work has started (stage lines of the guard)
+        seen.append(line)
+        if "linearize" in line or "deriving" in line or time.time() > deadline:
+            break
+    time.sleep(0.3)
+    t0 = time.time()
+    proc.send_signal(signum)
+    rc = proc.wait(timeout=30)
+    elapsed = time.time() - t0
+    proc.stderr.close()
+    assert rc != 0, seen
+    assert elapsed < 1.0, f"ended {elapsed:.2f} s after the signal"
+    assert not out.exists() or not any(out.iterdir()), sorted(p.name for p in out.iterdir())
+    time.sleep(0.5)
+    ps = subprocess.run(["ps", "-eo", "args"], capture_output=True, text=True).stdout
+    assert str(out) not in ps, "the derivation is still running after fjm derive ended"
