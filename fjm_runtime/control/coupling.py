@@ -23,10 +23,15 @@ acceleration and jerk), and adds to the reduced law's torque ``u_r(x~)`` what th
     u = u_r(x~) + d_l + d_m + K^-1 (B_m d_l' + J_m d_l'')
 
 ``d_l``, ``d_m`` depend on the accelerations (the input reaches them directly through ``S``: that
-is why no static law exists). They are evaluated along the REFERENCE: ``q, dq, ddq`` of the
-reference, ``dq_m = dq_d``, ``ddq_m = ddq_d`` (the spring deflection's derivatives are
-``O(K^-1)``), and ``d_l'``, ``d_l''`` are their time derivatives along it (CasADi forward AD with
-the reference's jerk and snap). It is a feedforward: exact on the reference, first order off it.
+is why no static law exists), so they are estimated, in one of two ways (``source``):
+
+- ``'measured'`` (default): the nominal complete model's accelerations at the measured state under
+  the torque held over the previous sample (kept in the controller state); ``d_l'``, ``d_l''``
+  (``order`` 1, 2; default 0: not used) are derivatives along ``f + g u_prev``.
+- ``'reference'``: a feedforward along the reference: ``q, dq, ddq`` of the reference,
+  ``dq_m = dq_d``, ``ddq_m = ddq_d`` (the spring deflection's derivatives are ``O(K^-1)``), and
+  ``d_l'``, ``d_l''`` their time derivatives along it (CasADi forward AD with the reference's jerk
+  and snap). Exact on the reference, first order off it.
 
 :func:`complete_plant` wraps a complete model as a plant for
 :func:`fjm_runtime.sim.simulate.simulate` (which also evaluates the reduced model's ``T`` of the
@@ -238,7 +243,7 @@ def _derivatives(d_l, arg, rate, order: int):
     return out + [ca.SX.zeros(d_l.shape)] * (2 - order)
 
 
-def measured_coupling_function(complete, reduced, p_nom, motor: bool = True, order: int = 2):
+def measured_coupling_function(complete, reduced, p_nom, motor: bool = True, order: int = 0):
     """``comp(x, u_prev) -> (x_tilde, u_add, d_l, d_m)``: the compensation from the measured state.
 
     The accelerations in ``d_l``, ``d_m`` are the complete NOMINAL model's at ``x`` under the torque
@@ -298,7 +303,13 @@ class CouplingCompensatedController:
     motor : bool
         Include the motor-side term ``d_m``.
     order : {0, 1, 2}
-        ``'measured'`` only: derivatives of ``d_l`` used (``'reference'`` always uses 2).
+        ``'measured'`` only: derivatives of ``d_l`` used (``'reference'`` always uses 2). Default 0:
+        on the Panda at N = 100 the derivatives change the tracking by under 5 % and multiply the
+        compiled loop's build time (docs/complete-model.md, "Control").
+
+    newton : int
+        ``'measured'`` only: Newton steps solving the implicit law ``u = u_r(x~(u)) + u_add(u)`` for the
+        current sample's torque (from the previous one); 0: the previous torque is used as it is.
 
     Attributes
     ----------
@@ -312,7 +323,7 @@ class CouplingCompensatedController:
     sensing = "state"
 
     def __init__(self, inner, complete, nominal_params=None, *, dt: float, source: str = "measured",
-                 motor: bool = True, order: int = 2):
+                 motor: bool = True, order: int = 0, newton: int = 0):
         if getattr(inner, "sensing", "state") != "state" or not hasattr(inner, "law_functions"):
             raise FjmValueError("inner: expected a state-feedback law of the reduced model "
                                 "(make_controller(kind, reduced, nominal), sensing = 'state')")
@@ -332,6 +343,9 @@ class CouplingCompensatedController:
                                 "nominal parameters (expected one nominal model)")
         self.delta, self.u_max = inner.delta, inner.u_max
         self.n_inner = int(inner.n_states)
+        if source != "measured" and newton:
+            raise FjmValueError("newton: Newton steps solve for the current torque; expected source = 'measured'")
+        self.newton = int(newton)
         self.n_states = self.n_inner + (self.n if source == "measured" else 0)
         self.compensation = (measured_coupling_function(complete, inner.model, self.p_nom, motor, order)
                              if source == "measured" else coupling_function(complete, inner.model, self.p_nom, motor))
@@ -350,11 +364,27 @@ class CouplingCompensatedController:
         ``x`` (4n, 1) the plant state, ``z`` (n_states, 1), ``r`` (5n, 1) the reference rows.
         """
         import casadi as ca
+        if self.newton:
+            z = ca.vertcat(z[:self.n_inner], self._newton(x, z, r))
         x_t, u_add, z_in = self._split(x, z, r)
         out = self.inner.symbolic_evaluate(x_t, z_in, r)
         u_cmd = out["u_cmd"] + u_add
         u = u_cmd if self.u_max is None else ca.fmin(ca.fmax(u_cmd, -ca.DM(self.u_max)), ca.DM(self.u_max))
         return {"u": u, "u_cmd": u_cmd, "s": out["s"], "y_hat": out["y_hat"]}
+
+    def _newton(self, x, z, r):
+        """The torque solving ``u = u_r(x~(u)) + u_add(u)`` for this sample: :attr:`newton` Newton steps from ``u_prev``."""
+        import casadi as ca
+        if getattr(self, "_phi", None) is None:
+            xs, zs, rs = ca.MX.sym("x", 4 * self.n), ca.MX.sym("z", self.n_states), ca.MX.sym("r", 5 * self.n)
+            x_t, u_add, z_in = self._split(xs, zs, rs)
+            res = zs[self.n_inner:] - (self.inner.symbolic_evaluate(x_t, z_in, rs)["u_cmd"] + u_add)
+            self._phi = ca.Function("phi", [xs, zs, rs], [res, ca.jacobian(res, zs)[:, self.n_inner:]])
+        u = z[self.n_inner:]
+        for _ in range(self.newton):
+            res, jac = self._phi(x, ca.vertcat(z[:self.n_inner], u), r)
+            u = u - ca.solve(jac, res)
+        return u
 
     def symbolic_state_derivative(self, x, z, r, sample):
         """``z'``: the inner law's (on ``x_tilde``, total torques) and ``(u - u_prev) / dt``."""
