@@ -505,22 +505,29 @@ def machine() -> dict:
     return info
 
 
+def _sampled_batch(checks: list) -> dict:
+    """The sampled-data batch throughput section (:mod:`bench.sampled_batch`)."""
+    from bench.sampled_batch import bench_sampled_batch
+    return bench_sampled_batch(checks)
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(prog="python -m bench", description=__doc__.split("\n\n")[0])
     ap.add_argument("--quick", action="store_true", help="one repetition per figure (smoke test / checks)")
     ap.add_argument("--skip-derive", action="store_true", help="skip the derive and gcc timings")
     ap.add_argument("--only", nargs="+", choices=("derive", "alpha_beta", "spatial", "closed_loop", "batch",
-                                                  "realtime"),
+                                                  "realtime", "sampled_batch"),
                     help="run only these sections")
     ap.add_argument("--out", type=Path, default=None,
                     help="results file (default: bench/results.json for a full run, "
                          "build/bench-results.json otherwise)")
     args = ap.parse_args(argv)
     reps, slow = (1, 1) if args.quick else (5, 3)
-    sections = set(args.only or ("derive", "alpha_beta", "spatial", "closed_loop", "batch", "realtime"))
+    sections = set(args.only or ("derive", "alpha_beta", "spatial", "closed_loop", "batch", "realtime",
+                                 "sampled_batch"))
     if args.skip_derive:
         sections.discard("derive")
-    full = not args.quick and len(sections) == 6
+    full = not args.quick and len(sections) == 7
     out = args.out or (DEFAULT_OUT if full else REPO / "build" / "bench-results.json")
     t_start = time.perf_counter()
     results = {"machine": machine(), "quick": bool(args.quick)}
@@ -533,7 +540,8 @@ def main(argv=None) -> int:
                 ("spatial", lambda: bench_spatial(work, reps, checks)),
                 ("closed_loop", lambda: bench_closed_loop(work, reps, slow, checks)),
                 ("batch", lambda: bench_batch(reps, slow, checks)),
-                ("realtime", lambda: bench_realtime(work, 10 ** 4 if args.quick else 10 ** 6, checks, check))]
+                ("realtime", lambda: bench_realtime(work, 10 ** 4 if args.quick else 10 ** 6, checks, check)),
+                ("sampled_batch", lambda: _sampled_batch(checks))]
         failed = []
         for name, run in plan:
             if name not in sections:

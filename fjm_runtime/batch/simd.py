@@ -33,7 +33,7 @@ UNARY = {
     ca.OP_ATAN: "v_atan({a})", ca.OP_ASIN: "v_asin({a})", ca.OP_ACOS: "v_acos({a})",
     ca.OP_FABS: "(vd)((vl)({a}) & 0x7fffffffffffffffLL)",
     ca.OP_NOT: "v_b(({a}) == 0.)", ca.OP_ASSIGN: "({a})",
-    ca.OP_SIGN: "v_sign({a})",
+    ca.OP_SIGN: "v_sign({a})", ca.OP_FLOOR: "v_floor({a})", ca.OP_CEIL: "v_ceil({a})",
 }
 
 #: C expression of each binary SX operation on vectors (``{a}``, ``{b}``: the operands).

@@ -13,6 +13,8 @@ static inline vd v_sel(vl m, vd a, vd b) { return (vd)(((vl)a & m) | ((vl)b & ~m
 static inline vd v_sign(vd x) { return v_sel(x < 0., V0 - 1., v_sel(x > 0., V0 + 1., x)); }
 static inline vd v_sin(vd x) { double a[LANES], r[LANES]; memcpy(a, &x, sizeof x); for (int l = 0; l < LANES; ++l) r[l] = sin(a[l]); memcpy(&x, r, sizeof x); return x; }
 static inline vd v_cos(vd x) { double a[LANES], r[LANES]; memcpy(a, &x, sizeof x); for (int l = 0; l < LANES; ++l) r[l] = cos(a[l]); memcpy(&x, r, sizeof x); return x; }
+static inline vd v_floor(vd x) { double a[LANES], r[LANES]; memcpy(a, &x, sizeof x); for (int l = 0; l < LANES; ++l) r[l] = floor(a[l]); memcpy(&x, r, sizeof x); return x; }
+static inline vd v_ceil(vd x) { double a[LANES], r[LANES]; memcpy(a, &x, sizeof x); for (int l = 0; l < LANES; ++l) r[l] = ceil(a[l]); memcpy(&x, r, sizeof x); return x; }
 static inline vd v_tan(vd x) { double a[LANES], r[LANES]; memcpy(a, &x, sizeof x); for (int l = 0; l < LANES; ++l) r[l] = tan(a[l]); memcpy(&x, r, sizeof x); return x; }
 static inline vd v_exp(vd x) { double a[LANES], r[LANES]; memcpy(a, &x, sizeof x); for (int l = 0; l < LANES; ++l) r[l] = exp(a[l]); memcpy(&x, r, sizeof x); return x; }
 static inline vd v_log(vd x) { double a[LANES], r[LANES]; memcpy(a, &x, sizeof x); for (int l = 0; l < LANES; ++l) r[l] = log(a[l]); memcpy(&x, r, sizeof x); return x; }

@@ -156,7 +156,10 @@ def _sensor(args) -> SensorModel:
 def _gains_file(args) -> dict:
     """``--gains FILE``: ``{"kind": ..., "gains": {...}}``; the kind checked against --controller."""
     if args.gains is None:
-        return {"kind": args.controller or "smc", "gains": {}}
+        from ..control.designed import designed_gains
+        shipped = None if (args.k_s is not None or args.delta is not None) else designed_gains(
+            args.model, args.controller or "smc", args.sensing, 1.0 / _period(args), args.delay_samples)
+        return shipped or {"kind": args.controller or "smc", "gains": {}}
     try:
         spec = json.loads(Path(args.gains).read_text())
     except (OSError, ValueError) as exc:
@@ -260,7 +263,7 @@ def run(args) -> int:
                 "delay_samples": args.delay_samples, "predict": bool(args.predict), "sensing": args.sensing,
                 "seed": args.seed, "noise": args.noise, "duration": args.duration,
                 "true_params": dict(zip(m.param_names, m.params_array(true).tolist())),
-                "gains": None if args.gains is None else str(args.gains)}
+                "gains": str(args.gains) if args.gains is not None else spec.get("file")}
     try:
         res = simulate(m, ctrl, ref, duration=args.duration, dt=dt, true_params=true, progress=progress,
                        substeps=args.substeps, sensor=sensor, delay_samples=args.delay_samples,

@@ -99,7 +99,7 @@ def test_numpy_batch_peer_equals_simulate_batch():
     Ks = np.array([100.0, 140.0, 200.0])
     P = np.tile(case.p_true, (3, 1))
     P[:, 2] = Ks
-    b = simulate_batch(case.model, case.controller, case.reference, P, duration=1.0, x0=case.x0())
+    b = simulate_batch(case.model, case.controller, case.reference, P, duration=1.0, x0=case.x0(), loop="legacy")
     nb = numpy_batch(case, Ks)
     for k in METRIC_NAMES:
         assert np.allclose(b.metrics[k], nb[k], rtol=1e-9, atol=1e-12), k

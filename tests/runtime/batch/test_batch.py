@@ -1,4 +1,4 @@
-"""simulate_batch: a batch of one equals a single run; each row is its own plant; the
+"""simulate_batch(loop="legacy"), the former batch: a batch of one equals a single run; each row is its own plant; the
 SIMD path runs where the CPU has it, equals the scalar path, and never fails silently."""
 import warnings
 
@@ -7,7 +7,12 @@ import pytest
 
 import fjm_runtime
 import fjm_runtime.batch.simd as batch_mod
-from fjm_runtime.batch.runner import METRIC_NAMES, SimdFallbackWarning, simulate_batch
+import functools
+
+from fjm_runtime.batch.runner import METRIC_NAMES, SimdFallbackWarning, simulate_batch as _simulate_batch
+
+#: This file checks the former batch against simulate(loop='legacy').
+simulate_batch = functools.partial(_simulate_batch, loop="legacy")
 from fjm_runtime.ccache import CompileError
 from fjm_runtime.control.factory import make_controller
 from fjm_runtime.control.references import Sinusoid, SmoothStep

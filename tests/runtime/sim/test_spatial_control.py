@@ -79,7 +79,7 @@ def test_batch_on_elbow3_rows_are_their_own_plants():
     ctrl = make_controller("ismc", m, m.default_params, lam=8.0, k_s=50.0, delta=0.5, u_max=20.0)
     ref = _ref(m)
     P = sample_parameters(m, 3, seed=2, k_relative=(0.8, 1.2))
-    batch = simulate_batch(m, ctrl, ref, P, duration=0.5, parallel=False)
+    batch = simulate_batch(m, ctrl, ref, P, duration=0.5, parallel=False, loop="legacy")
     assert not batch.diverged.any()
     for i, row in enumerate(P):
         single = simulate(m, ctrl, ref, duration=0.5, true_params=row, backend="compiled", loop="legacy")

@@ -1,0 +1,57 @@
+"""``fjm design MODEL``: search the gains for a rate, delay and sensor model over many sampled closed loops."""
+from __future__ import annotations
+
+import json
+import sys
+import time
+from pathlib import Path
+
+from ..validation import FjmValueError
+
+__all__ = ["add_parser", "run"]
+
+
+def add_parser(sub) -> None:
+    """Register ``fjm design``."""
+    p = sub.add_parser("design", help="search gains over sampled closed loops (batch engine)",
+                       description="Search the integral sliding-mode gains (lam, k_lin, k_s, delta) for a model, "
+                                   "control rate, delay and sensor model over draws of the TRUE plant "
+                                   "(docs/design-command.md); writes the gains file fjm simulate --gains reads.")
+    p.add_argument("model")
+    p.add_argument("--controller", default="ismc", choices=("ismc",), help="law (default ismc)")
+    p.add_argument("--sensing", default="torque", choices=("state", "torque"), help="default torque")
+    p.add_argument("--rate", type=float, default=1000.0, help="control rate, Hz (default 1000)")
+    p.add_argument("--delay-samples", type=int, default=1, help="computation delay, samples (default 1)")
+    p.add_argument("--noise", default="panda", choices=("none", "panda"), help="sensor model (default panda)")
+    p.add_argument("--draws", type=int, default=200, help="plant draws of the final check (default 200)")
+    p.add_argument("--duration", type=float, default=10.0, help="final run length, s (default 10)")
+    p.add_argument("--seed", type=int, default=0, help="draws and noise seed (default 0)")
+    p.add_argument("--threads", type=int, default=None, help="OpenMP threads (default all cores)")
+    p.add_argument("--simd", action="store_true", help="SIMD batch (long build for big models)")
+    p.add_argument("--out", type=Path, default=None, help="gains file (default: print the JSON)")
+
+
+def run(args) -> int:
+    """Run ``fjm design``; prints or writes the gains file, progress on stderr."""
+    from .. import load
+    from ..analysis.design import design
+    from ..sim.sensor import SensorModel
+    if args.out is not None and not args.out.parent.is_dir():
+        raise FjmValueError(f"--out {args.out}: the directory {args.out.parent} does not exist")
+    if args.draws < 1 or args.duration <= 0 or args.delay_samples < 0 or args.rate <= 0:
+        raise FjmValueError("--draws/--duration/--delay-samples/--rate: expected >= 1, > 0 s, >= 0, > 0 Hz")
+    m = load(args.model)
+    sensor = SensorModel.panda(seed=args.seed) if args.noise == "panda" else SensorModel.ideal(seed=args.seed)
+    t0 = time.perf_counter()
+    out = design(m, kind=args.controller, sensing=args.sensing, rate=args.rate, delay=args.delay_samples,
+                 sensor=sensor, draws=args.draws, duration=args.duration, seed=args.seed, threads=args.threads,
+                 simd=args.simd)
+    out["wall_seconds"] = time.perf_counter() - t0
+    out["noise"] = args.noise
+    text = json.dumps(out, indent=2, allow_nan=False)
+    if args.out is None:
+        print(text)
+    else:
+        args.out.write_text(text + "\n")
+        print(f"fjm design: wrote {args.out} ({out['wall_seconds']:.0f} s)", file=sys.stderr)
+    return 0
