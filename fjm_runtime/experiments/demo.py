@@ -10,7 +10,7 @@ import time
 from pathlib import Path
 from typing import Callable, List, Tuple
 
-from . import baxter, certified, chains, paper, real_arm
+from . import baxter, certified, chains, complete, paper, real_arm
 from .panda import panda_section
 from .report import log
 from .settings import DURATION, QUICK_DURATION, QUICK_SAMPLES, DemoContext
@@ -27,7 +27,8 @@ SECTIONS: Tuple[Callable[[DemoContext], Tuple[List[str], list]], ...] = (
     paper.chattering_section, paper.comparison_section, paper.adaptive_section, paper.anti_windup_section,
     chains.chains_section, chains.eigenvalue_section, chains.low_nominal_section,
     certified.certificates_section, certified.synthesized_loop_section, certified.disturbance_section,
-    paper.monte_carlo_section, spatial_section, real_arm.real_arm_section, baxter.tree_section,
+    paper.monte_carlo_section, spatial_section, real_arm.real_arm_section, complete.complete_section,
+    baxter.tree_section,
 )
 
 

@@ -1,0 +1,161 @@
+"""The demo's complete-model section: the Panda with rotor spin coupling (gear ratio N), reduced law vs compensated law.
+
+The demo's Panda integral SMC (:mod:`fjm_runtime.experiments.panda`: its gains, reference, torque
+limits and 5 kHz rate), built on the REDUCED model ``panda`` at its nominal parameters, runs on
+the reduced plant and on the complete plant ``panda_complete`` (rotor spin coupling, gear ratio
+N); the same law with the coupling compensated
+(:class:`fjm_runtime.control.coupling.CouplingCompensatedController`, nominal complete model,
+accelerations under the previous sample's torque) runs on the complete plant. The plant
+parameters are the model defaults with the gear ratios of each case; the controllers' nominal
+model is ``panda``'s defaults and, for the compensation, ``panda_complete``'s at N = 100.
+"""
+from __future__ import annotations
+
+import time
+from pathlib import Path
+from typing import Dict, List, Optional, Tuple
+
+import numpy as np
+
+from ..control.coupling import CouplingCompensatedController, complete_plant
+from ..sim.simulate import SimulationDivergedError, simulate
+from . import panda as P
+from .report import diverged_marker
+
+#: Plant gear-ratio cases: every joint at N, or only rotor 7 coupled (N = 1e9 elsewhere).
+GEAR_CASES = {"N = 100": (100.0,) * 7, "N = 300": (300.0,) * 7, "N = 1000": (1000.0,) * 7,
+              "N = 3000": (3000.0,) * 7, "rotor 7 only (N7 = 100)": (1e9,) * 6 + (100.0,)}
+QUICK_GEARS = ("N = 100",)
+RUNS = ("reduced law, reduced plant", "reduced law, complete plant", "compensated law, complete plant",
+        "compensated law (nominal N = the plant's), complete plant")
+
+
+def gear_params(ratios) -> Dict[str, float]:
+    """``{'N1': .., 'N7': ..}`` of a gear-ratio case."""
+    return {f"N{i + 1}": float(v) for i, v in enumerate(ratios)}
+
+
+def controllers(reduced, complete, ratios=None) -> Tuple[object, object]:
+    """``(reduced law, compensated law)``: the demo's ismc on ``reduced`` and the same law compensated.
+
+    ``ratios``: the compensation's nominal gear ratios (default: the complete model's defaults).
+    """
+    inner = P.controller("ismc", reduced)
+    nominal = None if ratios is None else gear_params(ratios)
+    return inner, CouplingCompensatedController(P.controller("ismc", reduced), complete, nominal, dt=P.DT)
+
+
+def _run(plant, ctrl, ref, duration, p_true, x0, backend):
+    try:
+        return simulate(plant, ctrl, ref, duration=duration, dt=P.DT, true_params=p_true, x0=x0, backend=backend)
+    except SimulationDivergedError as exc:
+        return exc
+
+
+def run_all(duration: float, gears=None, backend: str = "compiled", progress=None) -> Dict[str, Dict[str, object]]:
+    """``{case: {run label: SimulationResult or SimulationDivergedError}}``; the reduced plant under ``'-'``."""
+    from .. import load
+    reduced, complete = load("panda"), load("panda_complete")
+    plant = complete_plant(complete, reduced)
+    ref = P.reference(reduced.n)
+    x0 = P.rest_state(reduced, ref(0.0)[0], None)
+    law, comp = controllers(reduced, complete)
+    gears = GEAR_CASES if gears is None else gears
+    out: Dict[str, Dict[str, object]] = {"-": {RUNS[0]: _run(reduced, law, ref, duration, None, x0, backend)}}
+    for label, ratios in gears.items():
+        if progress:
+            progress(f"panda_complete, {label}")
+        p = gear_params(ratios)
+        out[label] = {RUNS[1]: _run(plant, law, ref, duration, p, x0, backend),
+                      RUNS[2]: _run(plant, comp, ref, duration, p, x0, backend)}
+        if any(p[k] != complete.default_params[k] for k in p):
+            matched = controllers(reduced, complete, ratios)[1]
+            out[label][RUNS[3]] = _run(plant, matched, ref, duration, p, x0, backend)
+    return out
+
+
+def worst_second_half(r) -> Tuple[float, int]:
+    """``(RMS of e1 over t >= t_end / 2, its joint (1-based))`` of the worst joint."""
+    e = r.e1[r.t >= 0.5 * r.t[-1]]
+    rms = np.sqrt(np.mean(e ** 2, axis=0))
+    return float(rms.max()), int(rms.argmax()) + 1
+
+
+def cells(r) -> str:
+    """Table cells: worst-joint 2nd-half RMS (joint), whole-run worst-joint RMS, peak abs(u) 1-4 / 5-7."""
+    t_div = P.divergence_time(r)
+    if t_div is not None:
+        return f"{diverged_marker(t_div)} | | "
+    rms2, j = worst_second_half(r)
+    rms = np.sqrt(np.mean(r.e1 ** 2, axis=0)).max()
+    peak = np.max(np.abs(r.u), axis=0)
+    return f"{rms2:.2e} (joint {j}) | {rms:.2e} | {peak[:4].max():.1f} / {peak[4:].max():.2f}"
+
+
+def table(res) -> List[str]:
+    """Markdown rows, one per (plant case, run)."""
+    lines = ["| plant | controller | RMS e1, 2nd half (rad, worst joint) | RMS e1 (rad, worst joint) | "
+             "peak abs(u) joints 1-4 / 5-7 (N m) |", "|---|---|---|---|---|"]
+    for case, runs in res.items():
+        for label, r in runs.items():
+            plant = "panda (reduced)" if case == "-" else f"panda_complete, {case}"
+            lines.append(f"| {plant} | {label.rsplit(', complete', 1)[0].split(', reduced')[0]} | {cells(r)} |")
+    return lines
+
+
+def plot(res, path: Path, case: str = "N = 100") -> Path:
+    """Worst joint's abs(e1) vs time (log scale) of the three runs at ``case``; diverged runs named in the legend."""
+    from .plots import pyplot
+    plt = pyplot()
+    fig, ax = plt.subplots(figsize=(8, 3.6), layout="constrained")
+    runs = [(RUNS[0], res["-"][RUNS[0]])] + [(k, res[case][k]) for k in RUNS[1:3]]
+    for (label, r), color in zip(runs, ("0.4", "tab:red", "tab:blue")):
+        t_div = P.divergence_time(r)
+        lab = label + (f" ({diverged_marker(t_div)})" if t_div is not None else "")
+        if isinstance(r, SimulationDivergedError):
+            ax.plot([], [], color=color, label=lab)
+            continue
+        style = dict(ls=(0, (4, 2)), lw=1.6, zorder=3) if label == RUNS[0] else dict(lw=1.0)
+        ax.semilogy(r.t, np.maximum(np.max(np.abs(r.e1), axis=1), 1e-12), color=color, label=lab, **style)
+    ax.set_ylim(bottom=1e-7)
+    ax.set_xlabel("t (s)")
+    ax.set_ylabel("max abs(e1) over joints (rad)")
+    ax.set_title(f"Panda, integral SMC at 5 kHz: complete plant ({case}) vs reduced plant", fontsize=10)
+    ax.legend(fontsize=8, loc="lower right")
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def complete_section(ctx) -> Tuple[List[str], list]:
+    """Demo section (``ctx`` a :class:`~fjm_runtime.experiments.settings.DemoContext`): table and ``panda_complete.png``.
+
+    Quick mode: N = 100 only, at most :data:`fjm_runtime.experiments.panda.QUICK_DURATION` s, CasADi backend.
+    """
+    t0 = time.perf_counter()
+    if ctx.quick:
+        gears, duration, backend = {k: GEAR_CASES[k] for k in QUICK_GEARS}, min(ctx.duration, P.QUICK_DURATION), "casadi"
+    else:
+        gears, duration, backend = GEAR_CASES, ctx.duration, "compiled"
+    res = run_all(duration, gears, backend, ctx.progress)
+    fig = plot(res, Path(ctx.out) / "panda_complete.png")
+    md = ["## Complete elastic model: the Panda with rotor spin coupling", "",
+          "The Panda section's integral SMC (same gains, reference, URDF torque limits, "
+          f"{1 / P.DT:g} Hz, {duration:g} s, starting at rest holding gravity), built on the REDUCED model "
+          "`panda` at its nominal parameters, on the reduced plant and on the complete plant `panda_complete` "
+          "(each rotor on the previous link, spinning about its joint axis; gear ratio N of every joint, or of "
+          "rotor 7 alone). *Compensated law*: the same law with the coupling put back "
+          "(`fjm_runtime.control.coupling.CouplingCompensatedController`): from the NOMINAL complete model "
+          "(N = 100) at the measured state under the previous sample's torque, the link-side term "
+          "`d_l = (D' - D) ddq + S ddq_m + h' + c_l - h` shifts the motor angle the reduced law sees "
+          "(`q_m - K^-1 d_l`, so its y3, y4 are the links' true acceleration and jerk) and "
+          "`d_l + S^T ddq + c_m` is added to its torque (docs/complete-model.md, \"Control\"). The plant's "
+          "gear ratios are the case's, its other parameters the defaults.", "",
+          *table(res), "",
+          "The compensated law's nominal gear ratios are N = 100 (`panda_complete`'s defaults) unless the row "
+          "says the plant's: rows with another plant N show how the compensation fares when its gear ratios "
+          "are wrong (the reduced law's nominal model has no gear ratio at all).", "",
+          f"Figure: `{fig.name}` (worst joint's error, N = 100, the three runs). {time.perf_counter() - t0:.0f} s.", ""]
+    return md, [fig]
