@@ -19,9 +19,13 @@ Hence ``beta = b^-1 = N^-1 D`` and ``alpha = -beta a = N^-1 R2``: alpha and
 beta need no linear solve at all; y3 and y4 need one SPD solve each, done
 numerically in the generated code.
 
-The brackets ``ad_f^k g`` use the same idea with the entries of
-``W = D^-1`` as implicit symbols, differentiated by the rule
-``d W = -W (d D) W``; the generated code computes W from D numerically.
+The brackets ``ad_f^k g`` serve only the controllability check: the emitted
+``ad`` Function is built by CasADi AD from the SX of f and g
+(:func:`derive.emit.functions.ad_by_ad`), which grows like the forward passes
+it takes, not like a symbolic expansion. :func:`brackets_implicit` keeps the
+symbolic form (entries of ``W = D^-1`` as implicit symbols, differentiated by
+``d W = -W (d D) W``) where it is cheap: one-joint models, whose report prints
+it beside the paper's matrix.
 
 Pure math: no I/O.
 """
@@ -29,7 +33,7 @@ Pure math: no I/O.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Dict, Tuple
+from typing import Dict, Optional, Tuple
 
 import sympy as sp
 
@@ -54,8 +58,9 @@ class Linearization:
     rhs4 : sympy.Matrix, shape (n, 1)
         ``-R1``, depends on (x, p, Y3).
     outputs : dict str -> sympy.Matrix
-        ``f`` (4n, 1), ``g`` (4n, n), ``ad`` (4n, 4n), ``T`` (4n, 1),
-        ``alpha`` (n, 1), ``beta`` (n, n), ``energy`` (1, 1), ``inertia`` (n, n).
+        ``f`` (4n, 1), ``g`` (4n, n), ``T`` (4n, 1), ``alpha`` (n, 1),
+        ``beta`` (n, n), ``energy`` (1, 1), ``inertia`` (n, n), and the symbolic
+        brackets ``ad`` (4n, 4n) only when requested (see :func:`linearize`).
         They may contain the implicit symbols above.
     """
 
@@ -168,8 +173,8 @@ def complete_plant(m: FlexibleJointModel) -> Linearization:
                          outputs={"inertia": M, "coupling": S, "rhs": rhs, "energy": sp.Matrix([[energy]])})
 
 
-def linearize(m: FlexibleJointModel) -> Linearization:
-    """Derive f, g, T, alpha, beta and the brackets of a model (structured).
+def linearize(m: FlexibleJointModel, symbolic_brackets: Optional[bool] = None) -> Linearization:
+    """Derive f, g, T, alpha, beta (structured) and, if asked, the symbolic brackets.
 
     A complete model (``m.coupling`` set) has no static feedback linearization:
     it gets :func:`complete_plant` instead.
@@ -177,6 +182,10 @@ def linearize(m: FlexibleJointModel) -> Linearization:
     Parameters
     ----------
     m : FlexibleJointModel
+    symbolic_brackets : bool, optional
+        Also form ``outputs["ad"]`` in SymPy (:func:`brackets_implicit`). Default:
+        only for one-joint models (cheap; their report prints it). The emitted
+        ``ad`` Function never uses it (CasADi AD from f and g).
 
     Returns
     -------
@@ -217,7 +226,9 @@ def linearize(m: FlexibleJointModel) -> Linearization:
     alpha = Ninv * R2
 
     W = inverse_symbols(n)
-    ad = brackets_implicit(m, W, d_time, Y3, 3)
+    if symbolic_brackets is None:
+        symbolic_brackets = n == 1
+    extra = {"ad": brackets_implicit(m, W, d_time, Y3, 3)} if symbolic_brackets else {}
 
     f = sp.Matrix.vstack(dq, sp.Matrix(Y3), dqm, acc_m)
     g = sp.Matrix.vstack(sp.zeros(3 * n, n), Jinv)
@@ -231,7 +242,7 @@ def linearize(m: FlexibleJointModel) -> Linearization:
     return Linearization(
         model=m, Y3=Y3, Y4=Y4, W=W, rhs3=r3, rhs4=-R1,
         outputs={
-            "f": f, "g": g, "ad": ad, "T": T, "alpha": alpha, "beta": beta,
-            "energy": sp.Matrix([[energy]]), "inertia": m.D,
+            "f": f, "g": g, "T": T, "alpha": alpha, "beta": beta,
+            "energy": sp.Matrix([[energy]]), "inertia": m.D, **extra,
         },
     )

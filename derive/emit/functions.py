@@ -4,7 +4,14 @@ Every Function has the signature ``(x, p) -> (value,)`` with ``x`` of length
 4n (``[q; dq; q_m; dq_m]``) and ``p`` of length ``len(param_names)``.
 The implicit symbols of the derivation are bound here to numeric linear
 algebra on D(q): ``y3 = D^-1 r3`` and ``y4 = D^-1 rhs4`` through one LDL^T
-factorization, and ``Dinv`` through the same factors (brackets only).
+factorization.
+
+The brackets ``ad = [g, ad_f g, ad_f^2 g, ad_f^3 g]`` are not converted from
+SymPy: they are built here by CasADi forward-mode AD from the SX of ``f`` and
+``g`` (:func:`ad_by_ad`), with the link acceleration's derivative taken
+implicitly, ``D_v y3 = D^-1 (D_v r3 - (D_v D) y3)`` through the shared factors.
+That costs one forward pass over ``D`` and ``r3`` per column instead of a
+symbolic expansion of ``W (dD) W`` products (docs/derivation.md, "Brackets by AD").
 """
 
 from __future__ import annotations
@@ -14,7 +21,7 @@ from typing import Dict, Tuple
 import casadi as ca
 
 from ..linearize import Linearization
-from .sx import SympyToSX, ldl_factor, ldl_solve, spd_inverse
+from .sx import SympyToSX, ldl_factor, ldl_solve
 
 #: Quantities emitted for every model, in file order, with their meaning.
 QUANTITIES: Tuple[Tuple[str, str], ...] = (
@@ -35,6 +42,48 @@ def operation_count(fn: ca.Function) -> int:
     """Number of arithmetic operations of an SX Function (no inputs, outputs, constants)."""
     return sum(1 for k in range(fn.n_instructions()) if fn.instruction_id(k) not in _NON_OPS)
 
+
+
+def ad_by_ad(x: ca.SX, D: ca.SX, r3: ca.SX, acc_m: ca.SX, g: ca.SX, factors, k: int = 3) -> ca.SX:
+    """``[g, ad_f g, ..., ad_f^k g]`` (paper's sign) by CasADi forward-mode AD.
+
+    ``ad_f v = (df/dx) v - (dv/dx) f`` with ``f = [dq; y3; dq_m; acc_m]`` and
+    ``y3 = D^-1 r3``; ``(df/dx) v`` takes the link-acceleration row implicitly,
+    ``D_v y3 = D^-1 (D_v r3 - (D_v D) y3)``, with the LDL^T ``factors`` of D.
+
+    Parameters
+    ----------
+    x : casadi.SX, shape (4n, 1)
+        State symbols ``[q; dq; q_m; dq_m]``.
+    D : casadi.SX, shape (n, n)
+    r3 : casadi.SX, shape (n, 1)
+        ``-(h + K (q - q_m))``.
+    acc_m : casadi.SX, shape (n, 1)
+        Motor acceleration ``J_m^-1 (K (q - q_m) - B_m dq_m)``.
+    g : casadi.SX, shape (4n, n)
+    factors : tuple
+        :func:`derive.emit.sx.ldl_factor` of ``D``.
+    k : int
+        Number of brackets after ``g``.
+
+    Returns
+    -------
+    casadi.SX, shape (4n, (k + 1) n)
+    """
+    n = D.shape[0]
+    y3 = ldl_solve(*factors, r3)
+    f = ca.vertcat(x[n:2 * n], y3, x[3 * n:], acc_m)
+
+    def df_along(v: ca.SX) -> ca.SX:  # (df/dx) v, one column
+        dy3 = ldl_solve(*factors, ca.jtimes(r3, x, v) - ca.mtimes(ca.jtimes(D, x, v), y3))
+        return ca.vertcat(v[n:2 * n], dy3, v[3 * n:], ca.jtimes(acc_m, x, v))
+
+    blocks = [g]
+    for _ in range(k):
+        V = blocks[-1]
+        JfV = ca.horzcat(*[df_along(V[:, c]) for c in range(n)])
+        blocks.append(JfV - ca.jtimes(V, x, f))
+    return ca.horzcat(*blocks)
 
 
 def build_functions(lin: Linearization, cse: bool = True) -> Dict[str, ca.Function]:
@@ -70,24 +119,20 @@ def build_functions(lin: Linearization, cse: bool = True) -> Dict[str, ca.Functi
             lazy[key] = ldl_solve(*factors(), conv(rhs))
         return lazy[key]
 
-    def inverse() -> ca.SX:
-        if "inv" not in lazy:
-            lazy["inv"] = spd_inverse(*factors())
-        return lazy["inv"]
-
     implicit = {}
     for i in range(n):
         implicit[lin.Y3[i]] = lambda i=i: solved("y3", lin.rhs3)[i]
         implicit[lin.Y4[i]] = lambda i=i: solved("y4", lin.rhs4)[i]
-        for j in range(i, n):
-            implicit[lin.W[i, j]] = lambda i=i, j=j: inverse()[i, j]
     conv = SympyToSX(bindings, dict(m.program.definitions), implicit)
+
+    def brackets() -> ca.SX:
+        f_sx = conv(lin.outputs["f"])
+        return ad_by_ad(x, conv(m.D), conv(lin.rhs3), f_sx[3 * n:], conv(lin.outputs["g"]), factors())
 
     out = {}
     for name, _ in QUANTITIES:
-        expr = lin.outputs[name]
-        value = conv(expr)
-        if expr.shape[1] == 1 and name != "energy":
+        value = brackets() if name == "ad" else conv(lin.outputs[name])
+        if value.shape[1] == 1 and name != "energy":
             value = ca.vec(value)
         if cse:
             value = ca.cse(value)

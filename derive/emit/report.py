@@ -3,8 +3,9 @@
 The controllability condition of feedback linearization (rank of
 ``[g, ad_f g, ad_f^2 g, ad_f^3 g]`` = 4n, involutivity of
 ``span{g, ad_f g, ad_f^2 g}``) is checked numerically on seeded sample
-states with the emitted CasADi functions themselves (brackets of the
-distribution's columns by CasADi AD). Numbers are printed with few
+states with the emitted CasADi functions themselves: brackets of the
+distribution's columns by one forward-mode AD pass per column (no Jacobian of
+the bracket matrix is formed, so the check stays cheap for long chains). Numbers are printed with few
 significant digits so that the file stays byte-identical across runs.
 """
 
@@ -38,9 +39,45 @@ def _fmt(v: float) -> str:
     return "< 1e-12" if abs(v) < 1e-12 else f"{v:.1e}"
 
 
+def _sample_state(rng, n: int) -> np.ndarray:
+    return np.concatenate([rng.uniform(-1.5, 1.5, n), rng.uniform(-1, 1, n),
+                           rng.uniform(-1.5, 1.5, n), rng.uniform(-1, 1, n)])
+
+
+def bracket_functions(x: ca.SX, A: ca.SX, n: int):
+    """Numeric evaluators of the bracket matrix and of its distribution's directional derivatives.
+
+    Parameters
+    ----------
+    x : casadi.SX, shape (4n, 1)
+    A : casadi.SX, shape (4n, 4n)
+        ``[g, ad_f g, ad_f^2 g, ad_f^3 g]`` as an SX expression of ``x``.
+    n : int
+
+    Returns
+    -------
+    (casadi.Function, casadi.Function)
+        ``x -> A`` and ``(x, v) -> (d Delta / dx) v`` (4n, 3n): column ``b`` is the derivative of the
+        distribution's column ``b`` along ``v``, one forward pass (no Jacobian is formed).
+    """
+    v = ca.SX.sym("v", 4 * n)
+    return (ca.Function("brackets", [x], [A]),
+            ca.Function("d_dist", [x, v], [ca.jtimes(A[:, :3 * n], x, v)]))
+
+
+def pairwise_brackets(d_dist: ca.Function, xs: np.ndarray, cols: np.ndarray) -> List[np.ndarray]:
+    """``[X_a, X_b] = (dX_b/dx) X_a - (dX_a/dx) X_b`` for every pair ``a < b`` of ``cols`` (4n, 3n)."""
+    m = cols.shape[1]
+    along = [np.array(d_dist(xs, cols[:, a])) for a in range(m)]  # along[a][:, b] = (dX_b/dx) X_a
+    return [along[a][:, b] - along[b][:, a] for a in range(m) for b in range(a + 1, m)]
+
+
 def controllability_check(functions: Dict[str, ca.Function], n: int, defaults: np.ndarray,
                           samples: int = 5, seed: int = 0) -> List[Dict[str, object]]:
     """Rank and involutivity residuals at seeded random states.
+
+    The brackets of pairs of distribution columns are taken numerically, by one
+    forward-mode pass of the emitted ``ad`` per column (:func:`bracket_functions`).
 
     Returns
     -------
@@ -50,26 +87,20 @@ def controllability_check(functions: Dict[str, ca.Function], n: int, defaults: n
         residual of ``[v, w]`` outside ``span{g, ad_f g, ad_f^2 g}``).
     """
     x = ca.SX.sym("x", 4 * n)
-    ad = functions["ad"](x, defaults)
-    # jac[:, c] blocks: d(ad[:, c])/dx, for the bracket [v, w] = (dw/dx) v - (dv/dx) w.
-    jac = ca.Function("jac_ad", [x], [ca.jacobian(ca.vec(ad), x), ad])
+    brackets, d_dist = bracket_functions(x, functions["ad"](x, defaults), n)
     rng = np.random.default_rng(seed)
     rows = []
     for _ in range(samples):
-        xs = np.concatenate([rng.uniform(-1.5, 1.5, n), rng.uniform(-1, 1, n),
-                             rng.uniform(-1.5, 1.5, n), rng.uniform(-1, 1, n)])
-        J, A = (np.array(v) for v in jac(xs))
+        xs = _sample_state(rng, n)
+        A = np.array(brackets(xs))
         s = np.linalg.svd(A, compute_uv=False)
         dist = A[:, :3 * n]
         Q, _ = np.linalg.qr(dist)
         worst = 0.0
-        dcol = [J[c * 4 * n:(c + 1) * 4 * n, :] for c in range(3 * n)]
-        for a in range(3 * n):
-            for b in range(a + 1, 3 * n):
-                br = dcol[b] @ dist[:, a] - dcol[a] @ dist[:, b]
-                nb = np.linalg.norm(br)
-                if nb > 0:
-                    worst = max(worst, np.linalg.norm(br - Q @ (Q.T @ br)) / max(nb, 1.0))
+        for br in pairwise_brackets(d_dist, xs, dist):
+            nb = np.linalg.norm(br)
+            if nb > 0:
+                worst = max(worst, np.linalg.norm(br - Q @ (Q.T @ br)) / max(nb, 1.0))
         rows.append({"rank": int(np.linalg.matrix_rank(A)), "sigma_ratio": float(s[-1] / s[0]),
                      "involutivity": worst})
     return rows
@@ -153,27 +184,24 @@ def complete_brackets(f_fn: ca.Function, g_fn: ca.Function, n: int, params: np.n
     """
     x = ca.SX.sym("x", 4 * n)
     F, G = f_fn(x, params), g_fn(x, params)
-    JF = ca.jacobian(F, x)
 
-    def ad(B):
-        return JF @ B - ca.reshape(ca.jacobian(ca.vec(B), x) @ F, 4 * n, n)
+    def ad(B):  # (dF/dx) B - (dB/dx) F, column by column (forward mode, no Jacobian)
+        return ca.horzcat(*[ca.jtimes(F, x, B[:, c]) for c in range(n)]) - ca.jtimes(B, x, F)
 
     blocks = [G]
     for _ in range(3):
         blocks.append(ad(blocks[-1]))
-    D3 = ca.horzcat(*blocks[:3])
-    fn = ca.Function("brackets", [x], [ca.horzcat(*blocks), ca.jacobian(ca.vec(D3), x)])
+    brackets, d_dist = bracket_functions(x, ca.horzcat(*blocks), n)
     rng = np.random.default_rng(seed)
     rows = []
     for _ in range(samples):
-        xs = np.concatenate([rng.uniform(-1.5, 1.5, n), rng.uniform(-1, 1, n),
-                             rng.uniform(-1.5, 1.5, n), rng.uniform(-1, 1, n)])
-        A, J = (np.array(v) for v in fn(xs))
+        xs = _sample_state(rng, n)
+        A = np.array(brackets(xs))
         cols = A[:, :3 * n]
         norms = np.linalg.norm(cols, axis=0)
-        dcol = [J[c * 4 * n:(c + 1) * 4 * n, :] for c in range(3 * n)]
-        extra = [(dcol[b] @ cols[:, a] - dcol[a] @ cols[:, b]) / (norms[a] * norms[b])
-                 for a in range(3 * n) for b in range(a + 1, 3 * n)]
+        extra = [br / (norms[a] * norms[b]) for br, (a, b) in
+                 zip(pairwise_brackets(d_dist, xs, cols),
+                     [(a, b) for a in range(3 * n) for b in range(a + 1, 3 * n)])]
         closed = np.column_stack([cols / norms] + extra)
 
         def rank(Mx):
