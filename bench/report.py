@@ -201,6 +201,34 @@ def _ops_line(r: dict) -> str:
             f"planar7 has {ops:.0f} operations.")
 
 
+def scaling_lines(r: dict) -> List[str]:
+    """The scaling section's table (synthetic chains, fitted exponents) and its targets; [] if not run."""
+    sc = r.get("scaling")
+    if not isinstance(sc, dict) or "runs" not in sc:
+        return []
+    cols = (("derive_seconds", "derive (s)", lambda v: f"{v:.1f}"),
+            ("peak_bytes", "peak memory (MB)", lambda v: f"{v / 1e6:.0f}"),
+            ("alpha_beta_ops", "alpha + beta ops", lambda v: f"{v:.0f}"),
+            ("ad_ops", "ad ops", lambda v: f"{v:.0f}"),
+            ("all_ops", "all functions ops", lambda v: f"{v:.0f}"),
+            ("c_bytes", "C (MB)", lambda v: f"{v / 1e6:.2f}"),
+            ("gcc_seconds", "gcc -O2 (s)", lambda v: f"{v:.1f}"))
+    out = ["| joints | " + " | ".join(c[1] for c in cols) + " |", "|---" * (len(cols) + 1) + "|"]
+    for run in sc["runs"]:
+        out.append(f"| {run['n']} | " + " | ".join("-" if run.get(k) is None else fmt(run[k])
+                                                  for k, _, fmt in cols) + " |")
+    fits = sc.get("fits", {})
+    out.append("| fitted exponent e (c n^e) | " + " | ".join(
+        f"{fits[k]['e']:.2f}" if k in fits else "-" for k, _, _ in cols) + " |")
+    out += ["", "| target | limit | measured | |", "|---|---|---|---|"]
+    for t in sc.get("targets", []):
+        v = t["measured"]
+        shown = "-" if v is None else (f"{v:.3g}" if isinstance(v, float) else str(v))
+        out.append(f"| {t['what']} | {t['limit']:.3g} | {shown} | "
+                   f"{'-' if t['ok'] is None else ('met' if t['ok'] else '**missed**')} |")
+    return out
+
+
 def render_readme(r: dict) -> str:
     """The block of README.md's "Performance" section."""
     lines = [machine_line(r), "", *main_table(r), "", checks_line(r), "", _ab_line(r)]
@@ -229,6 +257,8 @@ def render_bench_readme(r: dict) -> str:
     ops = _ops_line(r)
     if ops:
         lines += ["", ops]
+    if scaling_lines(r):
+        lines += ["", "Scaling (synthetic spatial chains, `bench/scaling.py`):", "", *scaling_lines(r)]
     lines += ["", checks_line(r), "", "| peer check | measured | tolerance | |", "|---|---|---|---|"]
     for c in r.get("checks", []):
         lines.append(f"| {c['what']} | {c['measured']:.2g} | {c['tolerance']:.0g} | "
@@ -285,7 +315,8 @@ def _realtime(r: dict) -> str:
     steps = g("steps")
     return (f"{'-' if steps is None else f'{steps:.0e}'.replace('e+0', 'e')} steps inside the closed loop, "
             f"gcc -O2: median step {_ns(g('link1.double.step_median_ns'))} (link1, 1 kHz) and "
-            f"{_ns(g('panda.double.step_median_ns'))} (panda, 5 kHz), "
+            f"{_ns(g('panda.double.step_median_ns'))} (panda, the torque-sensed law `control_ismc_tau` at "
+            f"{_f(r, 'realtime.panda.double.rate_hz', '.0f')} Hz), "
             f"{_f(r, 'realtime.link1.double.ratio_median', '.2f')}x and "
             f"{_f(r, 'realtime.panda.double.ratio_median', '.2f')}x one `alpha` + `beta` call of the same model; "
             f"99.9th percentile {_ns(g('link1.double.step_p999_ns'))} and {_ns(g('panda.double.step_p999_ns'))} "
@@ -293,7 +324,8 @@ def _realtime(r: dict) -> str:
             f"and {_ns(g('panda.double.step_max_ns'))} (the OS preempting the process on a shared machine). "
             f"Float vs double over the same 10 s closed loop: max |du| / max |u| = "
             f"{_f(r, 'realtime.link1.float_vs_double_u_relative', '.1e')} (link1), "
-            f"{_f(r, 'realtime.panda.float_vs_double_u_relative', '.1e')} (panda)")
+            f"{_f(r, 'realtime.panda.float_vs_double_u_relative', '.1e')} (panda: max |du| = "
+            f"{_f(r, 'realtime.panda.float_vs_double_u_max_abs', '.2g')} N m)")
 
 
 def _summary(r: dict) -> str:
@@ -335,6 +367,7 @@ BLOCKS = {
     "panda-alpha-beta": lambda r: (f"{_f(r, 'spatial.generated_us', '.2f')} us against "
                                    f"{_f(r, 'spatial.peer_us', '.2f')} us (ratio {_f(r, 'spatial.ratio', '.2f')})"),
     "realtime": _realtime,
+    "scaling": lambda r: "\n".join(scaling_lines(r)) + "\n" if scaling_lines(r) else "(not measured yet: run make bench)",
     "bench-seconds": lambda r: f"{_f(r, 'bench_seconds', '.0f')} s",
 }
 

@@ -1,10 +1,13 @@
 /* A fixed-rate controller on the generated control law, in a closed loop with the generated plant.
  *
- * Every control period the step reads the measured state x (4n) and one reference sample
- * r (5n: y_d and its four derivatives), calls the emitted integral sliding-mode law
- * <model>_control_ismc(x, z, r, p_nom, gains) -> (u, s, z_dot, ...) (generated/<model>/<model>.h
- * documents every argument's layout), writes the torques u (n) and advances the controller
- * state z by forward Euler over the period. All work arrays are static, sized at compile time
+ * Every control period the step reads the measurement and one reference sample r (5n: y_d and
+ * its four derivatives), calls the emitted integral sliding-mode law and writes the torques u (n)
+ * and advances the controller state z by forward Euler over the period. link1: the state law
+ * <model>_control_ismc(x, z, r, p_nom, gains) on the plant state x (4n). panda (-DFJM_TORQUE=1):
+ * the torque-sensed law <model>_control_ismc_tau(m, z, r, p_nom, gains) on what a torque-sensed
+ * arm measures, m = [q; dq; tau_J; dtau_J; dq_m] (5n), tau_J = K (q_m - q) and dtau_J = K (dq_m - dq)
+ * formed here from the simulated plant with its TRUE stiffness (the sensor measures the real
+ * spring; the law itself never sees K); generated/<model>/<model>.h documents every layout. All work arrays are static, sized at compile time
  * from the generated _work() functions (sizes.h, written by work_sizes.c): the step allocates
  * nothing. The plant is the generated model, x' = f(x; p_true) + g(x; p_true) u, integrated by
  * RK4 (PLANT_SUBSTEPS steps per control period) with the torque held.
@@ -33,11 +36,14 @@
 #define FN(suffix) CAT(FJM_MODEL, suffix)
 
 /* ---- configuration per model (gains are runtime inputs of the law: no re-derive to retune) ---- */
-#if NU == 7 /* panda: sines about Franka's ready pose, 5 kHz, effort limits with anti-windup */
-#define RATE_HZ 5000.0
-#define LAMBDA 10.0
-#define K_S 200.0
-#define DELTA 1.0
+#if NU == 7 /* panda: torque-sensed, sines about Franka's ready pose, 1 kHz, effort limits with anti-windup */
+/* hand-found gains (fjm_runtime.control.defaults.PANDA_ISMC_TAU_START), not the result of a search */
+#define RATE_HZ 1000.0
+#define LAMBDA 80.0
+#define K_S 2000.0
+#define DELTA 10.0
+#define K_LIN 400.0
+#define PLANT_SUBSTEPS 10 /* 1e-4 s: the wrist's ~670 rad/s mode needs it (the runtime's substep rule) */
 static const double REF_CENTER[NU] = {0.0, -0.785, 0.0, -2.356, 0.0, 1.571, 0.785};
 static const double REF_AMPL[NU] = {0.3, 0.25, 0.3, 0.3, 0.4, 0.3, 0.4};
 static const double REF_OMEGA[NU] = {1.0, 1.2, 0.9, 1.1, 1.5, 1.3, 1.7};
@@ -53,10 +59,20 @@ static const double REF_AMPL[NU] = {0.5};
 static const double REF_OMEGA[NU] = {1.0};
 static const double U_MAX[NU] = {100.0};
 #define USE_LIMIT 0.0
+#define K_LIN 0.0
+#define PLANT_SUBSTEPS 4
 #else
 #error "realtime.c: add a configuration block for this number of joints"
 #endif
-#define PLANT_SUBSTEPS 4
+#ifndef FJM_TORQUE
+#define FJM_TORQUE 0
+#endif
+#if FJM_TORQUE
+#define LAW_FN _control_ismc_tau
+static const double K_SENSOR[NU] = K_TRUE_VALUES; /* the TRUE stiffness: the torque sensor's spring */
+#else
+#define LAW_FN _control_ismc
+#endif
 #define DURATION 10.0
 #define N_RUN ((long)(DURATION * RATE_HZ + 0.5))
 #define N_BENCH_MAX 1000000L
@@ -88,7 +104,7 @@ static int controller_init(controller_t* c) {
   for (i = 0; i < NU; ++i) c->gains[k++] = (casadi_real)K_S;
   for (i = 0; i < NU; ++i) c->gains[k++] = (casadi_real)DELTA;
   c->gains[k++] = 0;                                   /* sign: 0 = sat(s / delta) */
-  for (i = 0; i < NU; ++i) c->gains[k++] = 0;          /* k_lin */
+  for (i = 0; i < NU; ++i) c->gains[k++] = (casadi_real)K_LIN;
   for (i = 0; i < NU; ++i) c->gains[k++] = (casadi_real)U_MAX[i];
   c->gains[k++] = (casadi_real)USE_LIMIT;
   c->gains[k++] = 1;                                   /* anti_windup */
@@ -97,13 +113,32 @@ static int controller_init(controller_t* c) {
   return k == NGAINS ? 0 : 1;
 }
 
+/* What the controller reads: x itself (state law) or m = [q; dq; tau_J; dtau_J; dq_m] (torque-sensed). */
+#if FJM_TORQUE
+#define NMEAS (5 * NU)
+static void measure(const casadi_real* x, casadi_real* m) {
+  int i;
+  for (i = 0; i < NU; ++i) {
+    m[i] = x[i];
+    m[NU + i] = x[NU + i];
+    m[2 * NU + i] = (casadi_real)(K_SENSOR[i] * ((double)x[2 * NU + i] - (double)x[i]));
+    m[3 * NU + i] = (casadi_real)(K_SENSOR[i] * ((double)x[3 * NU + i] - (double)x[NU + i]));
+    m[4 * NU + i] = x[3 * NU + i];
+  }
+}
+#else
+#define NMEAS NX
+static void measure(const casadi_real* x, casadi_real* m) { memcpy(m, x, sizeof(casadi_real) * NX); }
+#endif
+
 /* One control period: u from (x, r); z advanced by forward Euler. No allocation. */
 static int controller_step(controller_t* c, const casadi_real* x, const casadi_real* r, casadi_real* u) {
-  casadi_real zdot[NZ + 1];
+  casadi_real zdot[NZ + 1], m[NMEAS];
   int i, flag;
-  arg[0] = x; arg[1] = c->z; arg[2] = r; arg[3] = p_nom; arg[4] = c->gains;
+  measure(x, m);
+  arg[0] = m; arg[1] = c->z; arg[2] = r; arg[3] = p_nom; arg[4] = c->gains;
   res[0] = u; res[1] = 0; res[2] = zdot; res[3] = 0; res[4] = 0; /* s, u_cmd, y_hat not needed */
-  flag = FN(_control_ismc)(arg, res, iw, w, 0);
+  flag = FN(LAW_FN)(arg, res, iw, w, 0);
   for (i = 0; i < NZ; ++i) c->z[i] += c->dt * zdot[i];
   return flag;
 }
@@ -159,6 +194,21 @@ static void initial_state(casadi_real* x) {
   memset(x, 0, sizeof(casadi_real) * NX);
   reference(0.0, r);
   for (i = 0; i < NU; ++i) x[i] = x[2 * NU + i] = r[i]; /* at rest, springs relaxed */
+#if FJM_TORQUE
+  { /* at rest holding gravity on the TRUE plant: q_m = q + K^-1 G(q), G = -D ddq at q_m = q */
+    casadi_real dx[NX], D[NU * NU];
+    int j;
+    arg[0] = x; arg[1] = p_true; res[0] = dx;
+    (void)FN(_f)(arg, res, iw, w, 0);
+    res[0] = D;
+    (void)FN(_inertia)(arg, res, iw, w, 0);
+    for (i = 0; i < NU; ++i) {
+      double G = 0;
+      for (j = 0; j < NU; ++j) G -= (double)D[j * NU + i] * (double)dx[NU + j];
+      x[2 * NU + i] = (casadi_real)((double)x[i] + G / K_SENSOR[i]);
+    }
+  }
+#endif
 }
 
 static double now_ns(void) {

@@ -245,20 +245,22 @@ def input_gain_summary(stats: dict, W) -> dict:
             "drift_input_gain_bound": (stats["GI"] @ W).tolist()}
 
 
-def gamma_tolerance(model, q_box, p_nom=None, samples: int = 4000, seed: int = 0) -> dict:
+def gamma_tolerance(model, q_box, p_nom=None, samples: int = 4000, seed: int = 0, q_center=None) -> dict:
     """The largest stiffness-ratio spread for which the switching term still acts on every ``s_i``.
 
     With ``G = D^-1 Gamma D`` and ``Gamma_k = 1 + d_k``, ``|d_k| <= r`` (``J_m`` exact):
     ``G_ii = 1 + sum_k a_ik d_k`` with ``a_ik = (D^-1)_ik D_ki`` (``sum_k a_ik = 1``), so
     ``min G_ii = 1 - r sum_k |a_ik|`` and ``G_ii > 0`` on the whole box iff
     ``r < r_i = 1 / sup_q sum_k |a_ik|``. Exact in ``Gamma``; the supremum over ``q`` is sampled
-    (uniform in ``|q_i| <= q_box_i``).
+    (uniform in ``|q_i - q_center_i| <= q_box_i``).
 
     Parameters
     ----------
     model : Model
     q_box : array_like, shape (n,)
         Half-widths of the link angles, rad.
+    q_center : array_like, shape (n,), optional
+        Centre of the link-angle box (default 0, the certificate's box).
     p_nom : dict or array_like, optional
     samples : int
     seed : int
@@ -273,7 +275,8 @@ def gamma_tolerance(model, q_box, p_nom=None, samples: int = 4000, seed: int = 0
     qb = np.broadcast_to(np.asarray(q_box, dtype=float), (n,))
     pv = np.asarray(model.params_array(p_nom), dtype=float)
     rng = np.random.default_rng(seed)
-    Q = rng.uniform(-qb, qb, (int(samples), n))
+    qc = np.zeros(n) if q_center is None else np.broadcast_to(np.asarray(q_center, dtype=float), (n,))
+    Q = qc + rng.uniform(-qb, qb, (int(samples), n))
     X = np.zeros((Q.shape[0], nx))
     X[:, :n] = Q
     X[:, 2 * n:3 * n] = Q
