@@ -58,8 +58,9 @@ def ismc_gains(rate: float = RATE, delay: int = DELAY) -> Tuple[dict, str]:
             g = designed_gains("panda", "ismc", "torque", rate, delay)
         except Exception:       # noqa: BLE001 - no designed entry for this setting: fall back, say so
             g = None
-        if g:
-            return dict(g), f"designed gains (`fjm design`, panda, ismc, torque, {rate:g} Hz, delay {delay})"
+        if g:  # the design report: its "gains" (the limit is the arm's own PANDA_EFFORT, set in controller())
+            g = {k: v for k, v in g["gains"].items() if k != "u_max"}
+            return g, f"designed gains (`fjm design`, panda, ismc, torque, {rate:g} Hz, delay {delay})"
     return (dict(defaults.PANDA_ISMC_TAU_START),
             "hand-found gains (quadruple pole 80 1/s, k_lin 400 1/s, k_s 2000, delta 10), NOT the result of a search")
 
