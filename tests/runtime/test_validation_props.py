@@ -9,11 +9,13 @@ input must evaluate without raising.
 from __future__ import annotations
 
 import math
+import os
 import re
+from pathlib import Path
 
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, assume, given, settings
+from hypothesis import HealthCheck, assume, example, given, settings
 from hypothesis import strategies as st
 
 import fjm_runtime
@@ -312,10 +314,16 @@ def test_u_wrong_length_or_non_finite(data, name):
 
 @PROPS
 @given(name=st.one_of(st.text(max_size=12), st.integers(), st.none()))
+@example(name="/")  # a path separator: a model directory, not a name (found by hypothesis)
+@example(name="no_such_model")
 def test_unknown_model_lists_available(name):
     assume(name not in fjm_runtime.available_models())
     with pytest.raises(ValueError) as info:
         fjm_runtime.load(name)
     msg = str(info.value)
+    if isinstance(name, str) and (os.sep in name or (os.altsep and os.altsep in name)):
+        # a name with a path separator is a model directory (fjm_runtime.load): the error names it
+        assert "manifest.json" in msg and repr(str(Path(name).resolve()) if Path(name).is_dir() else name) in msg, msg
+        return
     for known in ("link1", "planar1", "planar7"):
         assert known in msg, msg
