@@ -1,7 +1,7 @@
 """Cost of a derivation estimated from the chain alone, before any symbolic work.
 
-The symbolic derivation of an n-joint chain grows fast with n (the bracket
-matrix ``ad`` and ``alpha`` dominate). To refuse a runaway input (a mistyped
+The symbolic derivation of an n-joint chain grows fast with n (``alpha``'s
+time derivatives and the bracket matrix ``ad`` dominate). To refuse a runaway input (a mistyped
 ``tip`` link, a snake robot) before it takes the machine's memory, the cost is
 estimated from ``n`` and the kind of chain (``"planar"``: the closed-form
 planar chains; ``"spatial"``: URDF arms) with power laws fitted to measured
@@ -37,38 +37,41 @@ FORMS = ("planar", "spatial")
 
 #: The cost model: per form, ``(factor, exponent)`` of each quantity's excess over the trivial derive
 #: (``base_bytes``, ``base_seconds``: ``python -m derive --models planar1``), fitted by
-#: :func:`fit_power_law` to ``runs``. Measured 2026-12-01 on the project machine (2 cores, Intel Xeon,
-#: 23 GB, shared with other jobs: seconds vary by up to 1.5x between runs), commit bef8005 (a clean
-#: ``git archive`` export), CPython 3 venv with the pinned SymPy and CasADi, by
-#: ``python -m bench.derive_cost --repo EXPORT --old-cli`` run twice (per n: the faster run's seconds,
-#: the larger peak memory). ``spatial``: synthetic URDF chains (:mod:`derive.synthetic`) derived with
-#: ``--model-file``; ``planar``: the built-in ``planar<n>``. Peak memory is the process's maximum
-#: resident set size (``/usr/bin/time -v``); seconds are the wall clock of the whole command.
-#: Planar derives stay within a few seconds of the baseline (the control-law emission dominates, and
-#: load noise), so their seconds fit is nearly flat; the planar form is capped at 7 links anyway.
+#: :func:`fit_power_law` to ``runs``. ``spatial``: synthetic URDF chains (:mod:`derive.synthetic`) derived
+#: with ``--model-file``; ``planar``: the built-in ``planar<n>``. Peak memory is the process's maximum
+#: resident set size (``/usr/bin/time -v``), seconds the wall clock of the whole command.
+#: Operations and peak memory: re-measured 2026-12-01 after the brackets moved to CasADi AD (they do not
+#: depend on the machine's load), by ``python -m bench.derive_cost`` on the project machine (2 cores,
+#: shared). Seconds: that run was made under a load of 6-7 on 2 cores and its wall clocks were 3-9x
+#: those of an idle machine, so the seconds are kept from the earlier calibration (commit bef8005, a
+#: clean ``git archive`` export, ``--old-cli``, the faster of two runs), whose derivation was slower
+#: than today's (21 joints: 69.8 s then, 54 s now on the same machine): an over-estimate, the safe side
+#: for a guard. Planar derives stay within a few seconds of the baseline, so their seconds fit is nearly
+#: flat; the planar form is capped at 7 links anyway.
 CALIBRATION: Dict[str, object] = {
-    "measured": "2026-12-01, 2 cores, commit bef8005, python -m bench.derive_cost",
-    "base_bytes": 102285312,
+    "measured": "2026-12-01, 2 cores; operations and peak memory after the AD brackets, seconds from commit "
+                "bef8005; python -m bench.derive_cost",
+    "base_bytes": 95178752,
     "base_seconds": 0.93,
-    "spatial": {"operations": (482.1171945572871, 2.121914251472184),
-                "peak_bytes": (306886.5073601743, 2.5425604330636014),
+    "spatial": {"operations": (464.3605151322975, 2.1351410186060913),
+                "peak_bytes": (799257.0241417133, 1.802443028769761),
                 "seconds": (0.03459418261171506, 2.404643483036551)},
-    "planar": {"operations": (129.50254107657673, 2.1568207517431874),
-               "peak_bytes": (133648.98124167314, 2.2086597392267513),
+    "planar": {"operations": (126.88805941086473, 2.1712012261231752),
+               "peak_bytes": (205028.8444603613, 1.746326365259364),
                "seconds": (0.4662896071482834, 0.8207445020068006)},
     "runs": [
-        {"form": "spatial", "n": 3, "operations": 4734, "peak_bytes": 108478464, "seconds": 1.51},
-        {"form": "spatial", "n": 5, "operations": 15367, "peak_bytes": 119377920, "seconds": 2.26},
-        {"form": "spatial", "n": 7, "operations": 30822, "peak_bytes": 138874880, "seconds": 4.96},
-        {"form": "spatial", "n": 10, "operations": 63813, "peak_bytes": 194842624, "seconds": 10.01},
-        {"form": "spatial", "n": 14, "operations": 128059, "peak_bytes": 343736320, "seconds": 14.91},
-        {"form": "spatial", "n": 21, "operations": 304961, "peak_bytes": 977326080, "seconds": 69.83},
-        {"form": "planar", "n": 2, "operations": 590, "peak_bytes": 103018496, "seconds": 1.49},
-        {"form": "planar", "n": 3, "operations": 1367, "peak_bytes": 103591936, "seconds": 3.93},
-        {"form": "planar", "n": 4, "operations": 2522, "peak_bytes": 104792064, "seconds": 1.82},
-        {"form": "planar", "n": 5, "operations": 4110, "peak_bytes": 106737664, "seconds": 2.40},
-        {"form": "planar", "n": 6, "operations": 6189, "peak_bytes": 109228032, "seconds": 3.00},
-        {"form": "planar", "n": 7, "operations": 8817, "peak_bytes": 113836032, "seconds": 3.40},
+        {"form": "spatial", "n": 3, "operations": 4615, "peak_bytes": 101720064, "seconds": 1.51},
+        {"form": "spatial", "n": 5, "operations": 15153, "peak_bytes": 107929600, "seconds": 2.26},
+        {"form": "spatial", "n": 7, "operations": 30501, "peak_bytes": 121032704, "seconds": 4.96},
+        {"form": "spatial", "n": 10, "operations": 63391, "peak_bytes": 143110144, "seconds": 10.01},
+        {"form": "spatial", "n": 14, "operations": 127675, "peak_bytes": 194510848, "seconds": 14.91},
+        {"form": "spatial", "n": 21, "operations": 305456, "peak_bytes": 294363136, "seconds": 69.83},
+        {"form": "planar", "n": 2, "operations": 583, "peak_bytes": 95842304, "seconds": 1.49},
+        {"form": "planar", "n": 3, "operations": 1363, "peak_bytes": 96522240, "seconds": 3.93},
+        {"form": "planar", "n": 4, "operations": 2523, "peak_bytes": 97546240, "seconds": 1.82},
+        {"form": "planar", "n": 5, "operations": 4122, "peak_bytes": 99172352, "seconds": 2.4},
+        {"form": "planar", "n": 6, "operations": 6220, "peak_bytes": 100184064, "seconds": 3.0},
+        {"form": "planar", "n": 7, "operations": 8877, "peak_bytes": 100323328, "seconds": 3.4},
     ],
 }
 
