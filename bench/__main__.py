@@ -511,12 +511,19 @@ def _sampled_batch(checks: list) -> dict:
     return bench_sampled_batch(checks)
 
 
+def _scaling(work: Path, results: dict) -> dict:
+    """The scaling section (:mod:`bench.scaling`): synthetic chains of 7..30 joints, fitted growth."""
+    from bench.scaling import bench_scaling
+    spatial = results.get("spatial")
+    return bench_scaling(work / "scaling", spatial=spatial if isinstance(spatial, dict) else None, log=log)
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(prog="python -m bench", description=__doc__.split("\n\n")[0])
     ap.add_argument("--quick", action="store_true", help="one repetition per figure (smoke test / checks)")
     ap.add_argument("--skip-derive", action="store_true", help="skip the derive and gcc timings")
     ap.add_argument("--only", nargs="+", choices=("derive", "alpha_beta", "spatial", "closed_loop", "batch",
-                                                  "realtime", "sampled_batch"),
+                                                  "realtime", "sampled_batch", "scaling"),
                     help="run only these sections")
     ap.add_argument("--out", type=Path, default=None,
                     help="results file (default: bench/results.json for a full run, "
@@ -524,10 +531,10 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     reps, slow = (1, 1) if args.quick else (5, 3)
     sections = set(args.only or ("derive", "alpha_beta", "spatial", "closed_loop", "batch", "realtime",
-                                 "sampled_batch"))
+                                 "sampled_batch", "scaling"))
     if args.skip_derive:
         sections.discard("derive")
-    full = not args.quick and len(sections) == 7
+    full = not args.quick and len(sections) == 8
     out = args.out or (DEFAULT_OUT if full else REPO / "build" / "bench-results.json")
     t_start = time.perf_counter()
     results = {"machine": machine(), "quick": bool(args.quick)}
@@ -541,7 +548,8 @@ def main(argv=None) -> int:
                 ("closed_loop", lambda: bench_closed_loop(work, reps, slow, checks)),
                 ("batch", lambda: bench_batch(reps, slow, checks)),
                 ("realtime", lambda: bench_realtime(work, 10 ** 4 if args.quick else 10 ** 6, checks, check)),
-                ("sampled_batch", lambda: _sampled_batch(checks))]
+                ("sampled_batch", lambda: _sampled_batch(checks)),
+                ("scaling", lambda: _scaling(work, results))]
         failed = []
         for name, run in plan:
             if name not in sections:
