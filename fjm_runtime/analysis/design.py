@@ -89,10 +89,14 @@ def run_cost(batch, n_jitter: int = 4) -> np.ndarray:
 class _Problem:
     """Model, law, reference, sensor and the batch settings shared by every evaluation."""
 
-    def __init__(self, model, kind, sensing, rate, delay, sensor, u_max, threads, simd):
+    def __init__(self, model, kind, sensing, rate, delay, sensor, u_max, threads, simd, predict=False,
+                 reference=None, x0=None, task=None):
         self.model, self.kind, self.sensing, self.delay = model, kind, sensing, int(delay)
         self.dt, self.sensor, self.u_max, self.threads, self.simd = 1.0 / rate, sensor, u_max, threads, simd
-        self.reference = make_reference("sine", int(model.n), amplitude=0.5, omega=1.0)
+        self.predict, self.x0 = bool(predict), x0
+        self.reference = make_reference("sine", int(model.n), amplitude=0.5, omega=1.0) if reference is None \
+            else reference
+        self.task = task or {"kind": "sine", "amplitude": 0.5, "omega": 1.0}
 
     def controller(self, g: dict):
         return make_controller(self.kind, self.model, {}, sensing=self.sensing, u_max=self.u_max, **g)
@@ -105,7 +109,8 @@ class _Problem:
         seeds = np.tile(seed + np.arange(P.shape[0]), len(cands))
         b = simulate_batch(self.model, ctrls[0], self.reference, np.tile(P, (len(cands), 1)), duration=duration,
                            dt=self.dt, sensor=self.sensor, delay_samples=self.delay if delay is None else delay,
-                           seeds=seeds, gains=G, threads=self.threads, simd=self.simd)
+                           seeds=seeds, gains=G, threads=self.threads, simd=self.simd, predict=self.predict,
+                           x0=self.x0)
         return run_cost(b).reshape(len(cands), P.shape[0]), b
 
 
@@ -181,8 +186,13 @@ def design(model, *, kind: str = "ismc", sensing: str = "torque", rate: float = 
            sensor: Optional[SensorModel] = None, draws: int = 200, duration: float = 10.0, seed: int = 0,
            u_max=None, screen_draws: int = 12, screen_duration: float = 2.0, rounds: int = 3,
            max_extra_delay: int = 3, threads: Optional[int] = None, simd: bool = False,
-           progress: Optional[Callable[[str], None]] = None) -> dict:
+           progress: Optional[Callable[[str], None]] = None, predict: bool = False, reference=None,
+           x0=None, task: Optional[dict] = None) -> dict:
     """Search the gains (module docstring); returns the gains-file dict (``fjm simulate --gains``).
+
+    ``predict`` runs every loop with the delay compensation of the sample step; ``reference`` and
+    ``x0`` (shared by all runs) replace the default task (a 0.5 rad sine about q = 0 from rest),
+    ``task`` describes them in the file.
 
     Returns
     -------
@@ -199,7 +209,7 @@ def design(model, *, kind: str = "ismc", sensing: str = "torque", rate: float = 
     say = progress or (lambda msg: print(f"fjm design: {msg}", file=sys.stderr, flush=True))
     sensor = SensorModel.panda(seed=seed) if sensor is None else sensor
     u_max = EFFORTS.get(model.name) if u_max is None else u_max
-    prob = _Problem(model, kind, sensing, rate, delay, sensor, u_max, threads, simd)
+    prob = _Problem(model, kind, sensing, rate, delay, sensor, u_max, threads, simd, predict, reference, x0, task)
     P_all = draw_params(model, max(draws, screen_draws), seed)
     P_screen = P_all[:screen_draws]
     cands = _grid(np.geomspace(20.0, 160.0, 4), np.geomspace(200.0, 20000.0, 5))
@@ -224,7 +234,7 @@ def _report(model, prob, best, worst, b, margins, draws, seed, duration) -> dict
         gains["u_max"] = [float(v) for v in np.broadcast_to(prob.u_max, (int(model.n),))]
     return {"model": model.name, "kind": prob.kind, "sensing": prob.sensing, "rate": 1.0 / prob.dt,
             "delay": prob.delay, "sensor": {k: v for k, v in prob.sensor.__dict__.items()},
-            "reference": {"kind": "sine", "amplitude": 0.5, "omega": 1.0}, "gains": gains,
+            "reference": prob.task, "predict": prob.predict, "gains": gains,
             "worst_case": {"cost": worst, "diverged": int(np.sum(b.diverged)),
                            "rms_second_half": finite(np.nanmax(jm["rms_second_half"], axis=0)),
                            "time_at_limit": finite(np.nanmax(jm["time_at_limit"], axis=0)),

@@ -28,6 +28,11 @@ def add_parser(sub) -> None:
     p.add_argument("--seed", type=int, default=0, help="draws and noise seed (default 0)")
     p.add_argument("--threads", type=int, default=None, help="OpenMP threads (default all cores)")
     p.add_argument("--simd", action="store_true", help="SIMD batch (long build for big models)")
+    p.add_argument("--predict", action="store_true", help="loops run with delay compensation (the sample step's "
+                                                           "nominal-model prediction)")
+    p.add_argument("--task", default="auto", choices=("auto", "sine"),
+                   help="auto: the demo's task where the model has one (Panda: joint-space sines about the ready "
+                        "pose, from rest holding gravity); sine: 0.5 rad sines about q = 0 from rest")
     p.add_argument("--out", type=Path, default=None, help="gains file (default: print the JSON)")
 
 
@@ -42,10 +47,18 @@ def run(args) -> int:
         raise FjmValueError("--draws/--duration/--delay-samples/--rate: expected >= 1, > 0 s, >= 0, > 0 Hz")
     m = load(args.model)
     sensor = SensorModel.panda(seed=args.seed) if args.noise == "panda" else SensorModel.ideal(seed=args.seed)
+    task = {}
+    if args.task == "auto" and m.name == "panda":
+        from ..experiments import panda as demo_task  # the demo's task: cli sits on top, like experiments
+        ref = demo_task.reference()
+        task = {"reference": ref, "x0": demo_task.rest_state(m, ref(0.0)[0], m.default_params),
+                "task": {"kind": "panda ready-pose sines (the demo's)", "offset": list(demo_task.READY),
+                         "amplitude": list(demo_task.AMPLITUDE), "omega": list(demo_task.OMEGA),
+                         "start": "at rest holding gravity (nominal parameters)"}}
     t0 = time.perf_counter()
     out = design(m, kind=args.controller, sensing=args.sensing, rate=args.rate, delay=args.delay_samples,
                  sensor=sensor, draws=args.draws, duration=args.duration, seed=args.seed, threads=args.threads,
-                 simd=args.simd)
+                 simd=args.simd, predict=args.predict, **task)
     out["wall_seconds"] = time.perf_counter() - t0
     out["noise"] = args.noise
     text = json.dumps(out, indent=2, allow_nan=False)

@@ -258,6 +258,7 @@ def run(args) -> int:
               "constant": {"q_d": args.q_d}}.get(args.reference, {})
     ref = make_reference(args.reference, m.n, **ref_kw)
     ctrl, gain, k_s, delta = _build_controller(m, args, nominal, ref, kind, spec["gains"])
+    args.predict = bool(args.predict or spec.get("predict", False))  # gains designed with prediction keep it
     progress = None if (args.quiet or args.json) else stderr_progress(f"simulating {args.model} ({args.duration:g} s)")
     settings = {"model": m.name, "controller": kind, "rate": 1.0 / dt, "dt": dt, "substeps": args.substeps,
                 "delay_samples": args.delay_samples, "predict": bool(args.predict), "sensing": args.sensing,
