@@ -201,6 +201,9 @@ def _ops_line(r: dict) -> str:
             f"planar7 has {ops:.0f} operations.")
 
 
+GCC_SHOWN = "300 (stopped)"  # bench.scaling.GCC_TIMEOUT, as the table shows a gcc run cut short
+
+
 def scaling_lines(r: dict) -> List[str]:
     """The scaling section's table (synthetic chains, fitted exponents) and its targets; [] if not run."""
     sc = r.get("scaling")
@@ -215,15 +218,16 @@ def scaling_lines(r: dict) -> List[str]:
             ("gcc_seconds", "gcc -O2 (s)", lambda v: f"{v:.1f}"))
     out = ["| joints | " + " | ".join(c[1] for c in cols) + " |", "|---" * (len(cols) + 1) + "|"]
     for run in sc["runs"]:
-        out.append(f"| {run['n']} | " + " | ".join("-" if run.get(k) is None else fmt(run[k])
-                                                  for k, _, fmt in cols) + " |")
+        out.append(f"| {run['n']} | " + " | ".join(
+            (f"> {GCC_SHOWN}" if k == "gcc_seconds" and run.get("gcc_timed_out") else "-")
+            if run.get(k) is None else fmt(run[k]) for k, _, fmt in cols) + " |")
     fits = sc.get("fits", {})
     out.append("| fitted exponent e (c n^e) | " + " | ".join(
         f"{fits[k]['e']:.2f}" if k in fits else "-" for k, _, _ in cols) + " |")
     out += ["", "| target | limit | measured | |", "|---|---|---|---|"]
     for t in sc.get("targets", []):
         v = t["measured"]
-        shown = "-" if v is None else (f"{v:.3g}" if isinstance(v, float) else str(v))
+        shown = "-" if v is None else (f"{v:.3g}" if isinstance(v, (int, float)) else str(v))
         out.append(f"| {t['what']} | {t['limit']:.3g} | {shown} | "
                    f"{'-' if t['ok'] is None else ('met' if t['ok'] else '**missed**')} |")
     return out
@@ -257,8 +261,6 @@ def render_bench_readme(r: dict) -> str:
     ops = _ops_line(r)
     if ops:
         lines += ["", ops]
-    if scaling_lines(r):
-        lines += ["", "Scaling (synthetic spatial chains, `bench/scaling.py`):", "", *scaling_lines(r)]
     lines += ["", checks_line(r), "", "| peer check | measured | tolerance | |", "|---|---|---|---|"]
     for c in r.get("checks", []):
         lines.append(f"| {c['what']} | {c['measured']:.2g} | {c['tolerance']:.0g} | "

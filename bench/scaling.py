@@ -12,7 +12,7 @@ in a fresh process and records
 * ``ad_ops``: operations of the bracket matrix;
 * ``c_bytes``: size of the shipped ``<model>.c`` (every function, the control laws included);
 * ``gcc_seconds``: ``gcc -O2 -c`` of that file (:data:`bench.ccutil.CFLAGS`), within
-  :data:`GCC_TIMEOUT` (None if it did not finish).
+  :data:`GCC_TIMEOUT` (None and ``gcc_timed_out`` if it did not finish: the target counts as missed).
 
 Each quantity gets a fitted power law ``c n^e`` (least squares on log-log axes) and
 the run is compared with the :data:`TARGETS`.
@@ -83,15 +83,16 @@ def measure_chain(n: int, work: Path, compile_c: bool = True) -> Dict[str, Optio
     manifest = json.loads((out / name / "manifest.json").read_text())
     ops = {q: f["operations"] for q, f in manifest["functions"].items()}
     src = out / name / f"{name}.c"
-    gcc = None
+    gcc, timed_out = None, False
     if compile_c:
         try:
             gcc = _timed_compile(src, work / f"{name}.o")
         except subprocess.TimeoutExpired:
-            gcc = None
+            timed_out = True
     return {"n": n, "derive_seconds": run["seconds"], "peak_bytes": run["peak_bytes"],
             "alpha_beta_ops": ops["alpha"] + ops["beta"], "ad_ops": ops["ad"], "all_ops": sum(ops.values()),
-            "ops_by_function": ops, "c_bytes": src.stat().st_size, "gcc_seconds": gcc}
+            "ops_by_function": ops, "c_bytes": src.stat().st_size, "gcc_seconds": gcc,
+            "gcc_timed_out": timed_out}
 
 
 def _timed_compile(src: Path, obj: Path) -> float:
@@ -121,6 +122,10 @@ def target_rows(runs: List[Dict[str, object]], panda: Optional[Dict[str, float]]
     rows = []
     for n, q, limit in TARGETS:
         v = by_n.get(n, {}).get(q)
+        if v is None and q == "gcc_seconds" and by_n.get(n, {}).get("gcc_timed_out"):
+            rows.append({"what": f"n = {n} {q}", "limit": limit, "measured": f"> {GCC_TIMEOUT:g} (stopped)",
+                         "ok": False})
+            continue
         rows.append({"what": f"n = {n} {q}", "limit": limit, "measured": v,
                      "ok": None if v is None else bool(v <= limit)})
     for key, limit in (("alpha_beta_ops", 5000.0), ("alpha_beta_us", 2.0)):
