@@ -22,11 +22,14 @@ import numpy as np
 import pytest
 
 import fjm_runtime
-from fjm_runtime.model import QUANTITIES
+from fjm_runtime.model import COMPLETE_QUANTITIES, QUANTITIES
 
 from support.paths import REPO  # noqa: E402
 pytestmark = pytest.mark.slow  # builds and installs a wheel: `pytest -m "not slow"` skips it
-MODELS = ("link1", "planar1", "planar2", "planar3", "planar4", "planar5", "planar6", "planar7", "elbow3", "panda")
+MODELS = ("link1", "planar1", "planar2", "planar3", "planar4", "planar5", "planar6", "planar7", "elbow3", "panda",
+          "baxter")
+#: Complete models (rotor spin coupling): plant functions only (fjm_runtime.model.COMPLETE_QUANTITIES).
+COMPLETE = ("link1_complete", "planar2_complete", "panda_complete")
 SOURCES = ("pyproject.toml", "README.md", "LICENSE", "derive", "fjm_runtime", "generated")
 
 
@@ -61,8 +64,9 @@ def wheel(tmp_path_factory) -> Path:
 def test_wheel_contains_generated_models(wheel):
     with zipfile.ZipFile(wheel) as z:
         names = set(z.namelist())
-        for model in MODELS:
-            files = [f"{q}.casadi" for q in QUANTITIES] + ["manifest.json", f"{model}.c", f"{model}.h"]
+        for model in MODELS + COMPLETE:
+            quantities = COMPLETE_QUANTITIES if model in COMPLETE else QUANTITIES
+            files = [f"{q}.casadi" for q in quantities] + ["manifest.json", f"{model}.c", f"{model}.h"]
             for f in files:
                 arc = f"fjm_runtime/generated/{model}/{f}"
                 assert arc in names, f"wheel lacks {arc}"
@@ -126,7 +130,7 @@ def test_wheel_installs_and_runs_without_sympy(venv, tmp_path):
     assert not res["sympy_imported"]
     assert str(venv) in res["runtime_file"], res["runtime_file"]
     assert str(venv) in res["generated_root"] and res["generated_root"].endswith("fjm_runtime/generated"), res
-    assert res["models"] == sorted(MODELS)
+    assert res["models"] == sorted(MODELS + COMPLETE)
     m = fjm_runtime.load("planar3")
     x = np.linspace(-0.5, 0.6, m.nx)
     assert (res["n"], res["nx"]) == (3, 12)
