@@ -511,6 +511,12 @@ def _sampled_batch(checks: list) -> dict:
     return bench_sampled_batch(checks)
 
 
+def _sampled_loop() -> dict:
+    """The sampled-data loop section (:mod:`bench.sampled_loop`): substeps and delay prediction."""
+    from bench.sampled_loop import bench_sampled_loop
+    return bench_sampled_loop(log=log)
+
+
 def _scaling(work: Path, results: dict) -> dict:
     """The scaling section (:mod:`bench.scaling`): synthetic chains of 7..30 joints, fitted growth."""
     from bench.scaling import bench_scaling
@@ -523,7 +529,7 @@ def main(argv=None) -> int:
     ap.add_argument("--quick", action="store_true", help="one repetition per figure (smoke test / checks)")
     ap.add_argument("--skip-derive", action="store_true", help="skip the derive and gcc timings")
     ap.add_argument("--only", nargs="+", choices=("derive", "alpha_beta", "spatial", "closed_loop", "batch",
-                                                  "realtime", "sampled_batch", "scaling"),
+                                                  "realtime", "sampled_batch", "scaling", "sampled_loop"),
                     help="run only these sections")
     ap.add_argument("--out", type=Path, default=None,
                     help="results file (default: bench/results.json for a full run, "
@@ -531,10 +537,10 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     reps, slow = (1, 1) if args.quick else (5, 3)
     sections = set(args.only or ("derive", "alpha_beta", "spatial", "closed_loop", "batch", "realtime",
-                                 "sampled_batch", "scaling"))
+                                 "sampled_batch", "scaling", "sampled_loop"))
     if args.skip_derive:
         sections.discard("derive")
-    full = not args.quick and len(sections) == 8
+    full = not args.quick and len(sections) == 9
     out = args.out or (DEFAULT_OUT if full else REPO / "build" / "bench-results.json")
     t_start = time.perf_counter()
     results = {"machine": machine(), "quick": bool(args.quick)}
@@ -549,7 +555,8 @@ def main(argv=None) -> int:
                 ("batch", lambda: bench_batch(reps, slow, checks)),
                 ("realtime", lambda: bench_realtime(work, 10 ** 4 if args.quick else 10 ** 6, checks, check)),
                 ("sampled_batch", lambda: _sampled_batch(checks)),
-                ("scaling", lambda: _scaling(work, results))]
+                ("scaling", lambda: _scaling(work, results)),
+                ("sampled_loop", lambda: _sampled_loop())]
         failed = []
         for name, run in plan:
             if name not in sections:

@@ -349,6 +349,47 @@ def _summary(r: dict) -> str:
     return "\n".join(line for row in rows for line in row) + "\n"
 
 
+def _sl_num(v, fmt: str = ".2g") -> str:
+    return "-" if not isinstance(v, (int, float)) or isinstance(v, bool) or not math.isfinite(v) else format(v, fmt)
+
+
+def _substeps(r: dict) -> str:
+    """The substeps rule against a 10x finer plant (:mod:`bench.sampled_loop`), a markdown table."""
+    sub = (r.get("sampled_loop") or {}).get("substeps") or {}
+    if not sub:
+        return "(not measured yet: run make bench)"
+    what = {"panda": "Panda, ismc (lambda 80, k_lin 400, k_s 2000, delta 10), the demo's ready-pose sines from rest",
+            "link1": "link1, ismc (lambda 8, k_s 1000, delta 5), 0.5 rad sine at 1 rad/s"}
+    lines = ["| case, 10 s at 1 kHz, noise-free, compiled | omega_max (rad/s) | default substeps | "
+             "max abs(q - q_10x) (rad) | max abs(x - x_10x) |", "|---|---|---|---|---|"]
+    for name, c in sub.items():
+        lines.append(f"| {what.get(name, name)} | {_sl_num(c.get('omega_max'), '.0f')} | {c.get('substeps', '-')} | "
+                     f"{_sl_num(c.get('max_abs_q_diff'))} | {_sl_num(c.get('max_abs_state_diff'))} |")
+    return "\n".join(lines) + "\n"
+
+
+def _delay_cell(c: dict) -> str:
+    if not c:
+        return "-"
+    if c.get("diverged"):
+        return f"diverged at t = {_sl_num(c.get('diverged_at_s'), '.3f')} s"
+    return f"{_sl_num(c.get('rms_worst'), '.2e')} (joint {c.get('worst_joint', '?')})"
+
+
+def _delay_prediction(r: dict) -> str:
+    """Worst-joint second-half RMS with a one-sample delay, without / with prediction, a markdown table."""
+    dp = (r.get("sampled_loop") or {}).get("delay_prediction") or {}
+    if not dp:
+        return "(not measured yet: run make bench)"
+    lines = ["| sensing | TRUE stiffness | RMS, no prediction (rad) | RMS, `predict=True` (rad) |",
+             "|---|---|---|---|"]
+    for sensing, cases in dp.items():
+        for label, c in cases.items():
+            lines.append(f"| {sensing} | {'exact' if label == 'exact' else 'all joints ' + label} | "
+                         f"{_delay_cell(c.get('plain') or {})} | {_delay_cell(c.get('predict') or {})} |")
+    return "\n".join(lines) + "\n"
+
+
 #: name -> renderer of a named block (``str``; several lines make a block of whole lines).
 BLOCKS = {
     "run": lambda r: f"{r.get('finished_utc', '?')}" + (" (`--quick`)" if r.get("quick") else ""),
@@ -371,6 +412,8 @@ BLOCKS = {
     "realtime": _realtime,
     "scaling": lambda r: "\n".join(scaling_lines(r)) + "\n" if scaling_lines(r) else "(not measured yet: run make bench)",
     "bench-seconds": lambda r: f"{_f(r, 'bench_seconds', '.0f')} s",
+    "substeps": _substeps,
+    "delay-prediction": _delay_prediction,
 }
 
 
