@@ -39,7 +39,7 @@ error ``eps = y_f - K_hat phi_f``, with the scalar covariance ``P``::
 and the update points outward, and the value USED (and reported by
 :meth:`AdaptiveStiffnessController.stiffness_estimate`) is
 ``clip(K_hat, K_min, K_max)``, so the controller never uses a stiffness outside
-the bounds even between RK4 stages. Without projection and with exact
+the bounds even when the raw estimate overshoots within a sample. In continuous time, without projection and with exact
 ``J_m, B_m`` the error has the closed form
 ``K - K_hat(t) = (K - K_hat(0)) / (1 + P(0) int_0^t phi_f^2)``: it shrinks with
 the accumulated squared filtered deflection.
@@ -72,7 +72,9 @@ Assumptions and limits (state them when quoting results)
   the same place; the estimator works per joint for ``link1`` (``K``, ``J_m``,
   ``B_m``) and ``planar<n>`` (``K_i``, ``Jm_i``, ``Bm_i``).
 
-Controller state ``z`` (``n`` joints), integrated with the plant in RK4::
+Controller state ``z`` (``n`` joints), advanced once per sample by the simulators' sampled-data loop
+(``z_{k+1} = z_k + T z_dot_k``: the filtered regression then holds to O(T), so the estimate settles
+O(T) away from ``K``; the closed form above is the continuous-time limit)::
 
     [z_int (n, only with integral=True), K_hat (n), u_f (n), phi_f (n), w_f (n), P (n)]
 """
