@@ -34,7 +34,7 @@ check-generated: $(STAMP)
 	PYTHONHASHSEED=12345 $(PY) -m derive --check
 
 test: $(STAMP)
-	$(PY) -m pytest -q
+	$(PY) -m pytest -q -n auto
 
 demo: $(STAMP)
 	$(PY) -m fjm_runtime.cli figures --out out

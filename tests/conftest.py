@@ -7,7 +7,8 @@ C, reports), ``tests/runtime/<room>`` (``fjm_runtime``: model and validation at 
 by several files live in the package ``tests/support`` (no tests there).
 
 Tests that build C, a wheel or derive in a subprocess are marked ``slow``:
-``pytest -m "not slow"`` runs the rest in a fraction of the time; ``make test`` runs everything.
+``pytest -m "not slow"`` runs the rest in a fraction of the time; ``make test`` runs everything, on
+every core (pytest-xdist, ``-n auto``).
 """
 
 from __future__ import annotations
