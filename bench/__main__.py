@@ -124,7 +124,9 @@ def parse_derive_log(text: str) -> dict:
     """
     import re
     models = {}
-    for m in re.finditer(r"\]\s+(\S+): deriving \.\.\.\s*([0-9.]+) s .*?(\d+) ops", text):
+    # short models: "[i/N] m: deriving ... 1.2 s (...), k ops"; long ones print stage lines first and
+    # end with "[i/N] m: 12.3 s (...), k ops"
+    for m in re.finditer(r"\]\s+(\S+):(?: deriving \.\.\.)?\s*([0-9.]+) s \(.*?(\d+) ops", text):
         models[m.group(1)] = {"seconds": float(m.group(2)), "operations": int(m.group(3))}
     tot = re.search(r"derived \d+ model\(s\) in ([0-9.]+) s", text)
     if not models or not tot:
