@@ -13,7 +13,7 @@ import numpy as np
 from ..ccache import DEFAULT_FLAGS
 from ..control.laws import SlidingModeController
 from ..sim.metrics import metrics_from_sums
-from ..sim.sample_step import initial_measurement, initial_step_state, make_layout
+from ..sim.sample_step import check_loop_settings, initial_measurement, initial_step_state, make_layout
 from ..sim.sensor import SIGNALS, SensorModel, measurement_blocks
 from ..sim.substeps import resolve_substeps
 from ..validation import FjmValueError
@@ -100,14 +100,7 @@ def _check(duration, dt, sensor, delay, predict):
         raise FjmValueError(f"duration = {duration!r}: expected a finite value > 0 s")
     if not (np.isfinite(dt) and 0 < dt <= duration):
         raise FjmValueError(f"dt = {dt!r}: expected a finite step with 0 < dt <= duration")
-    sensor = SensorModel.ideal() if sensor is None else sensor
-    if not isinstance(sensor, SensorModel):
-        raise FjmValueError(f"sensor = {sensor!r}: expected a SensorModel (e.g. SensorModel.panda())")
-    if isinstance(delay, bool) or not isinstance(delay, (int, np.integer)) or delay < 0:
-        raise FjmValueError(f"delay_samples = {delay!r}: expected an integer >= 0 (samples of delay)")
-    if not isinstance(predict, (bool, np.bool_)):
-        raise FjmValueError(f"predict = {predict!r}: expected True or False")
-    return sensor
+    return check_loop_settings(sensor, delay, predict)[0]
 
 
 def _flags(N: int, h: int, t) -> np.ndarray:

@@ -31,7 +31,7 @@ from ..validation import FjmValueError
 from .sensor import SensorModel
 from .step import casadi_functions
 
-__all__ = ["StepLayout", "casadi_sample_step", "initial_measurement", "initial_step_state", "make_layout",
+__all__ = ["StepLayout", "casadi_sample_step", "check_loop_settings", "initial_measurement", "initial_step_state", "make_layout",
            "python_sample_step", "sample_step_function",
            "stiffness_indices"]
 
@@ -328,3 +328,29 @@ def initial_measurement(model, L: StepLayout, x0, p_true) -> np.ndarray:
 def sample_step_function(model, controller, L: StepLayout):
     """The CasADi sample step of ``(model, controller, layout)`` (rebuilt per call: gains are baked in)."""
     return casadi_sample_step(casadi_functions(model), controller, L, len(model.param_names))
+
+
+def check_loop_settings(sensor, delay_samples, predict):
+    """The sensor (default ideal), the delay and the prediction flag of a sampled-data loop, checked.
+
+    Shared by :func:`fjm_runtime.sim.simulate.simulate` and the batch engine.
+
+    Returns
+    -------
+    sensor : SensorModel
+    delay_samples : int
+
+    Raises
+    ------
+    FjmValueError
+        One line naming the bad setting and what was expected.
+    """
+    if sensor is None:
+        sensor = SensorModel.ideal()
+    if not isinstance(sensor, SensorModel):
+        raise FjmValueError(f"sensor = {sensor!r}: expected a SensorModel (e.g. SensorModel.panda())")
+    if isinstance(delay_samples, bool) or not isinstance(delay_samples, (int, np.integer)) or delay_samples < 0:
+        raise FjmValueError(f"delay_samples = {delay_samples!r}: expected an integer >= 0 (samples of delay)")
+    if not isinstance(predict, (bool, np.bool_)):
+        raise FjmValueError(f"predict = {predict!r}: expected True or False")
+    return sensor, int(delay_samples)

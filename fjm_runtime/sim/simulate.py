@@ -17,7 +17,7 @@ import numpy as np
 
 from ..sim.loops import LOOPS
 from ..sim.metrics import Metrics, compute_metrics
-from ..sim.sample_step import initial_measurement, initial_step_state, make_layout
+from ..sim.sample_step import check_loop_settings, initial_measurement, initial_step_state, make_layout
 from ..sim.sensor import SensorModel, noise_array
 from ..sim.step import SimulationDivergedError, casadi_functions
 from ..sim.substeps import CoarseIntegrationWarning, resolve_substeps
@@ -161,7 +161,7 @@ def simulate(model, controller, reference, *, duration: float, dt: float = 1e-3,
                                 backend, (substeps, sensor, delay_samples, predict))
     if loop != "sampled":
         raise FjmValueError(f"loop = {loop!r}: expected 'sampled' or 'legacy'")
-    sensor, delay = _check_settings(sensor, delay_samples, predict)
+    sensor, delay = check_loop_settings(sensor, delay_samples, predict)
     subs = resolve_substeps(substeps, model, x, p_true, float(dt))
     L = make_layout(model, controller, float(dt), subs, sensor, delay, predict)
     t = dt * np.arange(n_steps + 1)
@@ -196,17 +196,6 @@ def _simulate_legacy(model, controller, reference, p_true, x, dt, n_steps, progr
     return _finish(model, controller, p_true, L, t, W, AUX, R, settings)
 
 
-def _check_settings(sensor, delay_samples, predict):
-    """The sensor (default ideal) and the delay, checked; one-line FjmValueError otherwise."""
-    if sensor is None:
-        sensor = SensorModel.ideal()
-    if not isinstance(sensor, SensorModel):
-        raise FjmValueError(f"sensor = {sensor!r}: expected a SensorModel (e.g. SensorModel.panda())")
-    if isinstance(delay_samples, bool) or not isinstance(delay_samples, (int, np.integer)) or delay_samples < 0:
-        raise FjmValueError(f"delay_samples = {delay_samples!r}: expected an integer >= 0 (samples of delay)")
-    if not isinstance(predict, (bool, np.bool_)):
-        raise FjmValueError(f"predict = {predict!r}: expected True or False")
-    return sensor, int(delay_samples)
 
 
 def _reference_rows(reference, t, n):
