@@ -39,7 +39,7 @@ def _case():
     return m, ctrl, ref, P, SensorModel.panda(seed=0)
 
 
-def _peer(m, ctrl, ref, P, sensor, subs, threads, duration, x0, seeds):
+def casadi_map_peer(m, ctrl, ref, P, sensor, subs, threads, duration, x0, seeds):
     """The CasADi map peer: ``(wall seconds, x_final (B, 4n))``.
 
     THE same work as ``simulate_batch(..., x0=x0, seeds=seeds, substeps=subs)``: the layout, the
@@ -99,7 +99,7 @@ def bench_sampled_batch(checks: list) -> dict:
                            substeps=out["substeps"], **kw)
     dev = 0.0
     for threads in (1, 2):
-        wall, x_fin = _peer(m, ctrl, ref, P, sensor, out["substeps"], threads, PEER_DURATION, x0, seeds)
+        wall, x_fin = casadi_map_peer(m, ctrl, ref, P, sensor, out["substeps"], threads, PEER_DURATION, x0, seeds)
         out[f"casadi_map_{threads}t_sim_s_per_s"] = RUNS * PEER_DURATION / wall
         dev = max(dev, float(np.max(np.abs(x_fin - short.x_final))))
     checks.append({"key": "sampled_batch.peer_max_abs_dx", "what": "CasADi map peer vs batch final state",
