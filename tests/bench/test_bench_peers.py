@@ -127,7 +127,7 @@ def test_closed_loop_design_is_computed_not_pasted(monkeypatch):
 # -- the bench fails when a peer disagrees ------------------------------------------------------
 
 def test_check_records_and_fails_beyond_tolerance():
-    from bench.__main__ import check, metric_diff
+    from bench.checks import check, metric_diff
     checks = []
     check(checks, "a", "within", 1e-12, 1e-9)
     check(checks, "b", "beyond", 2e-9, 1e-9)
@@ -141,12 +141,14 @@ def test_check_records_and_fails_beyond_tolerance():
 @pytest.mark.parametrize("measured,status", [(0.0, 0), (1.0, 1)])
 def test_bench_exit_status_follows_the_peer_checks(tmp_path, monkeypatch, measured, status):
     import bench.__main__ as bm
+    import bench.sections as sections
+    from bench.checks import check
 
     def fake_batch(reps, slow, checks, n_runs=1000):
-        bm.check(checks, "batch.fake", "a peer vs the generated code", measured, 0.5)
+        check(checks, "batch.fake", "a peer vs the generated code", measured, 0.5)
         return {"n": 1}
 
-    monkeypatch.setattr(bm, "bench_batch", fake_batch)
+    monkeypatch.setattr(sections, "bench_batch", fake_batch)
     monkeypatch.setattr(bm.report, "write_all", lambda r: pytest.fail("a partial run rewrote the READMEs"))
     out = tmp_path / "r.json"
     assert bm.main(["--only", "batch", "--out", str(out)]) == status
@@ -155,7 +157,7 @@ def test_bench_exit_status_follows_the_peer_checks(tmp_path, monkeypatch, measur
 
 
 def test_differing_files_finds_one_changed_byte(tmp_path):
-    from bench.__main__ import differing_files
+    from bench.generated_tree import differing_files
     from fjm_runtime.model import generated_root
     src = generated_root()
     a, b = tmp_path / "a", tmp_path / "b"

@@ -1,0 +1,151 @@
+"""Sections ``alpha_beta`` and ``spatial``: the compiled alpha + beta of the generated code against the
+CasADi AD peer (planar chains, :mod:`bench.alpha_beta`) and the adam-robotics peer (the Panda,
+:mod:`bench.spatial`), checked at random states and through the timed loops' checksums."""
+from __future__ import annotations
+
+import json
+import statistics
+from pathlib import Path
+
+import numpy as np
+
+from .checks import TOLERANCES, check, rel_diff
+from .timing import log
+
+__all__ = ["AB_MODELS", "bench_alpha_beta", "bench_spatial", "timed_loop_error"]
+
+REPO = Path(__file__).resolve().parent.parent
+AB_MODELS = ("link1", "planar2", "planar4", "planar7")
+
+
+def timed_loop_error(m, x, p, libs, iters: int = 8) -> float:
+    """Relative error of the timed C loops' checksum against the ``.casadi`` Functions.
+
+    The timed loop of each library calls alpha + beta ``iters`` times at ``x`` with
+    ``x[0]`` nudged by ``1e-9 (k & 7)`` and sums ``alpha[0] + beta[0, 0]``; the same sum
+    is formed here from the model's Functions, so a loop that times the wrong work fails.
+
+    Parameters
+    ----------
+    m : fjm_runtime.Model
+    x : numpy.ndarray, shape (4n,)
+    p : numpy.ndarray, shape (len(m.param_names),)
+    libs : sequence
+        Timing libraries with ``timed_run(x, p, iters) -> (seconds, checksum)``.
+    iters : int
+
+    Returns
+    -------
+    float
+        The largest relative checksum error over ``libs``.
+    """
+    want = 0.0
+    for k in range(iters):
+        xk = x.copy()
+        xk[0] = x[0] + 1e-9 * (k & 7)
+        want += float(m.alpha(xk, p)[0]) + float(m.beta(xk, p)[0, 0])
+    return max(abs(lib.timed_run(x, p, iters)[1] - want) / max(1.0, abs(want)) for lib in libs)
+
+
+def bench_alpha_beta(work: Path, reps: int, checks: list, models=AB_MODELS) -> dict:
+    import fjm_runtime
+    from .alpha_beta import build_generated, build_peer, time_interleaved
+    tol, tol_chk = TOLERANCES["alpha_beta"], TOLERANCES["alpha_beta_checksum"]
+    res = {}
+    for name in models:
+        m = fjm_runtime.load(name)
+        rng = np.random.default_rng(1)
+        xs = [rng.normal(scale=0.5, size=m.nx) for _ in range(3)]
+        x = xs[0]
+        p = m.params_array()
+        log(f"alpha+beta {name}: compiling generated and peers ...")
+        gen = build_generated(m, work / "ab")
+        # the .casadi Functions (what fjm_runtime loads) at the test states
+        refs = [(m.alpha(xi, p), m.beta(xi, p)) for xi in xs]
+        gen_out = [gen(xi, p) for xi in xs]
+        err_c = max(max(rel_diff(a, ra), rel_diff(b, rb)) for (a, b), (ra, rb) in zip(gen_out, refs))
+        entry = {"generated_c_vs_casadi": err_c}
+        check(checks, f"alpha_beta.{name}.generated_c",
+              f"{name}: generated C (`generated/{name}/{name}.c`) vs the generated `.casadi` Functions",
+              err_c, tol)
+        peers, libs = {}, [gen]
+        for variant in ("structured", "generic"):
+            peer, gcc_s, c_bytes = build_peer(name, variant, work / "ab", m.n, m.nx)
+            err = 0.0
+            for xi, (ga, gb), (ra, rb) in zip(xs, gen_out, refs):
+                a, b = peer(xi, p)
+                err = max(err, rel_diff(a, ga), rel_diff(b, gb), rel_diff(a, ra), rel_diff(b, rb))
+            peers[variant] = {"gcc_seconds": gcc_s, "c_bytes": c_bytes, "max_rel_diff_vs_generated": err}
+            check(checks, f"alpha_beta.{name}.{variant}",
+                  f"{name}: AD peer ({variant}) vs generated C and `.casadi`", err, tol)
+            libs.append(peer)
+        # the timed loops compute what they claim: checksum of 8 calls vs the .casadi Functions
+        chk_err = timed_loop_error(m, x, p, libs)
+        check(checks, f"alpha_beta.{name}.timed_loop",
+              f"{name}: checksum of the timed C loops (generated and peers) vs the `.casadi` Functions",
+              chk_err, tol_chk)
+        us = time_interleaved(libs, x, p, reps=3 * reps)
+        entry["generated_us"] = us[0]
+        for variant, t in zip(("structured", "generic"), us[1:]):
+            peers[variant]["us"] = t
+        best = min(peers, key=lambda v: peers[v]["us"])
+        entry["peer_us"] = peers[best]["us"]
+        entry["peer_variant"] = best
+        entry["ratio"] = entry["generated_us"] / entry["peer_us"]
+        entry["peers"] = peers
+        res[name] = entry
+        log(f"  {name}: generated {entry['generated_us']:.3f} us, peer ({best}) {entry['peer_us']:.3f} us")
+    return res
+
+
+def bench_spatial(work: Path, reps: int, checks: list, name: str = "panda") -> dict:
+    """alpha + beta of the spatial ``name``: generated C vs the adam-robotics + CasADi AD peer."""
+    import fjm_runtime
+    from .alpha_beta import build_generated, time_interleaved
+    from .ccutil import compile_object
+    from .spatial import build_adam_peer, generated_alpha_beta_c
+    tol, tol_chk = TOLERANCES["alpha_beta"], TOLERANCES["alpha_beta_checksum"]
+    m = fjm_runtime.load(name)
+    p = m.params_array({"m_load": 0.0})  # adam knows no payload: compare without one
+    rng = np.random.default_rng(1)
+    xs = [rng.normal(scale=0.5, size=m.nx) for _ in range(3)]
+    x = xs[0]
+    log(f"spatial {name}: gcc -O2 of the shipped {name}.c (every function it ships) ...")
+    obj = work / "spatial" / f"{name}.o"
+    obj.parent.mkdir(parents=True, exist_ok=True)
+    gcc_all = statistics.median(compile_object(REPO / "generated" / name / f"{name}.c", obj)
+                                for _ in range(max(1, reps // 2)))
+    gen = build_generated(m, work / "spatial", obj=obj)
+    ab_only = [generated_alpha_beta_c(m, work / "spatial") for _ in range(max(1, reps // 2))]
+    log(f"spatial {name}: building the adam-robotics peer (CasADi AD, CSE, codegen, gcc -O2) ...")
+    peer, info = build_adam_peer(m, work / "spatial")
+    refs = [(m.alpha(xi, p), m.beta(xi, p)) for xi in xs]
+    gen_out = [gen(xi, p) for xi in xs]
+    err_c = max(max(rel_diff(a, ra), rel_diff(b, rb)) for (a, b), (ra, rb) in zip(gen_out, refs))
+    check(checks, f"spatial.{name}.generated_c",
+          f"{name}: generated C (`generated/{name}/{name}.c`) vs the generated `.casadi` Functions", err_c, tol)
+    err = 0.0
+    for xi, (ga, gb), (ra, rb) in zip(xs, gen_out, refs):
+        a, b = peer(xi, p)
+        err = max(err, rel_diff(a, ga), rel_diff(b, gb), rel_diff(a, ra), rel_diff(b, rb))
+    check(checks, f"spatial.{name}.adam_peer",
+          f"{name}: adam-robotics + CasADi AD peer (same URDF) vs generated C and `.casadi`, alpha and beta",
+          err, tol)
+    chk_err = timed_loop_error(m, x, p, (gen, peer))
+    check(checks, f"spatial.{name}.timed_loop",
+          f"{name}: checksum of the timed C loops (generated and adam peer) vs the `.casadi` Functions",
+          chk_err, tol_chk)
+    gen_us, peer_us = time_interleaved([gen, peer], x, p, reps=3 * reps)
+    log(f"  {name}: generated {gen_us:.2f} us, adam peer {peer_us:.2f} us")
+    manifest = json.loads((REPO / "generated" / name / "manifest.json").read_text())
+    return {
+        "n": int(m.n),
+        "generated_us": gen_us, "peer_us": peer_us, "ratio": gen_us / peer_us,
+        "generated_c_bytes_all": int(manifest["c_sources"][f"{name}.c"]), "generated_gcc_seconds_all": gcc_all,
+        "generated_c_bytes": int(ab_only[0]["c_bytes"]),
+        "generated_gcc_seconds": statistics.median(a["gcc_seconds"] for a in ab_only),
+        "generated_ops": {q: int(manifest["functions"][q]["operations"]) for q in ("alpha", "beta")},
+        "peer_c_bytes": int(info["c_bytes"]), "peer_gcc_seconds": info["gcc_seconds"],
+        "peer_build_seconds": info["build_seconds"], "peer_ops": info["ops"],
+        "max_rel_diff_peer_vs_generated": err,
+    }
