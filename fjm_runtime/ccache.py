@@ -11,7 +11,10 @@ compiler, flags)``. The JSON records the SHA-256 of the shared object; an entry
 whose record is missing, unreadable, for another key, or whose bytes do not
 match, is rebuilt, never loaded. New entries are written to a temporary file
 and renamed into place (never overwritten in place), so concurrent processes
-and already-loaded libraries are safe.
+and already-loaded libraries are safe. A build holds an exclusive lock on
+``<key>.lock`` (``fcntl.flock``, POSIX): a second process that wants the same
+entry (e.g. another pytest-xdist worker) waits for the first build and loads
+its result instead of compiling the same source again.
 
 :func:`fold_driver` is the one C driver loop (runs x samples, OpenMP across runs)
 that folds a code-generated step; the single-run and the batch loops both use it.
@@ -25,10 +28,16 @@ import shutil
 import subprocess
 import tempfile
 import threading
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Optional, Sequence, Tuple
 
 import casadi as ca
+
+try:
+    import fcntl
+except ImportError:  # not POSIX: no inter-process lock (builds may repeat; entries stay safe)
+    fcntl = None
 
 #: Default compiler flags (also part of the cache key).
 DEFAULT_FLAGS: Tuple[str, ...] = ("-O2", "-fPIC", "-shared")
@@ -103,6 +112,20 @@ def _entry_valid(so: Path, meta: Path, key: str) -> bool:
         return False
 
 
+@contextmanager
+def _entry_lock(root: Path, key: str):
+    """Hold an exclusive inter-process lock on the entry ``key`` (blocks while another holds it)."""
+    if fcntl is None:
+        yield
+        return
+    with open(root / f"{key}.lock", "a") as fh:
+        fcntl.flock(fh.fileno(), fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(fh.fileno(), fcntl.LOCK_UN)
+
+
 def _build(source: str, key: str, flags: Sequence[str], root: Path, name: str) -> Path:
     so, meta = root / f"{key}.so", root / f"{key}.json"
     with tempfile.TemporaryDirectory(prefix="fjm-build-", dir=root) as tmp:
@@ -136,7 +159,10 @@ def compile_library(source: str, name: str, flags: Sequence[str] = DEFAULT_FLAGS
         so, meta = root / f"{key}.so", root / f"{key}.json"
         if _entry_valid(so, meta, key):
             return so
-        return _build(source, key, flags, root, name)
+        with _entry_lock(root, key):
+            if _entry_valid(so, meta, key):      # built by another process while we waited
+                return so
+            return _build(source, key, flags, root, name)
 
 
 def compile_function(fn: ca.Function, flags: Sequence[str] = DEFAULT_FLAGS,
@@ -174,8 +200,15 @@ def compile_function(fn: ca.Function, flags: Sequence[str] = DEFAULT_FLAGS,
             except RuntimeError:
                 ext = None
         if ext is None:
-            so = _build(source, key, flags, root, fn.name())
-            ext = ca.external(fn.name(), str(so))
+            with _entry_lock(root, key):
+                if _entry_valid(so, meta, key):  # built by another process while we waited
+                    try:
+                        ext = ca.external(fn.name(), str(so))
+                    except RuntimeError:
+                        ext = None
+                if ext is None:
+                    so = _build(source, key, flags, root, fn.name())
+                    ext = ca.external(fn.name(), str(so))
         _memo[memo_key] = ext
         return ext
 

@@ -100,3 +100,32 @@ def test_cache_key_changes_with_the_source(private_cache):
     closed_loop_runner(m, c2, 1e-3, 10)
     closed_loop_runner(m, c1, 1e-3, 10)
     assert len(_entries(cache_dir())[0]) == 2
+
+
+_BUILDER = """
+import sys
+from fjm_runtime.ccache import compile_library
+print(compile_library("double fjm_lock_probe(double x) { return 2.0 * x; }\\n", "fjm_lock_probe"))
+"""
+
+
+def test_concurrent_processes_build_an_entry_once(private_cache, tmp_path):
+    """Two processes asking for the same entry at once: one compiles, the other waits for it (the lock)."""
+    import ctypes
+    log = tmp_path / "cc.log"
+    cc = tmp_path / "slow-cc"   # a compiler that logs each call and is slow enough for the two to overlap
+    cc.write_text(f"#!/bin/sh\necho \"$@\" >> '{log}'\nsleep 1\nexec gcc \"$@\"\n")
+    cc.chmod(0o755)
+    env = dict(os.environ, FJM_CACHE=str(private_cache), CC=str(cc), PYTHONPATH=str(REPO))
+    procs = [subprocess.Popen([sys.executable, "-c", _BUILDER], env=env, cwd=str(REPO), stdout=subprocess.PIPE,
+                              stderr=subprocess.PIPE, text=True) for _ in range(2)]
+    outs = [p.communicate(timeout=120) for p in procs]
+    assert all(p.returncode == 0 for p in procs), [o[1] for o in outs]
+    paths = {o[0].strip().splitlines()[-1] for o in outs}
+    assert len(paths) == 1, paths
+    assert len(log.read_text().splitlines()) == 1, log.read_text()   # compiled once, not twice
+    (so,), (meta,) = _entries(private_cache)
+    assert str(so) in paths and json.loads(meta.read_text())["function"] == "fjm_lock_probe"
+    fn = ctypes.CDLL(str(so)).fjm_lock_probe
+    fn.restype, fn.argtypes = ctypes.c_double, [ctypes.c_double]
+    assert fn(1.5) == 3.0
