@@ -33,8 +33,9 @@ check-generated: $(STAMP)
 	PYTHONHASHSEED=0 $(PY) -m derive --check
 	PYTHONHASHSEED=12345 $(PY) -m derive --check
 
+# one file per worker at a time (module fixtures built once), costliest files first (tests/conftest.py)
 test: $(STAMP)
-	$(PY) -m pytest -q -n auto
+	$(PY) -m pytest -q -n auto --dist loadfile --no-loadscope-reorder
 
 demo: $(STAMP)
 	$(PY) -m fjm_runtime.cli figures --out out
