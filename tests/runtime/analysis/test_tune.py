@@ -36,6 +36,18 @@ def planar2():
     return fjm.load("planar2")
 
 
+_SYNTH = {}
+
+
+def _link1_gain(link1, lam, **extra):
+    """``synthesize_gains(link1, K_NOM, REG box, lam, **extra)``, computed once per module: it is deterministic
+    and several tests check different properties of the same synthesized gain (~2 s each)."""
+    key = (lam, tuple(sorted(extra.items())))
+    if key not in _SYNTH:
+        _SYNTH[key] = synthesize_gains(link1, {"K": K_NOM}, **extra, **_link1_kwargs(REG, lam))
+    return _SYNTH[key]
+
+
 def _link1_kwargs(box=REG, lam=8.0):
     ref, E = box
     return dict(param_box=K_BOX, reference_bounds=ref.derivative_bounds()[:, 0], error_bounds=E, lam=lam,
@@ -100,7 +112,7 @@ def test_paper_bound_in_true_coordinates(link1, box, published):
 @pytest.mark.parametrize("lam", [8.0, 20.0, 30.0])
 def test_link1_certificate_sign(link1, lam):
     kw = _link1_kwargs(REG, lam)
-    res = synthesize_gains(link1, {"K": K_NOM}, **kw)
+    res = _link1_gain(link1, lam)
     assert res.feasible, res.reason
     assert res.certificate[0] <= -res.eta[0] + 1e-9
     assert res.certificate[0] < 0
@@ -171,7 +183,7 @@ def _check_witness(model, nominal, kw, k_low):
 
 def test_link1_witness_direct_evaluation(link1):
     kw = _link1_kwargs(REG, 20.0)
-    res = synthesize_gains(link1, {"K": K_NOM}, **kw)
+    res = _link1_gain(link1, 20.0)
     _check_witness(link1, {"K": K_NOM}, kw, 0.8 * res.k_s)
 
 
@@ -215,7 +227,7 @@ def _trajectory_check(res, E, eta, c):
 def test_link1_trajectory_reaching(link1, K_true):
     ref, E = REG
     kw = _link1_kwargs(REG, 8.0)
-    gain = synthesize_gains(link1, {"K": K_NOM}, **kw)
+    gain = _link1_gain(link1, 8.0)
     ctrl = make_controller("smc", link1, {"K": K_NOM}, lam=8.0, k_s=gain.k_s, delta=gain.delta,
                            beta_hat=kw["beta_hat"])
     e0 = 0.8 * np.asarray(E)
@@ -311,8 +323,8 @@ def test_cli_tune_infeasible_is_one_stderr_line(capsys):
 def test_disturbance_raises_gain_by_bound_over_beta_hat(link1):
     """link1: C J g = K_nom / (J_l J_m) and G = (C J g) beta_hat, so the gain grows by exactly D / beta_hat."""
     kw = _link1_kwargs(REG, 8.0)
-    r0 = synthesize_gains(link1, {"K": K_NOM}, **kw)
-    r1 = synthesize_gains(link1, {"K": K_NOM}, disturbance_bound=2.0, **kw)
+    r0 = _link1_gain(link1, 8.0)
+    r1 = _link1_gain(link1, 8.0, disturbance_bound=2.0)
     assert (r1.k_s[0] - r0.k_s[0]) == pytest.approx(2.0 / kw["beta_hat"], rel=1e-6)
     assert certificate(link1, r0.k_s, {"K": K_NOM}, disturbance_bound=2.0, **kw)["certificate"][0] > 0
     assert r1.certificate[0] <= -r1.eta[0] + 1e-9
@@ -334,7 +346,7 @@ def test_link1_trajectory_reaching_with_coulomb_friction(link1):
     from fjm_runtime.control.disturbance import with_motor_disturbance
     ref, E = REG
     kw = _link1_kwargs(REG, 8.0)
-    gain = synthesize_gains(link1, {"K": K_NOM}, disturbance_bound=2.0, **kw)
+    gain = _link1_gain(link1, 8.0, disturbance_bound=2.0)
     ctrl = make_controller("smc", link1, {"K": K_NOM}, lam=8.0, k_s=gain.k_s, delta=gain.delta,
                            beta_hat=kw["beta_hat"])
     x0 = link1_T_inverse(ref(0.0)[:4, 0] + 0.8 * np.asarray(E), {"K": K_NOM})
