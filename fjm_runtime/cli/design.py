@@ -1,6 +1,7 @@
 """``fjm design MODEL``: search the gains for a rate, delay and sensor model over many sampled closed loops."""
 from __future__ import annotations
 
+import argparse
 import json
 import sys
 import time
@@ -27,7 +28,9 @@ def add_parser(sub) -> None:
     p.add_argument("--duration", type=float, default=10.0, help="final run length, s (default 10)")
     p.add_argument("--seed", type=int, default=0, help="draws and noise seed (default 0)")
     p.add_argument("--threads", type=int, default=None, help="OpenMP threads (default all cores)")
-    p.add_argument("--simd", action="store_true", help="SIMD batch (long build for big models)")
+    p.add_argument("--simd", action=argparse.BooleanOptionalAction, default=True,
+                   help="SIMD batch (default; its C build is cached, the first one takes minutes for the Panda); "
+                        "--no-simd: the scalar batch")
     p.add_argument("--predict", action="store_true", help="loops run with delay compensation (the sample step's "
                                                            "nominal-model prediction)")
     p.add_argument("--task", default="auto", choices=("auto", "sine"),

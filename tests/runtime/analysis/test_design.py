@@ -70,3 +70,27 @@ def test_tiny_design_is_deterministic_and_simulate_reads_it(tmp_path):
                  sensor=SensorModel.panda(seed=5), delay_samples=1)
     assert rep["diverged"] is False
     assert np.allclose(rep["rms_second_half"], rms_second_half(r), rtol=1e-9, atol=0)
+
+
+def test_cost_sums_the_excess_over_joints():
+    """Two joints over the jitter limit cost twice one: a better gain on either joint counts."""
+    n = 7
+    jm = {"rms_second_half": np.full((3, n), 1e-3), "time_at_limit": np.zeros((3, n)),
+          "torque_jitter": np.ones((3, n))}
+    jm["torque_jitter"][1, 0] = 6.0
+    jm["torque_jitter"][2, [0, 1]] = 6.0
+    c = run_cost(SimpleNamespace(joint_metrics=jm, diverged=np.zeros(3, bool)))
+    assert c[2] - c[0] == pytest.approx(2 * (c[1] - c[0])) and c[1] - c[0] == pytest.approx(PENALTY)
+
+
+def test_moves_are_per_joint_and_keep_the_k_lin_floor():
+    from fjm_runtime.analysis.design import LIN_FLOOR, combine_moves, move_gain
+    g = {"lam": 80.0, "k_lin": [400.0, 200.0], "k_s": [1e3, 2e3], "delta": [5.0, 10.0]}
+    h = move_gain(g, ("k_s", 1), 2.0)
+    assert h["k_s"] == [1e3, 4e3] and g["k_s"] == [1e3, 2e3]          # the input is not changed
+    low = move_gain(g, ("k_lin", 1), 1 / 16)
+    assert low["k_lin"] == [400.0, LIN_FLOOR * 80.0]                    # 12.5 raised to the floor
+    up = move_gain(g, "lam", 4.0)
+    assert up["lam"] == 320.0 and up["k_lin"] == [LIN_FLOOR * 320.0] * 2
+    both = combine_moves(g, [(("delta", 0), 2.0), (("k_lin", 0), 0.5)])
+    assert both["delta"] == [10.0, 10.0] and both["k_lin"] == [200.0, 200.0]
