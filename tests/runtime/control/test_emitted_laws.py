@@ -58,6 +58,15 @@ class ReferenceLaw:
         """A model Function of (x, p) as an array (the raw casadi.Function: faster than the Model wrapper)."""
         return self.m.functions[q](x, p).full()
 
+    def ev_all(self, x, p):
+        """``T``, ``beta`` and ``alpha`` at (x, p) in one call (the three model Functions composed as they are)."""
+        if not hasattr(self, "_tba"):
+            import casadi as ca
+            xs, ps = ca.MX.sym("x", self.m.nx), ca.MX.sym("p", len(self.m.param_names))
+            self._tba = ca.Function("reference_T_beta_alpha", [xs, ps],
+                                    [self.m.functions[q](xs, ps) for q in ("T", "beta", "alpha")])
+        return [v.full() for v in self._tba(x, p)]
+
     def p_hat(self, z):
         p = self.p_nom.copy()
         if self.kind == "adaptive":
@@ -67,7 +76,8 @@ class ReferenceLaw:
     def law(self, x, z, r):
         n = self.n
         p = self.p_hat(z)
-        y = self.ev("T", x, p).reshape(4, n)
+        T, beta, alpha = self.ev_all(x, p)
+        y = T.reshape(4, n)
         e = y - r[:4]
         if self.integral:
             s = self.c[0] * z[:n] + self.c[1] * e[0] + self.c[2] * e[1] + self.c[3] * e[2] + e[3]
@@ -77,8 +87,8 @@ class ReferenceLaw:
             lin = self.c[0] * e[1] + self.c[1] * e[2] + self.c[2] * e[3]
         psi = np.sign(s) if self.sign else sat(s / self.delta)
         nu = r[4] - lin - self.k_s * psi - self.k_lin * s
-        B = self.ev("beta", x, p) if self.beta_hat is None else self.beta_hat * np.eye(n)
-        u_cmd = self.ev("alpha", x, p).ravel() + B @ nu
+        B = beta if self.beta_hat is None else self.beta_hat * np.eye(n)
+        u_cmd = alpha.ravel() + B @ nu
         u = u_cmd if self.u_max is None else np.clip(u_cmd, -self.u_max, self.u_max)
         return u, u_cmd, s
 
