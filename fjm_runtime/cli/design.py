@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 import time
 from pathlib import Path
@@ -57,6 +58,7 @@ def run(args) -> int:
         task = {"reference": ref, "x0": demo_task.rest_state(m, ref(0.0)[0], m.default_params),
                 "task": {"kind": "panda ready-pose sines (the demo's)", "offset": list(demo_task.READY),
                          "amplitude": list(demo_task.AMPLITUDE), "omega": list(demo_task.OMEGA),
+                         "phase": -0.5 * math.pi,
                          "start": "at rest holding gravity (nominal parameters)"}}
     t0 = time.perf_counter()
     out = design(m, kind=args.controller, sensing=args.sensing, rate=args.rate, delay=args.delay_samples,

@@ -36,7 +36,9 @@ def add_parser(sub) -> None:
                           "sliding surface; fl: plain feedback linearization; adaptive: integral surface "
                           "with an online stiffness estimate projected onto [--k-min, --k-max] "
                           "(default: the kind of --gains, else smc)")
-    sim.add_argument("--reference", default="sine", help=f"one of {', '.join(REFERENCE_KINDS)} (default sine)")
+    sim.add_argument("--reference", default=None,
+                     help=f"one of {', '.join(REFERENCE_KINDS)}, or 'task': the task the gains were designed on "
+                          "(default: 'task' when the gains come from a design file that records one, else sine)")
     sim.add_argument("--q-d", type=float, default=1.0, help="set point for step/constant, rad (default 1)")
     sim.add_argument("--rise-time", type=float, default=2.0, help="smooth step duration, s (default 2)")
     sim.add_argument("--amplitude", type=float, default=0.5, help="sine amplitude, rad (default 0.5)")
@@ -242,6 +244,41 @@ def _script_report(res, settings: dict, diverged: Optional[SimulationDivergedErr
     return out
 
 
+def design_task(m, task: dict):
+    """``(reference, x0)`` of a design file's ``reference`` entry (joint-space sines), or ``None``.
+
+    The gains of ``fjm design`` hold for the task they were searched on: per-joint sines
+    ``offset + amplitude sin(omega t + phase)``; ``start`` "at rest holding gravity" means the
+    motors at ``q + K^-1 G(q)`` for the NOMINAL parameters at ``t = 0``.
+    """
+    from ..control.references import Sinusoid
+    if not isinstance(task, dict) or not all(k in task for k in ("offset", "amplitude", "omega")):
+        return None
+    ref = Sinusoid(list(task["amplitude"]), list(task["omega"]), n=int(m.n), offset=list(task["offset"]),
+                   phase=float(task.get("phase", 0.0)))
+    x0 = None
+    if "holding gravity" in str(task.get("start", "")):
+        from ..experiments.panda import rest_state  # the demo's start: cli sits on top, like experiments
+        x0 = rest_state(m, ref(0.0)[0], m.default_params)
+    return ref, x0
+
+
+def _reference(m, args, spec):
+    """``(reference, x0)``: ``--reference`` (None: the gains file's task if it records one, else sine)."""
+    task = design_task(m, spec.get("reference")) if args.reference in (None, "task") else None
+    if args.reference == "task" and task is None:
+        raise FjmValueError("--reference task: the gains (file or shipped design) record no task; expected "
+                            f"one of {', '.join(REFERENCE_KINDS)}")
+    if task is not None:
+        args.reference = "task"
+        return task
+    args.reference = args.reference or "sine"
+    ref_kw = {"sine": {"amplitude": args.amplitude, "omega": args.omega},
+              "step": {"q_d": args.q_d, "rise_time": args.rise_time},
+              "constant": {"q_d": args.q_d}}.get(args.reference, {})
+    return make_reference(args.reference, m.n, **ref_kw), None
+
+
 def run(args) -> int:
     """Run ``fjm simulate``; returns the exit status (3: the simulation diverged, without --json)."""
     from .. import load
@@ -253,10 +290,7 @@ def run(args) -> int:
     sensor = _sensor(args)
     spec = _gains_file(args)
     kind, dt = spec["kind"], _period(args)
-    ref_kw = {"sine": {"amplitude": args.amplitude, "omega": args.omega},
-              "step": {"q_d": args.q_d, "rise_time": args.rise_time},
-              "constant": {"q_d": args.q_d}}.get(args.reference, {})
-    ref = make_reference(args.reference, m.n, **ref_kw)
+    ref, x0 = _reference(m, args, spec)
     ctrl, gain, k_s, delta = _build_controller(m, args, nominal, ref, kind, spec["gains"])
     args.predict = bool(args.predict or spec.get("predict", False))  # gains designed with prediction keep it
     progress = None if (args.quiet or args.json) else stderr_progress(f"simulating {args.model} ({args.duration:g} s)")
@@ -266,7 +300,7 @@ def run(args) -> int:
                 "true_params": dict(zip(m.param_names, m.params_array(true).tolist())),
                 "gains": str(args.gains) if args.gains is not None else spec.get("file")}
     try:
-        res = simulate(m, ctrl, ref, duration=args.duration, dt=dt, true_params=true, progress=progress,
+        res = simulate(m, ctrl, ref, duration=args.duration, dt=dt, true_params=true, progress=progress, x0=x0,
                        substeps=args.substeps, sensor=sensor, delay_samples=args.delay_samples,
                        predict=args.predict)
     except SimulationDivergedError as exc:

@@ -56,3 +56,32 @@ def test_non_finite_noise_level_in_a_file(capsys, tmp_path):
     f.write_text('{"q": 1e999}')
     status, _, err = _run(capsys, ["simulate", "link1", "--duration", "0.01", "--json", "--noise", str(f)])
     assert status == 2 and "SensorModel.q" in err and len(err.strip().splitlines()) == 1
+
+
+def test_designed_gains_run_on_their_task_by_default():
+    """The shipped Panda design holds for the task it was searched on: `fjm simulate` uses that task
+    (ready-pose sines from rest holding gravity) unless --reference says otherwise."""
+    from types import SimpleNamespace
+
+    import numpy as np
+
+    import fjm_runtime
+    from fjm_runtime.cli.simulate import _reference, design_task
+    from fjm_runtime.control.designed import designed_gains
+    from fjm_runtime.experiments import panda as demo
+    from fjm_runtime.validation import FjmValueError
+    m = fjm_runtime.load("panda")
+    spec = designed_gains("panda", "ismc", "torque", 1000, 1)
+    ref, x0 = design_task(m, spec["reference"])
+    assert np.allclose(ref(0.0)[0], np.subtract(demo.READY, demo.AMPLITUDE))      # from rest at READY - A
+    assert np.allclose(ref(0.0)[1], 0.0) and np.allclose(ref(1.3)[0], demo.reference()(1.3)[0])
+    assert np.allclose(x0[7:14], 0) and np.max(np.abs(x0[14:21] - x0[:7])) > 1e-4   # motors wound up on gravity
+    assert np.array_equal(x0, demo.rest_state(m, np.subtract(demo.READY, demo.AMPLITUDE), m.default_params))
+    args = SimpleNamespace(reference=None, amplitude=0.5, omega=1.0, q_d=1.0, rise_time=2.0)
+    got, x0_cli = _reference(m, args, spec)
+    assert args.reference == "task" and np.array_equal(x0_cli, x0)
+    args = SimpleNamespace(reference="sine", amplitude=0.5, omega=1.0, q_d=1.0, rise_time=2.0)
+    assert _reference(m, args, spec)[1] is None
+    args = SimpleNamespace(reference="task", amplitude=0.5, omega=1.0, q_d=1.0, rise_time=2.0)
+    with pytest.raises(FjmValueError, match="record no task"):
+        _reference(m, args, {"gains": {}})
