@@ -124,7 +124,8 @@ class Model:
         manifest = self.directory / "manifest.json"
         if not manifest.is_file():
             what = "no such directory" if not self.directory.is_dir() else "no manifest.json in it"
-            raise FjmValueError(f"model directory {str(self.directory)!r}: {what} (expected a generated "
+            given = directory if isinstance(directory, str) else str(self.directory)  # as typed: Path drops a '/'
+            raise FjmValueError(f"model directory {given!r}: {what} (expected a generated "
                                 "model directory, <dir>/manifest.json)")
         try:
             self.manifest = json.loads(manifest.read_text())
@@ -251,7 +252,7 @@ class Model:
 
 @lru_cache(maxsize=None)
 def _load_cached(directory: str) -> Model:
-    return Model(Path(directory))
+    return Model(directory)
 
 
 def load(name: str) -> Model:
