@@ -55,12 +55,12 @@ class Linearization:
         and ``W[j, i]`` are the same symbol).
     rhs3 : sympy.Matrix, shape (n, 1)
         ``r3 = -(h + K (q - q_m))``, depends on (x, p).
-    rhs4 : sympy.Matrix, shape (n, 1)
-        ``-R1``, depends on (x, p, Y3).
+    rhs4 : sympy.Matrix, shape (n, 1), or None
+        ``-R1``, depends on (x, p, Y3); only with ``linearize(..., symbolic=True)``.
     outputs : dict str -> sympy.Matrix
-        ``f`` (4n, 1), ``g`` (4n, n), ``T`` (4n, 1), ``alpha`` (n, 1),
-        ``beta`` (n, n), ``energy`` (1, 1), ``inertia`` (n, n), and the symbolic
-        brackets ``ad`` (4n, 4n) only when requested (see :func:`linearize`).
+        ``f`` (4n, 1), ``g`` (4n, n), ``T`` (4n, 1), ``beta`` (n, n), ``energy`` (1, 1),
+        ``inertia`` (n, n); the implicit ``alpha`` (n, 1) and the symbolic brackets
+        ``ad`` (4n, 4n) only when requested (see :func:`linearize`).
         They may contain the implicit symbols above.
     """
 
@@ -69,7 +69,7 @@ class Linearization:
     Y4: Tuple[sp.Symbol, ...]
     W: sp.Matrix
     rhs3: sp.Matrix
-    rhs4: sp.Matrix
+    rhs4: Optional[sp.Matrix]
     outputs: Dict[str, sp.Matrix] = field(default_factory=dict)
 
 
@@ -173,8 +173,9 @@ def complete_plant(m: FlexibleJointModel) -> Linearization:
                          outputs={"inertia": M, "coupling": S, "rhs": rhs, "energy": sp.Matrix([[energy]])})
 
 
-def linearize(m: FlexibleJointModel, symbolic_brackets: Optional[bool] = None) -> Linearization:
-    """Derive f, g, T, alpha, beta (structured) and, if asked, the symbolic brackets.
+def linearize(m: FlexibleJointModel, symbolic_brackets: Optional[bool] = None,
+              symbolic: Optional[bool] = None) -> Linearization:
+    """Derive f, g, T, beta and, if asked, the implicit symbolic alpha and brackets.
 
     A complete model (``m.coupling`` set) has no static feedback linearization:
     it gets :func:`complete_plant` instead.
@@ -186,10 +187,17 @@ def linearize(m: FlexibleJointModel, symbolic_brackets: Optional[bool] = None) -
         Also form ``outputs["ad"]`` in SymPy (:func:`brackets_implicit`). Default:
         only for one-joint models (cheap; their report prints it). The emitted
         ``ad`` Function never uses it (CasADi AD from f and g).
+    symbolic : bool, optional
+        Also form ``R1``, ``R2`` and ``alpha = N^-1 R2`` in SymPy (the implicit form of the
+        module docstring; ``rhs4 = -R1`` binds ``Y4``). Default: only for one-joint models,
+        whose report prints them. The emitted ``T`` and ``alpha`` never use them: they are
+        CasADi AD of the inverse dynamics (:mod:`derive.emit.dynamics`); ``symbolic=True``
+        is the independent route the tests compare them with.
 
     Returns
     -------
     Linearization
+        Without ``symbolic``: ``rhs4`` is None and ``outputs`` has no ``alpha``.
     """
     if m.coupling is not None:
         return complete_plant(m)
@@ -199,36 +207,46 @@ def linearize(m: FlexibleJointModel, symbolic_brackets: Optional[bool] = None) -
     Jinv = _diag([1 / j for j in m.Jm])
     Y3, Y4 = _implicit("y3", n), _implicit("y4", n)
     acc_m = Jinv * (Kd * (q - qm) - Bd * dqm)  # motor acceleration, explicit
-
-    seeds = {}
-    for i in range(n):
-        seeds.update({m.q[i]: m.dq[i], m.dq[i]: Y3[i], m.qm[i]: m.dqm[i], m.dqm[i]: acc_m[i],
-                      Y3[i]: Y4[i]})
-    d_time = DirectionalDerivative(seeds, program=m.program, tag="t")  # d/dt along f
-
-    r3 = -(m.h + Kd * (q - qm))
-    # E0 = D Y3 - r3 = 0.  E1 = d/dt E0 = D Y4 + R1 with R1 = D' Y3 - r3' (r3 has no Y3).
-    R1 = d_time(m.D) * sp.Matrix(Y3) - d_time(r3)
-    # E2 = d/dt E1 = D A + R2 with R2 = D' Y4 + R1' (R1 has no Y4, so no A term hides in R1').
-    R2 = d_time(m.D) * sp.Matrix(Y4) + d_time(R1)
-
-    # b = L_g y4 = D^-1 N with N = -(dR1/d dq_m) J_m^-1 (y3 does not depend on dq_m).
-    dR1 = []
-    for j in range(n):
-        d_u = DirectionalDerivative({m.dqm[j]: sp.Integer(1)}, program=m.program, tag=f"u{j + 1}")
-        dR1.append(d_u(R1))
-    N = (-sp.Matrix.hstack(*dR1) * Jinv).applyfunc(sp.simplify)
-    if not N.is_diagonal() or any(N[i, i].has(*[s for s, _ in m.program.definitions]) for i in range(n)):
-        raise ValueError(f"{m.name}: expected L_g y4 = D^-1 K J_m^-1 with K diagonal, got N = {N}")
-    # Named, so beta = Ninv D costs one product per entry (not a division each).
-    Ninv = _diag([m.program.define(f"Ninv{i + 1}", 1 / N[i, i]) for i in range(n)])
-    beta = Ninv * m.D
-    alpha = Ninv * R2
-
-    W = inverse_symbols(n)
+    if symbolic is None:
+        symbolic = n == 1
     if symbolic_brackets is None:
         symbolic_brackets = n == 1
-    extra = {"ad": brackets_implicit(m, W, d_time, Y3, 3)} if symbolic_brackets else {}
+
+    r3 = -(m.h + Kd * (q - qm))
+    extra: Dict[str, sp.Matrix] = {}
+    rhs4 = None
+    if symbolic or symbolic_brackets:
+        seeds = {}
+        for i in range(n):
+            seeds.update({m.q[i]: m.dq[i], m.dq[i]: Y3[i], m.qm[i]: m.dqm[i], m.dqm[i]: acc_m[i],
+                          Y3[i]: Y4[i]})
+        d_time = DirectionalDerivative(seeds, program=m.program, tag="t")  # d/dt along f
+    if symbolic:
+        # E0 = D Y3 - r3 = 0.  E1 = d/dt E0 = D Y4 + R1 with R1 = D' Y3 - r3' (r3 has no Y3).
+        R1 = d_time(m.D) * sp.Matrix(Y3) - d_time(r3)
+        # E2 = d/dt E1 = D A + R2 with R2 = D' Y4 + R1' (R1 has no Y4, so no A term hides in R1').
+        R2 = d_time(m.D) * sp.Matrix(Y4) + d_time(R1)
+        # b = L_g y4 = D^-1 N with N = -(dR1/d dq_m) J_m^-1 (y3 does not depend on dq_m).
+        dR1 = []
+        for j in range(n):
+            d_u = DirectionalDerivative({m.dqm[j]: sp.Integer(1)}, program=m.program, tag=f"u{j + 1}")
+            dR1.append(d_u(R1))
+        N = (-sp.Matrix.hstack(*dR1) * Jinv).applyfunc(sp.simplify)
+        if not N.is_diagonal() or any(N[i, i].has(*[s for s, _ in m.program.definitions]) for i in range(n)):
+            raise ValueError(f"{m.name}: expected L_g y4 = D^-1 K J_m^-1 with K diagonal, got N = {N}")
+        ninv = [1 / N[i, i] for i in range(n)]
+        rhs4 = -R1
+    else:  # N = K J_m^-1 by the structure of the model (checked above when symbolic, and by the tests)
+        ninv = [m.Jm[i] / m.K[i] for i in range(n)]
+    # Named, so beta = Ninv D costs one product per entry (not a division each).
+    Ninv = _diag([m.program.define(f"Ninv{i + 1}", ninv[i]) for i in range(n)])
+    beta = Ninv * m.D
+    if symbolic:
+        extra["alpha"] = Ninv * R2
+
+    W = inverse_symbols(n)
+    if symbolic_brackets:
+        extra["ad"] = brackets_implicit(m, W, d_time, Y3, 3)
 
     f = sp.Matrix.vstack(dq, sp.Matrix(Y3), dqm, acc_m)
     g = sp.Matrix.vstack(sp.zeros(3 * n, n), Jinv)
@@ -240,9 +258,9 @@ def linearize(m: FlexibleJointModel, symbolic_brackets: Optional[bool] = None) -
         + (spring.T * Kd * spring)[0, 0] / 2 + m.potential
     )
     return Linearization(
-        model=m, Y3=Y3, Y4=Y4, W=W, rhs3=r3, rhs4=-R1,
+        model=m, Y3=Y3, Y4=Y4, W=W, rhs3=r3, rhs4=rhs4,
         outputs={
-            "f": f, "g": g, "T": T, "alpha": alpha, "beta": beta,
+            "f": f, "g": g, "T": T, "beta": beta,
             "energy": sp.Matrix([[energy]]), "inertia": m.D, **extra,
         },
     )

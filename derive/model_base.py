@@ -94,6 +94,10 @@ class FlexibleJointModel:
         Complete model only: the name of the reduced model with the same state layout.
     rotors : derive.rotors.Rotors or None
         Complete model only: the rotor data (gear-ratio defaults, masses, transverse inertias).
+    inverse_dynamics : (tuple of sympy.Symbol, sympy.Matrix) or None
+        ``(ddq, tau)``: the joint-acceleration symbols (length n) and
+        ``tau(q, dq, ddq) = D ddq + h`` (n, 1) as one straight-line programme (RNEA with the
+        acceleration as an input) in ``program``. None: the emitter forms ``D ddq + h``.
     """
 
     name: str
@@ -116,6 +120,7 @@ class FlexibleJointModel:
     motor_bias: Optional[sp.Matrix] = None
     reduced_model: Optional[str] = None
     rotors: Optional[object] = None  # complete model: its derive.rotors.Rotors (for chain.json)
+    inverse_dynamics: Optional[Tuple[Tuple[sp.Symbol, ...], sp.Matrix]] = None
 
     @property
     def state(self) -> Tuple[sp.Symbol, ...]:

@@ -15,6 +15,9 @@ named intermediates --
   accelerated upwards by ``g0`` (gravity): a forward pass (body rates,
   accelerations and the forces they need) and a backward pass (forces
   carried to the base, ``h_i`` = the joint-axis moment);
+* the inverse dynamics ``tau(q, dq, ddq) = D ddq + h`` by the same RNEA with the
+  joint accelerations as symbols (``inverse_dynamics``; reduced model only): the
+  emitter takes its time derivatives by CasADi AD for ``y4`` and ``alpha``;
 * ``D`` by the composite-rigid-body algorithm (composite inertias in body
   frames, one force propagation per entry below the diagonal);
 * the potential from the world height of every body's centre of mass.
@@ -84,14 +87,15 @@ class _Namer:
     A symbol times constants costs nothing to repeat, so it stays inline.
     """
 
-    def __init__(self, prog: Program):
+    def __init__(self, prog: Program, prefix: str = ""):
         self.prog = prog
+        self.prefix = prefix  # a second pass over the same labels (the inverse dynamics) names them apart
 
     def __call__(self, label: str, e) -> sp.Expr:
         e = sp.sympify(e)
         if e.is_Atom or (e.is_Mul and sum(1 for a in e.args if not a.is_Number) <= 1):
             return e
-        return self.prog.define(label, e)
+        return self.prog.define(self.prefix + label, e)
 
     def vec(self, label: str, v) -> Vector:
         """Name the three components ``<label>x``, ``<label>y``, ``<label>z``."""
@@ -179,10 +183,11 @@ def _body_inertias(d: _Namer, num: ChainNumerics, sym: Dict[str, sp.Symbol], pay
 
 
 def _rnea_forward(d: _Namer, R, P, dq, mass, hmom, Io, g0,
-                  parents: Sequence[int]) -> Tuple[List[Vector], List[Vector], list]:
-    """RNEA forward pass (``ddq = 0``, base accelerated by ``+g0 e_z``): each body's force, moment, rates.
+                  parents: Sequence[int], ddq=None) -> Tuple[List[Vector], List[Vector], list]:
+    """RNEA forward pass (base accelerated by ``+g0 e_z``): each body's force, moment, rates.
 
-    Each body starts from its parent's rates (``parents[i]``, -1: the base).
+    ``ddq``: the joint accelerations (None: zero, which gives ``h``). Each body starts
+    from its parent's rates (``parents[i]``, -1: the base).
     The rates are ``(w_i, dw_i)``, body ``i``'s angular velocity and acceleration in its frame.
     """
     zero = [sp.Integer(0)] * 3
@@ -201,7 +206,8 @@ def _rnea_forward(d: _Namer, R, P, dq, mass, hmom, Io, g0,
         wr = d.vec(f"wr{i + 1}", _matTvec(Ri, w_prev))  # previous rate in this body's frame
         w_i = [wr[0], wr[1], d(f"w{i + 1}z", wr[2] + dq[i])]
         dwr = _matTvec(Ri, dw_prev)
-        dw_i = d.vec(f"dw{i + 1}", [dwr[0] + wr[1] * dq[i], dwr[1] - wr[0] * dq[i], dwr[2]])
+        dw_i = d.vec(f"dw{i + 1}", [dwr[0] + wr[1] * dq[i], dwr[1] - wr[0] * dq[i],
+                                    dwr[2] if ddq is None else dwr[2] + ddq[i]])
         h_i, I_i, m_i = hmom[i], Io[i], mass[i]
         wxh = d.vec(f"wh{i + 1}", _cross(w_i, h_i))
         f_i = [m_i * a_i[k] + t + u for k, (t, u) in enumerate(zip(_cross(dw_i, h_i), _cross(w_i, wxh)))]
@@ -403,6 +409,11 @@ def make_spatial(desc: ChainDescription, name: str, params: Tuple[Param, ...],
                     "motor_bias": motor_bias(d, num.bodies, coef, rates), "reduced_model": reduced_model,
                     "rotors": rotors}
     h = _rnea_backward(d, R, P, forces, moments, num.parents)
+    if rotors is None:  # tau(q, dq, ddq) = D ddq + h as one RNEA, for the emitted time derivatives
+        ddq = tuple(sp.Symbol(f"ddq{i + 1}", real=True) for i in range(n))
+        di = _Namer(prog, prefix="id_")
+        f_id, n_id, _ = _rnea_forward(di, R, P, dq, mass, hmom, Io, g0, num.parents, ddq=ddq)
+        complete["inverse_dynamics"] = (ddq, _rnea_backward(di, R, P, f_id, n_id, num.parents))
     Dm = _crba_entries(d, R, P, _composite_inertias(d, num, R, P, cs, mass, hmom, Io), num.parents)
     V = _potential(d, R, P, mass, hmom, g0, num.parents)
     return FlexibleJointModel(**complete,
@@ -479,4 +490,4 @@ def make_spatial_jacobian(desc: ChainDescription, name: str, params: Tuple[Param
     for i in range(n):
         di = DirectionalDerivative({q[i]: sp.Integer(1)}, program=prog, tag=f"jq{i + 1}")
         h[i] = prog.define(f"hj{i + 1}", h[i] - (dqv.T * di(D) * dqv)[0, 0] / 2 + di(V))
-    return replace(base, D=D, h=h, potential=V, program=prog)
+    return replace(base, D=D, h=h, potential=V, program=prog, inverse_dynamics=None)

@@ -66,6 +66,25 @@ class TorqueLinearization:
     outputs: Dict[str, sp.Matrix]
 
 
+def inverse_dynamics_derivatives(m, Y3, Y4) -> Tuple[sp.Matrix, sp.Matrix]:
+    """``(R1, W) = (D' Y3 + h', D'' Y3 + 2 D' Y4 + h'')`` in SymPy, ``Y3``, ``Y4`` implicit symbols.
+
+    The time derivatives of ``D Y3 + h`` along ``q -> dq``, ``dq -> Y3``, ``Y3 -> Y4`` (no ``Y4'``).
+    """
+    n = m.n
+    seeds = {}
+    for i in range(n):
+        seeds.update({m.q[i]: m.dq[i], m.dq[i]: Y3[i], Y3[i]: Y4[i]})
+    # D and h (and every program symbol they use) depend on (q, dq) only, and this direction
+    # agrees with the state derivation's "t" on q, dq and Y3: the program's derivative symbols
+    # along "t" are the same functions, so they are shared (the emitter binds no q_m, so a
+    # definition that used q_m would fail to emit rather than be silently wrong).
+    d_time = DirectionalDerivative(seeds, program=m.program, tag="t")
+    dD = d_time(m.D)
+    R1 = dD * sp.Matrix(Y3) + d_time(m.h)
+    return R1, d_time(R1) + dD * sp.Matrix(Y4)
+
+
 def torque_linearize(lin: Linearization) -> TorqueLinearization:
     """Derive ``T_tau``, ``alpha_tau`` and ``beta_tau`` in torque coordinates.
 
@@ -84,17 +103,7 @@ def torque_linearize(lin: Linearization) -> TorqueLinearization:
     tau = tuple(sp.Symbol(f"tauJ{i + 1}", real=True) for i in range(n))
     dtau = tuple(sp.Symbol(f"dtauJ{i + 1}", real=True) for i in range(n))
     Y3, Y4 = sp.Matrix(lin.Y3), sp.Matrix(lin.Y4)
-    seeds = {}
-    for i in range(n):
-        seeds.update({m.q[i]: m.dq[i], m.dq[i]: lin.Y3[i], lin.Y3[i]: lin.Y4[i]})
-    # D and h (and every program symbol they use) depend on (q, dq) only, and this direction
-    # agrees with the state derivation's "t" on q, dq and Y3: the program's derivative symbols
-    # along "t" are the same functions, so they are shared (the emitter binds no q_m, so a
-    # definition that used q_m would fail to emit rather than be silently wrong).
-    d_time = DirectionalDerivative(seeds, program=m.program, tag="t")
-    dD = d_time(m.D)
-    R1 = dD * Y3 + d_time(m.h)
-    W = d_time(R1) + dD * Y4
+    R1, W = inverse_dynamics_derivatives(m, lin.Y3, lin.Y4)
     ratio = sp.diag(*[m.Jm[i] / m.K[i] for i in range(n)])  # J_m K^-1, diagonal
     tau_v, dqm = sp.Matrix(tau), sp.Matrix(m.dqm)
     alpha = tau_v + sp.diag(*m.Bm) * dqm + sp.diag(*m.Jm) * Y3 + ratio * W

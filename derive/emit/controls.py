@@ -271,7 +271,7 @@ def _law_pair(model, kind: str, core: ca.Function, n_meas: int, first: str, idx)
 
 
 def build_controls(model, functions: Dict[str, ca.Function],
-                   torque: Dict[str, ca.Function] = None) -> Dict[str, ca.Function]:
+                   torque: Dict[str, ca.Function] = None, core: ca.Function = None) -> Dict[str, ca.Function]:
     """Every law of :data:`ALL_KINDS` (and the ``_zdot`` parts of stateful ones), and their shared cores.
 
     Parameters
@@ -294,10 +294,13 @@ def build_controls(model, functions: Dict[str, ca.Function],
         With ``torque``: ``"control_core_tau"``, the laws of :data:`TORQUE_KINDS` (first
         argument ``m``, 5n, calling ``control_core_tau``; ``ismc_tau`` with its ``_zdot``)
         and ``"control_pdg"``.
+    core : casadi.Function, optional
+        The ``control_core`` the laws call instead of :func:`build_core` (the C file's MX
+        twin, :func:`derive.emit.writer.c_functions`).
     """
     n = model.n
     idx = _stiffness_indices(model)
-    core = build_core(model, functions)
+    core = build_core(model, functions) if core is None else core
     out: Dict[str, ca.Function] = {"control_core": core}
     for kind, _ in KINDS:
         out.update(_law_pair(model, kind, core, 4 * n, "x", idx))

@@ -21,6 +21,7 @@ from typing import Dict, Tuple
 import casadi as ca
 
 from ..linearize import Linearization
+from .dynamics import build_kernel, state_bodies, sx_function
 from .sx import SympyToSX, ldl_factor, ldl_solve
 
 #: Quantities emitted for every model, in file order, with their meaning.
@@ -86,20 +87,12 @@ def ad_by_ad(x: ca.SX, D: ca.SX, r3: ca.SX, acc_m: ca.SX, g: ca.SX, factors, k: 
     return ca.horzcat(*blocks)
 
 
-def build_functions(lin: Linearization, cse: bool = True) -> Dict[str, ca.Function]:
-    """SX Functions ``<model>_<quantity>`` for every entry of :data:`QUANTITIES`.
+def build_model_functions(lin: Linearization, cse: bool = True,
+                          route: str = "ad") -> Tuple[Dict[str, ca.Function], ca.Function]:
+    """:func:`build_functions` and the kernel its ``T`` and ``alpha`` call (:mod:`derive.emit.dynamics`).
 
-    Parameters
-    ----------
-    lin : Linearization
-    cse : bool
-        Run CasADi's common-subexpression elimination on each output (the
-        emitted default; ``False`` exists so tests can check CSE == no-CSE).
-
-    Returns
-    -------
-    dict str -> casadi.Function
-        Keyed by quantity name (``"alpha"``), Function named ``"<model>_alpha"``.
+    ``route="symbolic"`` converts the implicit SymPy ``T`` and ``alpha`` instead (needs
+    ``linearize(..., symbolic=True)``): the independent route the tests compare with.
     """
     m = lin.model
     n = m.n
@@ -116,6 +109,8 @@ def build_functions(lin: Linearization, cse: bool = True) -> Dict[str, ca.Functi
 
     def solved(key: str, rhs) -> ca.SX:
         if key not in lazy:
+            if rhs is None:
+                raise ValueError(f"{m.name}: y4 is bound only by linearize(..., symbolic=True)")
             lazy[key] = ldl_solve(*factors(), conv(rhs))
         return lazy[key]
 
@@ -129,12 +124,40 @@ def build_functions(lin: Linearization, cse: bool = True) -> Dict[str, ca.Functi
         f_sx = conv(lin.outputs["f"])
         return ad_by_ad(x, conv(m.D), conv(lin.rhs3), f_sx[3 * n:], conv(lin.outputs["g"]), factors())
 
+    kernel = None if route == "symbolic" else build_kernel(m)
+    by_ad = {} if kernel is None else state_bodies(m, kernel)
     out = {}
     for name, _ in QUANTITIES:
+        if name in by_ad:
+            out[name] = sx_function(f"{m.name}_{name}", by_ad[name], [4 * n, len(m.params)], ["x", "p"],
+                                    [name], cse=cse)
+            continue
         value = brackets() if name == "ad" else conv(lin.outputs[name])
         if value.shape[1] == 1 and name != "energy":
             value = ca.vec(value)
         if cse:
             value = ca.cse(value)
         out[name] = ca.Function(f"{m.name}_{name}", [x, p], [value], ["x", "p"], [name])
-    return out
+    return out, kernel
+
+
+def build_functions(lin: Linearization, cse: bool = True, route: str = "ad") -> Dict[str, ca.Function]:
+    """SX Functions ``<model>_<quantity>`` for every entry of :data:`QUANTITIES`.
+
+    Parameters
+    ----------
+    lin : Linearization
+    cse : bool
+        Run CasADi's common-subexpression elimination on each output (the
+        emitted default; ``False`` exists so tests can check CSE == no-CSE).
+    route : str
+        ``"ad"`` (emitted): ``T`` and ``alpha`` by CasADi AD of the inverse dynamics
+        (:mod:`derive.emit.dynamics`); ``"symbolic"``: from the implicit SymPy form of
+        ``linearize(..., symbolic=True)`` (for cross-checks).
+
+    Returns
+    -------
+    dict str -> casadi.Function
+        Keyed by quantity name (``"alpha"``), Function named ``"<model>_alpha"``.
+    """
+    return build_model_functions(lin, cse, route)[0]

@@ -1,6 +1,6 @@
 """CasADi SX Functions of the torque-sensed derivation, and the motor PD + gravity law.
 
-From a :class:`derive.torque.TorqueLinearization`::
+For a model (the equations of :mod:`derive.torque`)::
 
     <model>_T_tau(m, p)      -> [q; dq; y3; y4]  (4n)     y3 = D^-1 (tau_J - h), y4 = D^-1 (dtau_J - R1)
     <model>_alpha_tau(m, p)  -> alpha_tau        (n)
@@ -8,8 +8,11 @@ From a :class:`derive.torque.TorqueLinearization`::
     <model>_control_core_tau(m, p_hat) -> (y_hat, alpha, beta): the three jointly CSE'd, the
                                                              model part of the ``control_<kind>_tau`` laws
 
-with ``m = [q; dq; tau_J; dtau_J; dq_m]`` (5n). The implicit y3, y4 are bound to one LDL^T
-of D(q) (as :mod:`derive.emit.functions` does for the state laws).
+with ``m = [q; dq; tau_J; dtau_J; dq_m]`` (5n). ``T_tau`` and ``alpha_tau`` call the model's
+kernel (:mod:`derive.emit.dynamics`, shared with the state laws: ``y3``, ``y4`` and
+``w = D'' y3 + 2 D' y4 + h''`` by CasADi AD of the inverse dynamics, one LDL^T of D(q)).
+The SymPy route of :func:`derive.torque.torque_linearize` is kept for cross-checks
+(:func:`build_torque_functions_symbolic`).
 
 And the regulation law ``<model>_control_pdg(x, z, r, p, gains) -> (u, s, z_dot, u_cmd, y_hat)``
 (Tomei's motor PD + gravity compensation, :func:`build_pdg`).
@@ -21,7 +24,9 @@ from typing import Dict, List, Tuple
 
 import casadi as ca
 
+from ..linearize import Linearization
 from ..torque import TorqueLinearization
+from .dynamics import mx_function, sx_function, torque_bodies
 from .sx import SympyToSX, ldl_factor, ldl_solve
 
 #: Torque-coordinate functions emitted for every model, in file order, with their meaning.
@@ -48,6 +53,7 @@ def pdg_gains_layout(n: int) -> List[Tuple[str, int, str]]:
 
 
 def _converter(tl: TorqueLinearization, m_sym: ca.SX, p: ca.SX) -> SympyToSX:
+    """The symbolic route (:func:`derive.torque.torque_linearize`), for cross-checks."""
     model = tl.lin.model
     n = model.n
     bindings = {s: m_sym[i] for i, s in enumerate(tl.measurement)}
@@ -69,12 +75,48 @@ def _converter(tl: TorqueLinearization, m_sym: ca.SX, p: ca.SX) -> SympyToSX:
     return conv
 
 
-def build_torque_functions(tl: TorqueLinearization) -> Dict[str, ca.Function]:
+def build_torque_functions_symbolic(tl: TorqueLinearization) -> Dict[str, ca.Function]:
+    """``T_tau``, ``alpha_tau``, ``beta_tau`` from the SymPy route (:func:`derive.torque.torque_linearize`).
+
+    Not emitted: the tests compare :func:`build_torque_functions` with it.
+    """
+    model = tl.lin.model
+    n = model.n
+    m_sym = ca.SX.sym("m", 5 * n)
+    p = ca.SX.sym("p", len(model.params))
+    conv = _converter(tl, m_sym, p)
+    out = {}
+    for name, _ in TORQUE_QUANTITIES:
+        v = conv(tl.outputs[name])
+        v = ca.vec(v) if tl.outputs[name].shape[1] == 1 else v
+        out[name] = ca.Function(f"{model.name}_{name}", [m_sym, p], [ca.cse(v)], ["m", "p"], [name])
+    return out
+
+
+def _beta_tau(lin: Linearization) -> ca.Function:
+    """``beta_tau(m, p) = J_m K^-1 D(q)``: the state law's ``beta`` with ``q`` read from ``m``."""
+    model = lin.model
+    n = model.n
+    m_sym = ca.SX.sym("m", 5 * n)
+    p = ca.SX.sym("p", len(model.params))
+    bindings = {s: m_sym[i] for i, s in enumerate(model.q)}
+    bindings.update({s: p[j] for j, s in enumerate(model.param_symbols)})
+    conv = SympyToSX(bindings, dict(model.program.definitions))
+    return ca.Function(f"{model.name}_beta_tau", [m_sym, p], [ca.cse(conv(lin.outputs["beta"]))], ["m", "p"],
+                       ["beta_tau"])
+
+
+def build_torque_functions(lin: Linearization, kernel: ca.Function) -> Dict[str, ca.Function]:
     """SX Functions ``<model>_<name>`` of :data:`TORQUE_QUANTITIES` and ``<model>_control_core_tau``.
+
+    ``T_tau`` and ``alpha_tau`` call the model's ``kernel`` (:func:`derive.emit.dynamics.build_kernel`,
+    inlined here, CSE'd); ``beta_tau`` is ``J_m K^-1 D(q)``.
 
     Parameters
     ----------
-    tl : TorqueLinearization
+    lin : Linearization
+    kernel : casadi.Function
+        ``<model>_accel_kernel``.
 
     Returns
     -------
@@ -82,24 +124,34 @@ def build_torque_functions(tl: TorqueLinearization) -> Dict[str, ca.Function]:
         ``"T_tau"``, ``"alpha_tau"``, ``"beta_tau"`` (inputs ``(m, p)``) and
         ``"control_core_tau"`` (inputs ``(m, p_hat)``, outputs ``y_hat``, ``alpha``, ``beta``).
     """
-    model = tl.lin.model
-    n = model.n
-    m_sym = ca.SX.sym("m", 5 * n)
-    p = ca.SX.sym("p", len(model.params))
-    conv = _converter(tl, m_sym, p)
-    values = {}
-    for name, _ in TORQUE_QUANTITIES:
-        v = conv(tl.outputs[name])
-        values[name] = ca.vec(v) if tl.outputs[name].shape[1] == 1 else v
-    out = {name: ca.Function(f"{model.name}_{name}", [m_sym, p], [ca.cse(values[name])], ["m", "p"], [name])
-           for name, _ in TORQUE_QUANTITIES}
-    core = ca.cse([values["T_tau"], values["alpha_tau"], values["beta_tau"]])
-    out["control_core_tau"] = ca.Function(f"{model.name}_control_core_tau", [m_sym, p], core,
-                                          ["m", "p_hat"], ["y_hat", "alpha", "beta"])
+    model = lin.model
+    n, n_p = model.n, len(model.params)
+    bodies = torque_bodies(model, kernel)
+    out = {name: sx_function(f"{model.name}_{name}", bodies[name], [5 * n, n_p], ["m", "p"], [name])
+           for name in ("T_tau", "alpha_tau")}
+    out["beta_tau"] = _beta_tau(lin)
+    beta = out["beta_tau"]
+    out["control_core_tau"] = sx_function(f"{model.name}_control_core_tau", bodies["core"], [5 * n, n_p],
+                                          ["m", "p_hat"], ["y_hat", "alpha", "beta"],
+                                          extra=lambda m, p: [beta(m, p)])
     return out
 
 
-def build_pdg(tl: TorqueLinearization) -> ca.Function:
+def torque_twins(lin: Linearization, kernel: ca.Function, sx: Dict[str, ca.Function]) -> Dict[str, ca.Function]:
+    """MX twins of :func:`build_torque_functions` for the C file: same names and signatures, one kernel call each."""
+    model = lin.model
+    n, n_p = model.n, len(model.params)
+    bodies = torque_bodies(model, kernel)
+    out = {name: mx_function(f"{model.name}_{name}", bodies[name], [5 * n, n_p], ["m", "p"], [name])
+           for name in ("T_tau", "alpha_tau")}
+    out["beta_tau"] = beta = sx["beta_tau"]
+    out["control_core_tau"] = mx_function(f"{model.name}_control_core_tau", bodies["core"], [5 * n, n_p],
+                                          ["m", "p_hat"], ["y_hat", "alpha", "beta"],
+                                          extra=lambda m, p: [beta(m, p)])
+    return out
+
+
+def build_pdg(model) -> ca.Function:
     """``<model>_control_pdg(x, z, r, p, gains) -> (u, s, z_dot, u_cmd, y_hat)``: motor PD + gravity.
 
     ``q_d = r[0:n]``, ``G = h(q_d, 0)`` and ``K_nom`` from ``p`` (NOMINAL), ``q_md = q_d + K_nom^-1 G``,
@@ -108,7 +160,6 @@ def build_pdg(tl: TorqueLinearization) -> ca.Function:
     the measured link position and rate, zeros for the two upper blocks). Reads only
     ``q_m``, ``dq_m`` of ``x`` for ``u``.
     """
-    model = tl.lin.model
     n = model.n
     x, z, r = ca.SX.sym("x", 4 * n), ca.SX.sym("z", 0), ca.SX.sym("r", 5 * n)
     p = ca.SX.sym("p", len(model.params))

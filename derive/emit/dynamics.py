@@ -1,0 +1,201 @@
+"""The model part of ``T``, ``alpha`` and the control laws, by CasADi AD of the inverse dynamics.
+
+One SX Function, the *kernel*, holds everything ``T``, ``alpha`` and their torque-sensed
+counterparts need (docs/derivation.md, "Time derivatives by AD")::
+
+    <model>_accel_kernel(q, dq, s, ds, p) -> (y3, y4, w)
+    y3 = D^-1 (s - h)                        D y3 + h = s   (s: the link-side spring torque)
+    y4 = D^-1 (ds - r1),   r1 = D' y3 + h'   (the time derivative of D y3 + h = s)
+    w  = D'' y3 + 2 D' y4 + h''
+
+with one LDL^T of ``D(q)``. ``r1`` and ``w`` are first and second time derivatives of the
+inverse dynamics ``tau(q, dq, a) = D(q) a + h(q, dq)`` along ``q' = dq``, ``dq' = y3``,
+``a' = y4`` (``a`` frozen at ``y3``, no ``a''`` term), taken by CasADi forward-mode AD::
+
+    r1 = J [dq; y3; 0],     w = d/dz (J v) v + J [y3; y4; 0],   v = [dq; y3; y4],  J = dtau/dz
+
+where ``z = [q; dq; a]``. ``tau`` is the model's straight-line RNEA with the acceleration
+as an input (``model.inverse_dynamics``, spatial chains) or ``D a + h`` (planar chains).
+The state laws use ``s = K (q_m - q)``, ``ds = K (dq_m - dq)``; the torque-sensed laws
+the measured ``tau_J``, ``dtau_J``. Then::
+
+    T     = [q; dq; y3; y4]
+    alpha = J_m K^-1 (w + K (y3 - ddq_m)),    ddq_m = J_m^-1 (K (q - q_m) - B_m dq_m)
+    alpha_tau = tau_J + B_m dq_m + J_m y3 + J_m K^-1 w
+
+The same bodies build the SX Functions written to ``.casadi`` (the kernel inlined and CSE'd,
+fast from Python) and their MX twins for the C file, which call the one kernel: the C holds
+the model part once instead of once per function (:func:`c_twins`).
+"""
+
+from __future__ import annotations
+
+from typing import Callable, Dict, Sequence, Tuple
+
+import casadi as ca
+import sympy as sp
+
+from .sx import SympyToSX, ldl_factor, ldl_solve
+
+
+def _converter(model, q, dq, p) -> SympyToSX:
+    bind = {s: q[i] for i, s in enumerate(model.q)}
+    bind.update({s: dq[i] for i, s in enumerate(model.dq)})
+    bind.update({s: p[j] for j, s in enumerate(model.param_symbols)})
+    return SympyToSX(bind, dict(model.program.definitions))
+
+
+def inverse_dynamics(model) -> ca.Function:
+    """``tau(q, dq, a, p) = D(q) a + h(q, dq)`` (SX), from the model's RNEA programme if it has one."""
+    n = model.n
+    q, dq, a = ca.SX.sym("q", n), ca.SX.sym("dq", n), ca.SX.sym("a", n)
+    p = ca.SX.sym("p", len(model.params))
+    conv = _converter(model, q, dq, p)
+    if model.inverse_dynamics is not None:
+        acc, tau = model.inverse_dynamics
+        for i, s in enumerate(acc):
+            conv.bind(s, a[i])
+        t = ca.vec(conv(tau))
+    else:
+        t = ca.mtimes(conv(model.D), a) + ca.vec(conv(model.h))
+    return ca.Function(f"{model.name}_tau", [q, dq, a, p], [t], ["q", "dq", "a", "p"], ["tau"])
+
+
+def time_derivatives(model) -> Tuple[ca.Function, ca.Function]:
+    """``(d1, d2)``: ``d1(z, v, p) = J v`` and ``d2(z, v, w, p) = d/dz (J v) v + J w`` of ``tau(z)``.
+
+    ``d2`` is the second derivative at ``s = 0`` of ``tau(z + s v + s^2/2 w)`` (forward mode in
+    the scalar ``s``, twice, then ``s = 0`` folded in): cheaper than nesting ``jtimes`` in ``z``.
+    """
+    n = model.n
+    tau = inverse_dynamics(model)
+    z, v, w = ca.SX.sym("z", 3 * n), ca.SX.sym("v", 3 * n), ca.SX.sym("w", 3 * n)
+    p, s = ca.SX.sym("p", len(model.params)), ca.SX.sym("s")
+    t = tau(z[:n], z[n:2 * n], z[2 * n:], p)
+    d1 = ca.Function("d1", [z, v, p], [ca.jtimes(t, z, v)])
+    zs = z + s * v + (s * s / 2) * w
+    ts = tau(zs[:n], zs[n:2 * n], zs[2 * n:], p)
+    second = ca.jtimes(ca.jtimes(ts, s, ca.SX(1)), s, ca.SX(1))
+    at0 = ca.Function("d2s", [s, z, v, w, p], [second])(ca.SX(0), z, v, w, p)
+    d2 = ca.Function("d2", [z, v, w, p], [at0])
+    return d1, d2
+
+
+def build_kernel(model) -> ca.Function:
+    """``<model>_accel_kernel(q, dq, s, ds, p) -> (y3, y4, w)`` (SX, CSE'd; see the module docstring).
+
+    With an inverse-dynamics programme (spatial chains) ``r1`` and ``w`` are CasADi AD of it; without
+    (the closed-form planar chains, whose SymPy programme has cheap derivative rules for the cosines
+    of angle differences and measured fewer operations that way) they are the SymPy time derivatives
+    of ``D y3 + h`` (:func:`derive.torque.inverse_dynamics_derivatives`), converted.
+    """
+    n = model.n
+    q, dq, s, ds = (ca.SX.sym(nm, n) for nm in ("q", "dq", "s", "ds"))
+    p = ca.SX.sym("p", len(model.params))
+    if model.inverse_dynamics is None:  # first, so that the converter knows their programme symbols
+        from ..torque import inverse_dynamics_derivatives
+        # the names of derive.linearize (the programme caches its derivatives along "t" by them)
+        Y3 = tuple(sp.Symbol(f"y3_{i + 1}", real=True) for i in range(n))
+        Y4 = tuple(sp.Symbol(f"y4_{i + 1}", real=True) for i in range(n))
+        R1, W = inverse_dynamics_derivatives(model, Y3, Y4)
+    conv = _converter(model, q, dq, p)
+    L, inv_d = ldl_factor(conv(model.D))
+    zero = ca.SX.zeros(n)
+    y3 = ldl_solve(L, inv_d, s - ca.vec(conv(model.h)))
+    if model.inverse_dynamics is not None:
+        d1, d2 = time_derivatives(model)
+        z = ca.vertcat(q, dq, y3)
+        y4 = ldl_solve(L, inv_d, ds - d1(z, ca.vertcat(dq, y3, zero), p))
+        w = d2(z, ca.vertcat(dq, y3, y4), ca.vertcat(y3, y4, zero), p)
+    else:
+        for i in range(n):
+            conv.bind(Y3[i], y3[i])
+        y4 = ldl_solve(L, inv_d, ds - ca.vec(conv(R1)))
+        for i in range(n):
+            conv.bind(Y4[i], y4[i])
+        w = ca.vec(conv(W))
+    y3, y4, w = ca.cse([y3, y4, w])
+    return ca.Function(f"{model.name}_accel_kernel", [q, dq, s, ds, p], [y3, y4, w],
+                       ["q", "dq", "s", "ds", "p"], ["y3", "y4", "w"])
+
+
+def _elastic(model, p) -> Tuple[object, object, object]:
+    """``K``, ``J_m``, ``B_m`` (column vectors) as functions of ``p`` (SX or MX)."""
+    sp_syms = list(model.param_symbols)
+    out = []
+    for exprs in (model.K, model.Jm, model.Bm):
+        col = []
+        for e in exprs:
+            if e in sp_syms:
+                col.append(p[sp_syms.index(e)])
+            elif getattr(e, "is_Number", False):
+                col.append(float(e))
+            else:  # an expression of parameters: convert it (rare; SX only)
+                ps = ca.SX.sym("p", len(sp_syms))
+                conv = SympyToSX({s: ps[j] for j, s in enumerate(sp_syms)})
+                col.append(ca.Function("e", [ps], [conv(e)])(p))
+        out.append(ca.vertcat(*col))
+    return tuple(out)
+
+
+def state_bodies(model, kernel: ca.Function) -> Dict[str, Callable]:
+    """``T``, ``alpha`` of ``(x, p)`` (SX or MX arguments), calling ``kernel``."""
+    n = model.n
+
+    def parts(x, p):
+        q, dq, qm, dqm = (x[i * n:(i + 1) * n] for i in range(4))
+        K, Jm, Bm = _elastic(model, p)
+        y3, y4, w = kernel(q, dq, K * (qm - q), K * (dqm - dq), p)
+        return q, dq, qm, dqm, K, Jm, Bm, y3, y4, w
+
+    def T(x, p):
+        q, dq, _, _, _, _, _, y3, y4, _ = parts(x, p)
+        return ca.vertcat(q, dq, y3, y4)
+
+    def alpha(x, p):
+        q, _, qm, dqm, K, Jm, Bm, y3, _, w = parts(x, p)
+        acc_m = (K * (q - qm) - Bm * dqm) / Jm
+        return Jm / K * (w + K * (y3 - acc_m))
+
+    def core(x, p):  # (y_hat, alpha) of one kernel call
+        q, dq, qm, dqm, K, Jm, Bm, y3, y4, w = parts(x, p)
+        acc_m = (K * (q - qm) - Bm * dqm) / Jm
+        return ca.vertcat(q, dq, y3, y4), Jm / K * (w + K * (y3 - acc_m))
+
+    return {"T": T, "alpha": alpha, "core": core}
+
+
+def torque_bodies(model, kernel: ca.Function) -> Dict[str, Callable]:
+    """``T_tau``, ``alpha_tau`` of ``(m, p)``, ``m = [q; dq; tau_J; dtau_J; dq_m]``, calling ``kernel``."""
+    n = model.n
+
+    def core(m, p):
+        q, dq, tau, dtau, dqm = (m[i * n:(i + 1) * n] for i in range(5))
+        K, Jm, Bm = _elastic(model, p)
+        y3, y4, w = kernel(q, dq, tau, dtau, p)
+        return ca.vertcat(q, dq, y3, y4), tau + Bm * dqm + Jm * y3 + Jm / K * w
+
+    return {"T_tau": lambda m, p: core(m, p)[0], "alpha_tau": lambda m, p: core(m, p)[1], "core": core}
+
+
+def sx_function(name: str, body: Callable, sizes: Sequence[int], in_names, out_names, cse: bool = True,
+                extra: Callable = None) -> ca.Function:
+    """An SX Function ``name`` of ``body`` (the kernel inlined), outputs CSE'd together."""
+    args = [ca.SX.sym(a, s) for a, s in zip(in_names, sizes)]
+    outs = body(*args)
+    outs = list(outs) if isinstance(outs, tuple) else [outs]
+    if extra is not None:
+        outs = outs + list(extra(*args))
+    outs = ca.cse(outs) if cse else outs
+    return ca.Function(name, args, outs, list(in_names), list(out_names))
+
+
+def mx_function(name: str, body: Callable, sizes: Sequence[int], in_names, out_names,
+                extra: Callable = None) -> ca.Function:
+    """The MX twin of :func:`sx_function`: same name, inputs and outputs; the kernel is a call."""
+    args = [ca.MX.sym(a, s) for a, s in zip(in_names, sizes)]
+    outs = body(*args)
+    outs = list(outs) if isinstance(outs, tuple) else [outs]
+    if extra is not None:
+        outs = outs + list(extra(*args))
+    return ca.Function(name, args, outs, list(in_names), list(out_names))
