@@ -40,32 +40,33 @@ FORMS = ("planar", "spatial")
 #: :func:`fit_power_law` to ``runs``. ``spatial``: synthetic URDF chains (:mod:`derive.synthetic`) derived
 #: with ``--model-file``; ``planar``: the built-in ``planar<n>``. Peak memory is the process's maximum
 #: resident set size (``/usr/bin/time -v``), seconds the wall clock of the whole command.
-#: Operations and peak memory: re-measured 2026-12-01 after the brackets moved to CasADi AD (they do not
-#: depend on the machine's load), by ``python -m bench.derive_cost`` on the project machine (2 cores,
-#: shared). Seconds: that run was made under a load of 6-7 on 2 cores and its wall clocks were 3-9x
-#: those of an idle machine, so the seconds are kept from the earlier calibration (commit bef8005, a
-#: clean ``git archive`` export, ``--old-cli``, the faster of two runs), whose derivation was slower
-#: than today's (21 joints: 69.8 s then, 54 s now on the same machine): an over-estimate, the safe side
-#: for a guard. Planar derives stay within a few seconds of the baseline, so their seconds fit is nearly
+#: Spatial operations and peak memory: re-measured 2026-12-02 after T and alpha moved to CasADi AD of the
+#: RNEA inverse dynamics (one kernel; they do not depend on the machine's load), by
+#: ``python -m bench.derive_cost`` on the project machine (2 cores, shared, load 5-6). Seconds: that run's
+#: wall clocks were again inflated by the load (and noisy: 34 s at 14 joints, 37 s at 21), so the seconds
+#: are kept from the earlier calibration (commit bef8005, a clean ``git archive`` export, ``--old-cli``,
+#: the faster of two runs), whose derivation was much slower than today's (21 joints: 69.8 s then,
+#: 24-37 s now under load): an over-estimate, the safe side for a guard. Planar runs are those of
+#: 2026-12-01 (the planar derivation did not change: 8890 operations at 7 links against 8877). Planar derives stay within a few seconds of the baseline, so their seconds fit is nearly
 #: flat; the planar form is capped at 7 links anyway.
 CALIBRATION: Dict[str, object] = {
-    "measured": "2026-12-01, 2 cores; operations and peak memory after the AD brackets, seconds from commit "
-                "bef8005; python -m bench.derive_cost",
+    "measured": "2026-12-02, 2 cores; spatial operations and peak memory after the AD kernel (planar: "
+                "2026-12-01), seconds from commit bef8005; python -m bench.derive_cost",
     "base_bytes": 95178752,
     "base_seconds": 0.93,
-    "spatial": {"operations": (464.3605151322975, 2.1351410186060913),
-                "peak_bytes": (799257.0241417133, 1.802443028769761),
+    "spatial": {"operations": (512.9872910083692, 2.0528430677162595),
+                "peak_bytes": (466105.41186198196, 1.789685429656444),
                 "seconds": (0.03459418261171506, 2.404643483036551)},
     "planar": {"operations": (126.88805941086473, 2.1712012261231752),
                "peak_bytes": (205028.8444603613, 1.746326365259364),
                "seconds": (0.4662896071482834, 0.8207445020068006)},
     "runs": [
-        {"form": "spatial", "n": 3, "operations": 4615, "peak_bytes": 101720064, "seconds": 1.51},
-        {"form": "spatial", "n": 5, "operations": 15153, "peak_bytes": 107929600, "seconds": 2.26},
-        {"form": "spatial", "n": 7, "operations": 30501, "peak_bytes": 121032704, "seconds": 4.96},
-        {"form": "spatial", "n": 10, "operations": 63391, "peak_bytes": 143110144, "seconds": 10.01},
-        {"form": "spatial", "n": 14, "operations": 127675, "peak_bytes": 194510848, "seconds": 14.91},
-        {"form": "spatial", "n": 21, "operations": 305456, "peak_bytes": 294363136, "seconds": 69.83},
+        {"form": "spatial", "n": 3, "operations": 4703, "peak_bytes": 98996224, "seconds": 1.51},
+        {"form": "spatial", "n": 5, "operations": 14639, "peak_bytes": 104202240, "seconds": 2.26},
+        {"form": "spatial", "n": 7, "operations": 28525, "peak_bytes": 107069440, "seconds": 4.96},
+        {"form": "spatial", "n": 10, "operations": 57375, "peak_bytes": 120975360, "seconds": 10.01},
+        {"form": "spatial", "n": 14, "operations": 112894, "peak_bytes": 142950400, "seconds": 14.91},
+        {"form": "spatial", "n": 21, "operations": 266251, "peak_bytes": 230809600, "seconds": 69.83},
         {"form": "planar", "n": 2, "operations": 583, "peak_bytes": 95842304, "seconds": 1.49},
         {"form": "planar", "n": 3, "operations": 1363, "peak_bytes": 96522240, "seconds": 3.93},
         {"form": "planar", "n": 4, "operations": 2523, "peak_bytes": 97546240, "seconds": 1.82},

@@ -227,15 +227,18 @@ def _law(kind, n, core, x, z, r, p, g, idx):
     return u, s, u_cmd, y_hat
 
 
-def build_core(model, functions: Dict[str, ca.Function]) -> ca.Function:
+def build_core(model, functions: Dict[str, ca.Function], body=None) -> ca.Function:
     """``<model>_control_core(x, p_hat) -> (y_hat, alpha, beta)``: the model part every law shares.
 
     One SX Function, ``T``, ``alpha`` and ``beta`` inlined and jointly CSE'd; the laws
-    call it (so the generated C holds it once). ``beta`` is ``(n, n)`` as ``<model>_beta``.
+    call it. ``beta`` is ``(n, n)`` as ``<model>_beta``. ``body(x, p) -> (y_hat, alpha)``, if
+    given, computes the first two in one go (one kernel call, :mod:`derive.emit.dynamics`)
+    instead of inlining ``T`` and ``alpha`` separately.
     """
     x = ca.SX.sym("x", 4 * model.n)
     p = ca.SX.sym("p_hat", len(model.params))
-    outs = ca.cse([functions["T"](x, p), functions["alpha"](x, p), functions["beta"](x, p)])
+    first = body(x, p) if body is not None else (functions["T"](x, p), functions["alpha"](x, p))
+    outs = ca.cse([*first, functions["beta"](x, p)])
     return ca.Function(f"{model.name}_control_core", [x, p], outs,
                        ["x", "p_hat"], ["y_hat", "alpha", "beta"])
 
@@ -271,7 +274,8 @@ def _law_pair(model, kind: str, core: ca.Function, n_meas: int, first: str, idx)
 
 
 def build_controls(model, functions: Dict[str, ca.Function],
-                   torque: Dict[str, ca.Function] = None, core: ca.Function = None) -> Dict[str, ca.Function]:
+                   torque: Dict[str, ca.Function] = None, core: ca.Function = None,
+                   core_body=None) -> Dict[str, ca.Function]:
     """Every law of :data:`ALL_KINDS` (and the ``_zdot`` parts of stateful ones), and their shared cores.
 
     Parameters
@@ -297,10 +301,12 @@ def build_controls(model, functions: Dict[str, ca.Function],
     core : casadi.Function, optional
         The ``control_core`` the laws call instead of :func:`build_core` (the C file's MX
         twin, :func:`derive.emit.writer.c_functions`).
+    core_body : callable, optional
+        ``body`` of :func:`build_core`.
     """
     n = model.n
     idx = _stiffness_indices(model)
-    core = build_core(model, functions) if core is None else core
+    core = build_core(model, functions, core_body) if core is None else core
     out: Dict[str, ca.Function] = {"control_core": core}
     for kind, _ in KINDS:
         out.update(_law_pair(model, kind, core, 4 * n, "x", idx))

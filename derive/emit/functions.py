@@ -129,8 +129,9 @@ def build_model_functions(lin: Linearization, cse: bool = True,
     out = {}
     for name, _ in QUANTITIES:
         if name in by_ad:
+            # one kernel call (itself CSE'd) and a few products: a CSE pass would find nothing more
             out[name] = sx_function(f"{m.name}_{name}", by_ad[name], [4 * n, len(m.params)], ["x", "p"],
-                                    [name], cse=cse)
+                                    [name], cse=False)
             continue
         value = brackets() if name == "ad" else conv(lin.outputs[name])
         if value.shape[1] == 1 and name != "energy":

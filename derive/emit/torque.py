@@ -127,8 +127,8 @@ def build_torque_functions(lin: Linearization, kernel: ca.Function) -> Dict[str,
     model = lin.model
     n, n_p = model.n, len(model.params)
     bodies = torque_bodies(model, kernel)
-    out = {name: sx_function(f"{model.name}_{name}", bodies[name], [5 * n, n_p], ["m", "p"], [name])
-           for name in ("T_tau", "alpha_tau")}
+    out = {name: sx_function(f"{model.name}_{name}", bodies[name], [5 * n, n_p], ["m", "p"], [name], cse=False)
+           for name in ("T_tau", "alpha_tau")}  # one kernel call (CSE'd) and a few products each
     out["beta_tau"] = _beta_tau(lin)
     beta = out["beta_tau"]
     out["control_core_tau"] = sx_function(f"{model.name}_control_core_tau", bodies["core"], [5 * n, n_p],

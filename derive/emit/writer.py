@@ -134,7 +134,7 @@ def _build_laws(lin: Linearization, functions, kernel: ca.Function) -> Dict[str,
     """Every control law (state, torque-sensed, pdg), their cores, and T_tau, alpha_tau, beta_tau."""
     torque = build_torque_functions(lin, kernel)
     torque["control_pdg"] = build_pdg(lin.model)
-    controls = build_controls(lin.model, functions, torque)
+    controls = build_controls(lin.model, functions, torque, core_body=state_bodies(lin.model, kernel)["core"])
     controls.update({name: torque[name] for name, _ in TORQUE_QUANTITIES})
     return controls
 
