@@ -129,7 +129,7 @@ class SympyToSX:
         raise ValueError(f"cannot emit power with exponent {expo}")
 
 
-def ldl_factor(A: ca.SX):
+def _ldl_factor_py(A: ca.SX):
     """Unpivoted LDL^T factorization of a symmetric positive definite SX matrix.
 
     Parameters
@@ -164,7 +164,7 @@ def ldl_factor(A: ca.SX):
     return L, inv_d
 
 
-def ldl_solve(L, inv_d, b: ca.SX) -> ca.SX:
+def _ldl_solve_py(L, inv_d, b: ca.SX) -> ca.SX:
     """Solve ``A x = b`` given :func:`ldl_factor` of A.
 
     Parameters
@@ -190,6 +190,82 @@ def ldl_solve(L, inv_d, b: ca.SX) -> ca.SX:
             xi = xi - L[k][i] * x[k]
         x[i] = xi
     return ca.vertcat(*x)
+
+
+
+
+# Scalar SX arithmetic from Python costs tens of microseconds per operation (the wrapper's
+# overload resolution); the factorization and the solves are O(n^3) and O(n^2) of them per use.
+# So each is built once per size as an SX Function of symbols and *called* on the actual
+# expressions: the call evaluates the same operations in the same order in C++ (with the same
+# on-the-fly simplifications of exact zeros and ones), i.e. the same graph, much faster.
+_FACTOR_FNS: Dict[int, ca.Function] = {}
+_SOLVE_FNS: Dict[int, ca.Function] = {}
+
+
+def _lower(n: int):
+    return [(i, k) for i in range(n) for k in range(i)]
+
+
+def _factor_fn(n: int) -> ca.Function:
+    if n not in _FACTOR_FNS:
+        A = ca.SX.sym("A", n, n)
+        L, inv_d = _ldl_factor_py(A)
+        low = _lower(n)
+        _FACTOR_FNS[n] = ca.Function(f"ldl_factor_{n}", [A], [ca.vertcat(ca.SX(0, 1), *[L[i][k] for i, k in low]),
+                                                              ca.vertcat(*inv_d)])
+    return _FACTOR_FNS[n]
+
+
+def _solve_fn(n: int) -> ca.Function:
+    if n not in _SOLVE_FNS:
+        low = _lower(n)
+        lv, dv, b = ca.SX.sym("L", len(low)), ca.SX.sym("inv_d", n), ca.SX.sym("b", n)
+        L = [[None] * n for _ in range(n)]
+        for k, (i, j) in enumerate(low):
+            L[i][j] = lv[k]
+        _SOLVE_FNS[n] = ca.Function(f"ldl_solve_{n}", [lv, dv, b], [_ldl_solve_py(L, [dv[i] for i in range(n)], b)])
+    return _SOLVE_FNS[n]
+
+
+def ldl_factor(A: ca.SX):
+    """Unpivoted LDL^T factorization of a symmetric positive definite SX matrix.
+
+    Parameters
+    ----------
+    A : casadi.SX, shape (n, n), symmetric positive definite
+
+    Returns
+    -------
+    L : list of list of casadi.SX
+        Unit lower-triangular factor, ``L[i][j]`` for ``j < i``.
+    inv_d : list of casadi.SX, length n
+        Reciprocals of the diagonal of D (all > 0 for SPD input). No pivoting
+        is needed for SPD.
+    """
+    n = A.shape[0]
+    lv, dv = _factor_fn(n)(A)
+    L = [[None] * n for _ in range(n)]
+    for k, (i, j) in enumerate(_lower(n)):
+        L[i][j] = lv[k]
+    return L, [dv[i] for i in range(n)]
+
+
+def ldl_solve(L, inv_d, b: ca.SX) -> ca.SX:
+    """Solve ``A x = b`` given :func:`ldl_factor` of A.
+
+    Parameters
+    ----------
+    b : casadi.SX, shape (n, 1)
+
+    Returns
+    -------
+    casadi.SX, shape (n, 1)
+    """
+    n = len(inv_d)
+    low = _lower(n)
+    lv = ca.vertcat(ca.SX(0, 1), *[L[i][k] for i, k in low])
+    return _solve_fn(n)(lv, ca.vertcat(*inv_d), b)
 
 
 def spd_inverse(L, inv_d) -> ca.SX:
