@@ -45,19 +45,43 @@ def _converter(model, q, dq, p) -> SympyToSX:
     return SympyToSX(bind, dict(model.program.definitions))
 
 
-def inverse_dynamics(model) -> ca.Function:
-    """``tau(q, dq, a, p) = D(q) a + h(q, dq)`` (SX), from the model's RNEA programme if it has one."""
+_PROGRAMMES: Dict[int, Tuple[object, ca.Function]] = {}
+
+
+def programme(model) -> ca.Function:
+    """``(D, h, tau)`` of ``(q, dq, a, p)`` as one SX Function, converted once per model (cached).
+
+    ``tau(q, dq, a) = D a + h``: the model's RNEA programme with the acceleration as an input
+    (``model.inverse_dynamics``, spatial chains) or ``D a + h`` (planar chains). Callers call it
+    on their own expressions (a call is evaluated in C++; converting the SymPy programme again
+    would cost a Python operation per node).
+    """
+    hit = _PROGRAMMES.get(id(model))
+    if hit is not None and hit[0] is model:
+        return hit[1]
     n = model.n
     q, dq, a = ca.SX.sym("q", n), ca.SX.sym("dq", n), ca.SX.sym("a", n)
     p = ca.SX.sym("p", len(model.params))
     conv = _converter(model, q, dq, p)
+    D, h = conv(model.D), ca.vec(conv(model.h))
     if model.inverse_dynamics is not None:
         acc, tau = model.inverse_dynamics
         for i, s in enumerate(acc):
             conv.bind(s, a[i])
         t = ca.vec(conv(tau))
     else:
-        t = ca.mtimes(conv(model.D), a) + ca.vec(conv(model.h))
+        t = ca.mtimes(D, a) + h
+    fn = ca.Function(f"{model.name}_programme", [q, dq, a, p], [D, h, t], ["q", "dq", "a", "p"], ["D", "h", "tau"])
+    _PROGRAMMES[id(model)] = (model, fn)
+    return fn
+
+
+def inverse_dynamics(model) -> ca.Function:
+    """``tau(q, dq, a, p) = D(q) a + h(q, dq)`` (SX), from the model's RNEA programme if it has one."""
+    n = model.n
+    q, dq, a = ca.SX.sym("q", n), ca.SX.sym("dq", n), ca.SX.sym("a", n)
+    p = ca.SX.sym("p", len(model.params))
+    t = programme(model)(q, dq, a, p)[2]
     return ca.Function(f"{model.name}_tau", [q, dq, a, p], [t], ["q", "dq", "a", "p"], ["tau"])
 
 
@@ -98,16 +122,17 @@ def build_kernel(model) -> ca.Function:
         Y3 = tuple(sp.Symbol(f"y3_{i + 1}", real=True) for i in range(n))
         Y4 = tuple(sp.Symbol(f"y4_{i + 1}", real=True) for i in range(n))
         R1, W = inverse_dynamics_derivatives(model, Y3, Y4)
-    conv = _converter(model, q, dq, p)
-    L, inv_d = ldl_factor(conv(model.D))
+    D, h, _ = programme(model)(q, dq, ca.SX.zeros(n), p)
+    L, inv_d = ldl_factor(D)
     zero = ca.SX.zeros(n)
-    y3 = ldl_solve(L, inv_d, s - ca.vec(conv(model.h)))
+    y3 = ldl_solve(L, inv_d, s - h)
     if model.inverse_dynamics is not None:
         d1, d2 = time_derivatives(model)
         z = ca.vertcat(q, dq, y3)
         y4 = ldl_solve(L, inv_d, ds - d1(z, ca.vertcat(dq, y3, zero), p))
         w = d2(z, ca.vertcat(dq, y3, y4), ca.vertcat(y3, y4, zero), p)
     else:
+        conv = _converter(model, q, dq, p)
         for i in range(n):
             conv.bind(Y3[i], y3[i])
         y4 = ldl_solve(L, inv_d, ds - ca.vec(conv(R1)))

@@ -93,20 +93,27 @@ def build_torque_functions_symbolic(tl: TorqueLinearization) -> Dict[str, ca.Fun
     return out
 
 
-def _beta_tau(lin: Linearization) -> ca.Function:
-    """``beta_tau(m, p) = J_m K^-1 D(q)``: the state law's ``beta`` with ``q`` read from ``m``."""
+def _beta_tau(lin: Linearization, beta: ca.Function = None) -> ca.Function:
+    """``beta_tau(m, p) = J_m K^-1 D(q)``: the state law's ``beta`` with ``q`` read from ``m``.
+
+    ``beta``: the state law's ``<model>_beta(x, p)`` (called with ``x = [q; 0; 0; 0]``: it reads q
+    only), else converted from the SymPy form.
+    """
     model = lin.model
     n = model.n
     m_sym = ca.SX.sym("m", 5 * n)
     p = ca.SX.sym("p", len(model.params))
-    bindings = {s: m_sym[i] for i, s in enumerate(model.q)}
-    bindings.update({s: p[j] for j, s in enumerate(model.param_symbols)})
-    conv = SympyToSX(bindings, dict(model.program.definitions))
-    return ca.Function(f"{model.name}_beta_tau", [m_sym, p], [ca.cse(conv(lin.outputs["beta"]))], ["m", "p"],
-                       ["beta_tau"])
+    if beta is not None:
+        value = beta(ca.vertcat(m_sym[:n], ca.SX.zeros(3 * n)), p)
+    else:
+        bindings = {s: m_sym[i] for i, s in enumerate(model.q)}
+        bindings.update({s: p[j] for j, s in enumerate(model.param_symbols)})
+        value = ca.cse(SympyToSX(bindings, dict(model.program.definitions))(lin.outputs["beta"]))
+    return ca.Function(f"{model.name}_beta_tau", [m_sym, p], [value], ["m", "p"], ["beta_tau"])
 
 
-def build_torque_functions(lin: Linearization, kernel: ca.Function) -> Dict[str, ca.Function]:
+def build_torque_functions(lin: Linearization, kernel: ca.Function,
+                           beta: ca.Function = None) -> Dict[str, ca.Function]:
     """SX Functions ``<model>_<name>`` of :data:`TORQUE_QUANTITIES` and ``<model>_control_core_tau``.
 
     ``T_tau`` and ``alpha_tau`` call the model's ``kernel`` (:func:`derive.emit.dynamics.build_kernel`,
@@ -117,6 +124,8 @@ def build_torque_functions(lin: Linearization, kernel: ca.Function) -> Dict[str,
     lin : Linearization
     kernel : casadi.Function
         ``<model>_accel_kernel``.
+    beta : casadi.Function, optional
+        The state law's ``<model>_beta`` (``beta_tau`` calls it instead of converting D again).
 
     Returns
     -------
@@ -129,7 +138,7 @@ def build_torque_functions(lin: Linearization, kernel: ca.Function) -> Dict[str,
     bodies = torque_bodies(model, kernel)
     out = {name: sx_function(f"{model.name}_{name}", bodies[name], [5 * n, n_p], ["m", "p"], [name], cse=False)
            for name in ("T_tau", "alpha_tau")}  # one kernel call (CSE'd) and a few products each
-    out["beta_tau"] = _beta_tau(lin)
+    out["beta_tau"] = _beta_tau(lin, beta)
     beta = out["beta_tau"]
     out["control_core_tau"] = sx_function(f"{model.name}_control_core_tau", bodies["core"], [5 * n, n_p],
                                           ["m", "p_hat"], ["y_hat", "alpha", "beta"],

@@ -132,7 +132,7 @@ def _write_casadi_files(lin: Linearization, outdir: Path, functions, controls, o
 
 def _build_laws(lin: Linearization, functions, kernel: ca.Function) -> Dict[str, ca.Function]:
     """Every control law (state, torque-sensed, pdg), their cores, and T_tau, alpha_tau, beta_tau."""
-    torque = build_torque_functions(lin, kernel)
+    torque = build_torque_functions(lin, kernel, functions["beta"])
     torque["control_pdg"] = build_pdg(lin.model)
     controls = build_controls(lin.model, functions, torque, core_body=state_bodies(lin.model, kernel)["core"])
     controls.update({name: torque[name] for name, _ in TORQUE_QUANTITIES})
