@@ -19,6 +19,11 @@ Hence ``beta = b^-1 = N^-1 D`` and ``alpha = -beta a = N^-1 R2``: alpha and
 beta need no linear solve at all; y3 and y4 need one SPD solve each, done
 numerically in the generated code.
 
+This SymPy form of R1, R2 and alpha is formed only on request (``symbolic=True``;
+by default for one-joint models, whose report prints it): the emitted ``T`` and
+``alpha`` take R1 and R2 as time derivatives of the inverse dynamics by CasADi AD
+(:mod:`derive.emit.dynamics`), and the tests compare the two routes.
+
 The brackets ``ad_f^k g`` serve only the controllability check: the emitted
 ``ad`` Function is built by CasADi AD from the SX of f and g
 (:func:`derive.emit.functions.ad_by_ad`), which grows like the forward passes
@@ -153,6 +158,25 @@ def brackets_implicit(m: FlexibleJointModel, W: sp.Matrix, d_time: DirectionalDe
     return sp.Matrix.hstack(*blocks)
 
 
+def _implicit_alpha(m: FlexibleJointModel, d_time: DirectionalDerivative, r3: sp.Matrix, Y3, Y4,
+                    Jinv: sp.Matrix) -> Tuple[sp.Matrix, sp.Matrix, list]:
+    """``(R1, R2, diag(N)^-1)`` of the module docstring, in SymPy; checks that ``N`` is diagonal."""
+    n = m.n
+    # E0 = D Y3 - r3 = 0.  E1 = d/dt E0 = D Y4 + R1 with R1 = D' Y3 - r3' (r3 has no Y3).
+    R1 = d_time(m.D) * sp.Matrix(Y3) - d_time(r3)
+    # E2 = d/dt E1 = D A + R2 with R2 = D' Y4 + R1' (R1 has no Y4, so no A term hides in R1').
+    R2 = d_time(m.D) * sp.Matrix(Y4) + d_time(R1)
+    # b = L_g y4 = D^-1 N with N = -(dR1/d dq_m) J_m^-1 (y3 does not depend on dq_m).
+    dR1 = []
+    for j in range(n):
+        d_u = DirectionalDerivative({m.dqm[j]: sp.Integer(1)}, program=m.program, tag=f"u{j + 1}")
+        dR1.append(d_u(R1))
+    N = (-sp.Matrix.hstack(*dR1) * Jinv).applyfunc(sp.simplify)
+    if not N.is_diagonal() or any(N[i, i].has(*[s for s, _ in m.program.definitions]) for i in range(n)):
+        raise ValueError(f"{m.name}: expected L_g y4 = D^-1 K J_m^-1 with K diagonal, got N = {N}")
+    return R1, R2, [1 / N[i, i] for i in range(n)]
+
+
 def complete_plant(m: FlexibleJointModel) -> Linearization:
     """The plant pieces of a complete model (docs/complete-model.md); no T, alpha, beta.
 
@@ -222,19 +246,7 @@ def linearize(m: FlexibleJointModel, symbolic_brackets: Optional[bool] = None,
                           Y3[i]: Y4[i]})
         d_time = DirectionalDerivative(seeds, program=m.program, tag="t")  # d/dt along f
     if symbolic:
-        # E0 = D Y3 - r3 = 0.  E1 = d/dt E0 = D Y4 + R1 with R1 = D' Y3 - r3' (r3 has no Y3).
-        R1 = d_time(m.D) * sp.Matrix(Y3) - d_time(r3)
-        # E2 = d/dt E1 = D A + R2 with R2 = D' Y4 + R1' (R1 has no Y4, so no A term hides in R1').
-        R2 = d_time(m.D) * sp.Matrix(Y4) + d_time(R1)
-        # b = L_g y4 = D^-1 N with N = -(dR1/d dq_m) J_m^-1 (y3 does not depend on dq_m).
-        dR1 = []
-        for j in range(n):
-            d_u = DirectionalDerivative({m.dqm[j]: sp.Integer(1)}, program=m.program, tag=f"u{j + 1}")
-            dR1.append(d_u(R1))
-        N = (-sp.Matrix.hstack(*dR1) * Jinv).applyfunc(sp.simplify)
-        if not N.is_diagonal() or any(N[i, i].has(*[s for s, _ in m.program.definitions]) for i in range(n)):
-            raise ValueError(f"{m.name}: expected L_g y4 = D^-1 K J_m^-1 with K diagonal, got N = {N}")
-        ninv = [1 / N[i, i] for i in range(n)]
+        R1, R2, ninv = _implicit_alpha(m, d_time, r3, Y3, Y4, Jinv)
         rhs4 = -R1
     else:  # N = K J_m^-1 by the structure of the model (checked above when symbolic, and by the tests)
         ninv = [m.Jm[i] / m.K[i] for i in range(n)]

@@ -3,8 +3,10 @@
 Every Function has the signature ``(x, p) -> (value,)`` with ``x`` of length
 4n (``[q; dq; q_m; dq_m]``) and ``p`` of length ``len(param_names)``.
 The implicit symbols of the derivation are bound here to numeric linear
-algebra on D(q): ``y3 = D^-1 r3`` and ``y4 = D^-1 rhs4`` through one LDL^T
-factorization.
+algebra on D(q): ``y3 = D^-1 r3`` through one LDL^T factorization. ``T`` and
+``alpha`` call the model's kernel (:mod:`derive.emit.dynamics`: ``y3``, ``y4`` and
+the second time derivative of the inverse dynamics by CasADi AD); the SymPy route
+(``y4 = D^-1 rhs4``, the implicit ``alpha``) is ``route="symbolic"``, for cross-checks.
 
 The brackets ``ad = [g, ad_f g, ad_f^2 g, ad_f^3 g]`` are not converted from
 SymPy: they are built here by CasADi forward-mode AD from the SX of ``f`` and
