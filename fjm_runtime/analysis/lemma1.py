@@ -60,6 +60,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from itertools import product
+from typing import Optional
 
 import numpy as np
 
@@ -143,7 +144,8 @@ def beta_hat_link1(nominal=None, bounds=None) -> float:
     return beta_bounds_link1(nominal, bounds)[2]
 
 
-def alpha_mismatch_bound(y_box, nominal=None, bounds=None, n_grid: int = 41, n_param: int = 5) -> float:
+def alpha_mismatch_bound(y_box, nominal=None, bounds=None, n_grid: int = 41, n_param: int = 5,
+                         endpoints_only: Optional[bool] = None) -> float:
     """``H = sup |alpha(x; p_nom) - alpha(x; p)|`` over a y-box and the parameter box (link1).
 
     ``x = T^{-1}(y; p)`` (:func:`mismatch_evaluator`).
@@ -158,6 +160,9 @@ def alpha_mismatch_bound(y_box, nominal=None, bounds=None, n_grid: int = 41, n_p
         Grid points along ``y1`` (``y2..y4`` use 9/5/5 points including the vertices).
     n_param : int
         Grid points along each uncertain parameter (endpoints included).
+    endpoints_only : bool, optional
+        Evaluate only the ends of the parameter interval. Default: when ``K`` is the only uncertain
+        parameter and ``B_m = 0`` (exact then, see Notes; the interior points cannot raise ``H``).
 
     Notes
     -----
@@ -179,7 +184,11 @@ def alpha_mismatch_bound(y_box, nominal=None, bounds=None, n_grid: int = 41, n_p
     p_nom = np.array([nom[k] for k in names])
     ev = mismatch_evaluator(m, p_nom)
     H = 0.0
-    for combo in product(*[np.linspace(b[k][0], b[k][1], n_param) for k in uncertain]):
+    # K-only uncertainty with B_m = 0: the mismatch is affine in 1/K at each y (Notes), so its modulus
+    # peaks at an end of the interval and the interior K points cannot raise the supremum.
+    if endpoints_only is None:
+        endpoints_only = uncertain == ["K"] and nom.get("B_m", 0.0) == 0.0
+    for combo in product(*[np.linspace(b[k][0], b[k][1], 2 if endpoints_only else n_param) for k in uncertain]):
         p = p_nom.copy()
         p[[names.index(k) for k in uncertain]] = combo
         V = ev(grid, np.repeat(p[None, :], grid.shape[0], axis=0))

@@ -6,6 +6,8 @@ the canvas (constrained layout).
 """
 from __future__ import annotations
 
+import contextlib
+
 from pathlib import Path
 from typing import Dict, List, Optional, Sequence
 
@@ -31,11 +33,25 @@ def pyplot():
     return plt
 
 
+#: Resolution of the written figures (dots per inch); :func:`resolution` changes it for a run.
+DPI = {"value": 110}
+
+
+@contextlib.contextmanager
+def resolution(dpi: int):
+    """Write the figures of the ``with`` block at ``dpi`` (the quick demo: a smoke test, not for reading)."""
+    old, DPI["value"] = DPI["value"], int(dpi)
+    try:
+        yield
+    finally:
+        DPI["value"] = old
+
+
 def save(fig, path: Path, tight: bool = True) -> Path:
-    """Write ``fig`` to ``path`` (110 dpi), close it, log the path; returns ``path``."""
+    """Write ``fig`` to ``path`` (110 dpi, see :func:`resolution`), close it, log the path; returns ``path``."""
     if tight:
         fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    fig.savefig(path, dpi=DPI["value"])
     pyplot().close(fig)
     log(f"  wrote {path}")
     return Path(path)

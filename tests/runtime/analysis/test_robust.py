@@ -51,6 +51,19 @@ def test_alpha_mismatch_bound_closed_form_for_stiffness_only():
     assert alpha_mismatch_bound(Y, {}, None) == 0.0  # no uncertainty, no mismatch
 
 
+def test_alpha_mismatch_endpoints_suffice_for_stiffness_only():
+    """K-only, B_m = 0: the interval's ends carry the supremum (affine in 1/K), so the default
+    shortcut equals the full parameter grid; with B_m uncertain it is not taken."""
+    for Y, box in (((0.5, 1.0, 2.0, 5.0), (100.0, 200.0)), ((1.0, 2.0, 10.0, 40.0), (70.0, 130.0))):
+        fast = alpha_mismatch_bound(Y, {"K": 150.0}, {"K": box}, n_grid=21)
+        full = alpha_mismatch_bound(Y, {"K": 150.0}, {"K": box}, n_grid=21, n_param=9, endpoints_only=False)
+        assert fast == pytest.approx(full, rel=1e-12) and fast > 0
+    Y = (0.5, 1.0, 2.0, 5.0)
+    both = {"K": (100.0, 200.0), "B_m": (0.0, 0.5)}
+    assert alpha_mismatch_bound(Y, {"K": 150.0}, both, n_grid=11) == \
+        alpha_mismatch_bound(Y, {"K": 150.0}, both, n_grid=11, endpoints_only=False)
+
+
 def test_lemma1_gain_structure():
     c = coefficients_from_pole(8.0)
     R = [0.5, 0.5, 0.5, 0.5, 0.5]
