@@ -362,7 +362,7 @@ def _substeps(r: dict) -> str:
             "link1": "link1, ismc (lambda 8, k_s 1000, delta 5), 0.5 rad sine at 1 rad/s"}
     lines = ["| case, 10 s at 1 kHz, noise-free, compiled | omega_max (rad/s) | default substeps | "
              "max abs(q - q_10x) (rad) | max abs(x - x_10x) |", "|---|---|---|---|---|"]
-    for name, c in sub.items():
+    for name, c in sorted(sub.items()):       # key order: results.json is written sorted
         lines.append(f"| {what.get(name, name)} | {_sl_num(c.get('omega_max'), '.0f')} | {c.get('substeps', '-')} | "
                      f"{_sl_num(c.get('max_abs_q_diff'))} | {_sl_num(c.get('max_abs_state_diff'))} |")
     return "\n".join(lines) + "\n"
@@ -383,8 +383,8 @@ def _delay_prediction(r: dict) -> str:
         return "(not measured yet: run make bench)"
     lines = ["| sensing | TRUE stiffness | RMS, no prediction (rad) | RMS, `predict=True` (rad) |",
              "|---|---|---|---|"]
-    for sensing, cases in dp.items():
-        for label, c in cases.items():
+    for sensing, cases in sorted(dp.items()):
+        for label, c in sorted(cases.items()):
             lines.append(f"| {sensing} | {'exact' if label == 'exact' else 'all joints ' + label} | "
                          f"{_delay_cell(c.get('plain') or {})} | {_delay_cell(c.get('predict') or {})} |")
     return "\n".join(lines) + "\n"
