@@ -165,6 +165,16 @@ def compile_library(source: str, name: str, flags: Sequence[str] = DEFAULT_FLAGS
             return _build(source, key, flags, root, name)
 
 
+def _load_entry(name: str, so: Path, meta: Path, key: str):
+    """``casadi.external(name, so)`` of a valid cache entry, or ``None`` (missing, invalid or unloadable)."""
+    if not _entry_valid(so, meta, key):
+        return None
+    try:
+        return ca.external(name, str(so))
+    except RuntimeError:
+        return None
+
+
 def compile_function(fn: ca.Function, flags: Sequence[str] = DEFAULT_FLAGS,
                      cache: Optional[Path] = None) -> ca.Function:
     """Code-generate ``fn``, compile it (or reuse a verified cache entry), load it.
@@ -193,22 +203,12 @@ def compile_function(fn: ca.Function, flags: Sequence[str] = DEFAULT_FLAGS,
         if hit is not None:
             return hit
         so, meta = root / f"{key}.so", root / f"{key}.json"
-        ext = None
-        if _entry_valid(so, meta, key):
-            try:
-                ext = ca.external(fn.name(), str(so))
-            except RuntimeError:
-                ext = None
+        ext = _load_entry(fn.name(), so, meta, key)
         if ext is None:
             with _entry_lock(root, key):
-                if _entry_valid(so, meta, key):  # built by another process while we waited
-                    try:
-                        ext = ca.external(fn.name(), str(so))
-                    except RuntimeError:
-                        ext = None
+                ext = _load_entry(fn.name(), so, meta, key)  # built by another process while we waited
                 if ext is None:
-                    so = _build(source, key, flags, root, fn.name())
-                    ext = ca.external(fn.name(), str(so))
+                    ext = ca.external(fn.name(), str(_build(source, key, flags, root, fn.name())))
         _memo[memo_key] = ext
         return ext
 
