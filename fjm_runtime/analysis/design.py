@@ -48,8 +48,8 @@ from ..sim.sample_step import stiffness_indices
 from ..sim.sensor import SensorModel
 from ..validation import FjmValueError
 
-__all__ = ["DIVERGED_COST", "LIN_FLOOR", "PENALTY", "combine_moves", "design", "draw_params", "evaluate_gains", "move_gain",
-           "run_cost"]
+__all__ = ["DIVERGED_COST", "LIN_FLOOR", "PENALTY", "combine_moves", "design", "draw_params", "evaluate_gains",
+           "move_gain", "run_cost"]
 
 #: Cost of a diverged run (rad): far above any tracking error.
 DIVERGED_COST = 10.0

@@ -54,8 +54,9 @@ def run(args) -> int:
     task = {}
     if args.task == "auto" and m.name == "panda":
         from ..experiments import panda as demo_task  # the demo's task: cli sits on top, like experiments
+        from ..sim.rest import rest_state
         ref = demo_task.reference()
-        task = {"reference": ref, "x0": demo_task.rest_state(m, ref(0.0)[0], m.default_params),
+        task = {"reference": ref, "x0": rest_state(m, ref(0.0)[0], m.default_params),
                 "task": {"kind": "panda ready-pose sines (the demo's)", "offset": list(demo_task.READY),
                          "amplitude": list(demo_task.AMPLITUDE), "omega": list(demo_task.OMEGA),
                          "phase": -0.5 * math.pi,

@@ -252,13 +252,13 @@ def design_task(m, task: dict):
     motors at ``q + K^-1 G(q)`` for the NOMINAL parameters at ``t = 0``.
     """
     from ..control.references import Sinusoid
+    from ..sim.rest import rest_state
     if not isinstance(task, dict) or not all(k in task for k in ("offset", "amplitude", "omega")):
         return None
     ref = Sinusoid(list(task["amplitude"]), list(task["omega"]), n=int(m.n), offset=list(task["offset"]),
                    phase=float(task.get("phase", 0.0)))
     x0 = None
     if "holding gravity" in str(task.get("start", "")):
-        from ..experiments.panda import rest_state  # the demo's start: cli sits on top, like experiments
         x0 = rest_state(m, ref(0.0)[0], m.default_params)
     return ref, x0
 

@@ -20,8 +20,8 @@ import numpy as np
 
 from ..control.factory import make_controller
 from ..control.references import Sinusoid
+from ..sim.rest import rest_state
 from ..sim.simulate import SimulationDivergedError, simulate
-from .panda import rest_state
 from .report import diverged_marker
 
 #: ``<limit effort>`` of head_pan, s0, s1, e0, e1 (50 N m) and w0, w1, w2 (15 N m) in the URDF, q order;

@@ -22,6 +22,7 @@ import numpy as np
 
 from ..control.factory import DEFAULT_LAYER_RATE, make_controller
 from ..control.references import Sinusoid
+from ..sim.rest import rest_state
 from ..sim.simulate import SimulationDivergedError, SimulationResult, simulate
 from .report import diverged_marker
 
@@ -74,22 +75,6 @@ GAIN_NOTE = (
 def reference(n: int = 7) -> Sinusoid:
     """Joint-space sines about :data:`READY`, starting at rest at ``READY - AMPLITUDE`` (phase -pi/2)."""
     return Sinusoid(list(AMPLITUDE), list(OMEGA), n=n, offset=list(READY), phase=-0.5 * np.pi)
-
-
-def rest_state(model, q, p) -> np.ndarray:
-    """State at rest at link angles ``q`` holding gravity: ``q_m = q + K^-1 G(q)`` (parameters ``p``).
-
-    ``G(q) = -D(q) ddq`` with ``ddq`` the link acceleration of ``f`` at ``q_m = q``, ``dq = 0``.
-    """
-    n = int(model.n)
-    q = np.asarray(q, dtype=float)
-    x = np.concatenate([q, np.zeros(n), q, np.zeros(n)])
-    ddq = np.asarray(model.f(x, p), dtype=float).ravel()[n:2 * n]
-    G = -np.asarray(model.inertia(x, p), dtype=float) @ ddq
-    pv = model.params_array(p)
-    K = pv[[list(model.param_names).index(f"K{i + 1}") for i in range(n)]]
-    x[2 * n:3 * n] = q + G / K
-    return x
 
 
 def mismatch_ratio(model, factor: float, lam: float = LAM) -> np.ndarray:

@@ -23,8 +23,9 @@ from ..control import defaults
 from ..control.factory import make_controller
 from ..sim.metrics import rms_second_half, time_at_limit, torque_jitter
 from ..sim.sensor import SensorModel
+from ..sim.rest import rest_state
 from ..sim.simulate import SimulationDivergedError, simulate
-from .panda import AMPLITUDE, DIVERGED_ERROR, PANDA_EFFORT, READY, reference, rest_state
+from .panda import AMPLITUDE, DIVERGED_ERROR, PANDA_EFFORT, READY, reference
 
 RATE = 1000.0          # Hz, the Panda's control rate
 DELAY = 1              # samples of computation delay

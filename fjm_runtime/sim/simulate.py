@@ -196,8 +196,6 @@ def _simulate_legacy(model, controller, reference, p_true, x, dt, n_steps, progr
     return _finish(model, controller, p_true, L, t, W, AUX, R, settings)
 
 
-
-
 def _reference_rows(reference, t, n):
     """The reference at every sample time, shape (N+1, 5n)."""
     if hasattr(reference, "sample"):
