@@ -173,21 +173,13 @@ def state_bodies(model, kernel: ca.Function) -> Dict[str, Callable]:
         y3, y4, w = kernel(q, dq, K * (qm - q), K * (dqm - dq), p)
         return q, dq, qm, dqm, K, Jm, Bm, y3, y4, w
 
-    def T(x, p):
-        q, dq, _, _, _, _, _, y3, y4, _ = parts(x, p)
-        return ca.vertcat(q, dq, y3, y4)
-
-    def alpha(x, p):
-        q, _, qm, dqm, K, Jm, Bm, y3, _, w = parts(x, p)
-        acc_m = (K * (q - qm) - Bm * dqm) / Jm
-        return Jm / K * (w + K * (y3 - acc_m))
-
     def core(x, p):  # (y_hat, alpha) of one kernel call
         q, dq, qm, dqm, K, Jm, Bm, y3, y4, w = parts(x, p)
         acc_m = (K * (q - qm) - Bm * dqm) / Jm
         return ca.vertcat(q, dq, y3, y4), Jm / K * (w + K * (y3 - acc_m))
 
-    return {"T": T, "alpha": alpha, "core": core}
+    # a Function keeps only what its output depends on: T drops alpha's products and vice versa
+    return {"T": lambda x, p: core(x, p)[0], "alpha": lambda x, p: core(x, p)[1], "core": core}
 
 
 def torque_bodies(model, kernel: ca.Function) -> Dict[str, Callable]:
@@ -203,24 +195,25 @@ def torque_bodies(model, kernel: ca.Function) -> Dict[str, Callable]:
     return {"T_tau": lambda m, p: core(m, p)[0], "alpha_tau": lambda m, p: core(m, p)[1], "core": core}
 
 
-def sx_function(name: str, body: Callable, sizes: Sequence[int], in_names, out_names, cse: bool = True,
-                extra: Callable = None) -> ca.Function:
-    """An SX Function ``name`` of ``body`` (the kernel inlined), outputs CSE'd together."""
-    args = [ca.SX.sym(a, s) for a, s in zip(in_names, sizes)]
+def _traced(sym, body: Callable, sizes: Sequence[int], in_names, extra: Callable = None):
+    """``(arguments, outputs)`` of ``body`` (and ``extra``) on fresh ``sym`` (``ca.SX`` or ``ca.MX``) symbols."""
+    args = [sym.sym(a, s) for a, s in zip(in_names, sizes)]
     outs = body(*args)
     outs = list(outs) if isinstance(outs, tuple) else [outs]
     if extra is not None:
         outs = outs + list(extra(*args))
-    outs = ca.cse(outs) if cse else outs
-    return ca.Function(name, args, outs, list(in_names), list(out_names))
+    return args, outs
+
+
+def sx_function(name: str, body: Callable, sizes: Sequence[int], in_names, out_names, cse: bool = True,
+                extra: Callable = None) -> ca.Function:
+    """An SX Function ``name`` of ``body`` (the kernel inlined), outputs CSE'd together."""
+    args, outs = _traced(ca.SX, body, sizes, in_names, extra)
+    return ca.Function(name, args, ca.cse(outs) if cse else outs, list(in_names), list(out_names))
 
 
 def mx_function(name: str, body: Callable, sizes: Sequence[int], in_names, out_names,
                 extra: Callable = None) -> ca.Function:
     """The MX twin of :func:`sx_function`: same name, inputs and outputs; the kernel is a call."""
-    args = [ca.MX.sym(a, s) for a, s in zip(in_names, sizes)]
-    outs = body(*args)
-    outs = list(outs) if isinstance(outs, tuple) else [outs]
-    if extra is not None:
-        outs = outs + list(extra(*args))
+    args, outs = _traced(ca.MX, body, sizes, in_names, extra)
     return ca.Function(name, args, outs, list(in_names), list(out_names))

@@ -130,20 +130,7 @@ class SympyToSX:
 
 
 def _ldl_factor_py(A: ca.SX):
-    """Unpivoted LDL^T factorization of a symmetric positive definite SX matrix.
-
-    Parameters
-    ----------
-    A : casadi.SX, shape (n, n), symmetric positive definite
-
-    Returns
-    -------
-    L : list of list of casadi.SX
-        Unit lower-triangular factor, ``L[i][j]`` for ``j < i``.
-    inv_d : list of casadi.SX, length n
-        Reciprocals of the diagonal of D (all > 0 for SPD input). No pivoting
-        is needed for SPD.
-    """
+    """The arithmetic of :func:`ldl_factor` in Python SX (traced once per size into its Function)."""
     n = A.shape[0]
     L = [[None] * n for _ in range(n)]
     d: List[ca.SX] = []
