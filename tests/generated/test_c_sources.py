@@ -16,11 +16,19 @@ and evaluated through ctypes in CasADi's calling convention
 
 If the strict build fails, the library is rebuilt without ``-Werror`` so the
 numeric comparisons still run (and the strict test reports the diagnostics).
+
+A strict build that passed is kept in the fjm C cache (``$FJM_CACHE``, see
+``fjm_runtime.ccache``) under ``sha256(source, compiler and its version, flags)``: the same
+bytes through the same compiler and flags give the same verdict, so a later session loads that
+library instead of compiling again (a changed source, flag or compiler is a new key; an entry
+whose library does not match its recorded SHA-256 is rebuilt). A failing build is never cached.
 """
 
 from __future__ import annotations
 
 import ctypes
+import hashlib
+import json
 import os
 import shutil
 import subprocess
@@ -35,6 +43,7 @@ import numpy as np
 import pytest
 
 import fjm_runtime
+from fjm_runtime.ccache import cache_dir
 from fjm_runtime.model import QUANTITIES, generated_root
 
 pytestmark = pytest.mark.slow  # builds C: `pytest -m "not slow"` skips it
@@ -61,7 +70,8 @@ class Build:
     strict_ok: bool
     diagnostics: str     # compiler output of the strict build
     lib: Path            # shared library (strict build, or the non -Werror fallback)
-    seconds: float       # wall time of the strict compile
+    seconds: float       # wall time of the strict compile (of the cached build, if cached)
+    cached: bool = False  # the strict build came from the C cache (an earlier, identical compile)
 
 
 def _compile(src: Path, out: Path, extra) -> Tuple[int, str, float]:
@@ -71,15 +81,61 @@ def _compile(src: Path, out: Path, extra) -> Tuple[int, str, float]:
     return proc.returncode, " ".join(cmd) + "\n" + proc.stdout + proc.stderr, time.perf_counter() - t0
 
 
+def _sha256(path: Path) -> str:
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+def _strict_key(src: Path, extra) -> str:
+    """sha256 of the source bytes, the compiler (resolved path and ``--version``) and the flags."""
+    version = subprocess.run([CC, "--version"], capture_output=True, text=True).stdout
+    h = hashlib.sha256(b"fjm tests/generated strict build\0")
+    h.update(src.read_bytes())
+    for part in (os.path.realpath(shutil.which(CC) or CC), version, *STRICT, OPT, "-fPIC", "-shared", *extra):
+        h.update(b"\0" + part.encode())
+    return h.hexdigest()
+
+
+def _cached_strict(key: str):
+    """``(library, seconds)`` of a verified cached strict build, or ``None``."""
+    root = cache_dir()
+    lib, meta = root / f"strict-{key}.so", root / f"strict-{key}.json"
+    try:
+        record = json.loads(meta.read_text())
+        if record.get("key") == key and lib.is_file() and record.get("so_sha256") == _sha256(lib):
+            return lib, float(record["seconds"])
+    except (OSError, ValueError, KeyError, TypeError, AttributeError):
+        pass
+    return None
+
+
+def _store_strict(key: str, built: Path, model: str, real: str, seconds: float) -> Path:
+    """Copy a passing strict build into the cache (temporary file, then renamed: never half written)."""
+    root = cache_dir()
+    lib, meta = root / f"strict-{key}.so", root / f"strict-{key}.json"
+    tmp_lib, tmp_meta = root / f".strict-{key}.so.{os.getpid()}", root / f".strict-{key}.json.{os.getpid()}"
+    shutil.copyfile(built, tmp_lib)
+    tmp_meta.write_text(json.dumps({"key": key, "so_sha256": _sha256(tmp_lib), "model": model, "real": real,
+                                    "seconds": round(seconds, 3)}, indent=1))
+    os.replace(tmp_lib, lib)     # library first, then the record that vouches for it
+    os.replace(tmp_meta, meta)
+    return lib
+
+
 def _build(model: str, real: str, outdir: Path) -> Build:
     src = generated_root() / model / f"{model}.c"
     extra = ["-Dcasadi_real=float"] if real == "float" else []
+    key = _strict_key(src, extra)
+    hit = _cached_strict(key)
+    if hit is not None:
+        return Build(model, real, True, "", hit[0], hit[1], cached=True)
     lib = outdir / f"{model}_{real}.so"
     rc, diag, secs = _compile(src, lib, extra)
     ok = rc == 0 and not diag.split("\n", 1)[1].strip()
     if rc != 0:  # keep the numeric tests meaningful: rebuild without -Werror
         rc2, diag2, _ = _compile(src, lib, extra + ["-Wno-error"])
         assert rc2 == 0, f"{model} ({real}) does not compile even without -Werror:\n{diag2[:4000]}"
+    if ok:
+        _store_strict(key, lib, model, real, secs)
     return Build(model, real, ok, diag, lib, secs)
 
 
@@ -172,7 +228,8 @@ def test_strict_compile(c_builds, model, real, record_property):
     """gcc -std=c99 -Wall -Wextra -Werror -pedantic accepts the generated C without a single diagnostic."""
     b = c_builds[(model, real)]
     record_property("compile_seconds", round(b.seconds, 2))
-    print(f"{model} ({real}): strict compile {b.seconds:.2f} s ({OPT})")
+    record_property("compile_cached", b.cached)
+    print(f"{model} ({real}): strict compile {b.seconds:.2f} s ({OPT}){' (cached build)' if b.cached else ''}")
     assert b.strict_ok, f"{model}.c fails the strict {real} build:\n{b.diagnostics[:3000]}"
 
 
