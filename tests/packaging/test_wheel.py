@@ -6,15 +6,26 @@ models byte for byte, installs it with ``--no-deps`` into a fresh venv that
 has only casadi==3.7.2 and numpy (no SymPy), and there loads planar3 (and
 every other model) from the installed package data, comparing the numbers with
 this process. Takes ~30-60 s (venv + casadi install); part of ``make test``.
+
+The wheel is kept in the fjm C cache (``$FJM_CACHE``, ``wheel-<key>/``) under the SHA-256 of
+everything it is built from (the paths and bytes of the copied source tree, the Python and pip
+versions): a session whose sources are unchanged installs the wheel built by an earlier one (and
+still checks its contents file by file against generated/). The venv is always new; it is created
+without pip and filled by this interpreter's pip (``pip --python``), one install for casadi, numpy
+and the wheel.
 """
 
 from __future__ import annotations
 
+import hashlib
+import importlib.metadata
+import importlib.util
 import json
 import os
 import shutil
 import subprocess
 import sys
+import tempfile
 import zipfile
 from pathlib import Path
 
@@ -22,6 +33,7 @@ import numpy as np
 import pytest
 
 import fjm_runtime
+from fjm_runtime.ccache import cache_dir
 from fjm_runtime.model import COMPLETE_QUANTITIES, QUANTITIES
 
 from support.paths import REPO  # noqa: E402
@@ -45,19 +57,61 @@ def _clean_env():
     return env
 
 
-@pytest.fixture(scope="module")
-def wheel(tmp_path_factory) -> Path:
-    src = tmp_path_factory.mktemp("wheel_src")
+IGNORE = ("__pycache__", "*.pyc", "*.so", "*.o")
+
+
+def _copy_sources(dst: Path) -> None:
     for name in SOURCES:
         p = REPO / name
         if p.is_dir():
-            shutil.copytree(p, src / name, ignore=shutil.ignore_patterns("__pycache__", "*.pyc", "*.so", "*.o"))
+            shutil.copytree(p, dst / name, ignore=shutil.ignore_patterns(*IGNORE))
         elif p.is_file():
-            shutil.copy2(p, src / name)
+            shutil.copy2(p, dst / name)
+
+
+def _tree_key(root: Path) -> str:
+    """SHA-256 of the relative paths and bytes of every file under ``root``, and the Python and pip versions."""
+    pip = _run([sys.executable, "-m", "pip", "--version"]).stdout.split()[1]
+    h = hashlib.sha256(f"fjm tests/packaging wheel\0{sys.version}\0pip {pip}".encode())
+    for f in sorted(p for p in root.rglob("*") if p.is_file()):
+        h.update(b"\0" + str(f.relative_to(root)).encode() + b"\0")
+        h.update(hashlib.sha256(f.read_bytes()).digest())
+    return h.hexdigest()
+
+
+def _cached_wheel(entry: Path):
+    """The wheel of a cache entry whose recorded SHA-256 matches its bytes, else ``None``."""
+    try:
+        record = json.loads((entry / "wheel.json").read_text())
+        whl = entry / record["wheel"]
+        if whl.is_file() and hashlib.sha256(whl.read_bytes()).hexdigest() == record["sha256"]:
+            return whl
+    except (OSError, ValueError, KeyError, TypeError):
+        pass
+    return None
+
+
+@pytest.fixture(scope="module")
+def wheel(tmp_path_factory) -> Path:
+    src = tmp_path_factory.mktemp("wheel_src")
+    _copy_sources(src)
+    entry = cache_dir() / f"wheel-{_tree_key(src)}"
+    cached = _cached_wheel(entry)
+    if cached is not None:
+        return cached
     dist = tmp_path_factory.mktemp("wheel_dist")
     _run([sys.executable, "-m", "pip", "wheel", str(src), "--no-deps", "-w", str(dist), "-q"], env=_clean_env())
     wheels = sorted(dist.glob("fjm-*.whl"))
     assert len(wheels) == 1, wheels
+    # into the cache: a fresh directory renamed into place (a concurrent session's entry is kept)
+    tmp = Path(tempfile.mkdtemp(prefix=".wheel-", dir=cache_dir()))
+    shutil.copy2(wheels[0], tmp / wheels[0].name)
+    (tmp / "wheel.json").write_text(json.dumps({"wheel": wheels[0].name,
+                                                "sha256": hashlib.sha256(wheels[0].read_bytes()).hexdigest()}))
+    try:
+        os.rename(tmp, entry)
+    except OSError:  # already there (another session) or not renamable: the built wheel is used as is
+        shutil.rmtree(tmp, ignore_errors=True)
     return wheels[0]
 
 
@@ -107,15 +161,19 @@ print(json.dumps(out))
 """
 
 
+def _pip(py: Path, *args, **kw):
+    """This interpreter's pip acting on the environment of ``py`` (``pip --python``; the venv has no pip)."""
+    return _run([sys.executable, "-m", "pip", "--python", py, *args], **kw)
+
+
 @pytest.fixture(scope="module")
 def venv(wheel, tmp_path_factory) -> Path:
     """A fresh venv with casadi, numpy and the wheel only (no SymPy)."""
     venv = tmp_path_factory.mktemp("wheel_venv") / "venv"
     env = _clean_env()
-    _run([sys.executable, "-m", "venv", str(venv)], env=env)
+    _run([sys.executable, "-m", "venv", "--without-pip", str(venv)], env=env)
     py = venv / "bin" / "python"
-    _run([py, "-m", "pip", "install", "-q", "--no-deps", "casadi==3.7.2", f"numpy=={np.__version__}"], env=env)
-    _run([py, "-m", "pip", "install", "-q", "--no-deps", str(wheel)], env=env)
+    _pip(py, "install", "-q", "--no-deps", "casadi==3.7.2", f"numpy=={np.__version__}", wheel, env=env)
     return venv
 
 
@@ -142,8 +200,9 @@ def test_wheel_installs_and_runs_without_sympy(venv, tmp_path):
 def test_installed_derive_needs_out_and_fjm_generated(venv, tmp_path):
     """``fjm derive`` from the installed wheel: without SymPy it names the extra; with SymPy but
     without ``--out`` it is a usage error (no ``site-packages/generated``); with ``--out DIR`` and
-    ``FJM_GENERATED=DIR`` load() reads the derived model. SymPy goes into a separate ``--target``
-    directory on PYTHONPATH, so the venv itself stays SymPy-free for the test above."""
+    ``FJM_GENERATED=DIR`` load() reads the derived model. SymPy (sympy==1.14.0 and mpmath of this
+    interpreter, linked: no second download and install) goes into a separate directory on
+    PYTHONPATH, so the venv itself stays SymPy-free for the test above."""
     env = _clean_env()
     fjm, py = venv / "bin" / "fjm", venv / "bin" / "python"
     run_dir = tmp_path / "elsewhere"
@@ -154,8 +213,11 @@ def test_installed_derive_needs_out_and_fjm_generated(venv, tmp_path):
     assert proc.returncode == 2 and "pip install" in proc.stderr and "sympy" in proc.stderr, proc.stderr
 
     extra = tmp_path / "derive-extra"
-    _run([py, "-m", "pip", "install", "-q", "--no-deps", "--target", str(extra), "sympy==1.14.0", "mpmath"],
-         env=env)
+    extra.mkdir()
+    assert importlib.metadata.version("sympy") == "1.14.0"  # the pin of the derive extra (pyproject.toml)
+    for name in ("sympy", "mpmath"):  # this interpreter's installed packages, linked (with their bytecode)
+        (extra / name).symlink_to(importlib.util.find_spec(name).submodule_search_locations[0],
+                                  target_is_directory=True)
     env_sympy = dict(env, PYTHONPATH=str(extra))
     site = Path(_run([py, "-c", "import derive, pathlib; print(pathlib.Path(derive.__file__).parent.parent)"],
                      env=env_sympy, cwd=run_dir).stdout.strip())
