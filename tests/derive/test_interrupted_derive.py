@@ -9,9 +9,12 @@ before and no staging directory (``.<out>-tmp-*``) or backup
 (``--models link1``) must replace link1 and keep the other models.
 
 So that the signal lands at a known point however fast derive becomes, the
-child runs derive's real ``main`` through a tiny wrapper that pauses (sleeps)
-at a hook point and prints a marker: after planar6 has been emitted into the
-staging directory, or between the two renames that swap the new tree in.
+child runs derive's real ``main`` through a tiny wrapper that pauses at a hook
+point and prints a marker: after planar6 has been emitted into the staging
+directory (a sleep that the signal ends), or between the two renames that swap
+the new tree in (until the test, having sent its signal, closes the child's stdin:
+derive defers signals there, so the child must resume by itself, and waiting for
+the test instead of a fixed sleep means the signal is always sent during the pause).
 Nothing else of derive is replaced.
 
 SIGKILL cannot be handled: a child killed at the swap pause leaves ``<out>.old`` and no
@@ -58,11 +61,14 @@ def marked_copy(tmp_path):
 # Runs ``python -m derive ARGS`` with an optional pause point (argv[1]): "model:NAME" pauses after
 # NAME's files are written (to staging), "swap" pauses after the first rename of the swap.
 WRAPPER = r"""
-import os, runpy, sys, time
+import os, runpy, select, sys, time
 hook, sys.argv = sys.argv[1], ["derive"] + sys.argv[2:]
-def pause(what, seconds):
+def pause(what, seconds, until_stdin=False):
     print(f"\nPAUSED {what}", flush=True)
-    time.sleep(seconds)
+    if until_stdin:  # until the parent writes to or closes our stdin (after its signal), at most `seconds`
+        select.select([sys.stdin], [], [], seconds)
+    else:
+        time.sleep(seconds)
 if hook.startswith("model:"):
     import derive.emit.writer as writer
     real_write = writer.write_model
@@ -77,7 +83,7 @@ elif hook == "swap":
         def rename(src, dst, *a, **k):
             real(src, dst, *a, **k)
             if not os.path.basename(str(src)).startswith("."):  # moving the live tree aside
-                pause("swap", 3)  # short: a derive that blocks signals here resumes soon
+                pause("swap", 60, until_stdin=True)  # a derive that defers signals here resumes once signalled
         return rename
     os.rename, os.replace = slow(os.rename), slow(os.replace)
 runpy.run_module("derive", run_name="__main__", alter_sys=True)
@@ -87,7 +93,8 @@ runpy.run_module("derive", run_name="__main__", alter_sys=True)
 def _start(out: Path, *extra, hook: str = "none") -> subprocess.Popen:
     env = dict(os.environ, PYTHONPATH=str(REPO) + os.pathsep + os.environ.get("PYTHONPATH", ""))
     return subprocess.Popen([sys.executable, "-u", "-c", WRAPPER, hook, "--out", str(out), *extra],
-                            cwd=out.parent, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
+                            cwd=out.parent, env=env, stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                            stderr=subprocess.STDOUT)
 
 
 def _read_until(proc: subprocess.Popen, marker: bytes, timeout: float) -> bytes:
@@ -157,7 +164,7 @@ def test_interrupt_during_swap_keeps_a_complete_tree(marked_copy, sig):
     # hook always fires; a derive that swaps otherwise (or exits 0 first) fails here.
     log = _read_until(proc, b"PAUSED swap", timeout=120)
     proc.send_signal(sig)
-    rest, _ = proc.communicate(timeout=60)
+    rest, _ = proc.communicate(timeout=60)  # closes the child's stdin: the paused swap resumes
     text = (log + rest).decode(errors="replace")
     assert out.is_dir(), f"{out.name}/ is gone after {sig.name} during the swap:\n{text}\n" \
         f"next to it: {sorted(p.name for p in out.parent.iterdir())}"
