@@ -30,6 +30,32 @@ def stiffness_indices(m):
             [names.index(f"Bm{i + 1}") for i in range(m.n)])
 
 
+class Dense:
+    """A CasADi Function of dense inputs and outputs called through its FunctionBuffer (the same
+    evaluation as ``fn(*args)``, bit for bit, without building a DM per argument and result: the
+    reference loops below call their Functions 10 000 times per run). Returns NumPy arrays shaped
+    like ``fn(*args).full()``."""
+
+    def __init__(self, fn):
+        assert all(fn.sparsity_in(i).is_dense() for i in range(fn.n_in())), fn
+        assert all(fn.sparsity_out(i).is_dense() for i in range(fn.n_out())), fn
+        self.fn = fn
+        self.args = [np.zeros(fn.sparsity_in(i).nnz()) for i in range(fn.n_in())]
+        self.res = [np.zeros(fn.sparsity_out(i).nnz()) for i in range(fn.n_out())]
+        self.shapes = [fn.sparsity_out(i).shape for i in range(fn.n_out())]
+        self.buf, self.eval = fn.buffer()
+        for i, a in enumerate(self.args):
+            self.buf.set_arg(i, memoryview(a))
+        for i, r in enumerate(self.res):
+            self.buf.set_res(i, memoryview(r))
+
+    def __call__(self, *args):
+        for a, v in zip(self.args, args):
+            a[:] = np.asarray(v, dtype=float).ravel(order="F")
+        self.eval()
+        return [r.reshape(shape, order="F").copy() for r, shape in zip(self.res, self.shapes)]
+
+
 class ReferenceLaw:
     """The laws from their formulas (README "Controllers", fjm_runtime.control.adaptive docstring)."""
 
@@ -63,9 +89,9 @@ class ReferenceLaw:
         if not hasattr(self, "_tba"):
             import casadi as ca
             xs, ps = ca.MX.sym("x", self.m.nx), ca.MX.sym("p", len(self.m.param_names))
-            self._tba = ca.Function("reference_T_beta_alpha", [xs, ps],
-                                    [self.m.functions[q](xs, ps) for q in ("T", "beta", "alpha")])
-        return [v.full() for v in self._tba(x, p)]
+            self._tba = Dense(ca.Function("reference_T_beta_alpha", [xs, ps],
+                                          [self.m.functions[q](xs, ps) for q in ("T", "beta", "alpha")]))
+        return self._tba(x, p)
 
     def p_hat(self, z):
         p = self.p_nom.copy()
@@ -122,7 +148,7 @@ def reference_run(m, law, ref, p_true, duration, dt, substeps):
     z = law.z0(x)
     N = int(round(duration / dt))
     X, U = np.empty((N + 1, nx)), np.empty((N + 1, n))
-    plant = _substep_plant(m, dt, substeps)
+    plant = Dense(_substep_plant(m, dt, substeps))
     for k in range(N + 1):
         t = k * dt
         r = ref(t)
@@ -131,7 +157,7 @@ def reference_run(m, law, ref, p_true, duration, dt, substeps):
         if k == N:
             break
         z = z + dt * law.zdot(x, z, r, u_cmd, u)
-        x = plant(x, u, p_true).full().ravel()
+        x = plant(x, u, p_true)[0].ravel()
     return X, U
 
 
