@@ -12,11 +12,6 @@ import pytest
 import fjm_runtime
 
 
-@pytest.fixture(autouse=True)
-def private_cache(tmp_path, monkeypatch):
-    monkeypatch.setenv("FJM_CACHE", str(tmp_path / "cache"))
-
-
 @pytest.mark.parametrize("name", ["link1", "planar2", "planar3"])
 @pytest.mark.parametrize("variant", ["structured", "generic"])
 def test_ad_peer_alpha_beta_equal_generated(name, variant):

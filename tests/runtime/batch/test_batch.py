@@ -21,11 +21,6 @@ from fjm_runtime.sim.simulate import simulate
 
 pytestmark = pytest.mark.slow  # builds C, a wheel or derives in a subprocess: `pytest -m 'not slow'` skips it
 
-@pytest.fixture(autouse=True)
-def private_cache(tmp_path, monkeypatch):
-    monkeypatch.setenv("FJM_CACHE", str(tmp_path / "cache"))
-
-
 def _link1_ctrl(m, kind="smc", **kw):
     kw.setdefault("k_s", 1008.0)
     kw.setdefault("delta", 5.04)

@@ -142,8 +142,7 @@ SENSOR = SensorModel(q=1e-3, dq=1e-2, q_m=2e-3, dq_m=1e-2, q_quant=1e-4, q_m_qua
 
 @pytest.mark.slow
 @pytest.mark.parametrize("name", ["link1", "planar2"])
-def test_backends_agree_with_noise_delay_and_substeps(name, request, tmp_path, monkeypatch):
-    monkeypatch.setenv("FJM_CACHE", str(tmp_path / "cache"))
+def test_backends_agree_with_noise_delay_and_substeps(name, request):
     m = request.getfixturevalue(name)
     ctrl = _ismc(m)
     ref = Sinusoid(0.5, 1.0, n=m.n)

@@ -20,11 +20,6 @@ from fjm_runtime.validation import FjmValueError, check_physical
 from support.paths import REPO  # noqa: E402
 
 
-@pytest.fixture(autouse=True)
-def private_cache(tmp_path, monkeypatch):
-    monkeypatch.setenv("FJM_CACHE", str(tmp_path / "cache"))
-
-
 def _stiffness(m, factors):
     return {f"K{i + 1}": m.default_params[f"K{i + 1}"] * f for i, f in enumerate(factors)}
 
