@@ -48,25 +48,29 @@ def panda():
     return fjm_runtime.load("panda")
 
 
-#: Test files by CPU cost, costliest first (measured: ``make test`` on 2 cores, cold C cache); under
-#: pytest-xdist they are collected first, so with ``--dist loadfile --no-loadscope-reorder`` they are
-#: handed out first and the run does not end on one worker still in a long file. Only the order of
-#: the run changes; a file missing here runs after them, in the usual order.
+#: Test files by cost, costliest first (measured: ``make test`` on 2 cores, cold C cache, the machine
+#: shared with another CPU-bound job); under pytest-xdist they are collected first, so with
+#: ``--dist loadfile --no-loadscope-reorder`` they are handed out first and the run does not end on
+#: one worker still in a long file. Only the order of the run changes; a file missing here runs after
+#: them, in the usual order. (A worker is handed its next file once at most 2 tests of its current one
+#: are left: the quick-figures file, 2 tests behind one ~40 s CPU fixture, always has one queued.)
 HEAVY_FIRST = (
-    "tests/generated/test_c_sources.py",               # strict -O2 build of every model (~70 s)
-    "tests/runtime/experiments/test_figures_quick.py",  # fjm figures --quick (~65 s)
-    "tests/runtime/analysis/test_tune.py",
-    "tests/runtime/control/test_emitted_laws.py",
-    "tests/packaging/test_wheel.py",
+    "tests/runtime/experiments/test_figures_quick.py",  # fjm figures --quick (~40 s CPU)
+    "tests/generated/test_c_sources.py",               # strict -O2 build of every model (~37 s CPU cold, cached warm)
+    "tests/runtime/batch/test_sampled_batch.py",       # panda smoke: a 1.8 MB batch C source (~16 s gcc cold)
     "tests/derive/test_interrupted_derive.py",
-    "tests/runtime/batch/test_sampled_batch.py",
-    "tests/packaging/test_realtime_example.py",
+    "tests/runtime/analysis/test_tune.py",
+    "tests/packaging/test_wheel.py",
     "tests/runtime/control/test_smc.py",
     "tests/runtime/sim/test_spatial_control.py",
+    "tests/packaging/test_realtime_example.py",
     "tests/derive/test_derive_check_and_timings.py",
-    "tests/runtime/sim/test_sampled_data.py",
-    "tests/packaging/test_self_contained.py",
+    "tests/runtime/control/test_emitted_laws.py",
     "tests/derive/test_physics.py",
+    "tests/packaging/test_self_contained.py",
+    "tests/runtime/sim/test_sampled_data.py",
+    "tests/runtime/sim/test_compiled.py",
+    "tests/derive/test_guard.py",
     "tests/runtime/control/test_ismc.py",
 )
 
