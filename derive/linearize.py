@@ -25,9 +25,9 @@ by default for one-joint models, whose report prints it): the emitted ``T`` and
 (:mod:`derive.emit.dynamics`), and the tests compare the two routes.
 
 The brackets ``ad_f^k g`` serve only the controllability check: the emitted
-``ad`` Function is built by CasADi AD from the SX of f and g
-(:func:`derive.emit.functions.ad_by_ad`), which grows like the forward passes
-it takes, not like a symbolic expansion. :func:`brackets_implicit` keeps the
+``ad`` Function is their closed form for the reduced model
+(:mod:`derive.emit.brackets`), which needs only ``D``, ``D'`` and ``dh/ddq``.
+:func:`brackets_implicit` keeps the
 symbolic form (entries of ``W = D^-1`` as implicit symbols, differentiated by
 ``d W = -W (d D) W``) where it is cheap: one-joint models, whose report prints
 it beside the paper's matrix.

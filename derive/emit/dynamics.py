@@ -35,7 +35,7 @@ from typing import Callable, Dict, Sequence, Tuple
 import casadi as ca
 import sympy as sp
 
-from .sx import SympyToSX, ldl_factor, ldl_solve
+from .sx import SympyToSX, ldl_factor, ldl_solve, packed_factor_fn, packed_solve_fn
 
 
 def _converter(model, q, dq, p) -> SympyToSX:
@@ -144,7 +144,7 @@ def build_kernel(model) -> ca.Function:
                        ["q", "dq", "s", "ds", "p"], ["y3", "y4", "w"])
 
 
-def _elastic(model, p) -> Tuple[object, object, object]:
+def elastic_diagonals(model, p) -> Tuple[object, object, object]:
     """``K``, ``J_m``, ``B_m`` (column vectors) as functions of ``p`` (SX or MX)."""
     sp_syms = list(model.param_symbols)
     out = []
@@ -169,7 +169,7 @@ def state_bodies(model, kernel: ca.Function) -> Dict[str, Callable]:
 
     def parts(x, p):
         q, dq, qm, dqm = (x[i * n:(i + 1) * n] for i in range(4))
-        K, Jm, Bm = _elastic(model, p)
+        K, Jm, Bm = elastic_diagonals(model, p)
         y3, y4, w = kernel(q, dq, K * (qm - q), K * (dqm - dq), p)
         return q, dq, qm, dqm, K, Jm, Bm, y3, y4, w
 
@@ -188,11 +188,62 @@ def torque_bodies(model, kernel: ca.Function) -> Dict[str, Callable]:
 
     def core(m, p):
         q, dq, tau, dtau, dqm = (m[i * n:(i + 1) * n] for i in range(5))
-        K, Jm, Bm = _elastic(model, p)
+        K, Jm, Bm = elastic_diagonals(model, p)
         y3, y4, w = kernel(q, dq, tau, dtau, p)
         return ca.vertcat(q, dq, y3, y4), tau + Bm * dqm + Jm * y3 + Jm / K * w
 
     return {"T_tau": lambda m, p: core(m, p)[0], "alpha_tau": lambda m, p: core(m, p)[1], "core": core}
+
+
+def beta_twin(model, inertia: ca.Function) -> ca.Function:
+    """MX ``<model>_beta(x, p) = J_m K^-1 D(q)`` calling the model's ``inertia`` Function (for the C file)."""
+    n = model.n
+
+    def body(x, p):
+        K, Jm, _ = elastic_diagonals(model, p)
+        return ca.repmat(Jm / K, 1, n) * inertia(x, p)
+
+    return mx_function(f"{model.name}_beta", body, [4 * n, len(model.params)], ["x", "p"], ["beta"])
+
+
+def f_twin(model, inertia: ca.Function) -> ca.Function:
+    """MX ``<model>_f(x, p)`` calling ``inertia``, the LDL^T Functions and a bias-force Function (for the C file).
+
+    ``f = [dq; D^-1 (-h - K (q - q_m)); dq_m; J_m^-1 (K (q - q_m) - B_m dq_m)]``, the value of the
+    ``.casadi`` ``f``; ``h(q, dq)`` is the model's programme with zero acceleration.
+    """
+    n, n_p = model.n, len(model.params)
+    qs, dqs, ps = ca.SX.sym("q", n), ca.SX.sym("dq", n), ca.SX.sym("p", n_p)
+    bias = ca.Function(f"{model.name}_bias", [qs, dqs, ps], [ca.cse(programme(model)(qs, dqs, ca.SX.zeros(n), ps)[1])])
+
+    def body(x, p):
+        q, dq, qm, dqm = (x[i * n:(i + 1) * n] for i in range(4))
+        K, Jm, Bm = elastic_diagonals(model, p)
+        L, d = packed_factor_fn(n)(inertia(x, p))
+        y3 = packed_solve_fn(n)(L, d, -(bias(q, dq, p) + K * (q - qm)))
+        return ca.vertcat(dq, y3, dqm, (K * (q - qm) - Bm * dqm) / Jm)
+
+    return mx_function(f"{model.name}_f", body, [4 * n, n_p], ["x", "p"], ["f"])
+
+
+def energy_twin(model, inertia: ca.Function) -> ca.Function:
+    """MX ``<model>_energy(x, p)`` calling ``inertia`` for the links' kinetic energy (for the C file).
+
+    ``E = dq^T D(q) dq / 2 + dq_m^T J_m dq_m / 2 + (q - q_m)^T K (q - q_m) / 2 + V(q)``, the same sum
+    as the ``.casadi`` Function, with ``V`` (the links' gravitational potential) its own SX Function.
+    """
+    n, n_p = model.n, len(model.params)
+    q, p = ca.SX.sym("q", n), ca.SX.sym("p", n_p)
+    V = ca.Function(f"{model.name}_potential", [q, p], [_converter(model, q, ca.SX.sym("dq", n), p)(model.potential)])
+
+    def body(x, p):
+        q, dq, qm, dqm = (x[i * n:(i + 1) * n] for i in range(4))
+        K, Jm, _ = elastic_diagonals(model, p)
+        spring = q - qm
+        return (ca.dot(dq, ca.mtimes(inertia(x, p), dq)) + ca.dot(Jm * dqm, dqm) + ca.dot(K * spring, spring)) / 2 \
+            + V(q, p)
+
+    return mx_function(f"{model.name}_energy", body, [4 * n, n_p], ["x", "p"], ["energy"])
 
 
 def _traced(sym, body: Callable, sizes: Sequence[int], in_names, extra: Callable = None):

@@ -8,12 +8,10 @@ algebra on D(q): ``y3 = D^-1 r3`` through one LDL^T factorization. ``T`` and
 the second time derivative of the inverse dynamics by CasADi AD); the SymPy route
 (``y4 = D^-1 rhs4``, the implicit ``alpha``) is ``route="symbolic"``, for cross-checks.
 
-The brackets ``ad = [g, ad_f g, ad_f^2 g, ad_f^3 g]`` are not converted from
-SymPy: they are built here by CasADi forward-mode AD from the SX of ``f`` and
-``g`` (:func:`ad_by_ad`), with the link acceleration's derivative taken
-implicitly, ``D_v y3 = D^-1 (D_v r3 - (D_v D) y3)`` through the shared factors.
-That costs one forward pass over ``D`` and ``r3`` per column instead of a
-symbolic expansion of ``W (dD) W`` products (docs/derivation.md, "Brackets by AD").
+The brackets ``ad = [g, ad_f g, ad_f^2 g, ad_f^3 g]`` are their closed form for the reduced
+model (:mod:`derive.emit.brackets`, docs/derivation.md, "Brackets in closed form").
+:func:`ad_by_ad`, CasADi forward-mode AD of ``ad_f v`` over the SX of ``f``, is the generic
+construction the tests compare it with.
 """
 
 from __future__ import annotations
@@ -23,6 +21,7 @@ from typing import Dict, Tuple
 import casadi as ca
 
 from ..linearize import Linearization
+from .brackets import closed_form_brackets
 from .dynamics import build_kernel, state_bodies, sx_function
 from .sx import SympyToSX, ldl_factor, ldl_solve
 
@@ -122,9 +121,6 @@ def build_model_functions(lin: Linearization, cse: bool = True,
         implicit[lin.Y4[i]] = lambda i=i: solved("y4", lin.rhs4)[i]
     conv = SympyToSX(bindings, dict(m.program.definitions), implicit)
 
-    def brackets() -> ca.SX:
-        f_sx = conv(lin.outputs["f"])
-        return ad_by_ad(x, conv(m.D), conv(lin.rhs3), f_sx[3 * n:], conv(lin.outputs["g"]), factors())
 
     kernel = None if route == "symbolic" else build_kernel(m)
     by_ad = {} if kernel is None else state_bodies(m, kernel)
@@ -135,7 +131,7 @@ def build_model_functions(lin: Linearization, cse: bool = True,
             out[name] = sx_function(f"{m.name}_{name}", by_ad[name], [4 * n, len(m.params)], ["x", "p"],
                                     [name], cse=False)
             continue
-        value = brackets() if name == "ad" else conv(lin.outputs[name])
+        value = closed_form_brackets(m, x, p) if name == "ad" else conv(lin.outputs[name])
         if value.shape[1] == 1 and name != "energy":
             value = ca.vec(value)
         if cse:

@@ -194,7 +194,12 @@ def _lower(n: int):
     return [(i, k) for i in range(n) for k in range(i)]
 
 
-def _factor_fn(n: int) -> ca.Function:
+def packed_factor_fn(n: int) -> ca.Function:
+    """``ldl_factor_<n>(A) -> (L, inv_d)``: :func:`ldl_factor` as a Function of packed outputs.
+
+    ``L`` (n (n - 1) / 2,) holds the strict lower triangle row by row, ``inv_d`` (n,) the
+    reciprocal pivots: the layout :func:`packed_solve_fn` takes.
+    """
     if n not in _FACTOR_FNS:
         A = ca.SX.sym("A", n, n)
         L, inv_d = _ldl_factor_py(A)
@@ -204,7 +209,8 @@ def _factor_fn(n: int) -> ca.Function:
     return _FACTOR_FNS[n]
 
 
-def _solve_fn(n: int) -> ca.Function:
+def packed_solve_fn(n: int) -> ca.Function:
+    """``ldl_solve_<n>(L, inv_d, b) -> x`` with ``A x = b`` (the packed factors of :func:`packed_factor_fn`)."""
     if n not in _SOLVE_FNS:
         low = _lower(n)
         lv, dv, b = ca.SX.sym("L", len(low)), ca.SX.sym("inv_d", n), ca.SX.sym("b", n)
@@ -231,7 +237,7 @@ def ldl_factor(A: ca.SX):
         is needed for SPD.
     """
     n = A.shape[0]
-    lv, dv = _factor_fn(n)(A)
+    lv, dv = packed_factor_fn(n)(A)
     L = [[None] * n for _ in range(n)]
     for k, (i, j) in enumerate(_lower(n)):
         L[i][j] = lv[k]
@@ -252,7 +258,7 @@ def ldl_solve(L, inv_d, b: ca.SX) -> ca.SX:
     n = len(inv_d)
     low = _lower(n)
     lv = ca.vertcat(ca.SX(0, 1), *[L[i][k] for i, k in low])
-    return _solve_fn(n)(lv, ca.vertcat(*inv_d), b)
+    return packed_solve_fn(n)(lv, ca.vertcat(*inv_d), b)
 
 
 def spd_inverse(L, inv_d) -> ca.SX:

@@ -146,17 +146,24 @@ def build_torque_functions(lin: Linearization, kernel: ca.Function,
     return out
 
 
-def torque_twins(lin: Linearization, kernel: ca.Function, sx: Dict[str, ca.Function]) -> Dict[str, ca.Function]:
-    """MX twins of :func:`build_torque_functions` for the C file: same names and signatures, one kernel call each."""
+def torque_twins(lin: Linearization, kernel: ca.Function, beta: ca.Function) -> Dict[str, ca.Function]:
+    """MX twins of :func:`build_torque_functions` for the C file: same names and signatures, one kernel call each.
+
+    ``beta`` is the C file's ``<model>_beta`` (:func:`derive.emit.dynamics.beta_twin`), which
+    ``beta_tau`` calls at ``x = [q; 0; 0; 0]``.
+    """
     model = lin.model
     n, n_p = model.n, len(model.params)
     bodies = torque_bodies(model, kernel)
     out = {name: mx_function(f"{model.name}_{name}", bodies[name], [5 * n, n_p], ["m", "p"], [name])
            for name in ("T_tau", "alpha_tau")}
-    out["beta_tau"] = beta = sx["beta_tau"]
+    out["beta_tau"] = mx_function(f"{model.name}_beta_tau",
+                                  lambda m, p: beta(ca.vertcat(m[:n], ca.MX.zeros(3 * n)), p),
+                                  [5 * n, n_p], ["m", "p"], ["beta_tau"])
+    beta_tau = out["beta_tau"]
     out["control_core_tau"] = mx_function(f"{model.name}_control_core_tau", bodies["core"], [5 * n, n_p],
                                           ["m", "p_hat"], ["y_hat", "alpha", "beta"],
-                                          extra=lambda m, p: [beta(m, p)])
+                                          extra=lambda m, p: [beta_tau(m, p)])
     return out
 
 

@@ -34,7 +34,8 @@ from ..linearize import Linearization
 from .chain_json import write_chain_json
 from .controls import ALL_KINDS, build_controls, layout_lines, manifest_entry
 from .complete import COMPLETE_QUANTITIES, build_complete_functions
-from .dynamics import mx_function, state_bodies
+from .brackets import bracket_twin
+from .dynamics import beta_twin, energy_twin, f_twin, mx_function, state_bodies
 from .functions import QUANTITIES, build_model_functions, operation_count
 from .torque import TORQUE_QUANTITIES, build_pdg, build_torque_functions, torque_twins
 from .report import render_complete_report, render_report
@@ -145,7 +146,8 @@ def c_functions(lin: Linearization, functions, controls, kernel: ca.Function) ->
     The ``.casadi`` ``T``, ``alpha``, cores and torque functions are SX with the kernel inlined (fastest
     from Python, and counted in the manifest); here they are MX twins calling the one kernel
     (:mod:`derive.emit.dynamics`) and the cores also ``beta``, so that the C holds each model part once;
-    the laws call the twin cores.
+    the laws call the twin cores. ``f``, ``beta``, ``energy`` and ``ad`` call ``inertia`` (``ad`` maps one column's
+    arithmetic over the n columns, :func:`derive.emit.brackets.bracket_twin`).
     """
     m = lin.model
     n, n_p = m.n, len(m.params)
@@ -153,10 +155,13 @@ def c_functions(lin: Linearization, functions, controls, kernel: ca.Function) ->
     out = dict(functions)
     for name in ("T", "alpha"):
         out[name] = mx_function(f"{m.name}_{name}", bodies[name], [4 * n, n_p], ["x", "p"], [name])
-    beta = functions["beta"]
+    out["ad"] = bracket_twin(m, functions["inertia"])
+    out["beta"] = beta = beta_twin(m, functions["inertia"])
+    out["energy"] = energy_twin(m, functions["inertia"])
+    out["f"] = f_twin(m, functions["inertia"])
     core = mx_function(f"{m.name}_control_core", bodies["core"], [4 * n, n_p], ["x", "p_hat"],
                        ["y_hat", "alpha", "beta"], extra=lambda x, p: [beta(x, p)])
-    torque = torque_twins(lin, kernel, controls)
+    torque = torque_twins(lin, kernel, beta)
     torque["control_pdg"] = controls["control_pdg"]
     laws = build_controls(m, out, torque, core=core)
     laws.update({name: torque[name] for name, _ in TORQUE_QUANTITIES})

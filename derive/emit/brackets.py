@@ -1,0 +1,138 @@
+"""The bracket matrix ``ad = [g, ad_f g, ad_f^2 g, ad_f^3 g]`` of the reduced model, in closed form.
+
+With ``x = [q; dq; q_m; dq_m]``, ``A = J_m^-1``, ``B = B_m``, ``K`` (all diagonal),
+``W = D(q)^-1`` and the paper's sign ``ad_f v = (df/dx) v - (dv/dx) f``, the drift
+``f = [dq; W r3; dq_m; A (K (q - q_m) - B dq_m)]``, ``r3 = -(h(q, dq) + K (q - q_m))`` and
+``g = [0; 0; 0; A]`` give, block row by block row (docs/derivation.md, "Brackets in closed form")::
+
+    g        = [0; 0;                  0;             A          ]
+    ad_f g   = [0; 0;                  A;            -A B A      ]
+    ad_f^2 g = [0; X;                 -A B A;        -A K A + A B A B A]
+    ad_f^3 g = [X; W (D' - dh/ddq) X - X B A;  -A K A + A B A B A;  2 A K A B A - A B A B A B A]
+
+    X = W K A,    D' = sum_i (dD/dq_i) dq_i
+
+Only the two link-velocity rows depend on the state, and only through ``D``, ``D'`` and
+``dh/ddq``: the brackets need no derivative of ``W`` or of the link acceleration, which is
+what made the generic construction (:func:`derive.emit.functions.ad_by_ad`, kept as the tests'
+reference) the largest function of a spatial model.
+
+Two builds of the same blocks:
+
+- :func:`closed_form_brackets` (SX, the ``.casadi`` file): ``D' - dh/ddq`` as a matrix by
+  forward-mode AD of the model's ``D`` and ``h``, dense products with ``W``;
+- :func:`bracket_twin` (MX, the C file): column ``j`` of ``X`` and of the third bracket by one
+  small SX Function (two LDL^T solves and ``(D' - dh/ddq) v`` as forward derivatives of the
+  inverse dynamics) mapped over the ``n`` columns, so the C holds one column's arithmetic in a
+  loop, not ``n`` copies of it.
+"""
+
+from __future__ import annotations
+
+from typing import Tuple
+
+import casadi as ca
+
+from .dynamics import elastic_diagonals, programme
+from .sx import ldl_factor, packed_factor_fn, packed_solve_fn, spd_inverse
+
+__all__ = ["closed_form_brackets", "bracket_twin", "assemble_brackets", "coriolis_difference_along"]
+
+
+def _constant_rows(a, b, k) -> Tuple[object, object, object]:
+    """Diagonals of ``A B A``, ``-A K A + A B A B A`` and ``2 A K A B A - A B A B A B A`` (column vectors)."""
+    aba = a * a * b
+    row2 = -a * a * k + a * aba * b
+    row3 = 2 * a * a * a * k * b - aba * aba * b
+    return aba, row2, row3
+
+
+def assemble_brackets(a, b, k, X, R3):
+    """``[g, ad_f g, ad_f^2 g, ad_f^3 g]`` (4n, 4n) from the diagonals and the two state-dependent blocks.
+
+    Parameters
+    ----------
+    a, b, k : casadi.SX or casadi.MX, shape (n, 1)
+        Diagonals of ``J_m^-1``, ``B_m`` and ``K``.
+    X : shape (n, n)
+        ``W K A`` (``W = D^-1``).
+    R3 : shape (n, n)
+        ``W (D' - dh/ddq) X - X B A``: the link-velocity row of ``ad_f^3 g``.
+    """
+    n = a.shape[0]
+    zero = type(X).zeros(n, n)
+    aba, row2, row3 = _constant_rows(a, b, k)
+    g = ca.vertcat(zero, zero, zero, ca.diag(a))
+    ad1 = ca.vertcat(zero, zero, ca.diag(a), -ca.diag(aba))
+    ad2 = ca.vertcat(zero, X, -ca.diag(aba), ca.diag(row2))
+    ad3 = ca.vertcat(X, R3, ca.diag(row2), ca.diag(row3))
+    return ca.horzcat(g, ad1, ad2, ad3)
+
+
+def closed_form_brackets(model, x: ca.SX, p: ca.SX) -> ca.SX:
+    """The bracket matrix as one SX expression of ``x`` (4n) and ``p`` (see the module docstring).
+
+    Returns
+    -------
+    casadi.SX, shape (4n, 4n)
+    """
+    n = model.n
+    q, dq = x[:n], x[n:2 * n]
+    D, h, _ = programme(model)(q, dq, ca.SX.zeros(n), p)
+    k, jm, b = elastic_diagonals(model, p)
+    a = 1 / jm
+    W = spd_inverse(*ldl_factor(D))
+    X = ca.mtimes(W, ca.diag(k * a))
+    difference = ca.jtimes(D, q, dq) - ca.jacobian(h, dq)  # D' - dh/ddq (= C^T - C)
+    R3 = ca.mtimes(W, ca.mtimes(difference, X)) - ca.mtimes(X, ca.diag(b * a))
+    return assemble_brackets(a, b, k, X, R3)
+
+
+def coriolis_difference_along(model, q, dq, v, p):
+    """``(D'(q, dq) - dh/ddq(q, dq)) v`` by forward derivatives of the inverse dynamics ``tau(q, dq, a)``.
+
+    ``tau(q, 0, v) = D(q) v`` with gravity switched off (``g0 = 0``; without a ``g0`` parameter,
+    ``tau(q, 0, v) - tau(q, 0, 0)``), so its derivative along ``q' = dq`` is ``D' v``; ``dh/ddq v``
+    is the derivative of ``tau(q, dq, 0) = h`` along ``dq' = v``. (SX, (n, 1).)
+    """
+    n = model.n
+    prog, zero = programme(model), ca.SX.zeros(n)
+    names = list(model.param_names)
+    if "g0" in names:
+        i = names.index("g0")
+        Dv = prog(q, zero, v, ca.vertcat(p[:i], ca.SX(0), p[i + 1:]))[2]
+    else:
+        Dv = prog(q, zero, v, p)[2] - prog(q, zero, zero, p)[2]
+    return ca.jtimes(Dv, q, dq) - ca.jtimes(prog(q, dq, zero, p)[2], dq, v)
+
+
+def _column_function(model) -> ca.Function:
+    """``(q, dq, L, d, c, ba, p) -> (x_j, r_j)``: column j of ``X`` and of ``R3`` from ``c = (K A)_j e_j``."""
+    n = model.n
+    q, dq, c = ca.SX.sym("q", n), ca.SX.sym("dq", n), ca.SX.sym("c", n)
+    ba, p = ca.SX.sym("ba"), ca.SX.sym("p", len(model.params))
+    L, d = ca.SX.sym("L", n * (n - 1) // 2), ca.SX.sym("d", n)
+    solve = packed_solve_fn(n)
+    xj = solve(L, d, c)
+    rj = solve(L, d, coriolis_difference_along(model, q, dq, xj, p)) - xj * ba
+    xj, rj = ca.cse([xj, rj])
+    return ca.Function(f"{model.name}_bracket_column", [q, dq, L, d, c, ba, p], [xj, rj],
+                       ["q", "dq", "L", "d", "c", "ba", "p"], ["x_j", "r_j"])
+
+
+def bracket_twin(model, inertia: ca.Function) -> ca.Function:
+    """The MX twin of the ``ad`` Function for the C file: same name, signature and value.
+
+    Calls the model's ``inertia`` Function (already in the C file) and an LDL^T factorization,
+    then maps :func:`_column_function` over the ``n`` columns (a loop in C).
+    """
+    n = model.n
+    x, p = ca.MX.sym("x", 4 * n), ca.MX.sym("p", len(model.params))
+    q, dq = x[:n], x[n:2 * n]
+    k, jm, b = elastic_diagonals(model, p)
+    a = 1 / jm
+    L, d = packed_factor_fn(n)(inertia(x, p))
+    columns = _column_function(model).map(n)
+    X, R3 = columns(q, dq, L, d, ca.diag(k * a), (b * a).T, p)
+    value = assemble_brackets(a, b, k, X, R3)
+    return ca.Function(f"{model.name}_ad", [x, p], [value], ["x", "p"], ["ad"])
