@@ -71,7 +71,7 @@ def _copy_sources(dst: Path) -> None:
 
 def _tree_key(root: Path) -> str:
     """SHA-256 of the relative paths and bytes of every file under ``root``, and the Python and pip versions."""
-    pip = _run([sys.executable, "-m", "pip", "--version"]).stdout.split()[1]
+    pip = importlib.metadata.version("pip")
     h = hashlib.sha256(f"fjm tests/packaging wheel\0{sys.version}\0pip {pip}".encode())
     for f in sorted(p for p in root.rglob("*") if p.is_file()):
         h.update(b"\0" + str(f.relative_to(root)).encode() + b"\0")
@@ -108,6 +108,8 @@ def wheel(tmp_path_factory) -> Path:
     shutil.copy2(wheels[0], tmp / wheels[0].name)
     (tmp / "wheel.json").write_text(json.dumps({"wheel": wheels[0].name,
                                                 "sha256": hashlib.sha256(wheels[0].read_bytes()).hexdigest()}))
+    if entry.exists() and _cached_wheel(entry) is None:  # a broken entry: replaced, not kept forever
+        shutil.rmtree(entry, ignore_errors=True)
     try:
         os.rename(tmp, entry)
     except OSError:  # already there (another session) or not renamable: the built wheel is used as is
