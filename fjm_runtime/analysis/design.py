@@ -61,7 +61,10 @@ LIN_RATIO = 5.0
 MAX_TIME_AT_LIMIT = 0.02
 MAX_JITTER = 3.0
 #: Torque limits by model (N m; the Panda's URDF efforts).
-EFFORTS = {"panda": (87.0, 87.0, 87.0, 87.0, 12.0, 12.0, 12.0)}
+EFFORTS = {"panda": (87.0, 87.0, 87.0, 87.0, 12.0, 12.0, 12.0),
+           # head_pan, then each arm's s0, s1, e0, e1 (50 N m) and w0, w1, w2 (15 N m): the URDF's <limit effort>
+           # (the head's URDF value, 50000, is a placeholder: 50 N m)
+           "baxter": (50.0,) + (50.0, 50.0, 50.0, 50.0, 15.0, 15.0, 15.0) * 2}
 
 
 def draw_params(model, count: int, seed: int) -> np.ndarray:

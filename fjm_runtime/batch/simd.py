@@ -22,8 +22,9 @@ from .scalar import BatchRunner, metric_step
 
 #: Largest step (SX instructions) emitted in SIMD form (a guard against pathological
 #: compile times; gcc handles the vector-extension code in about linear time:
-#: link1 0.2 s, planar3 0.3 s).
-SIMD_MAX_INSTRUCTIONS = 200000
+#: link1 0.2 s, planar3 0.3 s). Baxter's design step (15 joints, per-joint gains as inputs,
+#: delay prediction) has about 240k.
+SIMD_MAX_INSTRUCTIONS = 400000
 
 #: C expression of each unary SX operation on vectors (``{a}``: the operand).
 UNARY = {

@@ -10,7 +10,7 @@ from pathlib import Path
 
 from ..validation import FjmValueError
 
-__all__ = ["add_parser", "run"]
+__all__ = ["add_parser", "run", "demo_task"]
 
 
 def add_parser(sub) -> None:
@@ -36,8 +36,33 @@ def add_parser(sub) -> None:
                                                            "nominal-model prediction)")
     p.add_argument("--task", default="auto", choices=("auto", "sine"),
                    help="auto: the demo's task where the model has one (Panda: joint-space sines about the ready "
-                        "pose, from rest holding gravity); sine: 0.5 rad sines about q = 0 from rest")
+                        "pose; Baxter: both arms on sines, the head still; from rest holding gravity); sine: "
+                        "0.5 rad sines about q = 0 from rest")
     p.add_argument("--out", type=Path, default=None, help="gains file (default: print the JSON)")
+
+
+def demo_task(m) -> dict:
+    """The demo's task for ``m`` as :func:`fjm_runtime.analysis.design.design` keywords; ``{}`` if it has none.
+
+    Panda: joint-space sines about the ready pose; Baxter: both arms on the same sines, the head still.
+    Both start at rest holding gravity (nominal parameters).
+    """
+    if m.name == "panda":
+        from ..experiments import panda as demo  # the demo's task: cli sits on top, like experiments
+        kind, offset, amplitude, omega = ("panda ready-pose sines (the demo's)", list(demo.READY),
+                                          list(demo.AMPLITUDE), list(demo.OMEGA))
+    elif m.name == "baxter":
+        from ..experiments import baxter as demo
+        kind, offset, amplitude, omega = ("baxter two-arm sines, head still (the demo's)",
+                                          [0.0] + list(demo.ARM_POSE) * 2, [0.0] + list(demo.ARM_AMPLITUDE) * 2,
+                                          [1.0] + list(demo.ARM_OMEGA) * 2)
+    else:
+        return {}
+    from ..sim.rest import rest_state
+    ref = demo.reference()
+    return {"reference": ref, "x0": rest_state(m, ref(0.0)[0], m.default_params),
+            "task": {"kind": kind, "offset": offset, "amplitude": amplitude, "omega": omega,
+                     "phase": -0.5 * math.pi, "start": "at rest holding gravity (nominal parameters)"}}
 
 
 def run(args) -> int:
@@ -51,16 +76,7 @@ def run(args) -> int:
         raise FjmValueError("--draws/--duration/--delay-samples/--rate: expected >= 1, > 0 s, >= 0, > 0 Hz")
     m = load(args.model)
     sensor = SensorModel.panda(seed=args.seed) if args.noise == "panda" else SensorModel.ideal(seed=args.seed)
-    task = {}
-    if args.task == "auto" and m.name == "panda":
-        from ..experiments import panda as demo_task  # the demo's task: cli sits on top, like experiments
-        from ..sim.rest import rest_state
-        ref = demo_task.reference()
-        task = {"reference": ref, "x0": rest_state(m, ref(0.0)[0], m.default_params),
-                "task": {"kind": "panda ready-pose sines (the demo's)", "offset": list(demo_task.READY),
-                         "amplitude": list(demo_task.AMPLITUDE), "omega": list(demo_task.OMEGA),
-                         "phase": -0.5 * math.pi,
-                         "start": "at rest holding gravity (nominal parameters)"}}
+    task = demo_task(m) if args.task == "auto" else {}
     t0 = time.perf_counter()
     out = design(m, kind=args.controller, sensing=args.sensing, rate=args.rate, delay=args.delay_samples,
                  sensor=sensor, draws=args.draws, duration=args.duration, seed=args.seed, threads=args.threads,

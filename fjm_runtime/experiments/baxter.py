@@ -1,40 +1,46 @@
 """The demo's tree section: Baxter's two series-elastic arms tracking joint-space sines.
 
 Baxter (``baxter``: head pan and two 7-joint arms, a tree of 15 elastic joints)
-runs the integral sliding-mode law at 1 kHz in the sampled-data loop (plant on
-RK4 substeps, zero-order hold), once reading the full state (``sensing='state'``)
-and once the joint-torque measurement ``[q; dq; tau_J; dtau_J; dq_m]`` that a
-series-elastic actuator provides (``sensing='torque'``, the ``_tau`` laws). The
-controller knows only the NOMINAL parameters (the defaults); the TRUE stiffness
-differs per joint. Torques are saturated at the URDF effort limits; the head
-holds its pan angle. :func:`baxter_section` writes a figure and returns the
-summary table. Gains are stated (the same on every joint), not synthesized.
+runs the integral sliding-mode law at 1 kHz in the sampled-data loop as a real one runs
+(plant on RK4 substeps, zero-order hold, sensor noise, one sample of computation delay
+with the law's prediction), once reading the full state (``sensing='state'``) and once
+the joint-torque measurement ``[q; dq; tau_J; dtau_J; dq_m]`` that a series-elastic
+actuator provides (``sensing='torque'``, the ``_tau`` laws). The controller knows only
+the NOMINAL parameters (the defaults); the TRUE stiffness differs per joint. Torques are
+saturated at the URDF effort limits; the head holds its pan angle. The gains are those
+``fjm design baxter --predict`` found for the torque-sensed law on this task when the
+package ships them (:mod:`fjm_runtime.control.designed`), else stated ones (the same on
+every joint). :func:`baxter_section` writes a figure and returns the summary table.
 """
 from __future__ import annotations
 
 import time
 from pathlib import Path
-from typing import Callable, Dict, List, Optional
+from typing import Callable, Dict, List, Optional, Tuple
 
 import numpy as np
 
+from ..analysis.design import EFFORTS
+from ..control.designed import designed_gains
 from ..control.factory import make_controller
 from ..control.references import Sinusoid
 from ..sim.rest import rest_state
+from ..sim.sensor import SensorModel
 from ..sim.simulate import SimulationDivergedError, simulate
 from .report import diverged_marker
 
-#: ``<limit effort>`` of head_pan, s0, s1, e0, e1 (50 N m) and w0, w1, w2 (15 N m) in the URDF, q order;
-#: the head's URDF effort (50000) is a placeholder: 50 N m here.
-ARM_EFFORT = (50.0, 50.0, 50.0, 50.0, 15.0, 15.0, 15.0)
-EFFORT = (50.0,) + ARM_EFFORT + ARM_EFFORT
+#: ``<limit effort>`` of head_pan, s0, s1, e0, e1 (50 N m) and w0, w1, w2 (15 N m) in the URDF, q order
+#: (the head's URDF effort, 50000, is a placeholder: 50 N m).
+EFFORT = EFFORTS["baxter"]
 #: Centre of each arm's sines (rad): s1 lowered, elbow bent (inside the URDF limits; holding gravity
 #: there takes ~19 N m on s1, 10 N m on e1: raised poses need the full 50 N m on s1 at rest).
 ARM_POSE = (0.0, 0.6, 0.0, 1.5, 0.0, 0.5, 0.0)
 ARM_AMPLITUDE = (0.2, 0.15, 0.2, 0.2, 0.3, 0.2, 0.3)
 ARM_OMEGA = (1.0, 1.2, 0.9, 1.1, 1.5, 1.3, 1.7)
 RATE = 1000.0       # Hz: the control rate
-LAM, K_S, DELTA = 10.0, 200.0, 1.0
+DELAY = 1           # samples of computation delay, compensated by the law's prediction
+#: Stated gains (every joint), used when no design is shipped.
+STATED = {"lam": 10.0, "k_s": 200.0, "delta": 1.0}
 CASES = {"exact": 0.0, "alternating +-20 %": 0.2}  # spread of the TRUE stiffness
 SENSING = ("state", "torque")
 DURATION, QUICK_DURATION = 3.0, 0.05
@@ -52,14 +58,26 @@ def true_stiffness(model, spread: float) -> Dict[str, float]:
             for i in range(model.n)}
 
 
+def ismc_gains() -> Tuple[dict, str]:
+    """``(gains, source)``: the shipped design for (baxter, ismc, torque, RATE, DELAY), else :data:`STATED`."""
+    spec = designed_gains("baxter", "ismc", "torque", RATE, DELAY)
+    if spec:
+        return ({k: v for k, v in spec["gains"].items() if k != "u_max"},
+                f"designed gains (`fjm design baxter --predict`: torque sensing, {RATE:g} Hz, delay {DELAY}, "
+                f"{spec['draws']} draws x {spec['duration']:g} s; `{spec['file']}`)")
+    return dict(STATED), "stated gains (the same on every joint), NOT the result of a search"
+
+
 def run(model, duration: float, backend: str = "casadi",
-        progress: Optional[Callable[[str], None]] = None) -> Dict[str, Dict[str, object]]:
-    """``{sensing: {case: SimulationResult or SimulationDivergedError}}``."""
+        progress: Optional[Callable[[str], None]] = None, gains: Optional[dict] = None,
+        seed: int = 0) -> Dict[str, Dict[str, object]]:
+    """``{sensing: {case: SimulationResult or SimulationDivergedError}}`` (sensor noise of the Panda's model)."""
     ref = reference()
+    gains = ismc_gains()[0] if gains is None else gains
     out: Dict[str, Dict[str, object]] = {}
     for sensing in SENSING:
-        ctrl = make_controller("ismc", model, model.default_params, sensing=sensing, lam=LAM, k_s=K_S,
-                               delta=DELTA, u_max=np.asarray(EFFORT))
+        ctrl = make_controller("ismc", model, model.default_params, sensing=sensing, u_max=np.asarray(EFFORT),
+                               **gains)
         out[sensing] = {}
         for label, spread in CASES.items():
             if progress:
@@ -68,7 +86,8 @@ def run(model, duration: float, backend: str = "casadi",
             try:
                 out[sensing][label] = simulate(model, ctrl, ref, duration=duration, dt=1.0 / RATE,
                                                true_params=p_true, x0=rest_state(model, ref(0.0)[0], p_true),
-                                               backend=backend)
+                                               backend=backend, sensor=SensorModel.panda(seed=seed),
+                                               delay_samples=DELAY, predict=True)
             except SimulationDivergedError as exc:
                 out[sensing][label] = exc
     return out
@@ -106,10 +125,12 @@ def plot(results, path: Path) -> Path:
             for ax, sl in zip(axes, (slice(1, 8), slice(8, 15))):
                 ax.semilogy(r.t, np.maximum(np.max(np.abs(r.e1[:, sl]), axis=1), 1e-9), ls=ls, color=color,
                             lw=1.1, label=f"{sensing} sensing, K {label}")
+    top = max([1e-2] + [float(np.max(np.abs(r.e1))) for per in results.values() for r in per.values()
+                        if not isinstance(r, SimulationDivergedError)])
     for ax, arm in zip(axes, ("left arm", "right arm")):
         ax.set_title(f"Baxter {arm}: worst joint abs(e1)", fontsize=9.5)
         ax.set_xlabel("t (s)")
-        ax.set_ylim(1e-7, 10)
+        ax.set_ylim(1e-6, min(10.0, 3 * top))
     axes[0].set_ylabel("rad")
     axes[1].legend(fontsize=8, frameon=False)
     path = Path(path)
@@ -126,21 +147,31 @@ def baxter_section(out: Path, duration: float = DURATION, progress: Optional[Cal
     t0 = time.perf_counter()
     m = load("baxter")
     duration = min(duration, QUICK_DURATION) if quick else duration
-    res = run(m, duration, progress=progress)
+    gains, source = ismc_gains()
+    res = run(m, duration, progress=progress, gains=gains)
     fig = plot(res, Path(out) / "baxter_tracking.png")
     return ["## Tree: Baxter's two series-elastic arms (15 joints), stiffness +-20 %", "",
             f"Both arms track joint-space sines about {list(ARM_POSE)} (A = {list(ARM_AMPLITUDE)} rad, omega = "
             f"{list(ARM_OMEGA)} rad/s), the head holds its pan angle; {duration:g} s at {RATE:g} Hz (sampled-data "
-            "loop, plant on RK4 substeps), CasADi backend, starting at rest holding gravity. Integral SMC on the "
-            f"NOMINAL parameters (lambda = {LAM:g}, k_s = {K_S:g}, delta = {DELTA:g}, stated, every joint), torques "
+            "loop, plant on RK4 substeps, zero-order hold, sensor noise of the Panda's model, "
+            f"{DELAY} sample of delay with the law's prediction), CasADi backend, starting at rest holding gravity. "
+            f"Integral SMC on the NOMINAL parameters, {source}: {_gains_text(gains)}; torques "
             f"saturated at {list(EFFORT)} N m. TRUE stiffness: the nominal (illustrative SEA values, "
             "derive/robots/baxter/README.md) or +20 % / -20 % on alternating joints. 'state': the law reads x; "
             "'torque': it reads [q; dq; tau_J; dtau_J; dq_m], as an SEA measures them, and has no K in its "
             "link-side part (the stiffness error becomes an input-gain error).", "",
             *table(res), "",
-            f"Figure: `{fig.name}`. The pose keeps s1's gravity load at ~19 N m of its 50 (the real Baxter adds a "
+            f"Figure: `{fig.name}` (where the two torque-sensed curves overlap, the stiffness error does not show). "
+            "The pose keeps s1's gravity load at ~19 N m of its 50 (the real Baxter adds a "
             "gravity-assist spring on s1, not modelled). "
             f"{time.perf_counter() - t0:.0f} s.", ""]
+
+
+def _gains_text(gains: dict) -> str:
+    """``lambda = 80, k_lin = [..], ...`` (scalars and per-joint lists, 3 significant digits)."""
+    def fmt(v):
+        return f"{v:.3g}" if np.ndim(v) == 0 else "[" + ", ".join(f"{x:.3g}" for x in v) + "]"
+    return ", ".join(f"{'lambda' if k == 'lam' else k} = {fmt(v)}" for k, v in gains.items())
 
 
 def tree_section(ctx) -> tuple:
