@@ -163,20 +163,29 @@ def elastic_diagonals(model, p) -> Tuple[object, object, object]:
     return tuple(out)
 
 
+def state_blocks(x, n: int):
+    """``(q, dq, q_m, dq_m)``: the four n-blocks of the state ``x`` (SX or MX)."""
+    return tuple(x[i * n:(i + 1) * n] for i in range(4))
+
+
+def motor_acceleration(K, Jm, Bm, q, qm, dqm):
+    """``ddq_m = J_m^-1 (K (q - q_m) - B_m dq_m)`` with no input: the last block of ``f``."""
+    return (K * (q - qm) - Bm * dqm) / Jm
+
+
 def state_bodies(model, kernel: ca.Function) -> Dict[str, Callable]:
     """``T``, ``alpha`` of ``(x, p)`` (SX or MX arguments), calling ``kernel``."""
     n = model.n
 
     def parts(x, p):
-        q, dq, qm, dqm = (x[i * n:(i + 1) * n] for i in range(4))
+        q, dq, qm, dqm = state_blocks(x, n)
         K, Jm, Bm = elastic_diagonals(model, p)
         y3, y4, w = kernel(q, dq, K * (qm - q), K * (dqm - dq), p)
         return q, dq, qm, dqm, K, Jm, Bm, y3, y4, w
 
     def core(x, p):  # (y_hat, alpha) of one kernel call
         q, dq, qm, dqm, K, Jm, Bm, y3, y4, w = parts(x, p)
-        acc_m = (K * (q - qm) - Bm * dqm) / Jm
-        return ca.vertcat(q, dq, y3, y4), Jm / K * (w + K * (y3 - acc_m))
+        return ca.vertcat(q, dq, y3, y4), Jm / K * (w + K * (y3 - motor_acceleration(K, Jm, Bm, q, qm, dqm)))
 
     # a Function keeps only what its output depends on: T drops alpha's products and vice versa
     return {"T": lambda x, p: core(x, p)[0], "alpha": lambda x, p: core(x, p)[1], "core": core}
@@ -217,11 +226,11 @@ def f_twin(model, inertia: ca.Function) -> ca.Function:
     bias = ca.Function(f"{model.name}_bias", [qs, dqs, ps], [ca.cse(programme(model)(qs, dqs, ca.SX.zeros(n), ps)[1])])
 
     def body(x, p):
-        q, dq, qm, dqm = (x[i * n:(i + 1) * n] for i in range(4))
+        q, dq, qm, dqm = state_blocks(x, n)
         K, Jm, Bm = elastic_diagonals(model, p)
         L, d = packed_factor_fn(n)(inertia(x, p))
         y3 = packed_solve_fn(n)(L, d, -(bias(q, dq, p) + K * (q - qm)))
-        return ca.vertcat(dq, y3, dqm, (K * (q - qm) - Bm * dqm) / Jm)
+        return ca.vertcat(dq, y3, dqm, motor_acceleration(K, Jm, Bm, q, qm, dqm))
 
     return mx_function(f"{model.name}_f", body, [4 * n, n_p], ["x", "p"], ["f"])
 
@@ -237,7 +246,7 @@ def energy_twin(model, inertia: ca.Function) -> ca.Function:
     V = ca.Function(f"{model.name}_potential", [q, p], [_converter(model, q, ca.SX.sym("dq", n), p)(model.potential)])
 
     def body(x, p):
-        q, dq, qm, dqm = (x[i * n:(i + 1) * n] for i in range(4))
+        q, dq, qm, dqm = state_blocks(x, n)
         K, Jm, _ = elastic_diagonals(model, p)
         spring = q - qm
         return (ca.dot(dq, ca.mtimes(inertia(x, p), dq)) + ca.dot(Jm * dqm, dqm) + ca.dot(K * spring, spring)) / 2 \

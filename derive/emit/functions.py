@@ -121,7 +121,6 @@ def build_model_functions(lin: Linearization, cse: bool = True,
         implicit[lin.Y4[i]] = lambda i=i: solved("y4", lin.rhs4)[i]
     conv = SympyToSX(bindings, dict(m.program.definitions), implicit)
 
-
     kernel = None if route == "symbolic" else build_kernel(m)
     by_ad = {} if kernel is None else state_bodies(m, kernel)
     out = {}

@@ -155,10 +155,11 @@ def c_functions(lin: Linearization, functions, controls, kernel: ca.Function) ->
     out = dict(functions)
     for name in ("T", "alpha"):
         out[name] = mx_function(f"{m.name}_{name}", bodies[name], [4 * n, n_p], ["x", "p"], [name])
-    out["ad"] = bracket_twin(m, functions["inertia"])
-    out["beta"] = beta = beta_twin(m, functions["inertia"])
-    out["energy"] = energy_twin(m, functions["inertia"])
-    out["f"] = f_twin(m, functions["inertia"])
+    inertia = functions["inertia"]
+    out["ad"] = bracket_twin(m, inertia)
+    out["beta"] = beta = beta_twin(m, inertia)
+    out["energy"] = energy_twin(m, inertia)
+    out["f"] = f_twin(m, inertia)
     core = mx_function(f"{m.name}_control_core", bodies["core"], [4 * n, n_p], ["x", "p_hat"],
                        ["y_hat", "alpha", "beta"], extra=lambda x, p: [beta(x, p)])
     torque = torque_twins(lin, kernel, beta)
