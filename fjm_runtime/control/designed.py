@@ -10,7 +10,7 @@ import json
 from importlib import resources
 from typing import Optional
 
-__all__ = ["designed_file_name", "designed_gains"]
+__all__ = ["designed_file_name", "designed_gains", "law_gains"]
 
 
 def designed_file_name(model: str, kind: str, sensing: str, rate: float, delay: int) -> str:
@@ -27,3 +27,8 @@ def designed_gains(model: str, kind: str, sensing: str, rate: float, delay: int)
     spec = json.loads(path.read_text(encoding="utf-8"))
     spec["file"] = f"fjm_runtime/control/designed/{name}"
     return spec
+
+
+def law_gains(spec: dict) -> dict:
+    """The law's gains of a design report without its ``u_max`` (a caller sets the arm's own limits)."""
+    return {k: v for k, v in spec["gains"].items() if k != "u_max"}

@@ -21,7 +21,7 @@ from typing import Callable, Dict, List, Optional, Tuple
 import numpy as np
 
 from ..analysis.design import EFFORTS
-from ..control.designed import designed_gains
+from ..control.designed import designed_gains, law_gains
 from ..control.factory import make_controller
 from ..control.references import Sinusoid
 from ..sim.rest import rest_state
@@ -62,7 +62,7 @@ def ismc_gains() -> Tuple[dict, str]:
     """``(gains, source)``: the shipped design for (baxter, ismc, torque, RATE, DELAY), else :data:`STATED`."""
     spec = designed_gains("baxter", "ismc", "torque", RATE, DELAY)
     if spec:
-        return ({k: v for k, v in spec["gains"].items() if k != "u_max"},
+        return (law_gains(spec),
                 f"designed gains (`fjm design baxter --predict`: torque sensing, {RATE:g} Hz, delay {DELAY}, "
                 f"{spec['draws']} draws x {spec['duration']:g} s; `{spec['file']}`)")
     return dict(STATED), "stated gains (the same on every joint), NOT the result of a search"
