@@ -21,7 +21,7 @@ import sympy as sp
 
 from .program import Program
 
-__all__ = ["Param", "FlexibleJointModel", "state_symbols", "PLANAR_GROUPS", "ELASTIC_GROUPS",
+__all__ = ["Param", "RigidBody", "FlexibleJointModel", "state_symbols", "PLANAR_GROUPS", "ELASTIC_GROUPS",
            "planar_param_names", "elastic_param_names", "param_group", "coriolis_gravity",
            "SPATIAL_NAMES", "MODEL_NAMES", "COMPLETE_NAMES"]
 
@@ -50,6 +50,38 @@ class Param:
     default: float
     meaning: str
     unit: str
+
+
+@dataclass(frozen=True)
+class RigidBody:
+    """One moving body of a spatial chain or tree, as the emitter's time-derivative recursion needs it.
+
+    Body ``i`` turns about the z axis of its frame ``B_i``; its rotation to the parent frame is
+    ``R0 Rz(q_i)`` and its origin in the parent frame is ``p`` (:mod:`derive.spatial`).
+
+    Attributes
+    ----------
+    parent : int
+        Index of the parent body (-1: the base); less than this body's index.
+    R0 : tuple of tuple of float, shape (3, 3)
+        Constant rotation from ``B_i`` at ``q_i = 0`` to the parent frame.
+    p : tuple of float, shape (3,)
+        Origin of ``B_i`` in the parent frame (m).
+    mass : sympy.Expr
+        Mass (kg): a number, or a programme symbol when the body carries parameters (payload,
+        symbolic inertials).
+    first_moment : tuple of sympy.Expr, shape (3,)
+        ``m c`` in ``B_i`` (kg m).
+    inertia : tuple of tuple of sympy.Expr, shape (3, 3)
+        Rotational inertia about the origin of ``B_i``, in ``B_i`` (kg m^2), symmetric.
+    """
+
+    parent: int
+    R0: Tuple[Tuple[float, float, float], ...]
+    p: Tuple[float, float, float]
+    mass: sp.Expr
+    first_moment: Tuple[sp.Expr, sp.Expr, sp.Expr]
+    inertia: Tuple[Tuple[sp.Expr, sp.Expr, sp.Expr], ...]
 
 
 @dataclass(frozen=True)
@@ -98,6 +130,10 @@ class FlexibleJointModel:
         ``(ddq, tau)``: the joint-acceleration symbols (length n) and
         ``tau(q, dq, ddq) = D ddq + h`` (n, 1) as one straight-line programme (RNEA with the
         acceleration as an input) in ``program``. None: the emitter forms ``D ddq + h``.
+    bodies : tuple of RigidBody or None
+        Reduced spatial models: the chain's (or tree's) bodies in q order, for the emitter's
+        Taylor recursion of the RNEA (:mod:`derive.emit.rnea_jets`). None for the planar closed
+        forms and the complete models.
     """
 
     name: str
@@ -121,6 +157,7 @@ class FlexibleJointModel:
     reduced_model: Optional[str] = None
     rotors: Optional[object] = None  # complete model: its derive.rotors.Rotors (for chain.json)
     inverse_dynamics: Optional[Tuple[Tuple[sp.Symbol, ...], sp.Matrix]] = None
+    bodies: Optional[Tuple[RigidBody, ...]] = None
 
     @property
     def state(self) -> Tuple[sp.Symbol, ...]:

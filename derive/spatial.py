@@ -16,102 +16,33 @@ named intermediates --
   accelerations and the forces they need) and a backward pass (forces
   carried to the base, ``h_i`` = the joint-axis moment);
 * the inverse dynamics ``tau(q, dq, ddq) = D ddq + h`` by the same RNEA with the
-  joint accelerations as symbols (``inverse_dynamics``; reduced model only): the
-  emitter takes its time derivatives by CasADi AD for ``y4`` and ``alpha``;
+  joint accelerations as symbols (``inverse_dynamics``; reduced model only), and the bodies'
+  numbers and inertials (``bodies``) for the emitter's Taylor recursion of it, which gives
+  ``y4`` and ``alpha`` their time derivatives (:mod:`derive.emit.rnea_jets`);
 * ``D`` by the composite-rigid-body algorithm (composite inertias in body
   frames, one force propagation per entry below the diagonal);
 * the potential from the world height of every body's centre of mass.
 
 The result is a :class:`derive.model_base.FlexibleJointModel`, so linearization
 and emission are exactly those of the planar chains. Pure math: no I/O.
-:func:`make_spatial_jacobian` is the Jacobian (Lagrangian) form of the same
-model, kept for cross-checks.
+:func:`derive.spatial_jacobian.make_spatial_jacobian` is the Jacobian (Lagrangian) form of the
+same model, kept for cross-checks.
 """
 
 from __future__ import annotations
 
-from dataclasses import replace
 from typing import Dict, List, Optional, Sequence, Tuple
 
-import numpy as np
 import sympy as sp
 
-from .chain import ChainDescription, ChainNumerics, chain_numerics, dot, mm, outer, rpy_matrix, snap
-from .lie import DirectionalDerivative
-from .model_base import FlexibleJointModel, Param, elastic_param_names, state_symbols
+from .chain import ChainDescription, ChainNumerics, chain_numerics, mm, rpy_matrix, snap
+from .model_base import FlexibleJointModel, Param, RigidBody, elastic_param_names, state_symbols
 from .program import Program
+from .sym3 import Matrix3, Namer, Vector, cross3, dot3, exact_number, fill_symmetric, joint_trig, matTvec3, matvec3
 from .rotors import Rotors, carry_rotors, coupling_matrix, motor_bias, spin_moments
 from .spatial_params import INERTIAL_FIELDS, PAYLOAD
 
-__all__ = ["make_spatial", "make_spatial_jacobian"]
-
-Vector = List[sp.Expr]
-Matrix3 = List[List[sp.Expr]]
-
-
-def _num(v: float) -> sp.Expr:
-    """Exact integer for integral values (0, +-1 above all), else the double as a Float."""
-    v = float(v)
-    if v == int(v) and abs(v) < 2 ** 31:
-        return sp.Integer(int(v))
-    return sp.Float(v)
-
-
-def _cross(a, b):
-    return [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
-
-
-def _dot(a, b):
-    return sp.Add(*[x * y for x, y in zip(a, b)])
-
-
-def _matvec(M, v):
-    return [sp.Add(*[M[r][k] * v[k] for k in range(3)]) for r in range(3)]
-
-
-def _matTvec(M, v):
-    return [sp.Add(*[M[k][r] * v[k] for k in range(3)]) for r in range(3)]
-
-
-def _symmetric(M: Matrix3) -> Matrix3:
-    """Fill the lower triangle of ``M`` (given on and above the diagonal) from the upper one."""
-    for r in range(3):
-        for k in range(r):
-            M[r][k] = M[k][r]
-    return M
-
-
-class _Namer:
-    """``namer(label, e)`` names ``e`` in ``prog`` unless it is a single term.
-
-    A symbol times constants costs nothing to repeat, so it stays inline.
-    """
-
-    def __init__(self, prog: Program, prefix: str = ""):
-        self.prog = prog
-        self.prefix = prefix  # a second pass over the same labels (the inverse dynamics) names them apart
-
-    def __call__(self, label: str, e) -> sp.Expr:
-        e = sp.sympify(e)
-        if e.is_Atom or (e.is_Mul and sum(1 for a in e.args if not a.is_Number) <= 1):
-            return e
-        return self.prog.define(self.prefix + label, e)
-
-    def vec(self, label: str, v) -> Vector:
-        """Name the three components ``<label>x``, ``<label>y``, ``<label>z``."""
-        return [self(f"{label}{'xyz'[k]}", v[k]) for k in range(3)]
-
-
-def _joint_trig(prog: Program, q) -> List[Tuple[sp.Expr, sp.Expr]]:
-    """``(c_i, s_i) = (cos q_i, sin q_i)`` with the derivative rules ``dc = -s dq``, ``ds = c dq``."""
-    cs: List[Tuple[sp.Expr, sp.Expr]] = []
-    for i in range(len(q)):
-        box: Dict[str, sp.Expr] = {}
-        box["c"] = prog.define(f"c{i + 1}", sp.cos(q[i]), rule=lambda dd, i=i, b=box: -b["s"] * dd(q[i]))
-        box["s"] = prog.define(f"s{i + 1}", sp.sin(q[i]), rule=lambda dd, i=i, b=box: b["c"] * dd(q[i]))
-        cs.append((box["c"], box["s"]))
-    return cs
-
+__all__ = ["make_spatial"]
 
 def _check_params(num: ChainNumerics, name: str, params: Tuple[Param, ...],
                   symbolic: Sequence[str]) -> bool:
@@ -126,63 +57,79 @@ def _check_params(num: ChainNumerics, name: str, params: Tuple[Param, ...],
     return payload
 
 
+def _check_structure(num: ChainNumerics, desc: ChainDescription, name: str, params: Tuple[Param, ...],
+                     symbolic: Sequence[str], rotors: Optional[Rotors]) -> Tuple[List[str], bool]:
+    """``(gear parameter names, has a payload)``; refuses rotors or a payload on a tree, and a wrong parameter order."""
+    n = len(num.bodies)
+    if rotors is not None and _is_tree(num):
+        raise ValueError(f"{name}: the complete model (rotors) is built for serial chains; the joints form a tree")
+    gears = [f"N{i}" for i in range(1, n + 1)] if rotors is not None else []
+    if [p.name for p in params[len(params) - len(gears):]] != gears:
+        raise ValueError(f"{name}: a complete model's parameters must end with {gears}")
+    payload = _check_params(num, name, params[:len(params) - len(gears)], symbolic)
+    if payload and _is_tree(num):
+        raise ValueError(f"{name}: a payload rides on the tip of a serial chain; the joints form a tree "
+                         f"(tips {list(desc.tips)}): leave out the payload parameters")
+    return gears, payload
+
+
 def _is_tree(num: ChainNumerics) -> bool:
     """True unless every body's parent is the previous body (a serial path)."""
     return any(pa != i - 1 for i, pa in enumerate(num.parents))
 
 
-def _rotations(d: _Namer, num: ChainNumerics, cs) -> Tuple[List[Matrix3], List[Vector]]:
+def _rotations(d: Namer, num: ChainNumerics, cs) -> Tuple[List[Matrix3], List[Vector]]:
     """``R_i = R0_i Rz(q_i)`` (linear in ``c_i``, ``s_i``) and the joint origins ``p_i``."""
     R: List[Matrix3] = []
     P: List[Vector] = []
     for i, b in enumerate(num.bodies):
         c, s = cs[i]
-        R0 = [[_num(b.R0[r, k]) for k in range(3)] for r in range(3)]
+        R0 = [[exact_number(b.R0[r, k]) for k in range(3)] for r in range(3)]
         Ri = [[d(f"R{i + 1}_{r + 1}1", R0[r][0] * c + R0[r][1] * s),
                d(f"R{i + 1}_{r + 1}2", R0[r][1] * c - R0[r][0] * s),
                R0[r][2]] for r in range(3)]
         R.append(Ri)
-        P.append([_num(v) for v in b.p])
+        P.append([exact_number(v) for v in b.p])
     return R, P
 
 
-def _body_inertias(d: _Namer, num: ChainNumerics, sym: Dict[str, sp.Symbol], payload: bool):
+def _body_inertias(d: Namer, num: ChainNumerics, sym: Dict[str, sp.Symbol], payload: bool):
     """Mass, first moment and inertia about the origin of every body: numbers, plus the symbolic parts."""
-    mass = [_num(b.mass) for b in num.bodies]
-    hmom = [[_num(v) for v in b.first_moment] for b in num.bodies]
-    Io = [[[_num(b.inertia_origin[r, k]) for k in range(3)] for r in range(3)] for b in num.bodies]
+    mass = [exact_number(b.mass) for b in num.bodies]
+    hmom = [[exact_number(v) for v in b.first_moment] for b in num.bodies]
+    Io = [[[exact_number(b.inertia_origin[r, k]) for k in range(3)] for r in range(3)] for b in num.bodies]
     for link, k, Rl, pl, inertial in num.symbolic:  # inertials as parameters join their body
         ms = sym[f"m_{link}"]
         cl = [sym[f"c{a}_{link}"] for a in "xyz"]
-        c = [d(f"cB_{link}_{'xyz'[r]}", sp.Add(*[_num(Rl[r, j]) * cl[j] for j in range(3)]) + _num(pl[r]))
+        c = [d(f"cB_{link}_{'xyz'[r]}", sp.Add(*[exact_number(Rl[r, j]) * cl[j] for j in range(3)]) + exact_number(pl[r]))
              for r in range(3)]
         Rc = snap(mm(Rl, rpy_matrix(inertial.rpy)))
         i6 = [sym[f"i{a}_{link}"] for a in ("xx", "xy", "xz", "yy", "yz", "zz")]
         Ic = [[i6[0], i6[1], i6[2]], [i6[1], i6[3], i6[4]], [i6[2], i6[4], i6[5]]]
-        RIc = [[sp.Add(*[_num(Rc[r, a]) * Ic[a][b] * _num(Rc[j, b]) for a in range(3) for b in range(3)])
+        RIc = [[sp.Add(*[exact_number(Rc[r, a]) * Ic[a][b] * exact_number(Rc[j, b]) for a in range(3) for b in range(3)])
                 for j in range(3)] for r in range(3)]
         b = k - 1
         mass[b] = d(f"mb_{link}", mass[b] + ms)
         hmom[b] = [d(f"hb_{link}_{'xyz'[r]}", hmom[b][r] + ms * c[r]) for r in range(3)]
         cc = c[0] ** 2 + c[1] ** 2 + c[2] ** 2
-        Io[b] = _symmetric([[d(f"Iob_{link}_{r + 1}{j + 1}",
+        Io[b] = fill_symmetric([[d(f"Iob_{link}_{r + 1}{j + 1}",
                                Io[b][r][j] + RIc[r][j] + ms * ((cc if r == j else 0) - c[r] * c[j]))
                              if j >= r else None for j in range(3)] for r in range(3)])
     if payload:  # a point mass m_load at c_load (tip link frame) joins the last body
         mp = sym["m_load"]
-        c = [sp.Add(*[_num(num.tip_R[r, k]) * sym[f"{'xyz'[k]}_load"] for k in range(3)]) + _num(num.tip_p[r])
+        c = [sp.Add(*[exact_number(num.tip_R[r, k]) * sym[f"{'xyz'[k]}_load"] for k in range(3)]) + exact_number(num.tip_p[r])
              for r in range(3)]
         c = [d(f"cload{'xyz'[r]}", c[r]) for r in range(3)]
         last = len(num.bodies) - 1
         mass[last] = d("mlast", mass[last] + mp)
         hmom[last] = [d(f"hlast{'xyz'[r]}", hmom[last][r] + mp * c[r]) for r in range(3)]
         cc = c[0] ** 2 + c[1] ** 2 + c[2] ** 2
-        Io[last] = _symmetric([[d(f"Iolast{r + 1}{k + 1}", Io[last][r][k] + mp * ((cc if r == k else 0) - c[r] * c[k]))
+        Io[last] = fill_symmetric([[d(f"Iolast{r + 1}{k + 1}", Io[last][r][k] + mp * ((cc if r == k else 0) - c[r] * c[k]))
                                 if k >= r else None for k in range(3)] for r in range(3)])
     return mass, hmom, Io
 
 
-def _rnea_forward(d: _Namer, R, P, dq, mass, hmom, Io, g0,
+def _rnea_forward(d: Namer, R, P, dq, mass, hmom, Io, g0,
                   parents: Sequence[int], ddq=None) -> Tuple[List[Vector], List[Vector], list]:
     """RNEA forward pass (base accelerated by ``+g0 e_z``): each body's force, moment, rates.
 
@@ -197,22 +144,22 @@ def _rnea_forward(d: _Namer, R, P, dq, mass, hmom, Io, g0,
         Ri, p = R[i], P[i]
         pa = parents[i]
         w_prev, dw_prev, a_prev = base if pa < 0 else (rates[pa][0], rates[pa][1], accs[pa])
-        acc = [a_prev[k] + t for k, t in enumerate(_cross(dw_prev, p))]
+        acc = [a_prev[k] + t for k, t in enumerate(cross3(dw_prev, p))]
         if any(v != 0 for v in w_prev):
-            wxp = d.vec(f"wp{i + 1}", _cross(w_prev, p))
-            acc = [acc[k] + t for k, t in enumerate(_cross(w_prev, wxp))]
+            wxp = d.vec(f"wp{i + 1}", cross3(w_prev, p))
+            acc = [acc[k] + t for k, t in enumerate(cross3(w_prev, wxp))]
         acc = d.vec(f"acc{i}_", acc)
-        a_i = d.vec(f"a{i + 1}", _matTvec(Ri, acc))
-        wr = d.vec(f"wr{i + 1}", _matTvec(Ri, w_prev))  # previous rate in this body's frame
+        a_i = d.vec(f"a{i + 1}", matTvec3(Ri, acc))
+        wr = d.vec(f"wr{i + 1}", matTvec3(Ri, w_prev))  # previous rate in this body's frame
         w_i = [wr[0], wr[1], d(f"w{i + 1}z", wr[2] + dq[i])]
-        dwr = _matTvec(Ri, dw_prev)
+        dwr = matTvec3(Ri, dw_prev)
         dw_i = d.vec(f"dw{i + 1}", [dwr[0] + wr[1] * dq[i], dwr[1] - wr[0] * dq[i],
                                     dwr[2] if ddq is None else dwr[2] + ddq[i]])
         h_i, I_i, m_i = hmom[i], Io[i], mass[i]
-        wxh = d.vec(f"wh{i + 1}", _cross(w_i, h_i))
-        f_i = [m_i * a_i[k] + t + u for k, (t, u) in enumerate(zip(_cross(dw_i, h_i), _cross(w_i, wxh)))]
-        Iw = d.vec(f"Iw{i + 1}", _matvec(I_i, w_i))
-        n_i = [t + u + v for t, u, v in zip(_matvec(I_i, dw_i), _cross(w_i, Iw), _cross(h_i, a_i))]
+        wxh = d.vec(f"wh{i + 1}", cross3(w_i, h_i))
+        f_i = [m_i * a_i[k] + t + u for k, (t, u) in enumerate(zip(cross3(dw_i, h_i), cross3(w_i, wxh)))]
+        Iw = d.vec(f"Iw{i + 1}", matvec3(I_i, w_i))
+        n_i = [t + u + v for t, u, v in zip(matvec3(I_i, dw_i), cross3(w_i, Iw), cross3(h_i, a_i))]
         forces.append(d.vec(f"fb{i + 1}", f_i))
         moments.append(d.vec(f"nb{i + 1}", n_i))
         rates.append((w_i, dw_i))
@@ -220,7 +167,7 @@ def _rnea_forward(d: _Namer, R, P, dq, mass, hmom, Io, g0,
     return forces, moments, rates
 
 
-def _rnea_backward(d: _Namer, R, P, forces, moments, parents: Sequence[int]) -> sp.Matrix:
+def _rnea_backward(d: Namer, R, P, forces, moments, parents: Sequence[int]) -> sp.Matrix:
     """RNEA backward pass: each body's force joins its parent's; ``h_i`` is the moment about joint axis i.
 
     Bodies are visited from the last to the first (children come after their
@@ -239,12 +186,12 @@ def _rnea_backward(d: _Namer, R, P, forces, moments, parents: Sequence[int]) -> 
             F, N = d.vec(f"F{i + 1}", F), d.vec(f"N{i + 1}", N)
         h[i] = N[2]
         if parents[i] >= 0:
-            RF = d.vec(f"RF{i + 1}", _matvec(R[i], F))
-            carried[parents[i]].append((RF, _matvec(R[i], N), _cross(P[i], RF)))
+            RF = d.vec(f"RF{i + 1}", matvec3(R[i], F))
+            carried[parents[i]].append((RF, matvec3(R[i], N), cross3(P[i], RF)))
     return h
 
 
-def _rotate_z_inertia(d: _Namer, i: int, A: Matrix3, c, s) -> Matrix3:
+def _rotate_z_inertia(d: Namer, i: int, A: Matrix3, c, s) -> Matrix3:
     """``Rz(q) A Rz(q)^T`` for the cosine and sine ``c``, ``s`` of joint ``i + 2``."""
     cc, ss, csq = d(f"cc{i + 2}", c * c), d(f"ss{i + 2}", s * s), d(f"cs{i + 2}", c * s)
     B = [[None] * 3 for _ in range(3)]
@@ -254,11 +201,11 @@ def _rotate_z_inertia(d: _Namer, i: int, A: Matrix3, c, s) -> Matrix3:
     B[0][2] = B[2][0] = c * A[0][2] - s * A[1][2]
     B[1][2] = B[2][1] = s * A[0][2] + c * A[1][2]
     B[2][2] = A[2][2]
-    return _symmetric([[d(f"Bz{i + 2}_{r + 1}{k + 1}", B[r][k]) if k >= r else None for k in range(3)]
+    return fill_symmetric([[d(f"Bz{i + 2}_{r + 1}{k + 1}", B[r][k]) if k >= r else None for k in range(3)]
                        for r in range(3)])
 
 
-def _composite_inertias(d: _Namer, num: ChainNumerics, R, P, cs, mass, hmom, Io) -> list:
+def _composite_inertias(d: Namer, num: ChainNumerics, R, P, cs, mass, hmom, Io) -> list:
     """CRBA backward pass: composite ``(m, h, I_o)`` of body i and its subtree about the origin of ``B_i``, in ``B_i``.
 
     A leaf's composite is its own inertia; a parent adds each child's composite
@@ -278,25 +225,25 @@ def _composite_inertias(d: _Namer, num: ChainNumerics, R, P, cs, mass, hmom, Io)
             co, si = cs[c]
             # Rz(q) I Rz(q)^T, then the constant R0 (exact zeros/ones keep it sparse).
             B = _rotate_z_inertia(d, c - 1, I_c, co, si)
-            R0 = [[_num(num.bodies[c].R0[r, k]) for k in range(3)] for r in range(3)]
+            R0 = [[exact_number(num.bodies[c].R0[r, k]) for k in range(3)] for r in range(3)]
             RIR = [[sp.Add(*[R0[r][a] * B[a][b] * R0[k][b] for a in range(3) for b in range(3)])
                     for k in range(3)] for r in range(3)]
-            hR = d.vec(f"hR{c + 1}", _matvec(Rn, h_c))
+            hR = d.vec(f"hR{c + 1}", matvec3(Rn, h_c))
             pn = sum(float(v) ** 2 for v in num.bodies[c].p)
-            diag = d(f"hp{c + 1}", 2 * _dot(p, hR) + m_c * _num(pn))
+            diag = d(f"hp{c + 1}", 2 * dot3(p, hR) + m_c * exact_number(pn))
             cI = [[cI[r][k] + RIR[r][k] + (diag if r == k else 0)
                    - (p[r] * hR[k] + hR[r] * p[k] + m_c * p[r] * p[k]) for k in range(3)] for r in range(3)]
             ch = [ch[k] + hR[k] + m_c * p[k] for k in range(3)]
             cm = cm + m_c
         if children[i]:
-            cI = _symmetric([[d(f"Ic{i + 1}_{r + 1}{k + 1}", cI[r][k]) if k >= r else None for k in range(3)]
+            cI = fill_symmetric([[d(f"Ic{i + 1}_{r + 1}{k + 1}", cI[r][k]) if k >= r else None for k in range(3)]
                              for r in range(3)])
             ch = d.vec(f"hc{i + 1}", ch)
         composite[i] = (cm, ch, cI)
     return composite
 
 
-def _crba_entries(d: _Namer, R, P, composite, parents: Sequence[int]) -> sp.Matrix:
+def _crba_entries(d: Namer, R, P, composite, parents: Sequence[int]) -> sp.Matrix:
     """CRBA forward pass: ``D_ij`` by carrying the unit-rate force of joint i down to each ancestor j.
 
     ``D_ij`` is zero unless one of the joints is an ancestor of the other; only
@@ -312,8 +259,8 @@ def _crba_entries(d: _Namer, R, P, composite, parents: Sequence[int]) -> sp.Matr
         cur, j = i, parents[i]
         while j >= 0:
             Rn, p = R[cur], P[cur]
-            fv2 = _matvec(Rn, fv)
-            nv2 = [a + b for a, b in zip(_matvec(Rn, nv), _cross(p, fv2))]
+            fv2 = matvec3(Rn, fv)
+            nv2 = [a + b for a, b in zip(matvec3(Rn, nv), cross3(p, fv2))]
             if parents[j] >= 0:
                 fv = d.vec(f"cf{i + 1}_{j + 1}", fv2)
                 nv = d.vec(f"cn{i + 1}_{j + 1}", nv2)
@@ -330,18 +277,26 @@ def _crba_entries(d: _Namer, R, P, composite, parents: Sequence[int]) -> sp.Matr
     return Dm
 
 
-def _potential(d: _Namer, R, P, mass, hmom, g0, parents: Sequence[int]) -> sp.Expr:
+def _potential(d: Namer, R, P, mass, hmom, g0, parents: Sequence[int]) -> sp.Expr:
     """``g0`` times the height of every centre of mass (world z of the first moments)."""
     base = ([sp.Integer(0), sp.Integer(0), sp.Integer(1)], sp.Integer(0))
     up: list = []  # per body: (world z row in its frame, height of its origin)
     V = sp.Integer(0)
     for i in range(len(R)):
         zrow, zpos = base if parents[i] < 0 else up[parents[i]]
-        zpos = d(f"zo{i + 1}", zpos + _dot(zrow, P[i]))
+        zpos = d(f"zo{i + 1}", zpos + dot3(zrow, P[i]))
         zrow = d.vec(f"zr{i + 1}", [sp.Add(*[zrow[k] * R[i][k][c] for k in range(3)]) for c in range(3)])
         up.append((zrow, zpos))
-        V += mass[i] * zpos + _dot(zrow, hmom[i])
+        V += mass[i] * zpos + dot3(zrow, hmom[i])
     return g0 * d("Vg", V)
+
+
+def _rigid_bodies(num: ChainNumerics, mass, hmom, Io) -> Tuple[RigidBody, ...]:
+    """The bodies' kinematic numbers and inertials (with the payload and symbolic parts) as :class:`RigidBody`."""
+    return tuple(RigidBody(parent=num.parents[i], R0=tuple(tuple(float(v) for v in row) for row in b.R0),
+                           p=tuple(float(v) for v in b.p), mass=mass[i], first_moment=tuple(hmom[i]),
+                           inertia=tuple(tuple(row) for row in Io[i]))
+                 for i, b in enumerate(num.bodies))
 
 
 def make_spatial(desc: ChainDescription, name: str, params: Tuple[Param, ...],
@@ -379,21 +334,13 @@ def make_spatial(desc: ChainDescription, name: str, params: Tuple[Param, ...],
     """
     num = chain_numerics(desc, symbolic)
     n = len(num.bodies)
-    if rotors is not None and _is_tree(num):
-        raise ValueError(f"{name}: the complete model (rotors) is built for serial chains; the joints form a tree")
-    gears = [f"N{i}" for i in range(1, n + 1)] if rotors is not None else []
-    if [p.name for p in params[len(params) - len(gears):]] != gears:
-        raise ValueError(f"{name}: a complete model's parameters must end with {gears}")
-    payload = _check_params(num, name, params[:len(params) - len(gears)], symbolic)
-    if payload and _is_tree(num):
-        raise ValueError(f"{name}: a payload rides on the tip of a serial chain; the joints form a tree "
-                         f"(tips {list(desc.tips)}): leave out the payload parameters")
+    gears, payload = _check_structure(num, desc, name, params, symbolic, rotors)
     sym = {p.name: sp.Symbol(p.name, real=True) for p in params}
     g0 = sym["g0"]
     q, dq, qm, dqm = state_symbols(n)
     prog = Program()
-    d = _Namer(prog)
-    cs = _joint_trig(prog, q)
+    d = Namer(prog)
+    cs = joint_trig(prog, q)
     R, P = _rotations(d, num, cs)
     mass, hmom, Io = _body_inertias(d, num, sym, payload)
     if rotors is not None:
@@ -411,9 +358,10 @@ def make_spatial(desc: ChainDescription, name: str, params: Tuple[Param, ...],
     h = _rnea_backward(d, R, P, forces, moments, num.parents)
     if rotors is None:  # tau(q, dq, ddq) = D ddq + h as one RNEA, for the emitted time derivatives
         ddq = tuple(sp.Symbol(f"ddq{i + 1}", real=True) for i in range(n))
-        di = _Namer(prog, prefix="id_")
+        di = Namer(prog, prefix="id_")
         f_id, n_id, _ = _rnea_forward(di, R, P, dq, mass, hmom, Io, g0, num.parents, ddq=ddq)
-        complete["inverse_dynamics"] = (ddq, _rnea_backward(di, R, P, f_id, n_id, num.parents))
+        complete.update(inverse_dynamics=(ddq, _rnea_backward(di, R, P, f_id, n_id, num.parents)),
+                        bodies=_rigid_bodies(num, mass, hmom, Io))
     Dm = _crba_entries(d, R, P, _composite_inertias(d, num, R, P, cs, mass, hmom, Io), num.parents)
     V = _potential(d, R, P, mass, hmom, g0, num.parents)
     return FlexibleJointModel(**complete,
@@ -424,70 +372,3 @@ def make_spatial(desc: ChainDescription, name: str, params: Tuple[Param, ...],
         Bm=tuple(sym[f"Bm{i}"] for i in range(1, n + 1)),
         description=description, program=prog,
     )
-
-
-def make_spatial_jacobian(desc: ChainDescription, name: str, params: Tuple[Param, ...],
-                          description: str) -> FlexibleJointModel:
-    """The same model in the Jacobian (Lagrangian) form, kept for comparison and cross-checks.
-
-    World-frame kinematics (rotations ``W_k``, origins ``o_k``, axes ``z_k``,
-    centres of mass ``c_k``) as named symbols;
-    ``D = sum_k m_k Jv_k^T Jv_k + Jw_k^T (W_k Ic_k W_k^T) Jw_k`` with
-    ``Jv_k[:, j] = z_j x (c_k - o_j)``, ``Jw_k[:, j] = z_j`` (j <= k); and
-    ``h = D' dq - 1/2 d/dq (dq^T D dq) + dV/dq`` by directional derivatives
-    of D. :func:`make_spatial` (CRBA + RNEA) is the emitted form: see
-    docs/spatial.md for the operation counts of both.
-    """
-    if any(p.name in PAYLOAD for p in params):
-        raise ValueError(f"{name}: the Jacobian form takes no payload parameters")
-    base = make_spatial(desc, name, params, description)  # for the parameters and state symbols
-    num = chain_numerics(desc)
-    if _is_tree(num):
-        raise ValueError(f"{name}: the Jacobian form is built for serial chains; the joints form a tree")
-    n = base.n
-    prog = Program()
-    q, dq = base.q, base.dq
-    g0 = sp.Symbol("g0", real=True)
-
-    d = _Namer(prog)
-    cs = _joint_trig(prog, q)
-    W = [[sp.Integer(int(r == k)) for k in range(3)] for r in range(3)]
-    o = [sp.Integer(0)] * 3
-    zs, os_, cms, Iws = [], [], [], []
-    for i, b in enumerate(num.bodies):
-        c, s = cs[i]
-        R0 = [[_num(b.R0[r, k]) for k in range(3)] for r in range(3)]
-        Ri = [[R0[r][0] * c + R0[r][1] * s, R0[r][1] * c - R0[r][0] * s, R0[r][2]] for r in range(3)]
-        o = [d(f"o{i + 1}{'xyz'[r]}", o[r] + sp.Add(*[W[r][k] * _num(b.p[k]) for k in range(3)])) for r in range(3)]
-        W = [[d(f"W{i + 1}_{r + 1}{k + 1}", sp.Add(*[W[r][a] * Ri[a][k] for a in range(3)])) for k in range(3)]
-             for r in range(3)]
-        com = b.first_moment / b.mass
-        cms.append([d(f"cm{i + 1}{'xyz'[r]}", o[r] + sp.Add(*[W[r][k] * _num(com[k]) for k in range(3)]))
-                    for r in range(3)])
-        Ic = b.inertia_origin - b.mass * (dot(com, com) * np.eye(3) - outer(com, com))
-        WI = [[sp.Add(*[W[r][a] * _num(Ic[a, k]) for a in range(3)]) for k in range(3)] for r in range(3)]
-        Iws.append(_symmetric([[d(f"Iw{i + 1}_{r + 1}{k + 1}", sp.Add(*[WI[r][a] * W[k][a] for a in range(3)]))
-                                if k >= r else None for k in range(3)] for r in range(3)]))
-        zs.append([W[r][2] for r in range(3)])
-        os_.append(o)
-    D = sp.zeros(n, n)
-    for k in range(n):
-        m = _num(num.bodies[k].mass)
-        Jv = [dvec for dvec in ([d(f"Jv{k + 1}_{j + 1}{'xyz'[r]}", e) for r, e in enumerate(
-            _cross(zs[j], [cms[k][a] - os_[j][a] for a in range(3)]))] for j in range(k + 1))]
-        for a in range(k + 1):
-            Iz = _matvec(Iws[k], zs[a])
-            for b_ in range(a + 1):
-                D[a, b_] += m * _dot(Jv[a], Jv[b_]) + _dot(zs[b_], Iz)
-    for a in range(n):
-        for b_ in range(a + 1):
-            D[a, b_] = D[b_, a] = prog.define(f"Dj{a + 1}_{b_ + 1}", D[a, b_])
-    V = g0 * d("Vj", sp.Add(*[_num(num.bodies[k].mass) * cms[k][2] for k in range(n)]))
-    dt = DirectionalDerivative({q[i]: dq[i] for i in range(n)}, program=prog, tag="jt")
-    Ddot = dt(D)
-    dqv = sp.Matrix(dq)
-    h = Ddot * dqv
-    for i in range(n):
-        di = DirectionalDerivative({q[i]: sp.Integer(1)}, program=prog, tag=f"jq{i + 1}")
-        h[i] = prog.define(f"hj{i + 1}", h[i] - (dqv.T * di(D) * dqv)[0, 0] / 2 + di(V))
-    return replace(base, D=D, h=h, potential=V, program=prog, inverse_dynamics=None)

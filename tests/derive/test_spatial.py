@@ -169,7 +169,7 @@ def test_jacobian_form_equals_crba_rnea_form():
     comparison) give the same D, h and potential on elbow3."""
     import casadi as ca
     from derive.emit.sx import SympyToSX
-    from derive.spatial import make_spatial_jacobian
+    from derive.spatial_jacobian import make_spatial_jacobian
     desc = load_urdf(REPO / "derive/robots/elbow3/elbow3.urdf", "base_link", "tool0").description
     P = elastic_params(3, [500.0] * 3, [0.2] * 3, [0.0] * 3, 9.81)
     x = ca.SX.sym("x", 12)
