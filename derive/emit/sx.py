@@ -266,3 +266,60 @@ def spd_inverse(L, inv_d) -> ca.SX:
     n = len(inv_d)
     cols = [ldl_solve(L, inv_d, ca.SX(ca.DM.eye(n)[:, j])) for j in range(n)]
     return ca.horzcat(*cols)
+
+
+_INVERSE_FNS: Dict[int, ca.Function] = {}
+_SKEW_FNS: Dict[int, ca.Function] = {}
+
+
+def _symmetric_inverse_py(lv: ca.SX, dv: ca.SX, n: int) -> ca.SX:
+    """``A^-1 = L^-T diag(inv_d) L^-1`` from the packed factors, the upper triangle formed once."""
+    L = [[None] * n for _ in range(n)]
+    for k, (i, j) in enumerate(_lower(n)):
+        L[i][j] = lv[k]
+    U = [[None] * n for _ in range(n)]  # U = L^-1, unit lower triangular
+    for j in range(n):
+        for i in range(j + 1, n):
+            u = -L[i][j]
+            for k in range(j + 1, i):
+                u = u - L[i][k] * U[k][j]
+            U[i][j] = u
+
+    def u(k, j):  # U[k][j] for k >= j
+        return 1 if k == j else U[k][j]
+
+    W = ca.SX(n, n)
+    for j in range(n):
+        V = [dv[k] * u(k, j) for k in range(j, n)]  # diag(inv_d) U, column j
+        for i in range(j + 1):
+            W[i, j] = W[j, i] = sum((u(k, i) * V[k - j] for k in range(j, n)), ca.SX(0))
+    return W
+
+
+def symmetric_inverse(L, inv_d) -> ca.SX:
+    """``A^-1`` from :func:`ldl_factor` of A (SX, (n, n)): about n^3/3 products, half of :func:`spd_inverse`."""
+    n = len(inv_d)
+    if n not in _INVERSE_FNS:
+        lv, dv = ca.SX.sym("L", n * (n - 1) // 2), ca.SX.sym("d", n)
+        _INVERSE_FNS[n] = ca.Function(f"ldl_inverse_{n}", [lv, dv], [_symmetric_inverse_py(lv, dv, n)])
+    lv = ca.vertcat(ca.SX(0, 1), *[L[i][k] for i, k in _lower(n)])
+    return _INVERSE_FNS[n](lv, ca.vertcat(*inv_d))
+
+
+def skew_congruence(W: ca.SX, M: ca.SX) -> ca.SX:
+    """``W M W`` for a symmetric ``W`` and a skew-symmetric ``M`` (SX, (n, n)), itself skew.
+
+    Only the strict upper triangle is formed (``M W`` once, then one row of ``W`` per entry), and
+    ``M``'s diagonal is taken as zero: about 1.5 n^3 products instead of 2 n^3.
+    """
+    n = W.shape[0]
+    if n not in _SKEW_FNS:
+        w, m = ca.SX.sym("W", n, n), ca.SX.sym("M", n, n)
+        Y = [[sum((m[i, k] * w[k, j] for k in range(n) if k != i), ca.SX(0)) for j in range(n)] for i in range(n)]
+        Z = ca.SX(n, n)
+        for i in range(n):
+            for j in range(i + 1, n):
+                Z[i, j] = sum((w[i, k] * Y[k][j] for k in range(n)), ca.SX(0))
+                Z[j, i] = -Z[i, j]
+        _SKEW_FNS[n] = ca.Function(f"skew_congruence_{n}", [w, m], [Z])
+    return _SKEW_FNS[n](W, M)

@@ -6,7 +6,7 @@ import pytest
 import sympy as sp
 
 from derive.emit.functions import QUANTITIES, build_functions
-from derive.emit.sx import SympyToSX, ldl_factor, ldl_solve, spd_inverse
+from derive.emit.sx import SympyToSX, ldl_factor, ldl_solve, skew_congruence, spd_inverse, symmetric_inverse
 from derive.linearize import linearize
 from derive.registry import build
 
@@ -50,6 +50,24 @@ def test_ldl_solve_and_inverse_match_numpy():
         np.testing.assert_allclose(x, np.linalg.solve(A, b), rtol=1e-12)
         Ainv = np.array(ca.evalf(spd_inverse(L, d)))
         np.testing.assert_allclose(Ainv, np.linalg.inv(A), rtol=1e-11, atol=1e-13)
+        np.testing.assert_allclose(np.array(ca.evalf(symmetric_inverse(L, d))), np.linalg.inv(A),
+                                   rtol=1e-11, atol=1e-13)
+
+
+def test_skew_congruence_is_W_M_W_and_costs_less_than_the_dense_products():
+    from derive.emit.functions import operation_count
+    rng = np.random.default_rng(2)
+    for n in (1, 2, 5):
+        W = rng.normal(size=(n, n))
+        W = W + W.T
+        M = rng.normal(size=(n, n))
+        M = M - M.T
+        Z = np.array(ca.evalf(skew_congruence(ca.SX(ca.DM(W)), ca.SX(ca.DM(M)))))
+        np.testing.assert_allclose(Z, W @ M @ W, rtol=1e-12, atol=1e-12)
+    w, m = ca.SX.sym("W", 7, 7), ca.SX.sym("M", 7, 7)
+    dense = operation_count(ca.Function("d", [w, m], [ca.mtimes(w, ca.mtimes(m, w))]))
+    skew = operation_count(ca.Function("s", [w, m], [skew_congruence(w, m)]))
+    assert skew < 0.8 * dense, (skew, dense)
 
 
 def test_derivative_shortcuts_equal_plain_differentiation():
