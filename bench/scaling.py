@@ -6,7 +6,7 @@ in a fresh process and records
 
 * ``derive_seconds``: the wall clock of the whole command;
 * ``peak_bytes``: the largest resident set of that process and its children
-  (``os.wait4``, the same number ``/usr/bin/time -v`` prints);
+  (``os.wait4`` in :mod:`bench.peak_rss`, the same number ``/usr/bin/time -v`` prints);
 * ``alpha_beta_ops``: operations of ``alpha`` plus ``beta`` after CSE (manifest);
 * ``all_ops``: operations of every model quantity (``f, g, ad, T, alpha, beta, energy, inertia``);
 * ``ad_ops``: operations of the bracket matrix;
@@ -52,20 +52,24 @@ def run_measured(cmd: Sequence[str], cwd: Path, env: Dict[str, str]) -> Dict[str
     """Run ``cmd``; returns ``{"seconds", "peak_bytes", "returncode", "stdout", "stderr"}``.
 
     The peak is ``ru_maxrss`` of ``os.wait4`` on the process: the largest resident set of
-    the process and of every descendant it waited for (the derivation's forked child).
+    the process and of every descendant it waited for (the derivation's forked child). It is
+    taken by :mod:`bench.peak_rss`, a small process that forks ``cmd``: forked from the bench
+    itself, ``cmd`` would start from the bench's high-water mark (Linux keeps ``ru_maxrss``
+    across ``exec``), and the small chains would all read the bench's own resident set.
     """
     import tempfile
-    with tempfile.TemporaryFile("w+") as fo, tempfile.TemporaryFile("w+") as fe:
+    with tempfile.TemporaryFile("w+") as fo, tempfile.TemporaryFile("w+") as fe, \
+            tempfile.TemporaryDirectory(prefix="fjm-peak-") as tmp:
+        peak_file = Path(tmp) / "peak"
         t0 = time.perf_counter()
-        proc = subprocess.Popen(list(cmd), cwd=str(cwd), env=env, stdout=fo, stderr=fe, text=True)
-        _, status, usage = os.wait4(proc.pid, 0)
+        proc = subprocess.run([sys.executable, "-S", str(HERE / "peak_rss.py"), str(peak_file), *cmd],
+                              cwd=str(cwd), env=env, stdout=fo, stderr=fe, text=True)
         seconds = time.perf_counter() - t0
-        proc.returncode = os.waitstatus_to_exitcode(status)
         fo.seek(0)
         fe.seek(0)
         out, err = fo.read(), fe.read()
-    return {"seconds": seconds, "peak_bytes": int(usage.ru_maxrss) * 1024,
-            "returncode": proc.returncode, "stdout": out, "stderr": err}
+        peak = int(peak_file.read_text()) if peak_file.exists() else None
+    return {"seconds": seconds, "peak_bytes": peak, "returncode": proc.returncode, "stdout": out, "stderr": err}
 
 
 def measure_chain(n: int, work: Path, compile_c: bool = True) -> Dict[str, Optional[float]]:

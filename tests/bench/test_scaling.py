@@ -38,3 +38,24 @@ def test_run_measured_reports_the_childs_peak_memory():
                        ".", None)
     assert res["returncode"] == 0
     assert res["peak_bytes"] > 60 * 1024 * 1024
+
+
+def test_run_measured_does_not_count_the_benchs_own_memory():
+    """A small child measured from a big parent reads its own peak, not the parent's (Linux keeps
+    ``ru_maxrss`` across exec: forked straight from a 300 MB parent, ``python -c pass`` read 329 MB)."""
+    import sys
+    held = bytearray(300 * 1024 * 1024)
+    held[::4096] = b"x" * len(held[::4096])  # touch every page: resident in this process
+    res = run_measured([sys.executable, "-c", "pass"], ".", None)
+    assert res["returncode"] == 0
+    assert 1e6 < res["peak_bytes"] < 100e6, res["peak_bytes"]
+    del held
+
+
+def test_run_measured_passes_the_exit_status_and_output_through():
+    import sys
+    res = run_measured([sys.executable, "-c", "import sys; print('out'); print('err', file=sys.stderr); sys.exit(3)"],
+                       ".", None)
+    assert (res["returncode"], res["stdout"], res["stderr"]) == (3, "out\n", "err\n")
+    assert res["peak_bytes"] > 1e6 and res["seconds"] > 0
+
