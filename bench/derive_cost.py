@@ -12,7 +12,9 @@ the fitted coefficients as JSON, ready to be copied into
 ``--repo DIR`` measures another checkout's derive (e.g. a clean
 ``git archive HEAD`` export), using this checkout's synthetic chains.
 ``--compare`` prints, beside each measurement, the estimate of the current
-:mod:`derive.cost` model (the accuracy of the guard).
+:mod:`derive.cost` model (the accuracy of the guard). ``--keep-base`` fits over the stored
+trivial derive of :data:`derive.cost.CALIBRATION` instead of this run's (re-measuring one form
+while keeping the other form's stored fit, which is relative to that base).
 """
 
 from __future__ import annotations
@@ -31,7 +33,7 @@ HERE = Path(__file__).resolve().parent
 REPO = HERE.parent
 sys.path.insert(0, str(REPO))
 
-from derive.cost import estimate, fit_power_law  # noqa: E402
+from derive.cost import CALIBRATION, estimate, fit_power_law  # noqa: E402
 from derive.synthetic import write_synthetic_chain  # noqa: E402
 
 _RSS = re.compile(r"Maximum resident set size \(kbytes\): (\d+)")
@@ -61,12 +63,15 @@ def measure(n: int, form: str, repo: Path, python: str, guard_flag: bool) -> Dic
 
 def main(argv: List[str] = None) -> int:
     ap = argparse.ArgumentParser(prog="python -m bench.derive_cost", description=__doc__.split("\n\n")[0])
-    ap.add_argument("--spatial", type=int, nargs="*", default=[3, 5, 7, 10, 14, 21], metavar="N")
+    # the sizes where a guard matters: growth steepens with n, and a fit over small chains under-estimates big ones
+    ap.add_argument("--spatial", type=int, nargs="*", default=[14, 21, 30, 45, 60], metavar="N")
     ap.add_argument("--planar", type=int, nargs="*", default=[2, 3, 4, 5, 6, 7], metavar="N")
     ap.add_argument("--repo", type=Path, default=REPO, help="checkout whose `python -m derive` is measured")
     ap.add_argument("--python", default=sys.executable)
     ap.add_argument("--old-cli", action="store_true", help="the measured derive has no --no-cost-limit flag")
     ap.add_argument("--compare", action="store_true", help="print the current estimate beside each run")
+    ap.add_argument("--keep-base", action="store_true",
+                    help="fit over the stored trivial derive (derive.cost.CALIBRATION) instead of this run's")
     args = ap.parse_args(argv)
     base = measure(1, "planar", args.repo.resolve(), args.python, not args.old_cli)
     print(json.dumps({"baseline": base}), file=sys.stderr, flush=True)
@@ -84,7 +89,9 @@ def main(argv: List[str] = None) -> int:
     for form in ("spatial", "planar"):
         sub = [r for r in runs if r["form"] == form]
         if len(sub) >= 2:
-            offsets = {"operations": 0.0, "peak_bytes": base["peak_bytes"], "seconds": base["seconds"]}
+            ref = ({"peak_bytes": CALIBRATION["base_bytes"], "seconds": CALIBRATION["base_seconds"]}
+                   if args.keep_base else base)
+            offsets = {"operations": 0.0, "peak_bytes": ref["peak_bytes"], "seconds": ref["seconds"]}
             fits[form] = {q: fit_power_law([r["n"] for r in sub], [r[q] for r in sub], offsets[q])
                           for q in offsets}
     print(json.dumps({"baseline": base, "runs": runs, "fits": fits}, indent=1))

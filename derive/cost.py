@@ -40,33 +40,31 @@ FORMS = ("planar", "spatial")
 #: :func:`fit_power_law` to ``runs``. ``spatial``: synthetic URDF chains (:mod:`derive.synthetic`) derived
 #: with ``--model-file``; ``planar``: the built-in ``planar<n>``. Peak memory is the process's maximum
 #: resident set size (``/usr/bin/time -v``), seconds the wall clock of the whole command.
-#: Spatial operations and peak memory: re-measured 2026-12-02 after T and alpha moved to CasADi AD of the
-#: RNEA inverse dynamics (one kernel; they do not depend on the machine's load), by
-#: ``python -m bench.derive_cost`` on the project machine (2 cores, shared, load 5-6). Seconds: that run's
-#: wall clocks were again inflated by the load (and noisy: 34 s at 14 joints, 37 s at 21), so the seconds
-#: are kept from the earlier calibration (commit bef8005, a clean ``git archive`` export, ``--old-cli``,
-#: the faster of two runs), whose derivation was much slower than today's (21 joints: 69.8 s then,
-#: 24-37 s now under load): an over-estimate, the safe side for a guard. Planar runs are those of
-#: 2026-12-01 (the planar derivation did not change: 8890 operations at 7 links against 8877). Planar derives stay within a few seconds of the baseline, so their seconds fit is nearly
-#: flat; the planar form is capped at 7 links anyway.
+#: Spatial: measured 2026-12-02 on an idle project machine (2 cores, load 0.1) by
+#: ``python -m bench.derive_cost --spatial 14 21 30 45 60 --planar --keep-base``, after the Taylor
+#: recursion and the closed-form brackets, at the sizes where a guard matters (the growth steepens with
+#: n: fitted over 14..60 the estimate at 60 joints is 0.92-0.98 of the measurement, fitted over 3..60
+#: it was 0.74 for memory). The seconds are this machine's; a machine three times slower (as measured
+#: between sessions on this project) stays within the 300 s limit up to the memory limit. The base and the
+#: planar runs are those of 2026-12-01 (the planar derivation did not change since; planar chains stay
+#: within about a second of the base and are capped at 7 links, so their fit is nearly flat).
 CALIBRATION: Dict[str, object] = {
-    "measured": "2026-12-02, 2 cores; spatial operations and peak memory after the AD kernel (planar: "
-                "2026-12-01), seconds from commit bef8005; python -m bench.derive_cost",
+    "measured": "spatial 2026-12-02 (idle machine, after the Taylor recursion and the closed-form brackets), "
+                "base and planar 2026-12-01; python -m bench.derive_cost",
     "base_bytes": 95178752,
     "base_seconds": 0.93,
-    "spatial": {"operations": (512.9872910083692, 2.0528430677162595),
-                "peak_bytes": (466105.41186198196, 1.789685429656444),
-                "seconds": (0.03459418261171506, 2.404643483036551)},
+    "spatial": {"operations": (163.56032824947656, 2.2643676456846284),
+                "peak_bytes": (25045.87856361485, 2.540545070237284),
+                "seconds": (0.0043319092178612005, 2.313706438453827)},
     "planar": {"operations": (126.88805941086473, 2.1712012261231752),
                "peak_bytes": (205028.8444603613, 1.746326365259364),
                "seconds": (0.4662896071482834, 0.8207445020068006)},
     "runs": [
-        {"form": "spatial", "n": 3, "operations": 4703, "peak_bytes": 98996224, "seconds": 1.51},
-        {"form": "spatial", "n": 5, "operations": 14639, "peak_bytes": 104202240, "seconds": 2.26},
-        {"form": "spatial", "n": 7, "operations": 28525, "peak_bytes": 107069440, "seconds": 4.96},
-        {"form": "spatial", "n": 10, "operations": 57375, "peak_bytes": 120975360, "seconds": 10.01},
-        {"form": "spatial", "n": 14, "operations": 112894, "peak_bytes": 142950400, "seconds": 14.91},
-        {"form": "spatial", "n": 21, "operations": 266251, "peak_bytes": 230809600, "seconds": 69.83},
+        {"form": "spatial", "n": 14, "operations": 67943, "peak_bytes": 116150272, "seconds": 3.01},
+        {"form": "spatial", "n": 21, "operations": 155976, "peak_bytes": 149118976, "seconds": 5.71},
+        {"form": "spatial", "n": 30, "operations": 342462, "peak_bytes": 245272576, "seconds": 11.44},
+        {"form": "spatial", "n": 45, "operations": 892132, "peak_bytes": 473067520, "seconds": 29.18},
+        {"form": "spatial", "n": 60, "operations": 1828127, "peak_bytes": 941600768, "seconds": 61.34},
         {"form": "planar", "n": 2, "operations": 583, "peak_bytes": 95842304, "seconds": 1.49},
         {"form": "planar", "n": 3, "operations": 1363, "peak_bytes": 96522240, "seconds": 3.93},
         {"form": "planar", "n": 4, "operations": 2523, "peak_bytes": 97546240, "seconds": 1.82},

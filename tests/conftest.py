@@ -77,7 +77,18 @@ HEAVY_FIRST = (
 
 @pytest.hookimpl(tryfirst=True)
 def pytest_collection_modifyitems(config, items):
-    """Under pytest-xdist, the files of ``HEAVY_FIRST`` first (stable: the rest keeps its order)."""
+    """Exhaustive tests only when asked for; under pytest-xdist, the files of ``HEAVY_FIRST`` first.
+
+    ``@pytest.mark.exhaustive`` tests (a minute or more each) are deselected unless the ``-m``
+    expression names them (``.ci/run`` runs ``pytest -m exhaustive`` after ``make test``), so that
+    ``make test`` and ``pytest -m 'not slow'`` leave them out alike. The heavy-first order is stable:
+    the rest keeps its order.
+    """
+    if "exhaustive" not in (config.getoption("markexpr") or ""):
+        kept = [item for item in items if item.get_closest_marker("exhaustive") is None]
+        if len(kept) < len(items):
+            config.hook.pytest_deselected(items=[item for item in items if item not in kept])
+            items[:] = kept
     if not os.environ.get("PYTEST_XDIST_WORKER"):
         return
     rank = {path: i for i, path in enumerate(HEAVY_FIRST)}
