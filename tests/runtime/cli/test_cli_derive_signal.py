@@ -15,9 +15,13 @@ pytestmark = pytest.mark.slow  # derives in a subprocess
 
 @pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGINT])
 def test_fjm_derive_ends_on_a_signal_and_writes_nothing(tmp_path, signum):
+    from derive.synthetic import write_synthetic_chain
+    # a 21-joint chain: several seconds of derivation on a fast idle machine (the Panda, under a
+    # second there, could end before the signal)
+    toml, _ = write_synthetic_chain(21, tmp_path / "model")
     out = tmp_path / "out"
-    proc = subprocess.Popen([sys.executable, "-m", "fjm_runtime.cli", "derive", "--models", "panda", "--out", str(out)],
-                            stderr=subprocess.PIPE, text=True)
+    proc = subprocess.Popen([sys.executable, "-m", "fjm_runtime.cli", "derive", "--model-file", str(toml),
+                             "--out", str(out)], stderr=subprocess.PIPE, text=True)
     seen = []
     deadline = time.time() + 120
     for line in proc.stderr:  # wait until the symbolic work has started (stage lines of the guard)
