@@ -70,7 +70,8 @@ def _layout_lines(lin: Linearization) -> List[str]:
 
 
 # CasADi's generated bodies do not use every argument of the calling convention
-# (iw, w, mem), which -Wextra -Werror rejects; a (void) cast documents that.
+# (iw, w, mem; arg where the outputs are constant, as link1_complete's 1x1 coupling 0), which
+# -Wextra -Werror rejects; a (void) cast documents that.
 _BODY = re.compile(r"^(static int casadi_f\d+\(const casadi_real\*\* arg, casadi_real\*\* res, "
                    r"casadi_int\* iw, casadi_real\* w, int mem\) \{)$", re.M)
 _MEM = re.compile(r"^(CASADI_SYMBOL_EXPORT (?:int|void) \w+_(?:init_mem|free_mem|release)\(int mem\) \{)$",
@@ -78,7 +79,7 @@ _MEM = re.compile(r"^(CASADI_SYMBOL_EXPORT (?:int|void) \w+_(?:init_mem|free_mem
 
 
 def _silence_unused(src: str) -> str:
-    return _MEM.sub(r"\1\n  (void)mem;", _BODY.sub(r"\1\n  (void)iw; (void)w; (void)mem;", src))
+    return _MEM.sub(r"\1\n  (void)mem;", _BODY.sub(r"\1\n  (void)arg; (void)iw; (void)w; (void)mem;", src))
 
 
 def _generate_c(model: str, functions: Dict[str, ca.Function], workdir: Path) -> Dict[str, str]:

@@ -313,7 +313,7 @@ static const casadi_real casadi_zeros[36] =
 
 /* elbow3_inertia:(x[12],p[10])->(inertia[3x3]) */
 static int casadi_f1(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14, a15, a16, a17, a18, a19, a20, a21;
   a00=-1.9999999999999997e-02;
@@ -525,7 +525,7 @@ static int casadi_f1(const casadi_real** arg, casadi_real** res, casadi_int* iw,
 
 /* ldl_factor_3:(i0[3x3])->(o0[3],o1[3]) */
 static int casadi_f2(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a0, a1, a2, a3, a4, a5, a6;
   a0=arg[0]? arg[0][1] : 0;
   a1=arg[0]? arg[0][0] : 0;
@@ -558,7 +558,7 @@ static int casadi_f2(const casadi_real** arg, casadi_real** res, casadi_int* iw,
 
 /* elbow3_bias:(i0[3],i1[3],i2[10])->(o0[3]) */
 static int casadi_f3(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14, a15, a16, a17, a18, a19, a20, a21, a22, a23;
   casadi_real a24, a25, a26, a27, a28, a29, a30, a31, a32, a33, a34, a35;
@@ -851,7 +851,7 @@ static int casadi_f3(const casadi_real** arg, casadi_real** res, casadi_int* iw,
 
 /* ldl_solve_3:(i0[3],i1[3],i2[3])->(o0[3]) */
 static int casadi_f4(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a0, a1, a2, a3, a4, a5, a6, a7;
   a0=arg[2]? arg[2][0] : 0;
   a1=arg[1]? arg[1][0] : 0;
@@ -885,7 +885,7 @@ static int casadi_f4(const casadi_real** arg, casadi_real** res, casadi_int* iw,
 
 /* elbow3_f:(x[12],p[10])->(f[12]) */
 static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i;
   casadi_real **res1=res+1, *rr, *w01=w+61, *w03=w+74, *w04=w+83, *w05=w+86, *w06=w+89, *w07=w+92, w08, w09, w10, *w12=w+101;
   const casadi_real **arg1=arg+2, *cr, *cs, *wr00, *wr01, *wr02, *wr06, *wr11, *wr12;
@@ -1074,7 +1074,7 @@ CASADI_SYMBOL_EXPORT int elbow3_f_work_bytes(casadi_int *sz_arg, casadi_int* sz_
 
 /* elbow3_g:(x[12],p[10])->(g[12x3]) */
 static int casadi_f5(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a0, a1;
   a0=0.;
   if (res[0]!=0) res[0][0]=a0;
@@ -1211,7 +1211,7 @@ CASADI_SYMBOL_EXPORT int elbow3_g_work_bytes(casadi_int *sz_arg, casadi_int* sz_
 
 /* elbow3_bracket_column:(q[3],dq[3],L[3],d[3],c[3],ba,p[10])->(x_j[3],r_j[3]) */
 static int casadi_f8(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14, a15, a16, a17, a18, a19, a20, a21, a22, a23;
   casadi_real a24, a25, a26, a27, a28, a29, a30, a31, a32, a33, a34, a35;
@@ -1899,7 +1899,7 @@ static int casadi_f8(const casadi_real** arg, casadi_real** res, casadi_int* iw,
 
 /* map3_elbow3_bracket_column:(q[3x3],dq[3x3],L[3x3],d[3x3],c[3x3],ba[1x3],p[10x3])->(x_j[3x3],r_j[3x3]) */
 static int casadi_f7(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i;
   casadi_real* *res1;
   const casadi_real* *arg1;
@@ -1924,7 +1924,7 @@ static int casadi_f7(const casadi_real** arg, casadi_real** res, casadi_int* iw,
 
 /* elbow3_ad:(x[12],p[10])->(ad[12x12,102nz]) */
 static int casadi_f6(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i, j;
   casadi_real **res1=res+1, *rr, *w00=w+87, *w01=w+96, *w02=w+105, w04, w05, w06, *w07=w+127, *w08=w+130, *w09=w+133, *w10=w+136;
   casadi_real *w11=w+139, *w12=w+169, *w13=w+199, *w14=w+202, *w15=w+205, *w16=w+208, *w17=w+232, *w19=w+268, *w20=w+277, *w21=w+286, *w22=w+295, *w23=w+304;
@@ -2232,7 +2232,7 @@ CASADI_SYMBOL_EXPORT int elbow3_ad_work_bytes(casadi_int *sz_arg, casadi_int* sz
 
 /* elbow3_accel_kernel:(q[3],dq[3],s[3],ds[3],p[10])->(y3[3],y4[3],w[3]) */
 static int casadi_f10(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a000, a001, a002, a003, a004, a005, a006, a007, a008, a009, a010, a011;
   casadi_real a012, a013, a014, a015, a016, a017, a018, a019, a020, a021, a022, a023;
   casadi_real a024, a025, a026, a027, a028, a029, a030, a031, a032, a033, a034, a035;
@@ -3812,7 +3812,7 @@ static int casadi_f10(const casadi_real** arg, casadi_real** res, casadi_int* iw
 
 /* elbow3_T:(x[12],p[10])->(T[12]) */
 static int casadi_f9(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i;
   casadi_real **res1=res+1, *rr, w04, w05, w06, *w07=w+185, *w08=w+188, *w09=w+191, *w10=w+194;
   const casadi_real **arg1=arg+2, *cr, *cs, *wr00, *wr01, *wr02, *wr03, *wr08, *wr09;
@@ -3957,7 +3957,7 @@ CASADI_SYMBOL_EXPORT int elbow3_T_work_bytes(casadi_int *sz_arg, casadi_int* sz_
 
 /* elbow3_alpha:(x[12],p[10])->(alpha[3]) */
 static int casadi_f11(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i;
   casadi_real **res1=res+1, *rr, w01, w02, w03, *w04=w+167, *w05=w+170, *w06=w+173, *w08=w+188, *w10=w+194, *w11=w+197, *w13=w+203;
   casadi_real *w14=w+206, *w15=w+209;
@@ -4139,7 +4139,7 @@ CASADI_SYMBOL_EXPORT int elbow3_alpha_work_bytes(casadi_int *sz_arg, casadi_int*
 
 /* elbow3_beta:(x[12],p[10])->(beta[3x3]) */
 static int casadi_f12(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i;
   casadi_real **res1=res+1, *rr, w1, w2, w3, *w4=w+35, *w5=w+38, *w6=w+41, *w8=w+62;
   const casadi_real **arg1=arg+2, *cs, *wr0, *wr7;
@@ -4276,7 +4276,7 @@ CASADI_SYMBOL_EXPORT int elbow3_beta_work_bytes(casadi_int *sz_arg, casadi_int* 
 
 /* elbow3_potential:(i0[3],i1[10])->(o0) */
 static int casadi_f14(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10;
   a00=1.3000000000000000e+00;
   a01=2.6327476856711184e-03;
@@ -4329,7 +4329,7 @@ static int casadi_f14(const casadi_real** arg, casadi_real** res, casadi_int* iw
 
 /* elbow3_energy:(x[12],p[10])->(energy) */
 static int casadi_f13(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i, j, k;
   casadi_real **res1=res+1, *rr, *w1=w+34, *w2=w+37, *w4=w+50, w5, w6, w7, w8, *w9=w+63;
   const casadi_real **arg1=arg+2, *cr, *cs, *ct, *wr0, *wr1, *wr2, *wr3, *wr9;
@@ -4584,7 +4584,7 @@ CASADI_SYMBOL_EXPORT int elbow3_inertia_work_bytes(casadi_int *sz_arg, casadi_in
 
 /* elbow3_control_core:(x[12],p_hat[10])->(y_hat[12],alpha[3],beta[3x3]) */
 static int casadi_f15(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i;
   casadi_real **res1=res+3, *rr, *w01=w+166, *w02=w+169, w04, w05, w06, *w07=w+185, *w08=w+188, *w09=w+191, *w11=w+197, *w12=w+200;
   casadi_real *w13=w+203, *w14=w+206, *w15=w+209;
@@ -4785,7 +4785,7 @@ CASADI_SYMBOL_EXPORT int elbow3_control_core_work_bytes(casadi_int *sz_arg, casa
 
 /* elbow3_control_smc:(x[12],z[0],r[15],p[10],gains[27])->(u[3],s[3],z_dot[0],u_cmd[3],y_hat[12]) */
 static int casadi_f16(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i, j, k;
   casadi_real **res1=res+5, *rr, w01, *w04=w+268, *w05=w+280, *w06=w+283, *w07=w+292, w08, *w09=w+296, *w11=w+320, *w12=w+323, *w13=w+326;
   casadi_real *w14=w+329, *w15=w+332, *w16=w+335, w17;
@@ -5055,7 +5055,7 @@ CASADI_SYMBOL_EXPORT int elbow3_control_smc_work_bytes(casadi_int *sz_arg, casad
 
 /* elbow3_control_ismc:(x[12],z[3],r[15],p[10],gains[29])->(u[3],s[3],z_dot[3],u_cmd[3],y_hat[12]) */
 static int casadi_f17(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i, j, k;
   casadi_real **res1=res+5, *rr, w01, *w04=w+270, *w05=w+282, *w06=w+285, *w07=w+294, w08, *w09=w+298, *w11=w+322, *w12=w+325, *w13=w+328;
   casadi_real *w14=w+331, *w15=w+334, *w16=w+337, *w17=w+340, w18;
@@ -5377,7 +5377,7 @@ CASADI_SYMBOL_EXPORT int elbow3_control_ismc_work_bytes(casadi_int *sz_arg, casa
 
 /* elbow3_control_ismc_zdot:(x[12],z[3],r[15],p[10],gains[29],u_cmd[3],u[3])->(z_dot[3]) */
 static int casadi_f18(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a0, a1, a2, a3, a4, a5, a6;
   a0=arg[4]? arg[4][17] : 0;
   a1=arg[4]? arg[4][18] : 0;
@@ -5536,7 +5536,7 @@ CASADI_SYMBOL_EXPORT int elbow3_control_ismc_zdot_work_bytes(casadi_int *sz_arg,
 
 /* elbow3_control_fl:(x[12],z[0],r[15],p[10],gains[20])->(u[3],s[3],z_dot[0],u_cmd[3],y_hat[12]) */
 static int casadi_f19(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i, j, k;
   casadi_real **res1=res+5, *rr, w01, *w04=w+261, *w05=w+273, *w06=w+276, *w07=w+285, w08, *w09=w+289, *w11=w+313, *w12=w+316, *w13=w+319;
   casadi_real *w14=w+322, *w15=w+325, *w16=w+328;
@@ -5776,7 +5776,7 @@ CASADI_SYMBOL_EXPORT int elbow3_control_fl_work_bytes(casadi_int *sz_arg, casadi
 
 /* elbow3_control_adaptive:(x[12],z[18],r[15],p[10],gains[36])->(u[3],s[3],z_dot[18],u_cmd[3],y_hat[12]) */
 static int casadi_f20(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i, j, k;
   casadi_real **res1=res+5, *rr, w01, *w04=w+285, *w05=w+288, *w06=w+291, w07, w08, w09, w11, w12, w13;
   casadi_real w14, w15, w16, w17, *w18=w+314, *w19=w+324, *w20=w+336, *w21=w+345, *w22=w+348, *w24=w+372, *w25=w+375, *w26=w+378;
@@ -6263,7 +6263,7 @@ CASADI_SYMBOL_EXPORT int elbow3_control_adaptive_work_bytes(casadi_int *sz_arg, 
 
 /* elbow3_control_adaptive_zdot:(x[12],z[18],r[15],p[10],gains[36],u_cmd[3],u[3])->(z_dot[18]) */
 static int casadi_f21(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14, a15, a16, a17, a18, a19, a20, a21, a22, a23;
   a00=arg[4]? arg[4][17] : 0;
@@ -6569,7 +6569,7 @@ CASADI_SYMBOL_EXPORT int elbow3_control_adaptive_zdot_work_bytes(casadi_int *sz_
 
 /* elbow3_beta_tau:(m[15],p[10])->(beta_tau[3x3]) */
 static int casadi_f23(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i;
   casadi_real **res1=res+1, *rr, *w2=w+89, *w3=w+98;
   const casadi_real **arg1=arg+2, *cs, *wr0, *wr1, *wr4;
@@ -6597,7 +6597,7 @@ static int casadi_f23(const casadi_real** arg, casadi_real** res, casadi_int* iw
 
 /* elbow3_control_core_tau:(m[15],p_hat[10])->(y_hat[12],alpha[3],beta[3x3]) */
 static int casadi_f22(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i;
   casadi_real **res1=res+3, *rr, *w03=w+175, *w06=w+191, *w07=w+194, *w08=w+197, w09, w10, w11, *w12=w+203;
   const casadi_real **arg1=arg+2, *cr, *cs, *wr00, *wr01, *wr02, *wr03, *wr04, *wr05;
@@ -6785,7 +6785,7 @@ CASADI_SYMBOL_EXPORT int elbow3_control_core_tau_work_bytes(casadi_int *sz_arg, 
 
 /* elbow3_control_smc_tau:(m[15],z[0],r[15],p[10],gains[27])->(u[3],s[3],z_dot[0],u_cmd[3],y_hat[12]) */
 static int casadi_f24(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i, j, k;
   casadi_real **res1=res+5, *rr, w01, *w04=w+265, *w05=w+277, *w06=w+280, *w07=w+289, w08, *w09=w+293, *w10=w+302, *w11=w+305, *w12=w+308;
   casadi_real *w13=w+311, *w14=w+314, *w15=w+317, w16;
@@ -7055,7 +7055,7 @@ CASADI_SYMBOL_EXPORT int elbow3_control_smc_tau_work_bytes(casadi_int *sz_arg, c
 
 /* elbow3_control_ismc_tau:(m[15],z[3],r[15],p[10],gains[29])->(u[3],s[3],z_dot[3],u_cmd[3],y_hat[12]) */
 static int casadi_f25(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i, j, k;
   casadi_real **res1=res+5, *rr, w01, *w04=w+267, *w05=w+279, *w06=w+282, *w07=w+291, w08, *w09=w+295, *w11=w+319, *w12=w+322, *w13=w+325;
   casadi_real *w14=w+328, *w15=w+331, *w16=w+334, *w17=w+337, w18;
@@ -7377,7 +7377,7 @@ CASADI_SYMBOL_EXPORT int elbow3_control_ismc_tau_work_bytes(casadi_int *sz_arg, 
 
 /* elbow3_control_ismc_tau_zdot:(m[15],z[3],r[15],p[10],gains[29],u_cmd[3],u[3])->(z_dot[3]) */
 static int casadi_f26(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a0, a1, a2, a3, a4, a5, a6;
   a0=arg[4]? arg[4][17] : 0;
   a1=arg[4]? arg[4][18] : 0;
@@ -7536,7 +7536,7 @@ CASADI_SYMBOL_EXPORT int elbow3_control_ismc_tau_zdot_work_bytes(casadi_int *sz_
 
 /* elbow3_control_fl_tau:(m[15],z[0],r[15],p[10],gains[20])->(u[3],s[3],z_dot[0],u_cmd[3],y_hat[12]) */
 static int casadi_f27(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i, j, k;
   casadi_real **res1=res+5, *rr, w01, *w04=w+258, *w05=w+270, *w06=w+273, *w07=w+282, w08, *w09=w+286, *w10=w+295, *w11=w+298, *w12=w+301;
   casadi_real *w13=w+304, *w14=w+307, *w15=w+310;
@@ -7776,7 +7776,7 @@ CASADI_SYMBOL_EXPORT int elbow3_control_fl_tau_work_bytes(casadi_int *sz_arg, ca
 
 /* elbow3_control_pdg:(x[12],z[0],r[15],p[10],gains[10])->(u[3],s[3],z_dot[0],u_cmd[3],y_hat[12]) */
 static int casadi_f28(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14, a15, a16, a17, a18, a19;
   a00=arg[4]? arg[4][9] : 0;
@@ -8053,7 +8053,7 @@ CASADI_SYMBOL_EXPORT int elbow3_control_pdg_work_bytes(casadi_int *sz_arg, casad
 
 /* elbow3_T_tau:(m[15],p[10])->(T_tau[12]) */
 static int casadi_f29(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real **res1=res+1, *w6=w+191, *w7=w+194;
   const casadi_real **arg1=arg+2, *wr0, *wr1, *wr2, *wr3, *wr4, *wr5;
   /* #0: @0 = input[0][0] */
@@ -8178,7 +8178,7 @@ CASADI_SYMBOL_EXPORT int elbow3_T_tau_work_bytes(casadi_int *sz_arg, casadi_int*
 
 /* elbow3_alpha_tau:(m[15],p[10])->(alpha_tau[3]) */
 static int casadi_f30(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i;
   casadi_real **res1=res+1, *rr, w03, w04, w05, *w06=w+185, *w07=w+188, *w11=w+200, *w12=w+203;
   const casadi_real **arg1=arg+2, *cr, *cs, *wr00, *wr01, *wr02, *wr07, *wr08, *wr09, *wr10;

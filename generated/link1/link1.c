@@ -197,7 +197,7 @@ static const casadi_real casadi_zeros[16] =
 
 /* link1_inertia:(x[4],p[7])->(inertia) */
 static int casadi_f1(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a0;
   a0=arg[1]? arg[1][0] : 0;
   if (res[0]!=0) res[0][0]=a0;
@@ -206,7 +206,7 @@ static int casadi_f1(const casadi_real** arg, casadi_real** res, casadi_int* iw,
 
 /* ldl_factor_1:(i0)->(o0[0],o1) */
 static int casadi_f2(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a0;
   a0=arg[0]? arg[0][0] : 0;
   a0=(1./a0);
@@ -216,7 +216,7 @@ static int casadi_f2(const casadi_real** arg, casadi_real** res, casadi_int* iw,
 
 /* link1_bias:(i0,i1,i2[7])->(o0) */
 static int casadi_f3(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a0, a1;
   a0=arg[2]? arg[2][5] : 0;
   a1=arg[2]? arg[2][3] : 0;
@@ -232,7 +232,7 @@ static int casadi_f3(const casadi_real** arg, casadi_real** res, casadi_int* iw,
 
 /* ldl_solve_1:(i0[0],i1,i2)->(o0) */
 static int casadi_f4(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a0, a1;
   a0=arg[2]? arg[2][0] : 0;
   a1=arg[1]? arg[1][0] : 0;
@@ -243,7 +243,7 @@ static int casadi_f4(const casadi_real** arg, casadi_real** res, casadi_int* iw,
 
 /* link1_f:(x[4],p[7])->(f[4]) */
 static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real **res1=res+1, *rr, *w0=w+2, w1, *w3=w+7, w4, w5, w6, w7, w8;
   const casadi_real **arg1=arg+2, *cs;
   /* #0: @0 = input[0][0] */
@@ -405,7 +405,7 @@ CASADI_SYMBOL_EXPORT int link1_f_work_bytes(casadi_int *sz_arg, casadi_int* sz_r
 
 /* link1_g:(x[4],p[7])->(g[4]) */
 static int casadi_f5(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a0;
   a0=0.;
   if (res[0]!=0) res[0][0]=a0;
@@ -506,7 +506,7 @@ CASADI_SYMBOL_EXPORT int link1_g_work_bytes(casadi_int *sz_arg, casadi_int* sz_r
 
 /* link1_bracket_column:(q,dq,L[0],d,c,ba,p[7])->(x_j,r_j) */
 static int casadi_f7(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a0, a1;
   a0=arg[4]? arg[4][0] : 0;
   a1=arg[3]? arg[3][0] : 0;
@@ -521,7 +521,7 @@ static int casadi_f7(const casadi_real** arg, casadi_real** res, casadi_int* iw,
 
 /* link1_ad:(x[4],p[7])->(ad[4x4]) */
 static int casadi_f6(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real **res1=res+1, *rr, w00, *w01=w+3, w02, w03, w04, w05, w06, *w07=w+15, w09, w10;
   casadi_real w11, w12, w13, w14;
   const casadi_real **arg1=arg+2, *cs;
@@ -727,7 +727,7 @@ CASADI_SYMBOL_EXPORT int link1_ad_work_bytes(casadi_int *sz_arg, casadi_int* sz_
 
 /* link1_accel_kernel:(q,dq,s,ds,p[7])->(y3,y4,w) */
 static int casadi_f9(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a0, a1, a2, a3, a4, a5, a6, a7, a8;
   a0=arg[2]? arg[2][0] : 0;
   a1=arg[4]? arg[4][5] : 0;
@@ -763,7 +763,7 @@ static int casadi_f9(const casadi_real** arg, casadi_real** res, casadi_int* iw,
 
 /* link1_T:(x[4],p[7])->(T[4]) */
 static int casadi_f8(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real **res1=res+1, *rr, *w0=w+9, w1, w2, *w3=w+15, w4, w5, w6, w7;
   const casadi_real **arg1=arg+2, *cs;
   /* #0: @0 = input[0][0] */
@@ -898,7 +898,7 @@ CASADI_SYMBOL_EXPORT int link1_T_work_bytes(casadi_int *sz_arg, casadi_int* sz_r
 
 /* link1_alpha:(x[4],p[7])->(alpha) */
 static int casadi_f10(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real **res1=res+1, *rr, *w00=w+9, w01, w02, w03, *w04=w+19, w05, w06, w07, w08, w09;
   casadi_real w10, w11, w12;
   const casadi_real **arg1=arg+2, *cs;
@@ -1052,7 +1052,7 @@ CASADI_SYMBOL_EXPORT int link1_alpha_work_bytes(casadi_int *sz_arg, casadi_int* 
 
 /* link1_beta:(x[4],p[7])->(beta) */
 static int casadi_f11(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real **res1=res+1, *rr, *w0=w+1, w1, w2, *w3=w+10;
   const casadi_real **arg1=arg+2, *cs;
   /* #0: @0 = input[1][0] */
@@ -1166,7 +1166,7 @@ CASADI_SYMBOL_EXPORT int link1_beta_work_bytes(casadi_int *sz_arg, casadi_int* s
 
 /* link1_potential:(i0,i1[7])->(o0) */
 static int casadi_f13(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a0, a1;
   a0=arg[1]? arg[1][5] : 0;
   a1=arg[1]? arg[1][3] : 0;
@@ -1183,7 +1183,7 @@ static int casadi_f13(const casadi_real** arg, casadi_real** res, casadi_int* iw
 
 /* link1_energy:(x[4],p[7])->(energy) */
 static int casadi_f12(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real **res1=res+1, *rr, *w0=w+2, w1, *w2=w+7, w3, w4, w5;
   const casadi_real **arg1=arg+2, *cs;
   /* #0: @0 = input[0][0] */
@@ -1417,7 +1417,7 @@ CASADI_SYMBOL_EXPORT int link1_inertia_work_bytes(casadi_int *sz_arg, casadi_int
 
 /* link1_control_core:(x[4],p_hat[7])->(y_hat[4],alpha,beta) */
 static int casadi_f14(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real **res1=res+3, *rr, *w00=w+14, w01, w02, *w03=w+20, w04, w05, w06, w07, w08, w09;
   casadi_real w10, w11;
   const casadi_real **arg1=arg+2, *cs;
@@ -1590,7 +1590,7 @@ CASADI_SYMBOL_EXPORT int link1_control_core_work_bytes(casadi_int *sz_arg, casad
 
 /* link1_control_smc:(x[4],z[0],r[5],p[7],gains[11])->(u,s,z_dot[0],u_cmd,y_hat[4]) */
 static int casadi_f15(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real **res1=res+5, *rr, w01, *w02=w+47, *w03=w+51, *w04=w+58, w05, w06, w07, w08, *w09=w+66, w10;
   casadi_real w11, w12, w13, w14, w15, w16;
   const casadi_real **arg1=arg+5, *cs, *wr00;
@@ -1855,7 +1855,7 @@ CASADI_SYMBOL_EXPORT int link1_control_smc_work_bytes(casadi_int *sz_arg, casadi
 
 /* link1_control_ismc:(x[4],z,r[5],p[7],gains[13])->(u,s,z_dot,u_cmd,y_hat[4]) */
 static int casadi_f16(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real **res1=res+5, *rr, w01, *w02=w+49, *w03=w+53, *w04=w+60, w05, w06, w07, w08, *w09=w+68, w10;
   casadi_real w11, w12, w13, w14, w15, w16;
   const casadi_real **arg1=arg+5, *cs, *wr00;
@@ -2172,7 +2172,7 @@ CASADI_SYMBOL_EXPORT int link1_control_ismc_work_bytes(casadi_int *sz_arg, casad
 
 /* link1_control_ismc_zdot:(x[4],z,r[5],p[7],gains[13],u_cmd,u)->(z_dot) */
 static int casadi_f17(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a0, a1, a2, a3, a4, a5, a6;
   a0=arg[4]? arg[4][9] : 0;
   a1=arg[4]? arg[4][10] : 0;
@@ -2297,7 +2297,7 @@ CASADI_SYMBOL_EXPORT int link1_control_ismc_zdot_work_bytes(casadi_int *sz_arg, 
 
 /* link1_control_fl:(x[4],z[0],r[5],p[7],gains[8])->(u,s,z_dot[0],u_cmd,y_hat[4]) */
 static int casadi_f18(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real **res1=res+5, *rr, w01, *w02=w+44, *w03=w+48, *w04=w+55, w05, w06, w07, w08, *w09=w+63, w10;
   casadi_real w11, w12, w13, w14, w15;
   const casadi_real **arg1=arg+5, *cs, *wr00;
@@ -2532,7 +2532,7 @@ CASADI_SYMBOL_EXPORT int link1_control_fl_work_bytes(casadi_int *sz_arg, casadi_
 
 /* link1_control_adaptive:(x[4],z[6],r[5],p[7],gains[16])->(u,s,z_dot[6],u_cmd,y_hat[4]) */
 static int casadi_f19(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real **res1=res+5, *rr, w01, *w02=w+52, *w03=w+56, w04, w05, *w06=w+65, w07, w08, w09, w10;
   casadi_real w11, w12, w13, *w14=w+78, *w15=w+85, *w16=w+89, w17, w18, w19, w20;
   const casadi_real **arg1=arg+5, *cs, *wr00;
@@ -2984,7 +2984,7 @@ CASADI_SYMBOL_EXPORT int link1_control_adaptive_work_bytes(casadi_int *sz_arg, c
 
 /* link1_control_adaptive_zdot:(x[4],z[6],r[5],p[7],gains[16],u_cmd,u)->(z_dot[6]) */
 static int casadi_f20(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12;
   a00=arg[4]? arg[4][9] : 0;
@@ -3160,7 +3160,7 @@ CASADI_SYMBOL_EXPORT int link1_control_adaptive_zdot_work_bytes(casadi_int *sz_a
 
 /* link1_beta_tau:(m[5],p[7])->(beta_tau) */
 static int casadi_f22(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i;
   casadi_real **res1=res+1, *rr, *w0=w+14, w1, *w2=w+20, *w3=w+23, *w4=w+27;
   const casadi_real **arg1=arg+2, *cs;
@@ -3188,7 +3188,7 @@ static int casadi_f22(const casadi_real** arg, casadi_real** res, casadi_int* iw
 
 /* link1_control_core_tau:(m[5],p_hat[7])->(y_hat[4],alpha,beta) */
 static int casadi_f21(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real **res1=res+3, *rr, *w0=w+34, w1, w2, w3, w4, *w5=w+43, w6, w7, w8;
   const casadi_real **arg1=arg+2, *cs;
   /* #0: @0 = input[0][0] */
@@ -3348,7 +3348,7 @@ CASADI_SYMBOL_EXPORT int link1_control_core_tau_work_bytes(casadi_int *sz_arg, c
 
 /* link1_control_smc_tau:(m[5],z[0],r[5],p[7],gains[11])->(u,s,z_dot[0],u_cmd,y_hat[4]) */
 static int casadi_f23(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real **res1=res+5, *rr, w01, *w02=w+65, *w03=w+70, *w04=w+77, w05, w06, w07, w08, w09, w10;
   casadi_real w11, w12, w13, w14, w15;
   const casadi_real **arg1=arg+5, *cs, *wr00;
@@ -3613,7 +3613,7 @@ CASADI_SYMBOL_EXPORT int link1_control_smc_tau_work_bytes(casadi_int *sz_arg, ca
 
 /* link1_control_ismc_tau:(m[5],z,r[5],p[7],gains[13])->(u,s,z_dot,u_cmd,y_hat[4]) */
 static int casadi_f24(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real **res1=res+5, *rr, w01, *w02=w+67, *w03=w+72, *w04=w+79, w05, w06, w07, w08, *w09=w+87, w10;
   casadi_real w11, w12, w13, w14, w15, w16;
   const casadi_real **arg1=arg+5, *cs, *wr00;
@@ -3930,7 +3930,7 @@ CASADI_SYMBOL_EXPORT int link1_control_ismc_tau_work_bytes(casadi_int *sz_arg, c
 
 /* link1_control_ismc_tau_zdot:(m[5],z,r[5],p[7],gains[13],u_cmd,u)->(z_dot) */
 static int casadi_f25(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a0, a1, a2, a3, a4, a5, a6;
   a0=arg[4]? arg[4][9] : 0;
   a1=arg[4]? arg[4][10] : 0;
@@ -4055,7 +4055,7 @@ CASADI_SYMBOL_EXPORT int link1_control_ismc_tau_zdot_work_bytes(casadi_int *sz_a
 
 /* link1_control_fl_tau:(m[5],z[0],r[5],p[7],gains[8])->(u,s,z_dot[0],u_cmd,y_hat[4]) */
 static int casadi_f26(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real **res1=res+5, *rr, w01, *w02=w+62, *w03=w+67, *w04=w+74, w05, w06, w07, w08, w09, w10;
   casadi_real w11, w12, w13, w14;
   const casadi_real **arg1=arg+5, *cs, *wr00;
@@ -4290,7 +4290,7 @@ CASADI_SYMBOL_EXPORT int link1_control_fl_tau_work_bytes(casadi_int *sz_arg, cas
 
 /* link1_control_pdg:(x[4],z[0],r[5],p[7],gains[4])->(u,s,z_dot[0],u_cmd,y_hat[4]) */
 static int casadi_f27(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a0, a1, a2, a3, a4, a5;
   a0=arg[4]? arg[4][3] : 0;
   a1=arg[4]? arg[4][0] : 0;
@@ -4437,7 +4437,7 @@ CASADI_SYMBOL_EXPORT int link1_control_pdg_work_bytes(casadi_int *sz_arg, casadi
 
 /* link1_T_tau:(m[5],p[7])->(T_tau[4]) */
 static int casadi_f28(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real **res1=res+1, *rr, *w0=w+9, w1, w2, w3, w4, *w5=w+18, w6, w7;
   const casadi_real **arg1=arg+2, *cs;
   /* #0: @0 = input[0][0] */
@@ -4562,7 +4562,7 @@ CASADI_SYMBOL_EXPORT int link1_T_tau_work_bytes(casadi_int *sz_arg, casadi_int* 
 
 /* link1_alpha_tau:(m[5],p[7])->(alpha_tau) */
 static int casadi_f29(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real **res1=res+1, *rr, *w0=w+9, w1, *w2=w+15, w3, w4, w5, w6, w7, w8, w9;
   const casadi_real **arg1=arg+2, *cs;
   /* #0: @0 = input[0][0] */

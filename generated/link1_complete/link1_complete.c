@@ -110,7 +110,7 @@ static const casadi_int casadi_s3[3] = {2, 2, 1};
 
 /* link1_complete_f:(x[4],p[8])->(f[4]) */
 static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a0, a1, a2, a3;
   a0=arg[0]? arg[0][1] : 0;
   if (res[0]!=0) res[0][0]=a0;
@@ -231,7 +231,7 @@ CASADI_SYMBOL_EXPORT int link1_complete_f_work_bytes(casadi_int *sz_arg, casadi_
 
 /* link1_complete_g:(x[4],p[8])->(g[4]) */
 static int casadi_f1(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a0;
   a0=0.;
   if (res[0]!=0) res[0][0]=a0;
@@ -332,7 +332,7 @@ CASADI_SYMBOL_EXPORT int link1_complete_g_work_bytes(casadi_int *sz_arg, casadi_
 
 /* link1_complete_energy:(x[4],p[8])->(energy) */
 static int casadi_f2(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a0, a1, a2, a3, a4;
   a0=arg[1]? arg[1][0] : 0;
   a1=arg[0]? arg[0][1] : 0;
@@ -455,7 +455,7 @@ CASADI_SYMBOL_EXPORT int link1_complete_energy_work_bytes(casadi_int *sz_arg, ca
 
 /* link1_complete_inertia:(x[4],p[8])->(inertia[2x2]) */
 static int casadi_f3(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a0;
   a0=arg[1]? arg[1][0] : 0;
   if (res[0]!=0) res[0][0]=a0;
@@ -556,7 +556,7 @@ CASADI_SYMBOL_EXPORT int link1_complete_inertia_work_bytes(casadi_int *sz_arg, c
 
 /* link1_complete_coupling:(x[4],p[8])->(coupling) */
 static int casadi_f4(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a0;
   a0=0.;
   if (res[0]!=0) res[0][0]=a0;

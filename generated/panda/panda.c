@@ -434,7 +434,7 @@ static const casadi_real casadi_zeros[100] =
 
 /* panda_inertia:(x[28],p[26])->(inertia[7x7]) */
 static int casadi_f1(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14, a15, a16, a17, a18, a19, a20, a21, a22, a23;
   casadi_real a24, a25, a26, a27, a28, a29, a30, a31, a32, a33, a34, a35;
@@ -1150,7 +1150,7 @@ static int casadi_f1(const casadi_real** arg, casadi_real** res, casadi_int* iw,
 
 /* ldl_factor_7:(i0[7x7])->(o0[21],o1[7]) */
 static int casadi_f2(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14, a15, a16, a17, a18, a19, a20, a21, a22, a23;
   casadi_real a24, a25, a26, a27, a28;
@@ -1355,7 +1355,7 @@ static int casadi_f2(const casadi_real** arg, casadi_real** res, casadi_int* iw,
 
 /* panda_bias:(i0[7],i1[7],i2[26])->(o0[7]) */
 static int casadi_f3(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a000, a001, a002, a003, a004, a005, a006, a007, a008, a009, a010, a011;
   casadi_real a012, a013, a014, a015, a016, a017, a018, a019, a020, a021, a022, a023;
   casadi_real a024, a025, a026, a027, a028, a029, a030, a031, a032, a033, a034, a035;
@@ -2323,7 +2323,7 @@ static int casadi_f3(const casadi_real** arg, casadi_real** res, casadi_int* iw,
 
 /* ldl_solve_7:(i0[21],i1[7],i2[7])->(o0[7]) */
 static int casadi_f4(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14, a15, a16, a17, a18, a19, a20, a21, a22, a23;
   casadi_real a24, a25, a26, a27, a28, a29;
@@ -2465,7 +2465,7 @@ static int casadi_f4(const casadi_real** arg, casadi_real** res, casadi_int* iw,
 
 /* panda_f:(x[28],p[26])->(f[28]) */
 static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i;
   casadi_real **res1=res+1, *rr, *w01=w+170, *w03=w+203, *w04=w+252, *w05=w+273, *w06=w+280, *w07=w+287, w08, w09, w10, w11;
   casadi_real w12, w13, w14, *w16=w+308;
@@ -2691,7 +2691,7 @@ CASADI_SYMBOL_EXPORT int panda_f_work_bytes(casadi_int *sz_arg, casadi_int* sz_r
 
 /* panda_g:(x[28],p[26])->(g[28x7]) */
 static int casadi_f5(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a0, a1;
   a0=0.;
   if (res[0]!=0) res[0][0]=a0;
@@ -2996,7 +2996,7 @@ CASADI_SYMBOL_EXPORT int panda_g_work_bytes(casadi_int *sz_arg, casadi_int* sz_r
 
 /* panda_bracket_column:(q[7],dq[7],L[21],d[7],c[7],ba,p[26])->(x_j[7],r_j[7]) */
 static int casadi_f8(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a000, a001, a002, a003, a004, a005, a006, a007, a008, a009, a010, a011;
   casadi_real a012, a013, a014, a015, a016, a017, a018, a019, a020, a021, a022, a023;
   casadi_real a024, a025, a026, a027, a028, a029, a030, a031, a032, a033, a034, a035;
@@ -5492,7 +5492,7 @@ static int casadi_f8(const casadi_real** arg, casadi_real** res, casadi_int* iw,
 
 /* map7_panda_bracket_column:(q[7x7],dq[7x7],L[21x7],d[7x7],c[7x7],ba[1x7],p[26x7])->(x_j[7x7],r_j[7x7]) */
 static int casadi_f7(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i;
   casadi_real* *res1;
   const casadi_real* *arg1;
@@ -5517,7 +5517,7 @@ static int casadi_f7(const casadi_real** arg, casadi_real** res, casadi_int* iw,
 
 /* panda_ad:(x[28],p[26])->(ad[28x28,490nz]) */
 static int casadi_f6(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i, j;
   casadi_real **res1=res+1, *rr, *w00=w+228, *w01=w+277, *w02=w+326, w04, w05, w06, w07, w08, w09, w10;
   casadi_real *w11=w+408, *w12=w+415, *w13=w+422, *w14=w+429, *w15=w+436, *w16=w+590, *w17=w+744, *w18=w+751, *w19=w+758, *w20=w+765, *w21=w+877, *w23=w+1017;
@@ -5861,7 +5861,7 @@ CASADI_SYMBOL_EXPORT int panda_ad_work_bytes(casadi_int *sz_arg, casadi_int* sz_
 
 /* panda_accel_kernel:(q[7],dq[7],s[7],ds[7],p[26])->(y3[7],y4[7],w[7]) */
 static int casadi_f10(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a000, a001, a002, a003, a004, a005, a006, a007, a008, a009, a010, a011;
   casadi_real a012, a013, a014, a015, a016, a017, a018, a019, a020, a021, a022, a023;
   casadi_real a024, a025, a026, a027, a028, a029, a030, a031, a032, a033, a034, a035;
@@ -10837,7 +10837,7 @@ static int casadi_f10(const casadi_real** arg, casadi_real** res, casadi_int* iw
 
 /* panda_T:(x[28],p[26])->(T[28]) */
 static int casadi_f9(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i;
   casadi_real **res1=res+1, *rr, w04, w05, w06, w07, w08, w09, w10, *w11=w+494, *w12=w+501, *w13=w+508;
   casadi_real *w14=w+515;
@@ -10995,7 +10995,7 @@ CASADI_SYMBOL_EXPORT int panda_T_work_bytes(casadi_int *sz_arg, casadi_int* sz_r
 
 /* panda_alpha:(x[28],p[26])->(alpha[7]) */
 static int casadi_f11(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i;
   casadi_real **res1=res+1, *rr, w01, w02, w03, w04, w05, w06, w07, *w08=w+452, *w09=w+459, *w10=w+466;
   casadi_real *w12=w+501, *w14=w+515, *w15=w+522, *w17=w+536, *w18=w+543, *w19=w+550;
@@ -11213,7 +11213,7 @@ CASADI_SYMBOL_EXPORT int panda_alpha_work_bytes(casadi_int *sz_arg, casadi_int* 
 
 /* panda_beta:(x[28],p[26])->(beta[7x7]) */
 static int casadi_f12(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i;
   casadi_real **res1=res+1, *rr, w01, w02, w03, w04, w05, w06, w07, *w08=w+105, *w09=w+112, *w10=w+119;
   casadi_real *w12=w+196;
@@ -11375,7 +11375,7 @@ CASADI_SYMBOL_EXPORT int panda_beta_work_bytes(casadi_int *sz_arg, casadi_int* s
 
 /* panda_potential:(i0[7],i1[26])->(o0) */
 static int casadi_f14(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14;
   a00=1.6339601579200003e+00;
@@ -11520,7 +11520,7 @@ static int casadi_f14(const casadi_real** arg, casadi_real** res, casadi_int* iw
 
 /* panda_energy:(x[28],p[26])->(energy) */
 static int casadi_f13(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i, j, k;
   casadi_real **res1=res+1, *rr, *w01=w+100, *w02=w+107, *w04=w+140, w05, w06, w07, w08, w09, w10, w11;
   casadi_real w12, *w13=w+197;
@@ -11800,7 +11800,7 @@ CASADI_SYMBOL_EXPORT int panda_inertia_work_bytes(casadi_int *sz_arg, casadi_int
 
 /* panda_control_core:(x[28],p_hat[26])->(y_hat[28],alpha[7],beta[7x7]) */
 static int casadi_f15(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i;
   casadi_real **res1=res+3, *rr, *w01=w+447, *w02=w+454, w04, w05, w06, w07, w08, w09, w10, *w11=w+494;
   casadi_real *w12=w+501, *w13=w+508, *w15=w+522, *w16=w+529, *w17=w+536, *w18=w+543, *w19=w+550;
@@ -12037,7 +12037,7 @@ CASADI_SYMBOL_EXPORT int panda_control_core_work_bytes(casadi_int *sz_arg, casad
 
 /* panda_control_smc:(x[28],z[0],r[35],p[26],gains[83])->(u[7],s[7],z_dot[0],u_cmd[7],y_hat[28]) */
 static int casadi_f16(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i, j, k;
   casadi_real **res1=res+5, *rr, w01, *w04=w+737, *w05=w+765, *w06=w+772, *w07=w+821, w08, *w09=w+829, *w11=w+913, *w12=w+920, *w13=w+927;
   casadi_real *w14=w+934, *w15=w+941, *w16=w+948, w17;
@@ -12307,7 +12307,7 @@ CASADI_SYMBOL_EXPORT int panda_control_smc_work_bytes(casadi_int *sz_arg, casadi
 
 /* panda_control_ismc:(x[28],z[7],r[35],p[26],gains[85])->(u[7],s[7],z_dot[7],u_cmd[7],y_hat[28]) */
 static int casadi_f17(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i, j, k;
   casadi_real **res1=res+5, *rr, w01, *w04=w+739, *w05=w+767, *w06=w+774, *w07=w+823, w08, *w09=w+831, *w11=w+915, *w12=w+922, *w13=w+929;
   casadi_real *w14=w+936, *w15=w+943, *w16=w+950, *w17=w+957, w18;
@@ -12629,7 +12629,7 @@ CASADI_SYMBOL_EXPORT int panda_control_ismc_work_bytes(casadi_int *sz_arg, casad
 
 /* panda_control_ismc_zdot:(x[28],z[7],r[35],p[26],gains[85],u_cmd[7],u[7])->(z_dot[7]) */
 static int casadi_f18(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a0, a1, a2, a3, a4, a5, a6;
   a0=arg[4]? arg[4][33] : 0;
   a1=arg[4]? arg[4][34] : 0;
@@ -12856,7 +12856,7 @@ CASADI_SYMBOL_EXPORT int panda_control_ismc_zdot_work_bytes(casadi_int *sz_arg, 
 
 /* panda_control_fl:(x[28],z[0],r[35],p[26],gains[68])->(u[7],s[7],z_dot[0],u_cmd[7],y_hat[28]) */
 static int casadi_f19(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i, j, k;
   casadi_real **res1=res+5, *rr, w01, *w04=w+722, *w05=w+750, *w06=w+757, *w07=w+806, w08, *w09=w+814, *w11=w+898, *w12=w+905, *w13=w+912;
   casadi_real *w14=w+919, *w15=w+926, *w16=w+933;
@@ -13096,7 +13096,7 @@ CASADI_SYMBOL_EXPORT int panda_control_fl_work_bytes(casadi_int *sz_arg, casadi_
 
 /* panda_control_adaptive:(x[28],z[42],r[35],p[26],gains[100])->(u[7],s[7],z_dot[42],u_cmd[7],y_hat[28]) */
 static int casadi_f20(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i, j, k;
   casadi_real **res1=res+5, *rr, w01, *w04=w+770, *w05=w+777, *w06=w+784, w07, w08, w09, w10, w11, w12;
   casadi_real w13, w15, w16, w17, w18, w19, w20, w21, w22, w23, w24, w25;
@@ -13656,7 +13656,7 @@ CASADI_SYMBOL_EXPORT int panda_control_adaptive_work_bytes(casadi_int *sz_arg, c
 
 /* panda_control_adaptive_zdot:(x[28],z[42],r[35],p[26],gains[100],u_cmd[7],u[7])->(z_dot[42]) */
 static int casadi_f21(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14, a15, a16, a17, a18, a19, a20, a21, a22, a23;
   casadi_real a24, a25, a26, a27, a28, a29, a30, a31, a32, a33, a34, a35;
@@ -14224,7 +14224,7 @@ CASADI_SYMBOL_EXPORT int panda_control_adaptive_zdot_work_bytes(casadi_int *sz_a
 
 /* panda_beta_tau:(m[35],p[26])->(beta_tau[7x7]) */
 static int casadi_f23(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i;
   casadi_real **res1=res+1, *rr, *w2=w+287, *w3=w+308, *w5=w+362;
   const casadi_real **arg1=arg+2, *cs, *wr0, *wr1, *wr4;
@@ -14252,7 +14252,7 @@ static int casadi_f23(const casadi_real** arg, casadi_real** res, casadi_int* iw
 
 /* panda_control_core_tau:(m[35],p_hat[26])->(y_hat[28],alpha[7],beta[7x7]) */
 static int casadi_f22(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i;
   casadi_real **res1=res+3, *rr, *w03=w+468, *w06=w+508, *w07=w+515, *w08=w+522, w09, w10, w11, w12, w13, w14;
   casadi_real w15, *w16=w+536;
@@ -14477,7 +14477,7 @@ CASADI_SYMBOL_EXPORT int panda_control_core_tau_work_bytes(casadi_int *sz_arg, c
 
 /* panda_control_smc_tau:(m[35],z[0],r[35],p[26],gains[83])->(u[7],s[7],z_dot[0],u_cmd[7],y_hat[28]) */
 static int casadi_f24(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i, j, k;
   casadi_real **res1=res+5, *rr, w01, *w04=w+730, *w05=w+758, *w06=w+765, *w07=w+814, w08, *w09=w+822, *w10=w+871, *w11=w+878, *w12=w+885;
   casadi_real *w13=w+892, *w14=w+899, *w15=w+906, w16;
@@ -14747,7 +14747,7 @@ CASADI_SYMBOL_EXPORT int panda_control_smc_tau_work_bytes(casadi_int *sz_arg, ca
 
 /* panda_control_ismc_tau:(m[35],z[7],r[35],p[26],gains[85])->(u[7],s[7],z_dot[7],u_cmd[7],y_hat[28]) */
 static int casadi_f25(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i, j, k;
   casadi_real **res1=res+5, *rr, w01, *w04=w+732, *w05=w+760, *w06=w+767, *w07=w+816, w08, *w09=w+824, *w11=w+908, *w12=w+915, *w13=w+922;
   casadi_real *w14=w+929, *w15=w+936, *w16=w+943, *w17=w+950, w18;
@@ -15069,7 +15069,7 @@ CASADI_SYMBOL_EXPORT int panda_control_ismc_tau_work_bytes(casadi_int *sz_arg, c
 
 /* panda_control_ismc_tau_zdot:(m[35],z[7],r[35],p[26],gains[85],u_cmd[7],u[7])->(z_dot[7]) */
 static int casadi_f26(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a0, a1, a2, a3, a4, a5, a6;
   a0=arg[4]? arg[4][33] : 0;
   a1=arg[4]? arg[4][34] : 0;
@@ -15296,7 +15296,7 @@ CASADI_SYMBOL_EXPORT int panda_control_ismc_tau_zdot_work_bytes(casadi_int *sz_a
 
 /* panda_control_fl_tau:(m[35],z[0],r[35],p[26],gains[68])->(u[7],s[7],z_dot[0],u_cmd[7],y_hat[28]) */
 static int casadi_f27(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i, j, k;
   casadi_real **res1=res+5, *rr, w01, *w04=w+715, *w05=w+743, *w06=w+750, *w07=w+799, w08, *w09=w+807, *w10=w+856, *w11=w+863, *w12=w+870;
   casadi_real *w13=w+877, *w14=w+884, *w15=w+891;
@@ -15536,7 +15536,7 @@ CASADI_SYMBOL_EXPORT int panda_control_fl_tau_work_bytes(casadi_int *sz_arg, cas
 
 /* panda_control_pdg:(x[28],z[0],r[35],p[26],gains[22])->(u[7],s[7],z_dot[0],u_cmd[7],y_hat[28]) */
 static int casadi_f28(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14, a15, a16, a17, a18, a19, a20, a21, a22, a23;
   casadi_real a24, a25, a26, a27, a28, a29, a30, a31, a32, a33, a34, a35;
@@ -16130,7 +16130,7 @@ CASADI_SYMBOL_EXPORT int panda_control_pdg_work_bytes(casadi_int *sz_arg, casadi
 
 /* panda_T_tau:(m[35],p[26])->(T_tau[28]) */
 static int casadi_f29(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real **res1=res+1, *w6=w+508, *w7=w+515;
   const casadi_real **arg1=arg+2, *wr0, *wr1, *wr2, *wr3, *wr4, *wr5;
   /* #0: @0 = input[0][0] */
@@ -16255,7 +16255,7 @@ CASADI_SYMBOL_EXPORT int panda_T_tau_work_bytes(casadi_int *sz_arg, casadi_int* 
 
 /* panda_alpha_tau:(m[35],p[26])->(alpha_tau[7]) */
 static int casadi_f30(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i;
   casadi_real **res1=res+1, *rr, w03, w04, w05, w06, w07, w08, w09, *w10=w+494, *w11=w+501, *w15=w+529;
   casadi_real *w16=w+536;

@@ -114,7 +114,7 @@ static const casadi_int casadi_s5[3] = {7, 7, 1};
 
 /* panda_complete_f:(x[28],p[33])->(f[28]) */
 static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a000, a001, a002, a003, a004, a005, a006, a007, a008, a009, a010, a011;
   casadi_real a012, a013, a014, a015, a016, a017, a018, a019, a020, a021, a022, a023;
   casadi_real a024, a025, a026, a027, a028, a029, a030, a031, a032, a033, a034, a035;
@@ -2802,7 +2802,7 @@ CASADI_SYMBOL_EXPORT int panda_complete_f_work_bytes(casadi_int *sz_arg, casadi_
 
 /* panda_complete_g:(x[28],p[33])->(g[28x7]) */
 static int casadi_f1(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a000, a001, a002, a003, a004, a005, a006, a007, a008, a009, a010, a011;
   casadi_real a012, a013, a014, a015, a016, a017, a018, a019, a020, a021, a022, a023;
   casadi_real a024, a025, a026, a027, a028, a029, a030, a031, a032, a033, a034, a035;
@@ -5114,7 +5114,7 @@ CASADI_SYMBOL_EXPORT int panda_complete_g_work_bytes(casadi_int *sz_arg, casadi_
 
 /* panda_complete_energy:(x[28],p[33])->(energy) */
 static int casadi_f2(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14, a15, a16, a17, a18, a19, a20, a21, a22, a23;
   casadi_real a24, a25, a26, a27, a28, a29, a30, a31, a32, a33, a34, a35;
@@ -6276,7 +6276,7 @@ CASADI_SYMBOL_EXPORT int panda_complete_energy_work_bytes(casadi_int *sz_arg, ca
 
 /* panda_complete_inertia:(x[28],p[33])->(inertia[14x14]) */
 static int casadi_f3(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14, a15, a16, a17, a18, a19, a20, a21, a22, a23;
   casadi_real a24, a25, a26, a27, a28, a29, a30, a31, a32, a33, a34, a35;
@@ -7318,7 +7318,7 @@ CASADI_SYMBOL_EXPORT int panda_complete_inertia_work_bytes(casadi_int *sz_arg, c
 
 /* panda_complete_coupling:(x[28],p[33])->(coupling[7x7]) */
 static int casadi_f4(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14;
   a00=0.;

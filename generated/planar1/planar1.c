@@ -195,7 +195,7 @@ static const casadi_real casadi_zeros[16] =
 
 /* planar1_inertia:(x[4],p[8])->(inertia) */
 static int casadi_f1(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a0, a1, a2;
   a0=arg[1]? arg[1][3] : 0;
   a1=arg[1]? arg[1][0] : 0;
@@ -209,7 +209,7 @@ static int casadi_f1(const casadi_real** arg, casadi_real** res, casadi_int* iw,
 
 /* ldl_factor_1:(i0)->(o0[0],o1) */
 static int casadi_f2(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a0;
   a0=arg[0]? arg[0][0] : 0;
   a0=(1./a0);
@@ -219,7 +219,7 @@ static int casadi_f2(const casadi_real** arg, casadi_real** res, casadi_int* iw,
 
 /* planar1_bias:(i0,i1,i2[8])->(o0) */
 static int casadi_f3(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a0, a1;
   a0=arg[2]? arg[2][0] : 0;
   a1=arg[2]? arg[2][2] : 0;
@@ -235,7 +235,7 @@ static int casadi_f3(const casadi_real** arg, casadi_real** res, casadi_int* iw,
 
 /* ldl_solve_1:(i0[0],i1,i2)->(o0) */
 static int casadi_f4(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a0, a1;
   a0=arg[2]? arg[2][0] : 0;
   a1=arg[1]? arg[1][0] : 0;
@@ -246,7 +246,7 @@ static int casadi_f4(const casadi_real** arg, casadi_real** res, casadi_int* iw,
 
 /* planar1_f:(x[4],p[8])->(f[4]) */
 static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real **res1=res+1, *rr, *w0=w+3, w1, w4, w5, w6, w7, w8;
   const casadi_real **arg1=arg+2, *cs, *wr3;
   /* #0: @0 = input[0][0] */
@@ -408,7 +408,7 @@ CASADI_SYMBOL_EXPORT int planar1_f_work_bytes(casadi_int *sz_arg, casadi_int* sz
 
 /* planar1_g:(x[4],p[8])->(g[4]) */
 static int casadi_f5(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a0;
   a0=0.;
   if (res[0]!=0) res[0][0]=a0;
@@ -509,7 +509,7 @@ CASADI_SYMBOL_EXPORT int planar1_g_work_bytes(casadi_int *sz_arg, casadi_int* sz
 
 /* planar1_bracket_column:(q,dq,L[0],d,c,ba,p[8])->(x_j,r_j) */
 static int casadi_f7(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a0, a1;
   a0=arg[4]? arg[4][0] : 0;
   a1=arg[3]? arg[3][0] : 0;
@@ -524,7 +524,7 @@ static int casadi_f7(const casadi_real** arg, casadi_real** res, casadi_int* iw,
 
 /* planar1_ad:(x[4],p[8])->(ad[4x4]) */
 static int casadi_f6(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real **res1=res+1, *rr, w00, w02, w03, w04, w05, w06, *w07=w+17, w09, w10, w11;
   casadi_real w12, w13, w14;
   const casadi_real **arg1=arg+2, *cs, *wr01;
@@ -730,7 +730,7 @@ CASADI_SYMBOL_EXPORT int planar1_ad_work_bytes(casadi_int *sz_arg, casadi_int* s
 
 /* planar1_accel_kernel:(q,dq,s,ds,p[8])->(y3,y4,w) */
 static int casadi_f9(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a0, a1, a2, a3, a4, a5, a6, a7;
   a0=arg[2]? arg[2][0] : 0;
   a1=arg[4]? arg[4][0] : 0;
@@ -767,7 +767,7 @@ static int casadi_f9(const casadi_real** arg, casadi_real** res, casadi_int* iw,
 
 /* planar1_T:(x[4],p[8])->(T[4]) */
 static int casadi_f8(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real **res1=res+1, *rr, *w0=w+8, w1, w2, w4, w5, w6, w7;
   const casadi_real **arg1=arg+2, *cs, *wr3;
   /* #0: @0 = input[0][0] */
@@ -902,7 +902,7 @@ CASADI_SYMBOL_EXPORT int planar1_T_work_bytes(casadi_int *sz_arg, casadi_int* sz
 
 /* planar1_alpha:(x[4],p[8])->(alpha) */
 static int casadi_f10(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real **res1=res+1, *rr, w01, w02, w03, *w04=w+19, w05, w06, w07, w08, w09, w10;
   casadi_real w11, w12;
   const casadi_real **arg1=arg+2, *cs, *wr00;
@@ -1056,7 +1056,7 @@ CASADI_SYMBOL_EXPORT int planar1_alpha_work_bytes(casadi_int *sz_arg, casadi_int
 
 /* planar1_beta:(x[4],p[8])->(beta) */
 static int casadi_f11(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real **res1=res+1, w1, w2, *w3=w+13;
   const casadi_real **arg1=arg+2, *wr0;
   /* #0: @0 = input[1][0] */
@@ -1170,7 +1170,7 @@ CASADI_SYMBOL_EXPORT int planar1_beta_work_bytes(casadi_int *sz_arg, casadi_int*
 
 /* planar1_potential:(i0,i1[8])->(o0) */
 static int casadi_f13(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a0, a1, a2;
   a0=arg[0]? arg[0][0] : 0;
   a0=cos(a0);
@@ -1187,7 +1187,7 @@ static int casadi_f13(const casadi_real** arg, casadi_real** res, casadi_int* iw
 
 /* planar1_energy:(x[4],p[8])->(energy) */
 static int casadi_f12(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real **res1=res+1, *rr, *w0=w+3, w1, w3, w4, w5;
   const casadi_real **arg1=arg+2, *cs, *wr2;
   /* #0: @0 = input[0][0] */
@@ -1421,7 +1421,7 @@ CASADI_SYMBOL_EXPORT int planar1_inertia_work_bytes(casadi_int *sz_arg, casadi_i
 
 /* planar1_control_core:(x[4],p_hat[8])->(y_hat[4],alpha,beta) */
 static int casadi_f14(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real **res1=res+3, *rr, *w00=w+17, w01, w02, w04, w05, w06, w07, w08, w09, w10;
   casadi_real w11;
   const casadi_real **arg1=arg+2, *cs, *wr03;
@@ -1594,7 +1594,7 @@ CASADI_SYMBOL_EXPORT int planar1_control_core_work_bytes(casadi_int *sz_arg, cas
 
 /* planar1_control_smc:(x[4],z[0],r[5],p[8],gains[11])->(u,s,z_dot[0],u_cmd,y_hat[4]) */
 static int casadi_f15(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real **res1=res+5, *rr, w01, *w02=w+51, *w04=w+63, w05, w06, w07, w08, *w09=w+71, w10, w11;
   casadi_real w12, w13, w14, w15, w16;
   const casadi_real **arg1=arg+5, *cs, *wr00, *wr03;
@@ -1859,7 +1859,7 @@ CASADI_SYMBOL_EXPORT int planar1_control_smc_work_bytes(casadi_int *sz_arg, casa
 
 /* planar1_control_ismc:(x[4],z,r[5],p[8],gains[13])->(u,s,z_dot,u_cmd,y_hat[4]) */
 static int casadi_f16(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real **res1=res+5, *rr, w01, *w02=w+53, *w04=w+65, w05, w06, w07, w08, *w09=w+73, w10, w11;
   casadi_real w12, w13, w14, w15, w16;
   const casadi_real **arg1=arg+5, *cs, *wr00, *wr03;
@@ -2176,7 +2176,7 @@ CASADI_SYMBOL_EXPORT int planar1_control_ismc_work_bytes(casadi_int *sz_arg, cas
 
 /* planar1_control_ismc_zdot:(x[4],z,r[5],p[8],gains[13],u_cmd,u)->(z_dot) */
 static int casadi_f17(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a0, a1, a2, a3, a4, a5, a6;
   a0=arg[4]? arg[4][9] : 0;
   a1=arg[4]? arg[4][10] : 0;
@@ -2301,7 +2301,7 @@ CASADI_SYMBOL_EXPORT int planar1_control_ismc_zdot_work_bytes(casadi_int *sz_arg
 
 /* planar1_control_fl:(x[4],z[0],r[5],p[8],gains[8])->(u,s,z_dot[0],u_cmd,y_hat[4]) */
 static int casadi_f18(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real **res1=res+5, *rr, w01, *w02=w+48, *w04=w+60, w05, w06, w07, w08, *w09=w+68, w10, w11;
   casadi_real w12, w13, w14, w15;
   const casadi_real **arg1=arg+5, *cs, *wr00, *wr03;
@@ -2536,7 +2536,7 @@ CASADI_SYMBOL_EXPORT int planar1_control_fl_work_bytes(casadi_int *sz_arg, casad
 
 /* planar1_control_adaptive:(x[4],z[6],r[5],p[8],gains[16])->(u,s,z_dot[6],u_cmd,y_hat[4]) */
 static int casadi_f19(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real **res1=res+5, *rr, w01, *w02=w+56, w04, w05, w06, w07, *w08=w+72, w09, w10, w11;
   casadi_real w12, w13, w14, *w15=w+84, *w16=w+92, *w17=w+96, w18, w19, w20;
   const casadi_real **arg1=arg+5, *cs, *wr00, *wr03;
@@ -2991,7 +2991,7 @@ CASADI_SYMBOL_EXPORT int planar1_control_adaptive_work_bytes(casadi_int *sz_arg,
 
 /* planar1_control_adaptive_zdot:(x[4],z[6],r[5],p[8],gains[16],u_cmd,u)->(z_dot[6]) */
 static int casadi_f20(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12;
   a00=arg[4]? arg[4][9] : 0;
@@ -3167,7 +3167,7 @@ CASADI_SYMBOL_EXPORT int planar1_control_adaptive_zdot_work_bytes(casadi_int *sz
 
 /* planar1_beta_tau:(m[5],p[8])->(beta_tau) */
 static int casadi_f22(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i;
   casadi_real **res1=res+1, *rr, *w0=w+17, w1, *w2=w+23, *w3=w+26;
   const casadi_real **arg1=arg+2, *cs, *wr4;
@@ -3195,7 +3195,7 @@ static int casadi_f22(const casadi_real** arg, casadi_real** res, casadi_int* iw
 
 /* planar1_control_core_tau:(m[5],p_hat[8])->(y_hat[4],alpha,beta) */
 static int casadi_f21(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real **res1=res+3, *rr, *w0=w+38, w1, w2, w3, w4, w6, w7, w8;
   const casadi_real **arg1=arg+2, *cs, *wr5;
   /* #0: @0 = input[0][0] */
@@ -3355,7 +3355,7 @@ CASADI_SYMBOL_EXPORT int planar1_control_core_tau_work_bytes(casadi_int *sz_arg,
 
 /* planar1_control_smc_tau:(m[5],z[0],r[5],p[8],gains[11])->(u,s,z_dot[0],u_cmd,y_hat[4]) */
 static int casadi_f23(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real **res1=res+5, *rr, w01, *w02=w+70, *w04=w+83, w05, w06, w07, w08, w09, w10, w11;
   casadi_real w12, w13, w14, w15;
   const casadi_real **arg1=arg+5, *cs, *wr00, *wr03;
@@ -3620,7 +3620,7 @@ CASADI_SYMBOL_EXPORT int planar1_control_smc_tau_work_bytes(casadi_int *sz_arg, 
 
 /* planar1_control_ismc_tau:(m[5],z,r[5],p[8],gains[13])->(u,s,z_dot,u_cmd,y_hat[4]) */
 static int casadi_f24(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real **res1=res+5, *rr, w01, *w02=w+72, *w04=w+85, w05, w06, w07, w08, *w09=w+93, w10, w11;
   casadi_real w12, w13, w14, w15, w16;
   const casadi_real **arg1=arg+5, *cs, *wr00, *wr03;
@@ -3937,7 +3937,7 @@ CASADI_SYMBOL_EXPORT int planar1_control_ismc_tau_work_bytes(casadi_int *sz_arg,
 
 /* planar1_control_ismc_tau_zdot:(m[5],z,r[5],p[8],gains[13],u_cmd,u)->(z_dot) */
 static int casadi_f25(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a0, a1, a2, a3, a4, a5, a6;
   a0=arg[4]? arg[4][9] : 0;
   a1=arg[4]? arg[4][10] : 0;
@@ -4062,7 +4062,7 @@ CASADI_SYMBOL_EXPORT int planar1_control_ismc_tau_zdot_work_bytes(casadi_int *sz
 
 /* planar1_control_fl_tau:(m[5],z[0],r[5],p[8],gains[8])->(u,s,z_dot[0],u_cmd,y_hat[4]) */
 static int casadi_f26(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real **res1=res+5, *rr, w01, *w02=w+67, *w04=w+80, w05, w06, w07, w08, w09, w10, w11;
   casadi_real w12, w13, w14;
   const casadi_real **arg1=arg+5, *cs, *wr00, *wr03;
@@ -4297,7 +4297,7 @@ CASADI_SYMBOL_EXPORT int planar1_control_fl_tau_work_bytes(casadi_int *sz_arg, c
 
 /* planar1_control_pdg:(x[4],z[0],r[5],p[8],gains[4])->(u,s,z_dot[0],u_cmd,y_hat[4]) */
 static int casadi_f27(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a0, a1, a2, a3, a4, a5;
   a0=arg[4]? arg[4][3] : 0;
   a1=arg[4]? arg[4][0] : 0;
@@ -4444,7 +4444,7 @@ CASADI_SYMBOL_EXPORT int planar1_control_pdg_work_bytes(casadi_int *sz_arg, casa
 
 /* planar1_T_tau:(m[5],p[8])->(T_tau[4]) */
 static int casadi_f28(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real **res1=res+1, *rr, *w0=w+8, w1, w2, w3, w4, w6, w7;
   const casadi_real **arg1=arg+2, *cs, *wr5;
   /* #0: @0 = input[0][0] */
@@ -4569,7 +4569,7 @@ CASADI_SYMBOL_EXPORT int planar1_T_tau_work_bytes(casadi_int *sz_arg, casadi_int
 
 /* planar1_alpha_tau:(m[5],p[8])->(alpha_tau) */
 static int casadi_f29(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real **res1=res+1, *rr, *w0=w+8, w1, w3, w4, w5, w6, w7, w8, w9;
   const casadi_real **arg1=arg+2, *cs, *wr2;
   /* #0: @0 = input[0][0] */

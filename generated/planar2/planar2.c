@@ -300,7 +300,7 @@ static const casadi_real casadi_zeros[25] =
 
 /* planar2_inertia:(x[8],p[15])->(inertia[2x2]) */
 static int casadi_f1(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a0, a1, a2, a3, a4, a5, a6, a7;
   a0=arg[1]? arg[1][1] : 0;
   a1=arg[1]? arg[1][5] : 0;
@@ -343,7 +343,7 @@ static int casadi_f1(const casadi_real** arg, casadi_real** res, casadi_int* iw,
 
 /* ldl_factor_2:(i0[2x2])->(o0,o1[2]) */
 static int casadi_f2(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a0, a1, a2;
   a0=arg[0]? arg[0][1] : 0;
   a1=arg[0]? arg[0][0] : 0;
@@ -361,7 +361,7 @@ static int casadi_f2(const casadi_real** arg, casadi_real** res, casadi_int* iw,
 
 /* planar2_bias:(i0[2],i1[2],i2[15])->(o0[2]) */
 static int casadi_f3(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a0, a1, a2, a3, a4, a5, a6, a7, a8;
   a0=arg[2]? arg[2][1] : 0;
   a1=arg[2]? arg[2][5] : 0;
@@ -406,7 +406,7 @@ static int casadi_f3(const casadi_real** arg, casadi_real** res, casadi_int* iw,
 
 /* ldl_solve_2:(i0,i1[2],i2[2])->(o0[2]) */
 static int casadi_f4(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a0, a1, a2, a3;
   a0=arg[2]? arg[2][0] : 0;
   a1=arg[1]? arg[1][0] : 0;
@@ -426,7 +426,7 @@ static int casadi_f4(const casadi_real** arg, casadi_real** res, casadi_int* iw,
 
 /* planar2_f:(x[8],p[15])->(f[8]) */
 static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i;
   casadi_real **res1=res+1, *rr, *w01=w+17, *w03=w+34, w04, *w05=w+39, *w06=w+41, *w07=w+43, w08, w09, *w11=w+49;
   const casadi_real **arg1=arg+2, *cr, *cs, *wr00, *wr01, *wr02, *wr06, *wr10, *wr11;
@@ -606,7 +606,7 @@ CASADI_SYMBOL_EXPORT int planar2_f_work_bytes(casadi_int *sz_arg, casadi_int* sz
 
 /* planar2_g:(x[8],p[15])->(g[8x2]) */
 static int casadi_f5(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a0, a1;
   a0=0.;
   if (res[0]!=0) res[0][0]=a0;
@@ -721,7 +721,7 @@ CASADI_SYMBOL_EXPORT int planar2_g_work_bytes(casadi_int *sz_arg, casadi_int* sz
 
 /* planar2_bracket_column:(q[2],dq[2],L,d[2],c[2],ba,p[15])->(x_j[2],r_j[2]) */
 static int casadi_f8(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14;
   a00=arg[4]? arg[4][0] : 0;
@@ -801,7 +801,7 @@ static int casadi_f8(const casadi_real** arg, casadi_real** res, casadi_int* iw,
 
 /* map2_planar2_bracket_column:(q[2x2],dq[2x2],L[1x2],d[2x2],c[2x2],ba[1x2],p[15x2])->(x_j[2x2],r_j[2x2]) */
 static int casadi_f7(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i;
   casadi_real* *res1;
   const casadi_real* *arg1;
@@ -826,7 +826,7 @@ static int casadi_f7(const casadi_real** arg, casadi_real** res, casadi_int* iw,
 
 /* planar2_ad:(x[8],p[15])->(ad[8x8,50nz]) */
 static int casadi_f6(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i, j;
   casadi_real **res1=res+1, *rr, *w00=w+15, *w01=w+19, *w02=w+23, w04, w05, *w06=w+44, *w07=w+46, *w08=w+48, *w09=w+50, *w10=w+52;
   casadi_real *w11=w+66, *w12=w+80, *w13=w+82, *w14=w+84, *w15=w+86, *w16=w+98, *w18=w+118, *w19=w+122, *w20=w+126, *w21=w+156, *w22=w+160, *w23=w+164;
@@ -1124,7 +1124,7 @@ CASADI_SYMBOL_EXPORT int planar2_ad_work_bytes(casadi_int *sz_arg, casadi_int* s
 
 /* planar2_accel_kernel:(q[2],dq[2],s[2],ds[2],p[15])->(y3[2],y4[2],w[2]) */
 static int casadi_f10(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14, a15, a16, a17, a18, a19, a20, a21, a22, a23;
   casadi_real a24, a25, a26, a27, a28, a29, a30, a31;
@@ -1304,7 +1304,7 @@ static int casadi_f10(const casadi_real** arg, casadi_real** res, casadi_int* iw
 
 /* planar2_T:(x[8],p[15])->(T[8]) */
 static int casadi_f9(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i;
   casadi_real **res1=res+1, *rr, w4, w5, *w6=w+61, *w7=w+63, *w8=w+65, *w9=w+67;
   const casadi_real **arg1=arg+2, *cr, *cs, *wr0, *wr1, *wr2, *wr3, *wr7, *wr8;
@@ -1446,7 +1446,7 @@ CASADI_SYMBOL_EXPORT int planar2_T_work_bytes(casadi_int *sz_arg, casadi_int* sz
 
 /* planar2_alpha:(x[8],p[15])->(alpha[2]) */
 static int casadi_f11(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i;
   casadi_real **res1=res+1, *rr, w01, w02, *w03=w+49, *w04=w+51, *w05=w+53, *w07=w+63, *w09=w+67, *w10=w+69, *w12=w+73, *w13=w+75;
   casadi_real *w14=w+77;
@@ -1619,7 +1619,7 @@ CASADI_SYMBOL_EXPORT int planar2_alpha_work_bytes(casadi_int *sz_arg, casadi_int
 
 /* planar2_beta:(x[8],p[15])->(beta[2x2]) */
 static int casadi_f12(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i;
   casadi_real **res1=res+1, *rr, w1, w2, *w3=w+25, *w4=w+27, *w5=w+29, *w7=w+41;
   const casadi_real **arg1=arg+2, *cs, *wr0, *wr6;
@@ -1750,7 +1750,7 @@ CASADI_SYMBOL_EXPORT int planar2_beta_work_bytes(casadi_int *sz_arg, casadi_int*
 
 /* planar2_potential:(i0[2],i1[15])->(o0) */
 static int casadi_f14(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a0, a1, a2, a3, a4, a5, a6;
   a0=arg[1]? arg[1][14] : 0;
   a1=arg[0]? arg[0][0] : 0;
@@ -1778,7 +1778,7 @@ static int casadi_f14(const casadi_real** arg, casadi_real** res, casadi_int* iw
 
 /* planar2_energy:(x[8],p[15])->(energy) */
 static int casadi_f13(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i, j, k;
   casadi_real **res1=res+1, *rr, *w1=w+16, *w2=w+18, *w4=w+35, w5, w6, w7, *w8=w+42;
   const casadi_real **arg1=arg+2, *cr, *cs, *ct, *wr0, *wr1, *wr2, *wr3, *wr8;
@@ -2027,7 +2027,7 @@ CASADI_SYMBOL_EXPORT int planar2_inertia_work_bytes(casadi_int *sz_arg, casadi_i
 
 /* planar2_control_core:(x[8],p_hat[15])->(y_hat[8],alpha[2],beta[2x2]) */
 static int casadi_f15(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i;
   casadi_real **res1=res+3, *rr, *w01=w+53, *w02=w+55, w04, w05, *w06=w+74, *w07=w+76, *w08=w+78, *w10=w+82, *w11=w+84, *w12=w+86;
   casadi_real *w13=w+88, *w14=w+90;
@@ -2219,7 +2219,7 @@ CASADI_SYMBOL_EXPORT int planar2_control_core_work_bytes(casadi_int *sz_arg, cas
 
 /* planar2_control_smc:(x[8],z[0],r[10],p[15],gains[18])->(u[2],s[2],z_dot[0],u_cmd[2],y_hat[8]) */
 static int casadi_f16(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i, j, k;
   casadi_real **res1=res+5, *rr, w01, *w04=w+136, *w05=w+144, *w06=w+146, *w07=w+150, w08, *w09=w+153, *w11=w+167, *w12=w+169, *w13=w+171;
   casadi_real *w14=w+173, *w15=w+175, *w16=w+177, w17;
@@ -2489,7 +2489,7 @@ CASADI_SYMBOL_EXPORT int planar2_control_smc_work_bytes(casadi_int *sz_arg, casa
 
 /* planar2_control_ismc:(x[8],z[2],r[10],p[15],gains[20])->(u[2],s[2],z_dot[2],u_cmd[2],y_hat[8]) */
 static int casadi_f17(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i, j, k;
   casadi_real **res1=res+5, *rr, w01, *w04=w+138, *w05=w+146, *w06=w+148, *w07=w+152, w08, *w09=w+155, *w11=w+169, *w12=w+171, *w13=w+173;
   casadi_real *w14=w+175, *w15=w+177, *w16=w+179, *w17=w+181, w18;
@@ -2811,7 +2811,7 @@ CASADI_SYMBOL_EXPORT int planar2_control_ismc_work_bytes(casadi_int *sz_arg, cas
 
 /* planar2_control_ismc_zdot:(x[8],z[2],r[10],p[15],gains[20],u_cmd[2],u[2])->(z_dot[2]) */
 static int casadi_f18(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a0, a1, a2, a3, a4, a5, a6;
   a0=arg[4]? arg[4][13] : 0;
   a1=arg[4]? arg[4][14] : 0;
@@ -2953,7 +2953,7 @@ CASADI_SYMBOL_EXPORT int planar2_control_ismc_zdot_work_bytes(casadi_int *sz_arg
 
 /* planar2_control_fl:(x[8],z[0],r[10],p[15],gains[13])->(u[2],s[2],z_dot[0],u_cmd[2],y_hat[8]) */
 static int casadi_f19(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i, j, k;
   casadi_real **res1=res+5, *rr, w01, *w04=w+131, *w05=w+139, *w06=w+141, *w07=w+145, w08, *w09=w+148, *w11=w+162, *w12=w+164, *w13=w+166;
   casadi_real *w14=w+168, *w15=w+170, *w16=w+172;
@@ -3193,7 +3193,7 @@ CASADI_SYMBOL_EXPORT int planar2_control_fl_work_bytes(casadi_int *sz_arg, casad
 
 /* planar2_control_adaptive:(x[8],z[12],r[10],p[15],gains[25])->(u[2],s[2],z_dot[12],u_cmd[2],y_hat[8]) */
 static int casadi_f20(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i, j, k;
   casadi_real **res1=res+5, *rr, w01, w04, w05, w06, w07, w08, w09, w10, w11, *w13=w+163;
   casadi_real *w14=w+165, *w15=w+167, w16, w17, w18, w19, w20, w21, w22, *w23=w+176, *w24=w+191, *w25=w+199;
@@ -3689,7 +3689,7 @@ CASADI_SYMBOL_EXPORT int planar2_control_adaptive_work_bytes(casadi_int *sz_arg,
 
 /* planar2_control_adaptive_zdot:(x[8],z[12],r[10],p[15],gains[25],u_cmd[2],u[2])->(z_dot[12]) */
 static int casadi_f21(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14, a15, a16, a17, a18;
   a00=arg[4]? arg[4][13] : 0;
@@ -3930,7 +3930,7 @@ CASADI_SYMBOL_EXPORT int planar2_control_adaptive_zdot_work_bytes(casadi_int *sz
 
 /* planar2_beta_tau:(m[10],p[15])->(beta_tau[2x2]) */
 static int casadi_f23(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i;
   casadi_real **res1=res+1, *rr, *w2=w+57, *w3=w+63, *w5=w+86;
   const casadi_real **arg1=arg+2, *cs, *wr0, *wr1, *wr4;
@@ -3958,7 +3958,7 @@ static int casadi_f23(const casadi_real** arg, casadi_real** res, casadi_int* iw
 
 /* planar2_control_core_tau:(m[10],p_hat[15])->(y_hat[8],alpha[2],beta[2x2]) */
 static int casadi_f22(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i;
   casadi_real **res1=res+3, *rr, *w03=w+104, *w06=w+123, *w07=w+125, *w08=w+127, w09, w10, *w11=w+131;
   const casadi_real **arg1=arg+2, *cr, *cs, *wr00, *wr01, *wr02, *wr03, *wr04, *wr05;
@@ -4137,7 +4137,7 @@ CASADI_SYMBOL_EXPORT int planar2_control_core_tau_work_bytes(casadi_int *sz_arg,
 
 /* planar2_control_smc_tau:(m[10],z[0],r[10],p[15],gains[18])->(u[2],s[2],z_dot[0],u_cmd[2],y_hat[8]) */
 static int casadi_f24(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i, j, k;
   casadi_real **res1=res+5, *rr, w01, *w04=w+179, *w05=w+187, *w06=w+189, *w07=w+193, w08, *w09=w+196, *w10=w+200, *w11=w+202, *w12=w+204;
   casadi_real *w13=w+206, *w14=w+208, *w15=w+210, w16;
@@ -4407,7 +4407,7 @@ CASADI_SYMBOL_EXPORT int planar2_control_smc_tau_work_bytes(casadi_int *sz_arg, 
 
 /* planar2_control_ismc_tau:(m[10],z[2],r[10],p[15],gains[20])->(u[2],s[2],z_dot[2],u_cmd[2],y_hat[8]) */
 static int casadi_f25(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i, j, k;
   casadi_real **res1=res+5, *rr, w01, *w04=w+181, *w05=w+189, *w06=w+191, *w07=w+195, w08, *w09=w+198, *w11=w+212, *w12=w+214, *w13=w+216;
   casadi_real *w14=w+218, *w15=w+220, *w16=w+222, *w17=w+224, w18;
@@ -4729,7 +4729,7 @@ CASADI_SYMBOL_EXPORT int planar2_control_ismc_tau_work_bytes(casadi_int *sz_arg,
 
 /* planar2_control_ismc_tau_zdot:(m[10],z[2],r[10],p[15],gains[20],u_cmd[2],u[2])->(z_dot[2]) */
 static int casadi_f26(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a0, a1, a2, a3, a4, a5, a6;
   a0=arg[4]? arg[4][13] : 0;
   a1=arg[4]? arg[4][14] : 0;
@@ -4871,7 +4871,7 @@ CASADI_SYMBOL_EXPORT int planar2_control_ismc_tau_zdot_work_bytes(casadi_int *sz
 
 /* planar2_control_fl_tau:(m[10],z[0],r[10],p[15],gains[13])->(u[2],s[2],z_dot[0],u_cmd[2],y_hat[8]) */
 static int casadi_f27(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i, j, k;
   casadi_real **res1=res+5, *rr, w01, *w04=w+174, *w05=w+182, *w06=w+184, *w07=w+188, w08, *w09=w+191, *w10=w+195, *w11=w+197, *w12=w+199;
   casadi_real *w13=w+201, *w14=w+203, *w15=w+205;
@@ -5111,7 +5111,7 @@ CASADI_SYMBOL_EXPORT int planar2_control_fl_tau_work_bytes(casadi_int *sz_arg, c
 
 /* planar2_control_pdg:(x[8],z[0],r[10],p[15],gains[7])->(u[2],s[2],z_dot[0],u_cmd[2],y_hat[8]) */
 static int casadi_f28(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a0, a1, a2, a3, a4, a5, a6, a7, a8;
   a0=arg[4]? arg[4][6] : 0;
   a1=arg[4]? arg[4][0] : 0;
@@ -5298,7 +5298,7 @@ CASADI_SYMBOL_EXPORT int planar2_control_pdg_work_bytes(casadi_int *sz_arg, casa
 
 /* planar2_T_tau:(m[10],p[15])->(T_tau[8]) */
 static int casadi_f29(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real **res1=res+1, *w6=w+65, *w7=w+67;
   const casadi_real **arg1=arg+2, *wr0, *wr1, *wr2, *wr3, *wr4, *wr5;
   /* #0: @0 = input[0][0] */
@@ -5423,7 +5423,7 @@ CASADI_SYMBOL_EXPORT int planar2_T_tau_work_bytes(casadi_int *sz_arg, casadi_int
 
 /* planar2_alpha_tau:(m[10],p[15])->(alpha_tau[2]) */
 static int casadi_f30(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i;
   casadi_real **res1=res+1, *rr, w03, w04, *w05=w+61, *w06=w+63, *w10=w+71, *w11=w+73;
   const casadi_real **arg1=arg+2, *cr, *cs, *wr00, *wr01, *wr02, *wr06, *wr07, *wr08, *wr09;

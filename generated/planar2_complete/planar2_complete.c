@@ -114,7 +114,7 @@ static const casadi_int casadi_s5[3] = {2, 2, 1};
 
 /* planar2_complete_f:(x[8],p[17])->(f[8]) */
 static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14, a15, a16, a17, a18;
   a00=arg[0]? arg[0][2] : 0;
@@ -323,7 +323,7 @@ CASADI_SYMBOL_EXPORT int planar2_complete_f_work_bytes(casadi_int *sz_arg, casad
 
 /* planar2_complete_g:(x[8],p[17])->(g[8x2]) */
 static int casadi_f1(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10;
   a00=0.;
   if (res[0]!=0) res[0][0]=a00;
@@ -490,7 +490,7 @@ CASADI_SYMBOL_EXPORT int planar2_complete_g_work_bytes(casadi_int *sz_arg, casad
 
 /* planar2_complete_energy:(x[8],p[17])->(energy) */
 static int casadi_f2(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14, a15, a16, a17;
   a00=arg[1]? arg[1][10] : 0;
@@ -675,7 +675,7 @@ CASADI_SYMBOL_EXPORT int planar2_complete_energy_work_bytes(casadi_int *sz_arg, 
 
 /* planar2_complete_inertia:(x[8],p[17])->(inertia[4x4]) */
 static int casadi_f3(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a0, a1, a2, a3, a4, a5, a6, a7, a8;
   a0=arg[1]? arg[1][1] : 0;
   a1=arg[1]? arg[1][5] : 0;
@@ -825,7 +825,7 @@ CASADI_SYMBOL_EXPORT int planar2_complete_inertia_work_bytes(casadi_int *sz_arg,
 
 /* planar2_complete_coupling:(x[8],p[17])->(coupling[2x2]) */
 static int casadi_f4(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a0, a1, a2;
   a0=0.;
   if (res[0]!=0) res[0][0]=a0;

@@ -315,7 +315,7 @@ static const casadi_real casadi_zeros[36] =
 
 /* planar3_inertia:(x[12],p[22])->(inertia[3x3]) */
 static int casadi_f1(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13;
   a00=arg[1]? arg[1][2] : 0;
@@ -398,7 +398,7 @@ static int casadi_f1(const casadi_real** arg, casadi_real** res, casadi_int* iw,
 
 /* ldl_factor_3:(i0[3x3])->(o0[3],o1[3]) */
 static int casadi_f2(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a0, a1, a2, a3, a4, a5, a6;
   a0=arg[0]? arg[0][1] : 0;
   a1=arg[0]? arg[0][0] : 0;
@@ -431,7 +431,7 @@ static int casadi_f2(const casadi_real** arg, casadi_real** res, casadi_int* iw,
 
 /* planar3_bias:(i0[3],i1[3],i2[22])->(o0[3]) */
 static int casadi_f3(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14, a15;
   a00=arg[2]? arg[2][2] : 0;
@@ -513,7 +513,7 @@ static int casadi_f3(const casadi_real** arg, casadi_real** res, casadi_int* iw,
 
 /* ldl_solve_3:(i0[3],i1[3],i2[3])->(o0[3]) */
 static int casadi_f4(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a0, a1, a2, a3, a4, a5, a6, a7;
   a0=arg[2]? arg[2][0] : 0;
   a1=arg[1]? arg[1][0] : 0;
@@ -547,7 +547,7 @@ static int casadi_f4(const casadi_real** arg, casadi_real** res, casadi_int* iw,
 
 /* planar3_f:(x[12],p[22])->(f[12]) */
 static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i;
   casadi_real **res1=res+1, *rr, *w01=w+28, *w03=w+53, *w04=w+62, *w05=w+65, *w06=w+68, *w07=w+71, w08, w09, w10, *w12=w+80;
   const casadi_real **arg1=arg+2, *cr, *cs, *wr00, *wr01, *wr02, *wr06, *wr11, *wr12;
@@ -736,7 +736,7 @@ CASADI_SYMBOL_EXPORT int planar3_f_work_bytes(casadi_int *sz_arg, casadi_int* sz
 
 /* planar3_g:(x[12],p[22])->(g[12x3]) */
 static int casadi_f5(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a0, a1;
   a0=0.;
   if (res[0]!=0) res[0][0]=a0;
@@ -873,7 +873,7 @@ CASADI_SYMBOL_EXPORT int planar3_g_work_bytes(casadi_int *sz_arg, casadi_int* sz
 
 /* planar3_bracket_column:(q[3],dq[3],L[3],d[3],c[3],ba,p[22])->(x_j[3],r_j[3]) */
 static int casadi_f8(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14, a15, a16, a17, a18, a19, a20, a21, a22, a23;
   casadi_real a24, a25, a26, a27, a28, a29;
@@ -1046,7 +1046,7 @@ static int casadi_f8(const casadi_real** arg, casadi_real** res, casadi_int* iw,
 
 /* map3_planar3_bracket_column:(q[3x3],dq[3x3],L[3x3],d[3x3],c[3x3],ba[1x3],p[22x3])->(x_j[3x3],r_j[3x3]) */
 static int casadi_f7(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i;
   casadi_real* *res1;
   const casadi_real* *arg1;
@@ -1071,7 +1071,7 @@ static int casadi_f7(const casadi_real** arg, casadi_real** res, casadi_int* iw,
 
 /* planar3_ad:(x[12],p[22])->(ad[12x12,102nz]) */
 static int casadi_f6(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i, j;
   casadi_real **res1=res+1, *rr, *w00=w+30, *w01=w+39, *w02=w+48, w04, w05, w06, *w07=w+82, *w08=w+85, *w09=w+88, *w10=w+91;
   casadi_real *w11=w+94, *w12=w+124, *w13=w+154, *w14=w+157, *w15=w+160, *w16=w+163, *w17=w+187, *w19=w+223, *w20=w+232, *w21=w+241, *w22=w+250, *w23=w+316;
@@ -1379,7 +1379,7 @@ CASADI_SYMBOL_EXPORT int planar3_ad_work_bytes(casadi_int *sz_arg, casadi_int* s
 
 /* planar3_accel_kernel:(q[3],dq[3],s[3],ds[3],p[22])->(y3[3],y4[3],w[3]) */
 static int casadi_f10(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14, a15, a16, a17, a18, a19, a20, a21, a22, a23;
   casadi_real a24, a25, a26, a27, a28, a29, a30, a31, a32, a33, a34, a35;
@@ -1784,7 +1784,7 @@ static int casadi_f10(const casadi_real** arg, casadi_real** res, casadi_int* iw
 
 /* planar3_T:(x[12],p[22])->(T[12]) */
 static int casadi_f9(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i;
   casadi_real **res1=res+1, *rr, w04, w05, w06, *w07=w+104, *w08=w+107, *w09=w+110, *w10=w+113;
   const casadi_real **arg1=arg+2, *cr, *cs, *wr00, *wr01, *wr02, *wr03, *wr08, *wr09;
@@ -1929,7 +1929,7 @@ CASADI_SYMBOL_EXPORT int planar3_T_work_bytes(casadi_int *sz_arg, casadi_int* sz
 
 /* planar3_alpha:(x[12],p[22])->(alpha[3]) */
 static int casadi_f11(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i;
   casadi_real **res1=res+1, *rr, w01, w02, w03, *w04=w+86, *w05=w+89, *w06=w+92, *w08=w+107, *w10=w+113, *w11=w+116, *w13=w+122;
   casadi_real *w14=w+125, *w15=w+128;
@@ -2111,7 +2111,7 @@ CASADI_SYMBOL_EXPORT int planar3_alpha_work_bytes(casadi_int *sz_arg, casadi_int
 
 /* planar3_beta:(x[12],p[22])->(beta[3x3]) */
 static int casadi_f12(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i;
   casadi_real **res1=res+1, *rr, w1, w2, w3, *w4=w+39, *w5=w+42, *w6=w+45, *w8=w+66;
   const casadi_real **arg1=arg+2, *cs, *wr0, *wr7;
@@ -2248,7 +2248,7 @@ CASADI_SYMBOL_EXPORT int planar3_beta_work_bytes(casadi_int *sz_arg, casadi_int*
 
 /* planar3_potential:(i0[3],i1[22])->(o0) */
 static int casadi_f14(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a0, a1, a2, a3, a4, a5, a6, a7;
   a0=arg[1]? arg[1][21] : 0;
   a1=arg[0]? arg[0][0] : 0;
@@ -2288,7 +2288,7 @@ static int casadi_f14(const casadi_real** arg, casadi_real** res, casadi_int* iw
 
 /* planar3_energy:(x[12],p[22])->(energy) */
 static int casadi_f13(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i, j, k;
   casadi_real **res1=res+1, *rr, *w1=w+26, *w2=w+29, *w4=w+54, w5, w6, w7, w8, *w9=w+67;
   const casadi_real **arg1=arg+2, *cr, *cs, *ct, *wr0, *wr1, *wr2, *wr3, *wr9;
@@ -2543,7 +2543,7 @@ CASADI_SYMBOL_EXPORT int planar3_inertia_work_bytes(casadi_int *sz_arg, casadi_i
 
 /* planar3_control_core:(x[12],p_hat[22])->(y_hat[12],alpha[3],beta[3x3]) */
 static int casadi_f15(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i;
   casadi_real **res1=res+3, *rr, *w01=w+87, *w02=w+90, w04, w05, w06, *w07=w+118, *w08=w+121, *w09=w+124, *w11=w+130, *w12=w+133;
   casadi_real *w13=w+136, *w14=w+139, *w15=w+142;
@@ -2744,7 +2744,7 @@ CASADI_SYMBOL_EXPORT int planar3_control_core_work_bytes(casadi_int *sz_arg, cas
 
 /* planar3_control_smc:(x[12],z[0],r[15],p[22],gains[27])->(u[3],s[3],z_dot[0],u_cmd[3],y_hat[12]) */
 static int casadi_f16(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i, j, k;
   casadi_real **res1=res+5, *rr, w01, *w04=w+213, *w05=w+225, *w06=w+228, *w07=w+237, w08, *w09=w+241, *w11=w+265, *w12=w+268, *w13=w+271;
   casadi_real *w14=w+274, *w15=w+277, *w16=w+280, w17;
@@ -3014,7 +3014,7 @@ CASADI_SYMBOL_EXPORT int planar3_control_smc_work_bytes(casadi_int *sz_arg, casa
 
 /* planar3_control_ismc:(x[12],z[3],r[15],p[22],gains[29])->(u[3],s[3],z_dot[3],u_cmd[3],y_hat[12]) */
 static int casadi_f17(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i, j, k;
   casadi_real **res1=res+5, *rr, w01, *w04=w+215, *w05=w+227, *w06=w+230, *w07=w+239, w08, *w09=w+243, *w11=w+267, *w12=w+270, *w13=w+273;
   casadi_real *w14=w+276, *w15=w+279, *w16=w+282, *w17=w+285, w18;
@@ -3336,7 +3336,7 @@ CASADI_SYMBOL_EXPORT int planar3_control_ismc_work_bytes(casadi_int *sz_arg, cas
 
 /* planar3_control_ismc_zdot:(x[12],z[3],r[15],p[22],gains[29],u_cmd[3],u[3])->(z_dot[3]) */
 static int casadi_f18(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a0, a1, a2, a3, a4, a5, a6;
   a0=arg[4]? arg[4][17] : 0;
   a1=arg[4]? arg[4][18] : 0;
@@ -3495,7 +3495,7 @@ CASADI_SYMBOL_EXPORT int planar3_control_ismc_zdot_work_bytes(casadi_int *sz_arg
 
 /* planar3_control_fl:(x[12],z[0],r[15],p[22],gains[20])->(u[3],s[3],z_dot[0],u_cmd[3],y_hat[12]) */
 static int casadi_f19(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i, j, k;
   casadi_real **res1=res+5, *rr, w01, *w04=w+206, *w05=w+218, *w06=w+221, *w07=w+230, w08, *w09=w+234, *w11=w+258, *w12=w+261, *w13=w+264;
   casadi_real *w14=w+267, *w15=w+270, *w16=w+273;
@@ -3735,7 +3735,7 @@ CASADI_SYMBOL_EXPORT int planar3_control_fl_work_bytes(casadi_int *sz_arg, casad
 
 /* planar3_control_adaptive:(x[12],z[18],r[15],p[22],gains[36])->(u[3],s[3],z_dot[18],u_cmd[3],y_hat[12]) */
 static int casadi_f20(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i, j, k;
   casadi_real **res1=res+5, *rr, w01, w04, w05, w06, w07, w08, w09, w10, w11, w12;
   casadi_real w13, w14, w15, *w17=w+252, *w18=w+255, *w19=w+258, w20, w21, w22, w23, w24, w25;
@@ -4259,7 +4259,7 @@ CASADI_SYMBOL_EXPORT int planar3_control_adaptive_work_bytes(casadi_int *sz_arg,
 
 /* planar3_control_adaptive_zdot:(x[12],z[18],r[15],p[22],gains[36],u_cmd[3],u[3])->(z_dot[18]) */
 static int casadi_f21(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14, a15, a16, a17, a18, a19, a20, a21, a22, a23;
   a00=arg[4]? arg[4][17] : 0;
@@ -4565,7 +4565,7 @@ CASADI_SYMBOL_EXPORT int planar3_control_adaptive_zdot_work_bytes(casadi_int *sz
 
 /* planar3_beta_tau:(m[15],p[22])->(beta_tau[3x3]) */
 static int casadi_f23(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i;
   casadi_real **res1=res+1, *rr, *w2=w+93, *w3=w+102;
   const casadi_real **arg1=arg+2, *cs, *wr0, *wr1, *wr4;
@@ -4593,7 +4593,7 @@ static int casadi_f23(const casadi_real** arg, casadi_real** res, casadi_int* iw
 
 /* planar3_control_core_tau:(m[15],p_hat[22])->(y_hat[12],alpha[3],beta[3x3]) */
 static int casadi_f22(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i;
   casadi_real **res1=res+3, *rr, *w03=w+157, *w06=w+185, *w07=w+188, *w08=w+191, w09, w10, w11, *w12=w+197;
   const casadi_real **arg1=arg+2, *cr, *cs, *wr00, *wr01, *wr02, *wr03, *wr04, *wr05;
@@ -4781,7 +4781,7 @@ CASADI_SYMBOL_EXPORT int planar3_control_core_tau_work_bytes(casadi_int *sz_arg,
 
 /* planar3_control_smc_tau:(m[15],z[0],r[15],p[22],gains[27])->(u[3],s[3],z_dot[0],u_cmd[3],y_hat[12]) */
 static int casadi_f24(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i, j, k;
   casadi_real **res1=res+5, *rr, w01, *w04=w+271, *w05=w+283, *w06=w+286, *w07=w+295, w08, *w09=w+299, *w10=w+308, *w11=w+311, *w12=w+314;
   casadi_real *w13=w+317, *w14=w+320, *w15=w+323, w16;
@@ -5051,7 +5051,7 @@ CASADI_SYMBOL_EXPORT int planar3_control_smc_tau_work_bytes(casadi_int *sz_arg, 
 
 /* planar3_control_ismc_tau:(m[15],z[3],r[15],p[22],gains[29])->(u[3],s[3],z_dot[3],u_cmd[3],y_hat[12]) */
 static int casadi_f25(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i, j, k;
   casadi_real **res1=res+5, *rr, w01, *w04=w+273, *w05=w+285, *w06=w+288, *w07=w+297, w08, *w09=w+301, *w11=w+325, *w12=w+328, *w13=w+331;
   casadi_real *w14=w+334, *w15=w+337, *w16=w+340, *w17=w+343, w18;
@@ -5373,7 +5373,7 @@ CASADI_SYMBOL_EXPORT int planar3_control_ismc_tau_work_bytes(casadi_int *sz_arg,
 
 /* planar3_control_ismc_tau_zdot:(m[15],z[3],r[15],p[22],gains[29],u_cmd[3],u[3])->(z_dot[3]) */
 static int casadi_f26(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a0, a1, a2, a3, a4, a5, a6;
   a0=arg[4]? arg[4][17] : 0;
   a1=arg[4]? arg[4][18] : 0;
@@ -5532,7 +5532,7 @@ CASADI_SYMBOL_EXPORT int planar3_control_ismc_tau_zdot_work_bytes(casadi_int *sz
 
 /* planar3_control_fl_tau:(m[15],z[0],r[15],p[22],gains[20])->(u[3],s[3],z_dot[0],u_cmd[3],y_hat[12]) */
 static int casadi_f27(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i, j, k;
   casadi_real **res1=res+5, *rr, w01, *w04=w+264, *w05=w+276, *w06=w+279, *w07=w+288, w08, *w09=w+292, *w10=w+301, *w11=w+304, *w12=w+307;
   casadi_real *w13=w+310, *w14=w+313, *w15=w+316;
@@ -5772,7 +5772,7 @@ CASADI_SYMBOL_EXPORT int planar3_control_fl_tau_work_bytes(casadi_int *sz_arg, c
 
 /* planar3_control_pdg:(x[12],z[0],r[15],p[22],gains[10])->(u[3],s[3],z_dot[0],u_cmd[3],y_hat[12]) */
 static int casadi_f28(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   a00=arg[4]? arg[4][9] : 0;
   a01=arg[4]? arg[4][0] : 0;
@@ -6000,7 +6000,7 @@ CASADI_SYMBOL_EXPORT int planar3_control_pdg_work_bytes(casadi_int *sz_arg, casa
 
 /* planar3_T_tau:(m[15],p[22])->(T_tau[12]) */
 static int casadi_f29(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real **res1=res+1, *w6=w+110, *w7=w+113;
   const casadi_real **arg1=arg+2, *wr0, *wr1, *wr2, *wr3, *wr4, *wr5;
   /* #0: @0 = input[0][0] */
@@ -6125,7 +6125,7 @@ CASADI_SYMBOL_EXPORT int planar3_T_tau_work_bytes(casadi_int *sz_arg, casadi_int
 
 /* planar3_alpha_tau:(m[15],p[22])->(alpha_tau[3]) */
 static int casadi_f30(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i;
   casadi_real **res1=res+1, *rr, w03, w04, w05, *w06=w+104, *w07=w+107, *w11=w+119, *w12=w+122;
   const casadi_real **arg1=arg+2, *cr, *cs, *wr00, *wr01, *wr02, *wr07, *wr08, *wr09, *wr10;

@@ -335,7 +335,7 @@ static const casadi_real casadi_zeros[49] =
 
 /* planar4_inertia:(x[16],p[29])->(inertia[4x4]) */
 static int casadi_f1(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14, a15, a16, a17, a18, a19, a20, a21;
   a00=arg[1]? arg[1][3] : 0;
@@ -467,7 +467,7 @@ static int casadi_f1(const casadi_real** arg, casadi_real** res, casadi_int* iw,
 
 /* ldl_factor_4:(i0[4x4])->(o0[6],o1[4]) */
 static int casadi_f2(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   a00=arg[0]? arg[0][1] : 0;
   a01=arg[0]? arg[0][0] : 0;
@@ -524,7 +524,7 @@ static int casadi_f2(const casadi_real** arg, casadi_real** res, casadi_int* iw,
 
 /* planar4_bias:(i0[4],i1[4],i2[29])->(o0[4]) */
 static int casadi_f3(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14, a15, a16, a17, a18, a19, a20, a21, a22, a23;
   a00=arg[2]? arg[2][3] : 0;
@@ -651,7 +651,7 @@ static int casadi_f3(const casadi_real** arg, casadi_real** res, casadi_int* iw,
 
 /* ldl_solve_4:(i0[6],i1[4],i2[4])->(o0[4]) */
 static int casadi_f4(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   a00=arg[2]? arg[2][0] : 0;
   a01=arg[1]? arg[1][0] : 0;
@@ -704,7 +704,7 @@ static int casadi_f4(const casadi_real** arg, casadi_real** res, casadi_int* iw,
 
 /* planar4_f:(x[16],p[29])->(f[16]) */
 static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i;
   casadi_real **res1=res+1, *rr, *w01=w+40, *w03=w+73, *w04=w+89, *w05=w+95, *w06=w+99, *w07=w+103, w08, w09, w10, w11;
   casadi_real *w13=w+115;
@@ -903,7 +903,7 @@ CASADI_SYMBOL_EXPORT int planar4_f_work_bytes(casadi_int *sz_arg, casadi_int* sz
 
 /* planar4_g:(x[16],p[29])->(g[16x4]) */
 static int casadi_f5(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a0, a1;
   a0=0.;
   if (res[0]!=0) res[0][0]=a0;
@@ -1070,7 +1070,7 @@ CASADI_SYMBOL_EXPORT int planar4_g_work_bytes(casadi_int *sz_arg, casadi_int* sz
 
 /* planar4_bracket_column:(q[4],dq[4],L[6],d[4],c[4],ba,p[29])->(x_j[4],r_j[4]) */
 static int casadi_f8(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14, a15, a16, a17, a18, a19, a20, a21, a22, a23;
   casadi_real a24, a25, a26, a27, a28, a29, a30, a31, a32, a33, a34, a35;
@@ -1371,7 +1371,7 @@ static int casadi_f8(const casadi_real** arg, casadi_real** res, casadi_int* iw,
 
 /* map4_planar4_bracket_column:(q[4x4],dq[4x4],L[6x4],d[4x4],c[4x4],ba[1x4],p[29x4])->(x_j[4x4],r_j[4x4]) */
 static int casadi_f7(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i;
   casadi_real* *res1;
   const casadi_real* *arg1;
@@ -1396,7 +1396,7 @@ static int casadi_f7(const casadi_real** arg, casadi_real** res, casadi_int* iw,
 
 /* planar4_ad:(x[16],p[29])->(ad[16x16,172nz]) */
 static int casadi_f6(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i, j;
   casadi_real **res1=res+1, *rr, *w00=w+49, *w01=w+65, *w02=w+81, w04, w05, w06, w07, *w08=w+130, *w09=w+134, *w10=w+138;
   casadi_real *w11=w+142, *w12=w+146, *w13=w+198, *w14=w+250, *w15=w+254, *w16=w+258, *w17=w+262, *w18=w+302, *w19=w+342, *w20=w+358, *w21=w+374, *w22=w+380;
@@ -1713,7 +1713,7 @@ CASADI_SYMBOL_EXPORT int planar4_ad_work_bytes(casadi_int *sz_arg, casadi_int* s
 
 /* planar4_accel_kernel:(q[4],dq[4],s[4],ds[4],p[29])->(y3[4],y4[4],w[4]) */
 static int casadi_f10(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14, a15, a16, a17, a18, a19, a20, a21, a22, a23;
   casadi_real a24, a25, a26, a27, a28, a29, a30, a31, a32, a33, a34, a35;
@@ -2431,7 +2431,7 @@ static int casadi_f10(const casadi_real** arg, casadi_real** res, casadi_int* iw
 
 /* planar4_T:(x[16],p[29])->(T[16]) */
 static int casadi_f9(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i;
   casadi_real **res1=res+1, *rr, w04, w05, w06, w07, *w08=w+156, *w09=w+160, *w10=w+164, *w11=w+168;
   const casadi_real **arg1=arg+2, *cr, *cs, *wr00, *wr01, *wr02, *wr03, *wr09, *wr10;
@@ -2579,7 +2579,7 @@ CASADI_SYMBOL_EXPORT int planar4_T_work_bytes(casadi_int *sz_arg, casadi_int* sz
 
 /* planar4_alpha:(x[16],p[29])->(alpha[4]) */
 static int casadi_f11(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i;
   casadi_real **res1=res+1, *rr, w01, w02, w03, w04, *w05=w+132, *w06=w+136, *w07=w+140, *w09=w+160, *w11=w+168, *w12=w+172;
   casadi_real *w14=w+180, *w15=w+184, *w16=w+188;
@@ -2770,7 +2770,7 @@ CASADI_SYMBOL_EXPORT int planar4_alpha_work_bytes(casadi_int *sz_arg, casadi_int
 
 /* planar4_beta:(x[16],p[29])->(beta[4x4]) */
 static int casadi_f12(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i;
   casadi_real **res1=res+1, *rr, w1, w2, w3, w4, *w5=w+55, *w6=w+59, *w7=w+63, *w9=w+95;
   const casadi_real **arg1=arg+2, *cs, *wr0, *wr8;
@@ -2913,7 +2913,7 @@ CASADI_SYMBOL_EXPORT int planar4_beta_work_bytes(casadi_int *sz_arg, casadi_int*
 
 /* planar4_potential:(i0[4],i1[29])->(o0) */
 static int casadi_f14(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a0, a1, a2, a3, a4, a5, a6, a7, a8, a9;
   a0=arg[1]? arg[1][28] : 0;
   a1=arg[0]? arg[0][0] : 0;
@@ -2965,7 +2965,7 @@ static int casadi_f14(const casadi_real** arg, casadi_real** res, casadi_int* iw
 
 /* planar4_energy:(x[16],p[29])->(energy) */
 static int casadi_f13(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i, j, k;
   casadi_real **res1=res+1, *rr, *w01=w+38, *w02=w+42, *w04=w+75, w05, w06, w07, w08, w09, *w10=w+96;
   const casadi_real **arg1=arg+2, *cr, *cs, *ct, *wr00, *wr01, *wr02, *wr03, *wr10;
@@ -3226,7 +3226,7 @@ CASADI_SYMBOL_EXPORT int planar4_inertia_work_bytes(casadi_int *sz_arg, casadi_i
 
 /* planar4_control_core:(x[16],p_hat[29])->(y_hat[16],alpha[4],beta[4x4]) */
 static int casadi_f15(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i;
   casadi_real **res1=res+3, *rr, *w01=w+127, *w02=w+131, w04, w05, w06, w07, *w08=w+168, *w09=w+172, *w10=w+176, *w12=w+184;
   casadi_real *w13=w+188, *w14=w+192, *w15=w+196, *w16=w+200;
@@ -3436,7 +3436,7 @@ CASADI_SYMBOL_EXPORT int planar4_control_core_work_bytes(casadi_int *sz_arg, cas
 
 /* planar4_control_smc:(x[16],z[0],r[20],p[29],gains[38])->(u[4],s[4],z_dot[0],u_cmd[4],y_hat[16]) */
 static int casadi_f16(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i, j, k;
   casadi_real **res1=res+5, *rr, w01, *w02=w+255, *w04=w+300, *w05=w+316, *w06=w+320, *w07=w+336, w08, *w10=w+361, *w11=w+365, *w12=w+369;
   casadi_real *w13=w+373, *w14=w+377, *w15=w+381, w16;
@@ -3706,7 +3706,7 @@ CASADI_SYMBOL_EXPORT int planar4_control_smc_work_bytes(casadi_int *sz_arg, casa
 
 /* planar4_control_ismc:(x[16],z[4],r[20],p[29],gains[40])->(u[4],s[4],z_dot[4],u_cmd[4],y_hat[16]) */
 static int casadi_f17(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i, j, k;
   casadi_real **res1=res+5, *rr, w01, *w04=w+302, *w05=w+318, *w06=w+322, *w07=w+338, w08, *w09=w+343, *w11=w+379, *w12=w+383, *w13=w+387;
   casadi_real *w14=w+391, *w15=w+395, *w16=w+399, *w17=w+403, w18;
@@ -4028,7 +4028,7 @@ CASADI_SYMBOL_EXPORT int planar4_control_ismc_work_bytes(casadi_int *sz_arg, cas
 
 /* planar4_control_ismc_zdot:(x[16],z[4],r[20],p[29],gains[40],u_cmd[4],u[4])->(z_dot[4]) */
 static int casadi_f18(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a0, a1, a2, a3, a4, a5, a6;
   a0=arg[4]? arg[4][21] : 0;
   a1=arg[4]? arg[4][22] : 0;
@@ -4204,7 +4204,7 @@ CASADI_SYMBOL_EXPORT int planar4_control_ismc_zdot_work_bytes(casadi_int *sz_arg
 
 /* planar4_control_fl:(x[16],z[0],r[20],p[29],gains[29])->(u[4],s[4],z_dot[0],u_cmd[4],y_hat[16]) */
 static int casadi_f19(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i, j, k;
   casadi_real **res1=res+5, *rr, w01, *w02=w+246, *w04=w+291, *w05=w+307, *w06=w+311, *w07=w+327, w08, *w10=w+352, *w11=w+356, *w12=w+360;
   casadi_real *w13=w+364, *w14=w+368, *w15=w+372;
@@ -4444,7 +4444,7 @@ CASADI_SYMBOL_EXPORT int planar4_control_fl_work_bytes(casadi_int *sz_arg, casad
 
 /* planar4_control_adaptive:(x[16],z[24],r[20],p[29],gains[49])->(u[4],s[4],z_dot[24],u_cmd[4],y_hat[16]) */
 static int casadi_f20(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i, j, k;
   casadi_real **res1=res+5, *rr, w01, w04, w05, w06, w07, w08, w09, w10, w11, w12;
   casadi_real w13, w14, w15, w16, w17, w18, w19, *w21=w+351, *w22=w+355, *w23=w+359, w24, w25;
@@ -4996,7 +4996,7 @@ CASADI_SYMBOL_EXPORT int planar4_control_adaptive_work_bytes(casadi_int *sz_arg,
 
 /* planar4_control_adaptive_zdot:(x[16],z[24],r[20],p[29],gains[49],u_cmd[4],u[4])->(z_dot[24]) */
 static int casadi_f21(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14, a15, a16, a17, a18, a19, a20, a21, a22, a23;
   casadi_real a24, a25, a26, a27, a28;
@@ -5368,7 +5368,7 @@ CASADI_SYMBOL_EXPORT int planar4_control_adaptive_zdot_work_bytes(casadi_int *sz
 
 /* planar4_beta_tau:(m[20],p[29])->(beta_tau[4x4]) */
 static int casadi_f23(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i;
   casadi_real **res1=res+1, *rr, *w2=w+135, *w3=w+147, *w5=w+192;
   const casadi_real **arg1=arg+2, *cs, *wr0, *wr1, *wr4;
@@ -5396,7 +5396,7 @@ static int casadi_f23(const casadi_real** arg, casadi_real** res, casadi_int* iw
 
 /* planar4_control_core_tau:(m[20],p_hat[29])->(y_hat[16],alpha[4],beta[4x4]) */
 static int casadi_f22(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i;
   casadi_real **res1=res+3, *rr, *w03=w+236, *w06=w+273, *w07=w+277, *w08=w+281, w09, w10, w11, w12, *w13=w+289;
   const casadi_real **arg1=arg+2, *cr, *cs, *wr00, *wr01, *wr02, *wr03, *wr04, *wr05;
@@ -5593,7 +5593,7 @@ CASADI_SYMBOL_EXPORT int planar4_control_core_tau_work_bytes(casadi_int *sz_arg,
 
 /* planar4_control_smc_tau:(m[20],z[0],r[20],p[29],gains[38])->(u[4],s[4],z_dot[0],u_cmd[4],y_hat[16]) */
 static int casadi_f24(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i, j, k;
   casadi_real **res1=res+5, *rr, w01, *w04=w+393, *w05=w+409, *w06=w+413, *w07=w+429, w08, *w09=w+434, *w10=w+450, *w11=w+454, *w12=w+458;
   casadi_real *w13=w+462, *w14=w+466, *w15=w+470, w16;
@@ -5863,7 +5863,7 @@ CASADI_SYMBOL_EXPORT int planar4_control_smc_tau_work_bytes(casadi_int *sz_arg, 
 
 /* planar4_control_ismc_tau:(m[20],z[4],r[20],p[29],gains[40])->(u[4],s[4],z_dot[4],u_cmd[4],y_hat[16]) */
 static int casadi_f25(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i, j, k;
   casadi_real **res1=res+5, *rr, w01, *w04=w+395, *w05=w+411, *w06=w+415, *w07=w+431, w08, *w09=w+436, *w11=w+472, *w12=w+476, *w13=w+480;
   casadi_real *w14=w+484, *w15=w+488, *w16=w+492, *w17=w+496, w18;
@@ -6185,7 +6185,7 @@ CASADI_SYMBOL_EXPORT int planar4_control_ismc_tau_work_bytes(casadi_int *sz_arg,
 
 /* planar4_control_ismc_tau_zdot:(m[20],z[4],r[20],p[29],gains[40],u_cmd[4],u[4])->(z_dot[4]) */
 static int casadi_f26(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a0, a1, a2, a3, a4, a5, a6;
   a0=arg[4]? arg[4][21] : 0;
   a1=arg[4]? arg[4][22] : 0;
@@ -6361,7 +6361,7 @@ CASADI_SYMBOL_EXPORT int planar4_control_ismc_tau_zdot_work_bytes(casadi_int *sz
 
 /* planar4_control_fl_tau:(m[20],z[0],r[20],p[29],gains[29])->(u[4],s[4],z_dot[0],u_cmd[4],y_hat[16]) */
 static int casadi_f27(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i, j, k;
   casadi_real **res1=res+5, *rr, w01, *w04=w+384, *w05=w+400, *w06=w+404, *w07=w+420, w08, *w09=w+425, *w10=w+441, *w11=w+445, *w12=w+449;
   casadi_real *w13=w+453, *w14=w+457, *w15=w+461;
@@ -6601,7 +6601,7 @@ CASADI_SYMBOL_EXPORT int planar4_control_fl_tau_work_bytes(casadi_int *sz_arg, c
 
 /* planar4_control_pdg:(x[16],z[0],r[20],p[29],gains[13])->(u[4],s[4],z_dot[0],u_cmd[4],y_hat[16]) */
 static int casadi_f28(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13;
   a00=arg[4]? arg[4][12] : 0;
@@ -6871,7 +6871,7 @@ CASADI_SYMBOL_EXPORT int planar4_control_pdg_work_bytes(casadi_int *sz_arg, casa
 
 /* planar4_T_tau:(m[20],p[29])->(T_tau[16]) */
 static int casadi_f29(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real **res1=res+1, *w6=w+164, *w7=w+168;
   const casadi_real **arg1=arg+2, *wr0, *wr1, *wr2, *wr3, *wr4, *wr5;
   /* #0: @0 = input[0][0] */
@@ -6996,7 +6996,7 @@ CASADI_SYMBOL_EXPORT int planar4_T_tau_work_bytes(casadi_int *sz_arg, casadi_int
 
 /* planar4_alpha_tau:(m[20],p[29])->(alpha_tau[4]) */
 static int casadi_f30(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i;
   casadi_real **res1=res+1, *rr, w03, w04, w05, w06, *w07=w+156, *w08=w+160, *w12=w+176, *w13=w+180;
   const casadi_real **arg1=arg+2, *cr, *cs, *wr00, *wr01, *wr02, *wr08, *wr09, *wr10, *wr11;

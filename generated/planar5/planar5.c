@@ -363,7 +363,7 @@ static const casadi_real casadi_zeros[64] =
 
 /* planar5_inertia:(x[20],p[36])->(inertia[5x5]) */
 static int casadi_f1(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14, a15, a16, a17, a18, a19, a20, a21, a22, a23;
   casadi_real a24, a25, a26, a27, a28;
@@ -555,7 +555,7 @@ static int casadi_f1(const casadi_real** arg, casadi_real** res, casadi_int* iw,
 
 /* ldl_factor_5:(i0[5x5])->(o0[10],o1[5]) */
 static int casadi_f2(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14, a15, a16;
   a00=arg[0]? arg[0][1] : 0;
@@ -648,7 +648,7 @@ static int casadi_f2(const casadi_real** arg, casadi_real** res, casadi_int* iw,
 
 /* planar5_bias:(i0[5],i1[5],i2[36])->(o0[5]) */
 static int casadi_f3(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14, a15, a16, a17, a18, a19, a20, a21, a22, a23;
   casadi_real a24, a25, a26, a27, a28, a29;
@@ -830,7 +830,7 @@ static int casadi_f3(const casadi_real** arg, casadi_real** res, casadi_int* iw,
 
 /* ldl_solve_5:(i0[10],i1[5],i2[5])->(o0[5]) */
 static int casadi_f4(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14, a15, a16;
   a00=arg[2]? arg[2][0] : 0;
@@ -908,7 +908,7 @@ static int casadi_f4(const casadi_real** arg, casadi_real** res, casadi_int* iw,
 
 /* planar5_f:(x[20],p[36])->(f[20]) */
 static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i;
   casadi_real **res1=res+1, *rr, *w01=w+50, *w03=w+91, *w04=w+116, *w05=w+126, *w06=w+131, *w07=w+136, w08, w09, w10, w11;
   casadi_real w12, *w14=w+151;
@@ -1116,7 +1116,7 @@ CASADI_SYMBOL_EXPORT int planar5_f_work_bytes(casadi_int *sz_arg, casadi_int* sz
 
 /* planar5_g:(x[20],p[36])->(g[20x5]) */
 static int casadi_f5(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a0, a1;
   a0=0.;
   if (res[0]!=0) res[0][0]=a0;
@@ -1321,7 +1321,7 @@ CASADI_SYMBOL_EXPORT int planar5_g_work_bytes(casadi_int *sz_arg, casadi_int* sz
 
 /* planar5_bracket_column:(q[5],dq[5],L[10],d[5],c[5],ba,p[36])->(x_j[5],r_j[5]) */
 static int casadi_f8(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14, a15, a16, a17, a18, a19, a20, a21, a22, a23;
   casadi_real a24, a25, a26, a27, a28, a29, a30, a31, a32, a33, a34, a35;
@@ -1782,7 +1782,7 @@ static int casadi_f8(const casadi_real** arg, casadi_real** res, casadi_int* iw,
 
 /* map5_planar5_bracket_column:(q[5x5],dq[5x5],L[10x5],d[5x5],c[5x5],ba[1x5],p[36x5])->(x_j[5x5],r_j[5x5]) */
 static int casadi_f7(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i;
   casadi_real* *res1;
   const casadi_real* *arg1;
@@ -1807,7 +1807,7 @@ static int casadi_f7(const casadi_real** arg, casadi_real** res, casadi_int* iw,
 
 /* planar5_ad:(x[20],p[36])->(ad[20x20,260nz]) */
 static int casadi_f6(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i, j;
   casadi_real **res1=res+1, *rr, *w00=w+69, *w01=w+94, *w02=w+119, w04, w05, w06, w07, w08, *w09=w+185, *w10=w+190;
   casadi_real *w11=w+195, *w12=w+200, *w13=w+205, *w14=w+285, *w15=w+365, *w16=w+370, *w17=w+375, *w18=w+380, *w19=w+440, *w21=w+520, *w22=w+545, *w23=w+555;
@@ -2133,7 +2133,7 @@ CASADI_SYMBOL_EXPORT int planar5_ad_work_bytes(casadi_int *sz_arg, casadi_int* s
 
 /* planar5_accel_kernel:(q[5],dq[5],s[5],ds[5],p[36])->(y3[5],y4[5],w[5]) */
 static int casadi_f10(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a000, a001, a002, a003, a004, a005, a006, a007, a008, a009, a010, a011;
   casadi_real a012, a013, a014, a015, a016, a017, a018, a019, a020, a021, a022, a023;
   casadi_real a024, a025, a026, a027, a028, a029, a030, a031, a032, a033, a034, a035;
@@ -3255,7 +3255,7 @@ static int casadi_f10(const casadi_real** arg, casadi_real** res, casadi_int* iw
 
 /* planar5_T:(x[20],p[36])->(T[20]) */
 static int casadi_f9(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i;
   casadi_real **res1=res+1, *rr, w04, w05, w06, w07, w08, *w09=w+218, *w10=w+223, *w11=w+228, *w12=w+233;
   const casadi_real **arg1=arg+2, *cr, *cs, *wr00, *wr01, *wr02, *wr03, *wr10, *wr11;
@@ -3406,7 +3406,7 @@ CASADI_SYMBOL_EXPORT int planar5_T_work_bytes(casadi_int *sz_arg, casadi_int* sz
 
 /* planar5_alpha:(x[20],p[36])->(alpha[5]) */
 static int casadi_f11(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i;
   casadi_real **res1=res+1, *rr, w01, w02, w03, w04, w05, *w06=w+188, *w07=w+193, *w08=w+198, *w10=w+223, *w12=w+233;
   casadi_real *w13=w+238, *w15=w+248, *w16=w+253, *w17=w+258;
@@ -3606,7 +3606,7 @@ CASADI_SYMBOL_EXPORT int planar5_alpha_work_bytes(casadi_int *sz_arg, casadi_int
 
 /* planar5_beta:(x[20],p[36])->(beta[5x5]) */
 static int casadi_f12(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i;
   casadi_real **res1=res+1, *rr, w01, w02, w03, w04, w05, *w06=w+70, *w07=w+75, *w08=w+80, *w10=w+125;
   const casadi_real **arg1=arg+2, *cs, *wr00, *wr09;
@@ -3755,7 +3755,7 @@ CASADI_SYMBOL_EXPORT int planar5_beta_work_bytes(casadi_int *sz_arg, casadi_int*
 
 /* planar5_potential:(i0[5],i1[36])->(o0) */
 static int casadi_f14(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   a00=arg[1]? arg[1][35] : 0;
   a01=arg[0]? arg[0][0] : 0;
@@ -3819,7 +3819,7 @@ static int casadi_f14(const casadi_real** arg, casadi_real** res, casadi_int* iw
 
 /* planar5_energy:(x[20],p[36])->(energy) */
 static int casadi_f13(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i, j, k;
   casadi_real **res1=res+1, *rr, *w01=w+49, *w02=w+54, *w04=w+95, w05, w06, w07, w08, w09, w10, *w11=w+126;
   const casadi_real **arg1=arg+2, *cr, *cs, *ct, *wr00, *wr01, *wr02, *wr03, *wr11;
@@ -4086,7 +4086,7 @@ CASADI_SYMBOL_EXPORT int planar5_inertia_work_bytes(casadi_int *sz_arg, casadi_i
 
 /* planar5_control_core:(x[20],p_hat[36])->(y_hat[20],alpha[5],beta[5x5]) */
 static int casadi_f15(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i;
   casadi_real **res1=res+3, *rr, *w01=w+170, *w02=w+175, w04, w05, w06, w07, w08, *w09=w+221, *w10=w+226, *w11=w+231;
   casadi_real *w13=w+241, *w14=w+246, *w15=w+251, *w16=w+256, *w17=w+261;
@@ -4305,7 +4305,7 @@ CASADI_SYMBOL_EXPORT int planar5_control_core_work_bytes(casadi_int *sz_arg, cas
 
 /* planar5_control_smc:(x[20],z[0],r[25],p[36],gains[51])->(u[5],s[5],z_dot[0],u_cmd[5],y_hat[20]) */
 static int casadi_f16(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i, j, k;
   casadi_real **res1=res+5, *rr, w01, *w04=w+394, *w05=w+414, *w06=w+419, *w07=w+444, w08, *w09=w+450, *w10=w+475, *w11=w+480, *w12=w+485;
   casadi_real *w13=w+490, *w14=w+495, *w15=w+500, w16;
@@ -4575,7 +4575,7 @@ CASADI_SYMBOL_EXPORT int planar5_control_smc_work_bytes(casadi_int *sz_arg, casa
 
 /* planar5_control_ismc:(x[20],z[5],r[25],p[36],gains[53])->(u[5],s[5],z_dot[5],u_cmd[5],y_hat[20]) */
 static int casadi_f17(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i, j, k;
   casadi_real **res1=res+5, *rr, w01, *w04=w+396, *w05=w+416, *w06=w+421, *w07=w+446, w08, *w09=w+452, *w10=w+477, *w11=w+482, *w12=w+487;
   casadi_real *w13=w+492, *w14=w+497, *w15=w+502, *w16=w+507, w17;
@@ -4897,7 +4897,7 @@ CASADI_SYMBOL_EXPORT int planar5_control_ismc_work_bytes(casadi_int *sz_arg, cas
 
 /* planar5_control_ismc_zdot:(x[20],z[5],r[25],p[36],gains[53],u_cmd[5],u[5])->(z_dot[5]) */
 static int casadi_f18(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a0, a1, a2, a3, a4, a5, a6;
   a0=arg[4]? arg[4][25] : 0;
   a1=arg[4]? arg[4][26] : 0;
@@ -5090,7 +5090,7 @@ CASADI_SYMBOL_EXPORT int planar5_control_ismc_zdot_work_bytes(casadi_int *sz_arg
 
 /* planar5_control_fl:(x[20],z[0],r[25],p[36],gains[40])->(u[5],s[5],z_dot[0],u_cmd[5],y_hat[20]) */
 static int casadi_f19(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i, j, k;
   casadi_real **res1=res+5, *rr, w01, *w04=w+383, *w05=w+403, *w06=w+408, *w07=w+433, w08, *w09=w+439, *w10=w+464, *w11=w+469, *w12=w+474;
   casadi_real *w13=w+479, *w14=w+484, *w15=w+489;
@@ -5330,7 +5330,7 @@ CASADI_SYMBOL_EXPORT int planar5_control_fl_work_bytes(casadi_int *sz_arg, casad
 
 /* planar5_control_adaptive:(x[20],z[30],r[25],p[36],gains[64])->(u[5],s[5],z_dot[30],u_cmd[5],y_hat[20]) */
 static int casadi_f20(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i, j, k;
   casadi_real **res1=res+5, *rr, w01, w04, w05, w06, w07, w08, w09, w10, w11, w12;
   casadi_real w13, w14, w15, w16, w17, w18, w19, w20, w21, w22, w23, *w25=w+457;
@@ -5909,7 +5909,7 @@ CASADI_SYMBOL_EXPORT int planar5_control_adaptive_work_bytes(casadi_int *sz_arg,
 
 /* planar5_control_adaptive_zdot:(x[20],z[30],r[25],p[36],gains[64],u_cmd[5],u[5])->(z_dot[30]) */
 static int casadi_f21(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14, a15, a16, a17, a18, a19, a20, a21, a22, a23;
   casadi_real a24, a25, a26, a27, a28, a29, a30, a31, a32, a33;
@@ -6346,7 +6346,7 @@ CASADI_SYMBOL_EXPORT int planar5_control_adaptive_zdot_work_bytes(casadi_int *sz
 
 /* planar5_beta_tau:(m[25],p[36])->(beta_tau[5x5]) */
 static int casadi_f23(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i;
   casadi_real **res1=res+1, *rr, *w0=w+150, *w2=w+180, *w3=w+195;
   const casadi_real **arg1=arg+2, *cs, *wr0, *wr1, *wr4;
@@ -6374,7 +6374,7 @@ static int casadi_f23(const casadi_real** arg, casadi_real** res, casadi_int* iw
 
 /* planar5_control_core_tau:(m[25],p_hat[36])->(y_hat[20],alpha[5],beta[5x5]) */
 static int casadi_f22(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i;
   casadi_real **res1=res+3, *rr, *w03=w+286, *w06=w+332, *w07=w+337, *w08=w+342, w09, w10, w11, w12, w13, *w14=w+352;
   const casadi_real **arg1=arg+2, *cr, *cs, *wr00, *wr01, *wr02, *wr03, *wr04, *wr05;
@@ -6580,7 +6580,7 @@ CASADI_SYMBOL_EXPORT int planar5_control_core_tau_work_bytes(casadi_int *sz_arg,
 
 /* planar5_control_smc_tau:(m[25],z[0],r[25],p[36],gains[51])->(u[5],s[5],z_dot[0],u_cmd[5],y_hat[20]) */
 static int casadi_f24(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i, j, k;
   casadi_real **res1=res+5, *rr, w01, *w02=w+429, *w04=w+490, *w05=w+510, *w06=w+515, *w07=w+540, w08, *w09=w+546, *w10=w+551, *w11=w+556;
   casadi_real *w12=w+561, *w13=w+566, *w14=w+571, w15;
@@ -6850,7 +6850,7 @@ CASADI_SYMBOL_EXPORT int planar5_control_smc_tau_work_bytes(casadi_int *sz_arg, 
 
 /* planar5_control_ismc_tau:(m[25],z[5],r[25],p[36],gains[53])->(u[5],s[5],z_dot[5],u_cmd[5],y_hat[20]) */
 static int casadi_f25(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i, j, k;
   casadi_real **res1=res+5, *rr, w01, *w04=w+492, *w05=w+512, *w06=w+517, *w07=w+542, w08, *w09=w+548, *w10=w+573, *w11=w+578, *w12=w+583;
   casadi_real *w13=w+588, *w14=w+593, *w15=w+598, *w16=w+603, w17;
@@ -7172,7 +7172,7 @@ CASADI_SYMBOL_EXPORT int planar5_control_ismc_tau_work_bytes(casadi_int *sz_arg,
 
 /* planar5_control_ismc_tau_zdot:(m[25],z[5],r[25],p[36],gains[53],u_cmd[5],u[5])->(z_dot[5]) */
 static int casadi_f26(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a0, a1, a2, a3, a4, a5, a6;
   a0=arg[4]? arg[4][25] : 0;
   a1=arg[4]? arg[4][26] : 0;
@@ -7365,7 +7365,7 @@ CASADI_SYMBOL_EXPORT int planar5_control_ismc_tau_zdot_work_bytes(casadi_int *sz
 
 /* planar5_control_fl_tau:(m[25],z[0],r[25],p[36],gains[40])->(u[5],s[5],z_dot[0],u_cmd[5],y_hat[20]) */
 static int casadi_f27(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i, j, k;
   casadi_real **res1=res+5, *rr, w01, *w02=w+418, *w04=w+479, *w05=w+499, *w06=w+504, *w07=w+529, w08, *w09=w+535, *w10=w+540, *w11=w+545;
   casadi_real *w12=w+550, *w13=w+555, *w14=w+560;
@@ -7605,7 +7605,7 @@ CASADI_SYMBOL_EXPORT int planar5_control_fl_tau_work_bytes(casadi_int *sz_arg, c
 
 /* planar5_control_pdg:(x[20],z[0],r[25],p[36],gains[16])->(u[5],s[5],z_dot[0],u_cmd[5],y_hat[20]) */
 static int casadi_f28(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14, a15;
   a00=arg[4]? arg[4][15] : 0;
@@ -7916,7 +7916,7 @@ CASADI_SYMBOL_EXPORT int planar5_control_pdg_work_bytes(casadi_int *sz_arg, casa
 
 /* planar5_T_tau:(m[25],p[36])->(T_tau[20]) */
 static int casadi_f29(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real **res1=res+1, *w6=w+228, *w7=w+233;
   const casadi_real **arg1=arg+2, *wr0, *wr1, *wr2, *wr3, *wr4, *wr5;
   /* #0: @0 = input[0][0] */
@@ -8041,7 +8041,7 @@ CASADI_SYMBOL_EXPORT int planar5_T_tau_work_bytes(casadi_int *sz_arg, casadi_int
 
 /* planar5_alpha_tau:(m[25],p[36])->(alpha_tau[5]) */
 static int casadi_f30(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i;
   casadi_real **res1=res+1, *rr, w03, w04, w05, w06, w07, *w08=w+218, *w09=w+223, *w13=w+243, *w14=w+248;
   const casadi_real **arg1=arg+2, *cr, *cs, *wr00, *wr01, *wr02, *wr09, *wr10, *wr11, *wr12;

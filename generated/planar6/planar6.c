@@ -396,7 +396,7 @@ static const casadi_real casadi_zeros[81] =
 
 /* planar6_inertia:(x[24],p[43])->(inertia[6x6]) */
 static int casadi_f1(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14, a15, a16, a17, a18, a19, a20, a21, a22, a23;
   casadi_real a24, a25, a26, a27, a28, a29, a30, a31, a32, a33, a34, a35;
@@ -658,7 +658,7 @@ static int casadi_f1(const casadi_real** arg, casadi_real** res, casadi_int* iw,
 
 /* ldl_factor_6:(i0[6x6])->(o0[15],o1[6]) */
 static int casadi_f2(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14, a15, a16, a17, a18, a19, a20, a21;
   a00=arg[0]? arg[0][1] : 0;
@@ -799,7 +799,7 @@ static int casadi_f2(const casadi_real** arg, casadi_real** res, casadi_int* iw,
 
 /* planar6_bias:(i0[6],i1[6],i2[43])->(o0[6]) */
 static int casadi_f3(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14, a15, a16, a17, a18, a19, a20, a21, a22, a23;
   casadi_real a24, a25, a26, a27, a28, a29, a30, a31, a32, a33, a34, a35;
@@ -1044,7 +1044,7 @@ static int casadi_f3(const casadi_real** arg, casadi_real** res, casadi_int* iw,
 
 /* ldl_solve_6:(i0[15],i1[6],i2[6])->(o0[6]) */
 static int casadi_f4(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14, a15, a16, a17, a18, a19, a20, a21, a22;
   a00=arg[2]? arg[2][0] : 0;
@@ -1151,7 +1151,7 @@ static int casadi_f4(const casadi_real** arg, casadi_real** res, casadi_int* iw,
 
 /* planar6_f:(x[24],p[43])->(f[24]) */
 static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i;
   casadi_real **res1=res+1, *rr, *w01=w+61, *w03=w+110, *w04=w+146, *w05=w+161, *w06=w+167, *w07=w+173, w08, w09, w10, w11;
   casadi_real w12, w13, *w15=w+191;
@@ -1368,7 +1368,7 @@ CASADI_SYMBOL_EXPORT int planar6_f_work_bytes(casadi_int *sz_arg, casadi_int* sz
 
 /* planar6_g:(x[24],p[43])->(g[24x6]) */
 static int casadi_f5(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a0, a1;
   a0=0.;
   if (res[0]!=0) res[0][0]=a0;
@@ -1619,7 +1619,7 @@ CASADI_SYMBOL_EXPORT int planar6_g_work_bytes(casadi_int *sz_arg, casadi_int* sz
 
 /* planar6_bracket_column:(q[6],dq[6],L[15],d[6],c[6],ba,p[43])->(x_j[6],r_j[6]) */
 static int casadi_f8(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14, a15, a16, a17, a18, a19, a20, a21, a22, a23;
   casadi_real a24, a25, a26, a27, a28, a29, a30, a31, a32, a33, a34, a35;
@@ -2274,7 +2274,7 @@ static int casadi_f8(const casadi_real** arg, casadi_real** res, casadi_int* iw,
 
 /* map6_planar6_bracket_column:(q[6x6],dq[6x6],L[15x6],d[6x6],c[6x6],ba[1x6],p[43x6])->(x_j[6x6],r_j[6x6]) */
 static int casadi_f7(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i;
   casadi_real* *res1;
   const casadi_real* *arg1;
@@ -2299,7 +2299,7 @@ static int casadi_f7(const casadi_real** arg, casadi_real** res, casadi_int* iw,
 
 /* planar6_ad:(x[24],p[43])->(ad[24x24,366nz]) */
 static int casadi_f6(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i, j;
   casadi_real **res1=res+1, *rr, *w00=w+92, *w01=w+128, *w02=w+164, w04, w05, w06, w07, w08, w09, *w10=w+249;
   casadi_real *w11=w+255, *w12=w+261, *w13=w+267, *w14=w+273, *w15=w+387, *w16=w+501, *w17=w+507, *w18=w+513, *w19=w+519, *w20=w+603, *w22=w+711, *w23=w+747;
@@ -2634,7 +2634,7 @@ CASADI_SYMBOL_EXPORT int planar6_ad_work_bytes(casadi_int *sz_arg, casadi_int* s
 
 /* planar6_accel_kernel:(q[6],dq[6],s[6],ds[6],p[43])->(y3[6],y4[6],w[6]) */
 static int casadi_f10(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a000, a001, a002, a003, a004, a005, a006, a007, a008, a009, a010, a011;
   casadi_real a012, a013, a014, a015, a016, a017, a018, a019, a020, a021, a022, a023;
   casadi_real a024, a025, a026, a027, a028, a029, a030, a031, a032, a033, a034, a035;
@@ -4252,7 +4252,7 @@ static int casadi_f10(const casadi_real** arg, casadi_real** res, casadi_int* iw
 
 /* planar6_T:(x[24],p[43])->(T[24]) */
 static int casadi_f9(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i;
   casadi_real **res1=res+1, *rr, w04, w05, w06, w07, w08, w09, *w10=w+289, *w11=w+295, *w12=w+301, *w13=w+307;
   const casadi_real **arg1=arg+2, *cr, *cs, *wr00, *wr01, *wr02, *wr03, *wr11, *wr12;
@@ -4406,7 +4406,7 @@ CASADI_SYMBOL_EXPORT int planar6_T_work_bytes(casadi_int *sz_arg, casadi_int* sz
 
 /* planar6_alpha:(x[24],p[43])->(alpha[6]) */
 static int casadi_f11(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i;
   casadi_real **res1=res+1, *rr, w01, w02, w03, w04, w05, w06, *w07=w+253, *w08=w+259, *w09=w+265, *w11=w+295;
   casadi_real *w13=w+307, *w14=w+313, *w16=w+325, *w17=w+331, *w18=w+337;
@@ -4615,7 +4615,7 @@ CASADI_SYMBOL_EXPORT int planar6_alpha_work_bytes(casadi_int *sz_arg, casadi_int
 
 /* planar6_beta:(x[24],p[43])->(beta[6x6]) */
 static int casadi_f12(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i;
   casadi_real **res1=res+1, *rr, w01, w02, w03, w04, w05, w06, *w07=w+86, *w08=w+92, *w09=w+98, *w11=w+158;
   const casadi_real **arg1=arg+2, *cs, *wr00, *wr10;
@@ -4770,7 +4770,7 @@ CASADI_SYMBOL_EXPORT int planar6_beta_work_bytes(casadi_int *sz_arg, casadi_int*
 
 /* planar6_potential:(i0[6],i1[43])->(o0) */
 static int casadi_f14(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13;
   a00=arg[1]? arg[1][42] : 0;
@@ -4847,7 +4847,7 @@ static int casadi_f14(const casadi_real** arg, casadi_real** res, casadi_int* iw
 
 /* planar6_energy:(x[24],p[43])->(energy) */
 static int casadi_f13(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i, j, k;
   casadi_real **res1=res+1, *rr, *w01=w+61, *w02=w+67, *w04=w+116, w05, w06, w07, w08, w09, w10, w11;
   casadi_real *w12=w+159;
@@ -5121,7 +5121,7 @@ CASADI_SYMBOL_EXPORT int planar6_inertia_work_bytes(casadi_int *sz_arg, casadi_i
 
 /* planar6_control_core:(x[24],p_hat[43])->(y_hat[24],alpha[6],beta[6x6]) */
 static int casadi_f15(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i;
   casadi_real **res1=res+3, *rr, *w01=w+228, *w02=w+234, w04, w05, w06, w07, w08, w09, *w10=w+289, *w11=w+295;
   casadi_real *w12=w+301, *w14=w+313, *w15=w+319, *w16=w+325, *w17=w+331, *w18=w+337;
@@ -5349,7 +5349,7 @@ CASADI_SYMBOL_EXPORT int planar6_control_core_work_bytes(casadi_int *sz_arg, cas
 
 /* planar6_control_smc:(x[24],z[0],r[30],p[43],gains[66])->(u[6],s[6],z_dot[0],u_cmd[6],y_hat[24]) */
 static int casadi_f16(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i, j, k;
   casadi_real **res1=res+5, *rr, w01, *w04=w+507, *w05=w+531, *w06=w+537, *w07=w+573, w08, *w09=w+580, *w11=w+646, *w12=w+652, *w13=w+658;
   casadi_real *w14=w+664, *w15=w+670, *w16=w+676, w17;
@@ -5619,7 +5619,7 @@ CASADI_SYMBOL_EXPORT int planar6_control_smc_work_bytes(casadi_int *sz_arg, casa
 
 /* planar6_control_ismc:(x[24],z[6],r[30],p[43],gains[68])->(u[6],s[6],z_dot[6],u_cmd[6],y_hat[24]) */
 static int casadi_f17(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i, j, k;
   casadi_real **res1=res+5, *rr, w01, *w04=w+509, *w05=w+533, *w06=w+539, *w07=w+575, w08, *w09=w+582, *w11=w+648, *w12=w+654, *w13=w+660;
   casadi_real *w14=w+666, *w15=w+672, *w16=w+678, *w17=w+684, w18;
@@ -5941,7 +5941,7 @@ CASADI_SYMBOL_EXPORT int planar6_control_ismc_work_bytes(casadi_int *sz_arg, cas
 
 /* planar6_control_ismc_zdot:(x[24],z[6],r[30],p[43],gains[68],u_cmd[6],u[6])->(z_dot[6]) */
 static int casadi_f18(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a0, a1, a2, a3, a4, a5, a6;
   a0=arg[4]? arg[4][29] : 0;
   a1=arg[4]? arg[4][30] : 0;
@@ -6151,7 +6151,7 @@ CASADI_SYMBOL_EXPORT int planar6_control_ismc_zdot_work_bytes(casadi_int *sz_arg
 
 /* planar6_control_fl:(x[24],z[0],r[30],p[43],gains[53])->(u[6],s[6],z_dot[0],u_cmd[6],y_hat[24]) */
 static int casadi_f19(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i, j, k;
   casadi_real **res1=res+5, *rr, w01, *w04=w+494, *w05=w+518, *w06=w+524, *w07=w+560, w08, *w09=w+567, *w11=w+633, *w12=w+639, *w13=w+645;
   casadi_real *w14=w+651, *w15=w+657, *w16=w+663;
@@ -6391,7 +6391,7 @@ CASADI_SYMBOL_EXPORT int planar6_control_fl_work_bytes(casadi_int *sz_arg, casad
 
 /* planar6_control_adaptive:(x[24],z[36],r[30],p[43],gains[81])->(u[6],s[6],z_dot[36],u_cmd[6],y_hat[24]) */
 static int casadi_f20(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i, j, k;
   casadi_real **res1=res+5, *rr, w01, w04, w05, w06, w07, w08, w09, w10, w11, w12;
   casadi_real w13, w14, w15, w16, w17, w18, w19, w20, w21, w22, w23, w24;
@@ -6998,7 +6998,7 @@ CASADI_SYMBOL_EXPORT int planar6_control_adaptive_work_bytes(casadi_int *sz_arg,
 
 /* planar6_control_adaptive_zdot:(x[24],z[36],r[30],p[43],gains[81],u_cmd[6],u[6])->(z_dot[36]) */
 static int casadi_f21(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14, a15, a16, a17, a18, a19, a20, a21, a22, a23;
   casadi_real a24, a25, a26, a27, a28, a29, a30, a31, a32, a33, a34, a35;
@@ -7501,7 +7501,7 @@ CASADI_SYMBOL_EXPORT int planar6_control_adaptive_zdot_work_bytes(casadi_int *sz
 
 /* planar6_beta_tau:(m[30],p[43])->(beta_tau[6x6]) */
 static int casadi_f23(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i;
   casadi_real **res1=res+1, *rr, *w2=w+230, *w3=w+248, *w5=w+315;
   const casadi_real **arg1=arg+2, *cs, *wr0, *wr1, *wr4;
@@ -7529,7 +7529,7 @@ static int casadi_f23(const casadi_real** arg, casadi_real** res, casadi_int* iw
 
 /* planar6_control_core_tau:(m[30],p_hat[43])->(y_hat[24],alpha[6],beta[6x6]) */
 static int casadi_f22(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i;
   casadi_real **res1=res+3, *rr, *w03=w+393, *w06=w+448, *w07=w+454, *w08=w+460, w09, w10, w11, w12, w13, w14;
   casadi_real *w15=w+472;
@@ -7745,7 +7745,7 @@ CASADI_SYMBOL_EXPORT int planar6_control_core_tau_work_bytes(casadi_int *sz_arg,
 
 /* planar6_control_smc_tau:(m[30],z[0],r[30],p[43],gains[66])->(u[6],s[6],z_dot[0],u_cmd[6],y_hat[24]) */
 static int casadi_f24(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i, j, k;
   casadi_real **res1=res+5, *rr, w01, *w04=w+648, *w05=w+672, *w06=w+678, *w07=w+714, w08, *w09=w+721, *w10=w+757, *w11=w+763, *w12=w+769;
   casadi_real *w13=w+775, *w14=w+781, *w15=w+787, w16;
@@ -8015,7 +8015,7 @@ CASADI_SYMBOL_EXPORT int planar6_control_smc_tau_work_bytes(casadi_int *sz_arg, 
 
 /* planar6_control_ismc_tau:(m[30],z[6],r[30],p[43],gains[68])->(u[6],s[6],z_dot[6],u_cmd[6],y_hat[24]) */
 static int casadi_f25(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i, j, k;
   casadi_real **res1=res+5, *rr, w01, *w04=w+650, *w05=w+674, *w06=w+680, *w07=w+716, w08, *w09=w+723, *w11=w+789, *w12=w+795, *w13=w+801;
   casadi_real *w14=w+807, *w15=w+813, *w16=w+819, *w17=w+825, w18;
@@ -8337,7 +8337,7 @@ CASADI_SYMBOL_EXPORT int planar6_control_ismc_tau_work_bytes(casadi_int *sz_arg,
 
 /* planar6_control_ismc_tau_zdot:(m[30],z[6],r[30],p[43],gains[68],u_cmd[6],u[6])->(z_dot[6]) */
 static int casadi_f26(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a0, a1, a2, a3, a4, a5, a6;
   a0=arg[4]? arg[4][29] : 0;
   a1=arg[4]? arg[4][30] : 0;
@@ -8547,7 +8547,7 @@ CASADI_SYMBOL_EXPORT int planar6_control_ismc_tau_zdot_work_bytes(casadi_int *sz
 
 /* planar6_control_fl_tau:(m[30],z[0],r[30],p[43],gains[53])->(u[6],s[6],z_dot[0],u_cmd[6],y_hat[24]) */
 static int casadi_f27(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i, j, k;
   casadi_real **res1=res+5, *rr, w01, *w04=w+635, *w05=w+659, *w06=w+665, *w07=w+701, w08, *w09=w+708, *w10=w+744, *w11=w+750, *w12=w+756;
   casadi_real *w13=w+762, *w14=w+768, *w15=w+774;
@@ -8787,7 +8787,7 @@ CASADI_SYMBOL_EXPORT int planar6_control_fl_tau_work_bytes(casadi_int *sz_arg, c
 
 /* planar6_control_pdg:(x[24],z[0],r[30],p[43],gains[19])->(u[6],s[6],z_dot[0],u_cmd[6],y_hat[24]) */
 static int casadi_f28(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14, a15, a16, a17;
   a00=arg[4]? arg[4][18] : 0;
@@ -9139,7 +9139,7 @@ CASADI_SYMBOL_EXPORT int planar6_control_pdg_work_bytes(casadi_int *sz_arg, casa
 
 /* planar6_T_tau:(m[30],p[43])->(T_tau[24]) */
 static int casadi_f29(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real **res1=res+1, *w6=w+301, *w7=w+307;
   const casadi_real **arg1=arg+2, *wr0, *wr1, *wr2, *wr3, *wr4, *wr5;
   /* #0: @0 = input[0][0] */
@@ -9264,7 +9264,7 @@ CASADI_SYMBOL_EXPORT int planar6_T_tau_work_bytes(casadi_int *sz_arg, casadi_int
 
 /* planar6_alpha_tau:(m[30],p[43])->(alpha_tau[6]) */
 static int casadi_f30(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i;
   casadi_real **res1=res+1, *rr, w03, w04, w05, w06, w07, w08, *w09=w+289, *w10=w+295, *w14=w+319, *w15=w+325;
   const casadi_real **arg1=arg+2, *cr, *cs, *wr00, *wr01, *wr02, *wr10, *wr11, *wr12, *wr13;

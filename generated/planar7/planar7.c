@@ -434,7 +434,7 @@ static const casadi_real casadi_zeros[100] =
 
 /* planar7_inertia:(x[28],p[50])->(inertia[7x7]) */
 static int casadi_f1(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14, a15, a16, a17, a18, a19, a20, a21, a22, a23;
   casadi_real a24, a25, a26, a27, a28, a29, a30, a31, a32, a33, a34, a35;
@@ -775,7 +775,7 @@ static int casadi_f1(const casadi_real** arg, casadi_real** res, casadi_int* iw,
 
 /* ldl_factor_7:(i0[7x7])->(o0[21],o1[7]) */
 static int casadi_f2(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14, a15, a16, a17, a18, a19, a20, a21, a22, a23;
   casadi_real a24, a25, a26, a27, a28;
@@ -980,7 +980,7 @@ static int casadi_f2(const casadi_real** arg, casadi_real** res, casadi_int* iw,
 
 /* planar7_bias:(i0[7],i1[7],i2[50])->(o0[7]) */
 static int casadi_f3(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14, a15, a16, a17, a18, a19, a20, a21, a22, a23;
   casadi_real a24, a25, a26, a27, a28, a29, a30, a31, a32, a33, a34, a35;
@@ -1298,7 +1298,7 @@ static int casadi_f3(const casadi_real** arg, casadi_real** res, casadi_int* iw,
 
 /* ldl_solve_7:(i0[21],i1[7],i2[7])->(o0[7]) */
 static int casadi_f4(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14, a15, a16, a17, a18, a19, a20, a21, a22, a23;
   casadi_real a24, a25, a26, a27, a28, a29;
@@ -1440,7 +1440,7 @@ static int casadi_f4(const casadi_real** arg, casadi_real** res, casadi_int* iw,
 
 /* planar7_f:(x[28],p[50])->(f[28]) */
 static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i;
   casadi_real **res1=res+1, *rr, *w01=w+75, *w03=w+132, *w04=w+181, *w05=w+202, *w06=w+209, *w07=w+216, w08, w09, w10, w11;
   casadi_real w12, w13, w14, *w16=w+237;
@@ -1666,7 +1666,7 @@ CASADI_SYMBOL_EXPORT int planar7_f_work_bytes(casadi_int *sz_arg, casadi_int* sz
 
 /* planar7_g:(x[28],p[50])->(g[28x7]) */
 static int casadi_f5(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a0, a1;
   a0=0.;
   if (res[0]!=0) res[0][0]=a0;
@@ -1971,7 +1971,7 @@ CASADI_SYMBOL_EXPORT int planar7_g_work_bytes(casadi_int *sz_arg, casadi_int* sz
 
 /* planar7_bracket_column:(q[7],dq[7],L[21],d[7],c[7],ba,p[50])->(x_j[7],r_j[7]) */
 static int casadi_f8(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a000, a001, a002, a003, a004, a005, a006, a007, a008, a009, a010, a011;
   casadi_real a012, a013, a014, a015, a016, a017, a018, a019, a020, a021, a022, a023;
   casadi_real a024, a025, a026, a027, a028, a029, a030, a031, a032, a033, a034, a035;
@@ -2853,7 +2853,7 @@ static int casadi_f8(const casadi_real** arg, casadi_real** res, casadi_int* iw,
 
 /* map7_planar7_bracket_column:(q[7x7],dq[7x7],L[21x7],d[7x7],c[7x7],ba[1x7],p[50x7])->(x_j[7x7],r_j[7x7]) */
 static int casadi_f7(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i;
   casadi_real* *res1;
   const casadi_real* *arg1;
@@ -2878,7 +2878,7 @@ static int casadi_f7(const casadi_real** arg, casadi_real** res, casadi_int* iw,
 
 /* planar7_ad:(x[28],p[50])->(ad[28x28,490nz]) */
 static int casadi_f6(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i, j;
   casadi_real **res1=res+1, *rr, *w00=w+118, *w01=w+167, *w02=w+216, w04, w05, w06, w07, w08, w09, w10;
   casadi_real *w11=w+322, *w12=w+329, *w13=w+336, *w14=w+343, *w15=w+350, *w16=w+504, *w17=w+658, *w18=w+665, *w19=w+672, *w20=w+679, *w21=w+791, *w23=w+931;
@@ -3222,7 +3222,7 @@ CASADI_SYMBOL_EXPORT int planar7_ad_work_bytes(casadi_int *sz_arg, casadi_int* s
 
 /* planar7_accel_kernel:(q[7],dq[7],s[7],ds[7],p[50])->(y3[7],y4[7],w[7]) */
 static int casadi_f10(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a000, a001, a002, a003, a004, a005, a006, a007, a008, a009, a010, a011;
   casadi_real a012, a013, a014, a015, a016, a017, a018, a019, a020, a021, a022, a023;
   casadi_real a024, a025, a026, a027, a028, a029, a030, a031, a032, a033, a034, a035;
@@ -5432,7 +5432,7 @@ static int casadi_f10(const casadi_real** arg, casadi_real** res, casadi_int* iw
 
 /* planar7_T:(x[28],p[50])->(T[28]) */
 static int casadi_f9(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i;
   casadi_real **res1=res+1, *rr, w04, w05, w06, w07, w08, w09, w10, *w11=w+370, *w12=w+377, *w13=w+384;
   casadi_real *w14=w+391;
@@ -5590,7 +5590,7 @@ CASADI_SYMBOL_EXPORT int planar7_T_work_bytes(casadi_int *sz_arg, casadi_int* sz
 
 /* planar7_alpha:(x[28],p[50])->(alpha[7]) */
 static int casadi_f11(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i;
   casadi_real **res1=res+1, *rr, w01, w02, w03, w04, w05, w06, w07, *w08=w+328, *w09=w+335, *w10=w+342;
   casadi_real *w12=w+377, *w14=w+391, *w15=w+398, *w17=w+412, *w18=w+419, *w19=w+426;
@@ -5808,7 +5808,7 @@ CASADI_SYMBOL_EXPORT int planar7_alpha_work_bytes(casadi_int *sz_arg, casadi_int
 
 /* planar7_beta:(x[28],p[50])->(beta[7x7]) */
 static int casadi_f12(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i;
   casadi_real **res1=res+1, *rr, w01, w02, w03, w04, w05, w06, w07, *w08=w+104, *w09=w+111, *w10=w+118;
   casadi_real *w12=w+195;
@@ -5970,7 +5970,7 @@ CASADI_SYMBOL_EXPORT int planar7_beta_work_bytes(casadi_int *sz_arg, casadi_int*
 
 /* planar7_potential:(i0[7],i1[50])->(o0) */
 static int casadi_f14(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14, a15;
   a00=arg[1]? arg[1][49] : 0;
@@ -6059,7 +6059,7 @@ static int casadi_f14(const casadi_real** arg, casadi_real** res, casadi_int* iw
 
 /* planar7_energy:(x[28],p[50])->(energy) */
 static int casadi_f13(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i, j, k;
   casadi_real **res1=res+1, *rr, *w01=w+75, *w02=w+82, *w04=w+139, w05, w06, w07, w08, w09, w10, w11;
   casadi_real w12, *w13=w+196;
@@ -6339,7 +6339,7 @@ CASADI_SYMBOL_EXPORT int planar7_inertia_work_bytes(casadi_int *sz_arg, casadi_i
 
 /* planar7_control_core:(x[28],p_hat[50])->(y_hat[28],alpha[7],beta[7x7]) */
 static int casadi_f15(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i;
   casadi_real **res1=res+3, *rr, *w01=w+299, *w02=w+306, w04, w05, w06, w07, w08, w09, w10, *w11=w+370;
   casadi_real *w12=w+377, *w13=w+384, *w15=w+398, *w16=w+405, *w17=w+412, *w18=w+419, *w19=w+426;
@@ -6576,7 +6576,7 @@ CASADI_SYMBOL_EXPORT int planar7_control_core_work_bytes(casadi_int *sz_arg, cas
 
 /* planar7_control_smc:(x[28],z[0],r[35],p[50],gains[83])->(u[7],s[7],z_dot[0],u_cmd[7],y_hat[28]) */
 static int casadi_f16(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i, j, k;
   casadi_real **res1=res+5, *rr, w01, *w04=w+637, *w05=w+665, *w06=w+672, *w07=w+721, w08, *w09=w+729, *w11=w+813, *w12=w+820, *w13=w+827;
   casadi_real *w14=w+834, *w15=w+841, *w16=w+848, w17;
@@ -6846,7 +6846,7 @@ CASADI_SYMBOL_EXPORT int planar7_control_smc_work_bytes(casadi_int *sz_arg, casa
 
 /* planar7_control_ismc:(x[28],z[7],r[35],p[50],gains[85])->(u[7],s[7],z_dot[7],u_cmd[7],y_hat[28]) */
 static int casadi_f17(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i, j, k;
   casadi_real **res1=res+5, *rr, w01, *w04=w+639, *w05=w+667, *w06=w+674, *w07=w+723, w08, *w09=w+731, *w11=w+815, *w12=w+822, *w13=w+829;
   casadi_real *w14=w+836, *w15=w+843, *w16=w+850, *w17=w+857, w18;
@@ -7168,7 +7168,7 @@ CASADI_SYMBOL_EXPORT int planar7_control_ismc_work_bytes(casadi_int *sz_arg, cas
 
 /* planar7_control_ismc_zdot:(x[28],z[7],r[35],p[50],gains[85],u_cmd[7],u[7])->(z_dot[7]) */
 static int casadi_f18(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a0, a1, a2, a3, a4, a5, a6;
   a0=arg[4]? arg[4][33] : 0;
   a1=arg[4]? arg[4][34] : 0;
@@ -7395,7 +7395,7 @@ CASADI_SYMBOL_EXPORT int planar7_control_ismc_zdot_work_bytes(casadi_int *sz_arg
 
 /* planar7_control_fl:(x[28],z[0],r[35],p[50],gains[68])->(u[7],s[7],z_dot[0],u_cmd[7],y_hat[28]) */
 static int casadi_f19(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i, j, k;
   casadi_real **res1=res+5, *rr, w01, *w04=w+622, *w05=w+650, *w06=w+657, *w07=w+706, w08, *w09=w+714, *w11=w+798, *w12=w+805, *w13=w+812;
   casadi_real *w14=w+819, *w15=w+826, *w16=w+833;
@@ -7635,7 +7635,7 @@ CASADI_SYMBOL_EXPORT int planar7_control_fl_work_bytes(casadi_int *sz_arg, casad
 
 /* planar7_control_adaptive:(x[28],z[42],r[35],p[50],gains[100])->(u[7],s[7],z_dot[42],u_cmd[7],y_hat[28]) */
 static int casadi_f20(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i, j, k;
   casadi_real **res1=res+5, *rr, w01, w04, w05, w06, w07, w08, w09, w10, w11, w12;
   casadi_real w13, w14, w15, w16, w17, w18, w19, w20, w21, w22, w23, w24;
@@ -8269,7 +8269,7 @@ CASADI_SYMBOL_EXPORT int planar7_control_adaptive_work_bytes(casadi_int *sz_arg,
 
 /* planar7_control_adaptive_zdot:(x[28],z[42],r[35],p[50],gains[100],u_cmd[7],u[7])->(z_dot[42]) */
 static int casadi_f21(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14, a15, a16, a17, a18, a19, a20, a21, a22, a23;
   casadi_real a24, a25, a26, a27, a28, a29, a30, a31, a32, a33, a34, a35;
@@ -8837,7 +8837,7 @@ CASADI_SYMBOL_EXPORT int planar7_control_adaptive_zdot_work_bytes(casadi_int *sz
 
 /* planar7_beta_tau:(m[35],p[50])->(beta_tau[7x7]) */
 static int casadi_f23(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i;
   casadi_real **res1=res+1, *rr, *w2=w+286, *w3=w+307, *w5=w+385;
   const casadi_real **arg1=arg+2, *cs, *wr0, *wr1, *wr4;
@@ -8865,7 +8865,7 @@ static int casadi_f23(const casadi_real** arg, casadi_real** res, casadi_int* iw
 
 /* planar7_control_core_tau:(m[35],p_hat[50])->(y_hat[28],alpha[7],beta[7x7]) */
 static int casadi_f22(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i;
   casadi_real **res1=res+3, *rr, *w03=w+483, *w06=w+547, *w07=w+554, *w08=w+561, w09, w10, w11, w12, w13, w14;
   casadi_real w15, *w16=w+575;
@@ -9090,7 +9090,7 @@ CASADI_SYMBOL_EXPORT int planar7_control_core_tau_work_bytes(casadi_int *sz_arg,
 
 /* planar7_control_smc_tau:(m[35],z[0],r[35],p[50],gains[83])->(u[7],s[7],z_dot[0],u_cmd[7],y_hat[28]) */
 static int casadi_f24(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i, j, k;
   casadi_real **res1=res+5, *rr, w01, *w04=w+793, *w05=w+821, *w06=w+828, *w07=w+877, w08, *w09=w+885, *w10=w+934, *w11=w+941, *w12=w+948;
   casadi_real *w13=w+955, *w14=w+962, *w15=w+969, w16;
@@ -9360,7 +9360,7 @@ CASADI_SYMBOL_EXPORT int planar7_control_smc_tau_work_bytes(casadi_int *sz_arg, 
 
 /* planar7_control_ismc_tau:(m[35],z[7],r[35],p[50],gains[85])->(u[7],s[7],z_dot[7],u_cmd[7],y_hat[28]) */
 static int casadi_f25(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i, j, k;
   casadi_real **res1=res+5, *rr, w01, *w04=w+795, *w05=w+823, *w06=w+830, *w07=w+879, w08, *w09=w+887, *w11=w+971, *w12=w+978, *w13=w+985;
   casadi_real *w14=w+992, *w15=w+999, *w16=w+1006, *w17=w+1013, w18;
@@ -9682,7 +9682,7 @@ CASADI_SYMBOL_EXPORT int planar7_control_ismc_tau_work_bytes(casadi_int *sz_arg,
 
 /* planar7_control_ismc_tau_zdot:(m[35],z[7],r[35],p[50],gains[85],u_cmd[7],u[7])->(z_dot[7]) */
 static int casadi_f26(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a0, a1, a2, a3, a4, a5, a6;
   a0=arg[4]? arg[4][33] : 0;
   a1=arg[4]? arg[4][34] : 0;
@@ -9909,7 +9909,7 @@ CASADI_SYMBOL_EXPORT int planar7_control_ismc_tau_zdot_work_bytes(casadi_int *sz
 
 /* planar7_control_fl_tau:(m[35],z[0],r[35],p[50],gains[68])->(u[7],s[7],z_dot[0],u_cmd[7],y_hat[28]) */
 static int casadi_f27(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i, j, k;
   casadi_real **res1=res+5, *rr, w01, *w04=w+778, *w05=w+806, *w06=w+813, *w07=w+862, w08, *w09=w+870, *w10=w+919, *w11=w+926, *w12=w+933;
   casadi_real *w13=w+940, *w14=w+947, *w15=w+954;
@@ -10149,7 +10149,7 @@ CASADI_SYMBOL_EXPORT int planar7_control_fl_tau_work_bytes(casadi_int *sz_arg, c
 
 /* planar7_control_pdg:(x[28],z[0],r[35],p[50],gains[22])->(u[7],s[7],z_dot[0],u_cmd[7],y_hat[28]) */
 static int casadi_f28(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14, a15, a16, a17, a18, a19;
   a00=arg[4]? arg[4][21] : 0;
@@ -10542,7 +10542,7 @@ CASADI_SYMBOL_EXPORT int planar7_control_pdg_work_bytes(casadi_int *sz_arg, casa
 
 /* planar7_T_tau:(m[35],p[50])->(T_tau[28]) */
 static int casadi_f29(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real **res1=res+1, *w6=w+384, *w7=w+391;
   const casadi_real **arg1=arg+2, *wr0, *wr1, *wr2, *wr3, *wr4, *wr5;
   /* #0: @0 = input[0][0] */
@@ -10667,7 +10667,7 @@ CASADI_SYMBOL_EXPORT int planar7_T_tau_work_bytes(casadi_int *sz_arg, casadi_int
 
 /* planar7_alpha_tau:(m[35],p[50])->(alpha_tau[7]) */
 static int casadi_f30(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)iw; (void)w; (void)mem;
+  (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i;
   casadi_real **res1=res+1, *rr, w03, w04, w05, w06, w07, w08, w09, *w10=w+370, *w11=w+377, *w15=w+405;
   casadi_real *w16=w+412;
