@@ -1,8 +1,8 @@
 """``python -m bench.derive_cost``: measure ``python -m derive`` on synthetic chains, fit the cost model.
 
 For each size n it writes a synthetic URDF chain (:mod:`derive.synthetic`) or
-picks the built-in ``planar<n>``, runs ``/usr/bin/time -v python -m derive
-... --out TMP --no-cost-limit`` in a fresh process, and records the
+picks the built-in ``planar<n>``, runs ``python -m derive ... --out TMP --no-cost-limit``
+in a fresh process (:func:`bench.scaling.run_measured`), and records the
 wall-clock seconds, the peak resident memory and the operation count (all
 generated functions, from ``--timings``). It then fits ``value = c n^e`` by
 least squares on log-log axes per quantity and prints the measurements and
@@ -21,11 +21,8 @@ from __future__ import annotations
 
 import argparse
 import json
-import re
-import subprocess
 import sys
 import tempfile
-import time
 from pathlib import Path
 from typing import Dict, List
 
@@ -35,8 +32,7 @@ sys.path.insert(0, str(REPO))
 
 from derive.cost import CALIBRATION, estimate, fit_power_law  # noqa: E402
 from derive.synthetic import write_synthetic_chain  # noqa: E402
-
-_RSS = re.compile(r"Maximum resident set size \(kbytes\): (\d+)")
+from bench.scaling import run_measured  # noqa: E402
 
 
 def measure(n: int, form: str, repo: Path, python: str, guard_flag: bool) -> Dict[str, float]:
@@ -49,16 +45,13 @@ def measure(n: int, form: str, repo: Path, python: str, guard_flag: bool) -> Dic
         else:
             what = ["--models", f"planar{n}"]
         timings = tmp / "timings.json"
-        cmd = ["/usr/bin/time", "-v", python, "-m", "derive", *what, "--out", str(tmp / "out"),
+        cmd = [python, "-m", "derive", *what, "--out", str(tmp / "out"),
                "--timings", str(timings)] + (["--no-cost-limit"] if guard_flag else [])
-        t0 = time.perf_counter()
-        proc = subprocess.run(cmd, cwd=repo, capture_output=True, text=True)
-        seconds = time.perf_counter() - t0
-        if proc.returncode != 0:
-            raise RuntimeError(f"derive of n = {n} ({form}) failed:\n{proc.stdout}\n{proc.stderr}")
-        rss = int(_RSS.search(proc.stderr).group(1)) * 1024
+        run = run_measured(cmd, repo, None)
+        if run["returncode"] != 0:
+            raise RuntimeError(f"derive of n = {n} ({form}) failed:\n{run['stdout']}\n{run['stderr']}")
         ops = sum(m["operations"] for m in json.loads(timings.read_text())["models"].values())
-    return {"n": n, "form": form, "seconds": seconds, "peak_bytes": rss, "operations": ops}
+    return {"n": n, "form": form, "seconds": run["seconds"], "peak_bytes": run["peak_bytes"], "operations": ops}
 
 
 def main(argv: List[str] = None) -> int:

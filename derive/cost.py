@@ -39,7 +39,8 @@ FORMS = ("planar", "spatial")
 #: (``base_bytes``, ``base_seconds``: ``python -m derive --models planar1``), fitted by
 #: :func:`fit_power_law` to ``runs``. ``spatial``: synthetic URDF chains (:mod:`derive.synthetic`) derived
 #: with ``--model-file``; ``planar``: the built-in ``planar<n>``. Peak memory is the process's maximum
-#: resident set size (``/usr/bin/time -v``), seconds the wall clock of the whole command.
+#: resident set size (``ru_maxrss``, the number ``/usr/bin/time -v`` prints; ``bench/peak_rss.py``), seconds the
+#: wall clock of the whole command.
 #: Spatial: measured 2026-12-02 on an idle project machine (2 cores, load 0.1) by
 #: ``python -m bench.derive_cost --spatial 14 21 30 45 60 --planar --keep-base``, after the Taylor
 #: recursion and the closed-form brackets, at the sizes where a guard matters (the growth steepens with

@@ -85,10 +85,10 @@ def pytest_collection_modifyitems(config, items):
     the rest keeps its order.
     """
     if "exhaustive" not in (config.getoption("markexpr") or ""):
-        kept = [item for item in items if item.get_closest_marker("exhaustive") is None]
-        if len(kept) < len(items):
-            config.hook.pytest_deselected(items=[item for item in items if item not in kept])
-            items[:] = kept
+        left_out = [item for item in items if item.get_closest_marker("exhaustive") is not None]
+        if left_out:
+            config.hook.pytest_deselected(items=left_out)
+            items[:] = [item for item in items if item.get_closest_marker("exhaustive") is None]
     if not os.environ.get("PYTEST_XDIST_WORKER"):
         return
     rank = {path: i for i, path in enumerate(HEAVY_FIRST)}
