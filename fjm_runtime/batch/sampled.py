@@ -57,6 +57,7 @@ class GainInput:
         self.n_law = int(controller.n_states)
         self.n_gains = int(np.asarray(controller.gains).size)
         self.n_states = self.n_law + self.n_gains
+        self.model = controller.model
         self.layout = {b["name"]: (int(b["offset"]), int(b["size"]))
                        for b in controller.model.manifest["controls"][controller.law_kind]["gains"]}
 
@@ -84,7 +85,7 @@ class AccLayout:
     """Where things sit in the batch accumulator ``acc = [w | sums | p]``.
 
     ``sums = [e2_half_j (n); e2_all; e2_half_all; peak_j (n); limit_count_j (n); max_u; last_out;
-    tv; u_prev (n); first_bad; ring (width n); jit_sum (n); jit_sq (n)]``.
+    tv; u_prev (n); first_bad; ring (width n); jit_sum (n); jit_sq (n); rate_count_j (n)]``.
     """
 
     nw: int
@@ -96,7 +97,7 @@ class AccLayout:
         n, o, out = self.n, self.nw, {}
         for name, size in (("e2_half_j", n), ("e2_all", 1), ("e2_half_all", 1), ("peak_j", n),
                            ("limit_j", n), ("max_u", 1), ("last_out", 1), ("tv", 1), ("u_prev", n),
-                           ("first_bad", 1), ("ring", self.width * n), ("jit_sum", n), ("jit_sq", n)):
+                           ("first_bad", 1), ("ring", self.width * n), ("jit_sum", n), ("jit_sq", n), ("rate_j", n)):
             out[name] = (o, size)
             o += size
         out["p"] = (o, self.n_par)
@@ -160,6 +161,9 @@ def sampled_metric_step(model, ctrl, L: StepLayout, max_state: float, width: int
     u_max, limit = _limits(ctrl, z, n)
     at_limit = limit * (absu >= u_max * (1.0 - 1e-9))
     outside = ca.mmax(ca.fabs(s) - _delta(ctrl, z, n)) > 0
+    # at the rate limit: the applied torque moved by the whole allowed step (sample 0 has no u_prev)
+    at_rate = (ca.fabs(u - g["u_prev"]) >= ca.DM(list(L.rate_step)) * (1.0 - 1e-9)) * (1 - first) \
+        if L.rate_step else ca.DM.zeros(n)
     ring = ca.if_else(applied, ca.vertcat(g["ring"][n:], u), g["ring"]) if width > 1 else u
     mean = sum(ring[i * n:(i + 1) * n] for i in range(width)) / width
     h = (width - 1) // 2
@@ -180,5 +184,6 @@ def sampled_metric_step(model, ctrl, L: StepLayout, max_state: float, width: int
         ca.if_else(bad_now, k + 1, g["first_bad"]),
         ring if width > 1 else g["ring"],
         g["jit_sum"] + jit_full * dev, g["jit_sq"] + jit_full * dev ** 2,
+        g["rate_j"] + applied * at_rate,
         p)
     return ca.Function("fjm_sampled_step", [acc, r, noise, fl], [ca.cse(acc_next)]), A

@@ -14,7 +14,7 @@ from ..ccache import DEFAULT_FLAGS
 from ..control.laws import SlidingModeController
 from ..sim.metrics import metrics_from_sums
 from ..sim.sample_step import check_loop_settings, initial_measurement, initial_step_state, make_layout
-from ..sim.sensor import SIGNALS, SensorModel, measurement_blocks
+from ..sim.sensor import SensorModel, noise_slots
 from ..sim.substeps import resolve_substeps
 from ..validation import FjmValueError
 from . import simd
@@ -24,7 +24,7 @@ from .scalar import sampled_scalar_runner
 __all__ = ["JOINT_METRICS", "batch_seeds", "build_sampled_runner", "run_sampled_batch"]
 
 #: Per-joint figures of :attr:`BatchResult.joint_metrics` (the ``fjm simulate --json`` names).
-JOINT_METRICS = ("rms_second_half", "peak_torque", "time_at_limit", "torque_jitter")
+JOINT_METRICS = ("rms_second_half", "peak_torque", "time_at_limit", "torque_jitter", "time_at_rate_limit")
 
 _RUNNERS: dict = {}
 
@@ -109,14 +109,14 @@ def _flags(N: int, h: int, t) -> np.ndarray:
     return np.column_stack([t >= 0.5 * t[-1], k, k == 0, k == N, k < N, (k < N) & (k >= 2 * h)]).astype(float)
 
 
-def _initial_rows(model, ctrl, controller, L, A, P, G, x0, R0):
+def _initial_rows(model, ctrl, controller, L, A, P, G, x0, R0, sensor, seeds):
     rows = []
     for i in range(P.shape[0]):
         m0 = initial_measurement(model, L, x0, P[i])
         z = np.asarray(controller.initial_state(0.0, m0, R0.reshape(5, L.n)), dtype=float)
         if G is not None:
             z = np.concatenate([z, G[i]])
-        rows.append(A.initial(initial_step_state(model, L, x0, z, P[i]), P[i]))
+        rows.append(A.initial(initial_step_state(model, L, x0, z, P[i], seed=int(seeds[i]), sensor=sensor), P[i]))
     return np.vstack(rows)
 
 
@@ -138,12 +138,10 @@ def run_sampled_batch(model, controller, reference, P, *, duration, dt, substeps
     h = jitter_half_width(float(dt))
     runner, reason, step, A = build_sampled_runner(model, ctrl, L, max_state, 2 * h + 1, simd, parallel,
                                                    want_simd_runner)
-    ACC0 = _initial_rows(model, ctrl, controller, L, A, P, G, x0, R[0])
-    blocks = measurement_blocks(L.sensing)
-    channels = np.array([SIGNALS.index(b) * n + i for b in blocks for i in range(n)], dtype=np.int64)
     sd = batch_seeds(sensor, B, seeds)
-    acc, used = runner.run(ACC0, R, _flags(N, h, t), sensor.levels(L.sensing, n), channels, sd,
-                           threads if parallel else 1)
+    ACC0 = _initial_rows(model, ctrl, controller, L, A, P, G, x0, R[0], sensor, sd)
+    channels, levels = noise_slots(sensor, L.sensing, n)
+    acc, used = runner.run(ACC0, R, _flags(N, h, t), levels, channels, sd, threads if parallel else 1)
     info = {"path": runner.path_name, "reason": reason, "threads": used, "lanes": runner.lanes,
             "openmp": runner.openmp, "instructions": int(step.n_instructions()), "library": str(runner.path),
             "substeps": subs, "loop": "sampled", "sensing": L.sensing, "delay_samples": int(delay),
@@ -175,7 +173,8 @@ def _metrics(A, acc, L, t, q_end, h):
     else:
         jitter = np.full((acc.shape[0], n), np.nan)
     joint = {"rms_second_half": np.sqrt(get("e2_half_j") / n_half), "peak_torque": get("peak_j").copy(),
-             "time_at_limit": get("limit_j") / N, "torque_jitter": jitter}
+             "time_at_limit": get("limit_j") / N, "torque_jitter": jitter,
+             "time_at_rate_limit": get("rate_j") / N}
     first_bad = get("first_bad")[:, 0]
     diverged = first_bad >= 0
     metrics = {k: np.array(v, dtype=float) for k, v in metrics.items()}

@@ -17,8 +17,8 @@ from ..analysis.lemma1 import (FALLBACK_SWITCHING_GAIN, default_error_bounds, de
                                paper_beta_hat, paper_bound_applies)
 from ..control.factory import CONTROLLER_KINDS, DEFAULT_LAYER_RATE, default_delta, make_controller
 from ..control.references import REFERENCE_KINDS, make_reference
-from ..sim.metrics import peak_torque, rms_second_half, time_at_limit, torque_jitter
-from ..sim.sensor import SensorModel
+from ..sim.metrics import peak_torque, rms_second_half, time_at_limit, time_at_rate_limit, torque_jitter
+from ..sim.sensor import PRESETS, SensorModel, sensor_from_spec
 from ..sim.simulate import SimulationDivergedError, simulate, stderr_progress
 from ..validation import FjmValueError
 from .common import check_output_file, finite_or_note, parse_assignments
@@ -77,8 +77,9 @@ def _add_sampled_data_flags(sim) -> None:
                      help="what the controller measures: the state, or q, dq, tau_J, dtau_J, dq_m (default state)")
     sim.add_argument("--delay-samples", type=int, default=0, help="computation delay in samples (default 0)")
     sim.add_argument("--predict", action="store_true", help="predict the delayed measurement with the nominal model")
-    sim.add_argument("--noise", default="none",
-                     help="sensor model: none, panda, or a JSON file of SensorModel fields (default none)")
+    sim.add_argument("--noise", default="ideal",
+                     help="sensor model: a preset (ideal, panda_white, franka_like) or a TOML sensor file "
+                          "(docs/simulation.md; default ideal)")
     sim.add_argument("--seed", type=int, default=0, help="noise seed (default 0)")
     sim.add_argument("--k-scale", default=None, metavar="A[,B,..]",
                      help="TRUE stiffness = nominal x A (one value, or one per joint)")
@@ -133,14 +134,14 @@ def _true_params(m, args, nominal) -> Dict[str, float]:
 
 
 def _sensor(args) -> SensorModel:
-    """``--noise none|panda|FILE`` with ``--seed``."""
-    if args.noise == "none":
-        return SensorModel.ideal(seed=args.seed)
-    if args.noise == "panda":
-        return SensorModel.panda(seed=args.seed)
+    """``--noise PRESET|FILE.toml`` (presets: ideal, panda_white, franka_like; ``none``, ``panda`` the former
+    names) with ``--seed``; a ``.json`` file of SensorModel fields is still read."""
     path = Path(args.noise)
-    if path.suffix != ".json" or not path.is_file():
-        raise FjmValueError(f"--noise {args.noise!r}: expected none, panda or an existing .json file")
+    if path.suffix != ".json":
+        return sensor_from_spec(args.noise, seed=args.seed, what="--noise")
+    if not path.is_file():
+        raise FjmValueError(f"--noise {args.noise!r}: expected a preset among {sorted(PRESETS)}, a .toml sensor "
+                            "file or an existing .json file")
     try:
         fields = json.loads(path.read_text())
     except ValueError as exc:
@@ -148,11 +149,7 @@ def _sensor(args) -> SensorModel:
     if not isinstance(fields, dict):
         raise FjmValueError(f"--noise {path}: expected a JSON object of SensorModel fields")
     fields.setdefault("seed", args.seed)
-    try:
-        return SensorModel(**fields)
-    except TypeError as exc:
-        raise FjmValueError(f"--noise {path}: {exc} (fields: q, dq, q_m, dq_m, tau_J, dtau_J, q_quant, "
-                            "q_m_quant, dtau_mode, dtau_cutoff, seed)") from None
+    return SensorModel.from_dict(fields, where=f"--noise {path}")
 
 
 def _gains_file(args) -> dict:
@@ -226,13 +223,13 @@ def _per_joint(values) -> list:
 def _script_report(res, settings: dict, diverged: Optional[SimulationDivergedError]) -> dict:
     """The ``--json`` object: diverged, per-joint metrics (null plus a reason), the settings."""
     out: Dict[str, object] = {"diverged": diverged is not None}
-    names = ("rms_second_half", "peak_torque", "time_at_limit", "torque_jitter")
+    names = ("rms_second_half", "peak_torque", "time_at_limit", "torque_jitter", "time_at_rate_limit")
     if diverged is not None:
         out.update({k: None for k in names})
         out["reason"] = str(diverged)
         out["divergence_time"] = float(diverged.t)
     else:
-        fns = (rms_second_half, peak_torque, time_at_limit, torque_jitter)
+        fns = (rms_second_half, peak_torque, time_at_limit, torque_jitter, time_at_rate_limit)
         for k, fn in zip(names, fns):
             out[k] = _per_joint(fn(res))
             if any(v is None for v in out[k]):

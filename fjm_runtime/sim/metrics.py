@@ -120,6 +120,23 @@ def time_at_limit(result, u_max=None) -> np.ndarray:
     return np.mean(u >= np.broadcast_to(limit, (u.shape[1],)) * (1.0 - 1e-9), axis=0)
 
 
+def time_at_rate_limit(result) -> np.ndarray:
+    """Fraction of the applied samples whose torque moved by the whole allowed step, per joint, shape (n,).
+
+    Counts ``k = 1..N-1`` with ``|u_k - u_{k-1}| >= R T (1 - 1e-9)`` over ``N`` applied samples
+    (the batch engine counts the same), ``R`` from ``result.settings['torque_rate_limit']``;
+    zeros without a rate limit.
+    """
+    u = result.u[:-1]
+    rate = (getattr(result, "settings", None) or {}).get("torque_rate_limit")
+    if rate is None or u.shape[0] < 2:
+        return np.zeros(u.shape[1])
+    T = float(result.t[1] - result.t[0])
+    r = np.array([np.inf if v is None else v for v in np.atleast_1d(np.asarray(rate, dtype=object))], dtype=float)
+    step = np.broadcast_to(r * T, (u.shape[1],))
+    return np.sum(np.abs(np.diff(u, axis=0)) >= step * (1.0 - 1e-9), axis=0) / u.shape[0]
+
+
 def torque_jitter(result, window: float = 0.02) -> np.ndarray:
     """Standard deviation of ``u`` minus its centred moving mean, per joint, N m, shape (n,).
 

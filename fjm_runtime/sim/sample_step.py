@@ -5,20 +5,26 @@ At sample ``k`` (``t_k = k T``), from the step state ``w_k`` (layout :class:`Ste
     m_true = x_k                          (state sensing, 4n)
            = [q; dq; K (q_m - q); K (dq_m - dq); dq_m]   (torque sensing, 5n, K TRUE)
     m_k    = m_true + noise_k             (noise generated outside, sim/sensor.py)
-             dtau_J 'filtered': d_k = d_{k-1} + a ((tau_k - tau_{k-1}) / T - d_{k-1}), a = 1 - exp(-w_c T)
              encoders: q (and q_m) -> step * floor(value / step + 0.5)
+             tau_J + the run's constant offset (drawn from its seed, held in w)
+             velocities 'differentiated': dq_k = v_{k-1} + a_v ((q_k - q_{k-1}) / T - v_{k-1}) of the
+             MEASURED angle (the same for dq_m from the measured motor angle), a_v = 1 - exp(-w_v T)
+             dtau_J 'filtered': d_k = d_{k-1} + a ((tau_k - tau_{k-1}) / T - d_{k-1}), a = 1 - exp(-w_c T)
     m_used = m_{k-d}                      (ring buffer of the d last measurements; d = 0: m_k)
              predict: x_hat from m_{k-d} (torque sensing: q_m = q + K_nom^-1 tau_J), integrated
-             over d samples of the NOMINAL model under u_{k-d} .. u_{k-1}, m_used = its measurement
-    u_k, s_k, y_hat_k = law(m_used, z_k, r_k)            (NOMINAL parameters)
-    z_{k+1} = z_k + T z_dot(m_used, z_k, r_k, u_k)        (a digital controller: once per sample)
+             over d samples of the CONTROLLER'S NOMINAL model (its own f, g and p_nom, whatever
+             the plant is) under u_{k-d} .. u_{k-1}, m_used = its measurement
+    u_law, s_k, y_hat_k = law(m_used, z_k, r_k)          (NOMINAL parameters; saturation and
+                                                          anti-windup inside the law)
+    u_k    = clip(u_law, u_{k-1} - R T, u_{k-1} + R T)   (the torque-rate limit R, when finite)
+    z_{k+1} = z_k + T z_dot(m_used, z_k, r_k, u_law)      (a digital controller: once per sample)
     x_{k+1} = substeps RK4 steps of T / substeps of x' = f(x; p) + g(x; p) u_k   (TRUE p, u held)
 
 The CasADi form (:func:`casadi_sample_step`) is ``fjm_sample_step(w, r, noise, p) -> (w_next, aux)``
 with plain vectors: ``w`` (nw), ``r`` (5n, the reference rows at ``t_k`` stacked), ``noise`` (nm),
-``p`` (n_params, TRUE), ``aux = [u; s; y_hat]`` (6n). A batch engine folds it over samples.
-The numpy form (:func:`python_sample_step`) does the same arithmetic through the model's
-``f``/``g`` and the controller's ``evaluate``/``state_derivative``.
+``p`` (n_params, TRUE), ``aux = [u; s; y_hat]`` (6n, ``u`` the APPLIED torque). A batch engine
+folds it over samples. The numpy form (:func:`python_sample_step`) does the same arithmetic
+through the models' ``f``/``g`` and the controller's ``evaluate``/``state_derivative``.
 """
 from __future__ import annotations
 
@@ -28,12 +34,15 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..validation import FjmValueError
-from .sensor import SensorModel
+from .sensor import SensorModel, offset_normals
 from .step import casadi_functions
 
-__all__ = ["StepLayout", "casadi_sample_step", "check_loop_settings", "initial_measurement", "initial_step_state", "make_layout",
-           "python_sample_step", "sample_step_function",
+__all__ = ["StepLayout", "casadi_sample_step", "check_loop_settings", "controller_model", "initial_measurement",
+           "initial_step_state", "make_layout", "python_sample_step", "sample_step_function",
            "stiffness_indices"]
+
+#: The rate limit's stand-in for "none" in the arithmetic (finite, so C and SIMD code see no inf).
+_NO_LIMIT = 1e300
 
 
 def stiffness_indices(model):
@@ -48,9 +57,18 @@ def stiffness_indices(model):
                             f"parameters {groups[0]} (found {names})") from None
 
 
+def controller_model(controller, plant):
+    """The model the controller was built on (its predictor's model); ``plant`` if it names none."""
+    for obj in (controller, getattr(controller, "base", None)):
+        m = getattr(obj, "model", None)
+        if m is not None:
+            return m
+    return plant
+
+
 @dataclass(frozen=True)
 class StepLayout:
-    """Sizes and settings of the sample step; ``w = [x | z | m_buf | u_buf | filt]``.
+    """Sizes and settings of the sample step; ``w = [x | z | m_buf | u_buf | filt | venc | off | u_last]``.
 
     Attributes
     ----------
@@ -68,11 +86,22 @@ class StepLayout:
         Control period, s.
     substeps : int
     a_filter : float
-        ``1 - exp(-cutoff T)``.
+        ``1 - exp(-dtau_cutoff T)``.
     q_quant, q_m_quant : float
     idx_K : tuple of int
-        Where ``K_i`` sit in the parameter vector.
+        Where ``K_i`` sit in the PLANT's parameter vector (the torque sensor measures the true spring).
     K_nom : tuple of float
+        The controller's nominal ``K_i`` (the predictor's ``q_m = q + K_nom^-1 tau_J``).
+    differentiated : bool
+        Velocities as filtered differences of the measured angles; ``venc = [q_prev; dq; q_m_prev;
+        dq_m]`` (4n), else empty.
+    a_velocity : float
+        ``1 - exp(-velocity_cutoff T)``.
+    offset : bool
+        A constant tau_J offset per run (torque sensing); ``off`` (n), else empty.
+    rate_step : tuple of float
+        The largest torque change per sample per joint, N m (``rate limit x T``); empty: no limit,
+        else ``u_last`` (n) holds the last applied torque.
     """
 
     n: int
@@ -90,15 +119,32 @@ class StepLayout:
     q_m_quant: float
     idx_K: tuple
     K_nom: tuple
+    differentiated: bool = False
+    a_velocity: float = 0.0
+    offset: bool = False
+    rate_step: tuple = ()
+
+    @property
+    def n_venc(self) -> int:
+        return 4 * self.n if self.differentiated else 0
 
     @property
     def nw(self) -> int:
-        return self.nx + self.nz + self.delay * (self.nm + self.n) + (2 * self.n if self.filtered else 0)
+        return (self.nx + self.nz + self.delay * (self.nm + self.n) + (2 * self.n if self.filtered else 0)
+                + self.n_venc + (self.n if self.offset else 0) + (self.n if self.rate_step else 0))
 
     def slices(self):
-        """``(x, z, m_buf, u_buf, filt)`` slices of ``w``."""
+        """``(x, z, m_buf, u_buf, filt)`` slices of ``w`` (:meth:`extra_slices` has the rest)."""
         a = self.nx; b = a + self.nz; c = b + self.delay * self.nm; d = c + self.delay * self.n
-        return slice(0, a), slice(a, b), slice(b, c), slice(c, d), slice(d, self.nw)
+        e = d + (2 * self.n if self.filtered else 0)
+        return slice(0, a), slice(a, b), slice(b, c), slice(c, d), slice(d, e)
+
+    def extra_slices(self):
+        """``(venc, off, u_last)`` slices of ``w`` (empty when the feature is off)."""
+        d = self.slices()[4].stop
+        e = d + self.n_venc
+        f = e + (self.n if self.offset else 0)
+        return slice(d, e), slice(e, f), slice(f, f + (self.n if self.rate_step else 0))
 
 
 def make_layout(model, controller, T: float, substeps: int, sensor: SensorModel, delay: int,
@@ -109,14 +155,24 @@ def make_layout(model, controller, T: float, substeps: int, sensor: SensorModel,
     if sensing not in ("state", "torque"):
         raise FjmValueError(f"controller.sensing = {sensing!r}: expected 'state' or 'torque'")
     torque = sensing == "torque"
-    idx_K = stiffness_indices(model)[0] if (torque or predict) else np.zeros(0, dtype=int)
-    p_nom = np.asarray(getattr(controller, "p_nom", model.params_array({})), dtype=float)
+    predicting = bool(predict and delay > 0)
+    idx_K = stiffness_indices(model)[0] if torque else np.zeros(0, dtype=int)
+    K_nom = ()
+    if torque and predicting:
+        nominal = controller_model(controller, model)
+        p_nom = np.asarray(getattr(controller, "p_nom", nominal.params_array({})), dtype=float)
+        K_nom = tuple(float(v) for v in p_nom[stiffness_indices(nominal)[0]])
+    rate = sensor.rate_limits(n)
+    rate_step = tuple(float(r * T) if np.isfinite(r) else _NO_LIMIT for r in rate) \
+        if sensor.has_rate_limit() else ()
     return StepLayout(n=n, nx=int(model.nx), nz=int(getattr(controller, "n_states", 0)), sensing=sensing,
-                      nm=5 * n if torque else 4 * n, delay=int(delay), predict=bool(predict and delay > 0),
+                      nm=5 * n if torque else 4 * n, delay=int(delay), predict=predicting,
                       filtered=torque and sensor.dtau_mode == "filtered", T=float(T), substeps=int(substeps),
                       a_filter=1.0 - math.exp(-sensor.dtau_cutoff * T), q_quant=sensor.q_quant,
-                      q_m_quant=sensor.q_m_quant, idx_K=tuple(int(i) for i in idx_K),
-                      K_nom=tuple(float(v) for v in p_nom[idx_K]))
+                      q_m_quant=sensor.q_m_quant, idx_K=tuple(int(i) for i in idx_K), K_nom=K_nom,
+                      differentiated=sensor.velocity_mode == "differentiated",
+                      a_velocity=1.0 - math.exp(-sensor.velocity_cutoff * T),
+                      offset=torque and bool(np.any(sensor.offsets(n) > 0)), rate_step=rate_step)
 
 
 # -- the arithmetic, written once for numpy and CasADi ------------------------------------------
@@ -127,6 +183,8 @@ class _NumpyOps:
 
     cat = staticmethod(lambda parts: np.concatenate([np.asarray(p, dtype=float).ravel() for p in parts]))
     floor = staticmethod(np.floor)
+    fmin = staticmethod(np.minimum)
+    fmax = staticmethod(np.maximum)
 
     def xdot(self, x, u, p):
         nx, n = int(self.model.nx), int(self.model.n)
@@ -149,6 +207,12 @@ class _CasadiOps:
 
     def floor(self, v):
         return self.ca.floor(v)
+
+    def fmin(self, a, b):
+        return self.ca.fmin(a, b)
+
+    def fmax(self, a, b):
+        return self.ca.fmax(a, b)
 
     def xdot(self, x, u, p):
         ca = self.ca
@@ -174,22 +238,41 @@ def _quantize(ops, v, step: float):
     return v if step == 0 else step * ops.floor(v / step + 0.5)
 
 
-def _sense(ops, L: StepLayout, x, filt, noise, p):
-    """``(m_k, filt_next)``: noisy, filtered, quantized measurement of sample k."""
+def _difference(L: StepLayout, angle, prev, v_prev):
+    """The filtered difference of an angle: ``v_prev + a ((angle - prev) / T - v_prev)``."""
+    return v_prev + L.a_velocity * ((angle - prev) / L.T - v_prev)
+
+
+def _sense(ops, L: StepLayout, w, noise, p):
+    """``(m_k, filt_next, venc_next)``: the noisy, quantized, filtered measurement of sample k."""
     n = L.n
+    x = w[0:L.nx]
     K = ops.take(p, L.idx_K) if L.sensing == "torque" else None
     m = _measure(ops, L, x, K) + noise
     parts = [m[b * n:(b + 1) * n] for b in range(L.nm // n)]
     parts[0] = _quantize(ops, parts[0], L.q_quant)
     if L.sensing == "state":
         parts[2] = _quantize(ops, parts[2], L.q_m_quant)
-    filt_next = filt
+    elif L.offset:
+        parts[2] = parts[2] + w[L.extra_slices()[1]]
+    venc_next = w[L.extra_slices()[0]]
+    if L.differentiated:
+        # the dq_m slot of a torque measurement carries the motor ANGLE's noise (sensor.noise_slots)
+        qm = parts[2] if L.sensing == "state" else \
+            _quantize(ops, x[2 * n:3 * n] + noise[4 * n:5 * n], L.q_m_quant)
+        enc = venc_next
+        dq = _difference(L, parts[0], enc[0:n], enc[n:2 * n])
+        dqm = _difference(L, qm, enc[2 * n:3 * n], enc[3 * n:4 * n])
+        parts[1] = dq
+        parts[3 if L.sensing == "state" else 4] = dqm
+        venc_next = ops.cat([parts[0], dq, qm, dqm])
+    filt_next = w[L.slices()[4]]
     if L.filtered:
-        tau, tau_prev, d_prev = parts[2], filt[0:n], filt[n:2 * n]
+        tau, tau_prev, d_prev = parts[2], filt_next[0:n], filt_next[n:2 * n]
         d = d_prev + L.a_filter * ((tau - tau_prev) / L.T - d_prev)
         parts[3] = d
         filt_next = ops.cat([tau, d])
-    return ops.cat(parts), filt_next
+    return ops.cat(parts), filt_next, venc_next
 
 
 def _plant(ops, L: StepLayout, x, u, p):
@@ -204,36 +287,43 @@ def _plant(ops, L: StepLayout, x, u, p):
     return x
 
 
-def _predict(ops, L: StepLayout, m_old, u_buf, p_nom):
-    """The measurement predicted ``d`` samples ahead from ``m_old`` with the NOMINAL model."""
+def _predict(nom_ops, L: StepLayout, m_old, u_buf, p_nom):
+    """The measurement predicted ``d`` samples ahead from ``m_old`` with the controller's NOMINAL model."""
     n = L.n
     if L.sensing == "state":
         x = m_old
     else:
-        K = ops.const(L.K_nom)
+        K = nom_ops.const(L.K_nom)
         q, dq, tau, dqm = m_old[0:n], m_old[n:2 * n], m_old[2 * n:3 * n], m_old[4 * n:5 * n]
-        x = ops.cat([q, dq, q + tau / K, dqm])
+        x = nom_ops.cat([q, dq, q + tau / K, dqm])
     for j in range(L.delay):
-        x = _plant(ops, L, x, u_buf[j * n:(j + 1) * n], p_nom)
-    return _measure(ops, L, x, ops.const(L.K_nom))
+        x = _plant(nom_ops, L, x, u_buf[j * n:(j + 1) * n], p_nom)
+    return _measure(nom_ops, L, x, nom_ops.const(L.K_nom) if L.sensing == "torque" else None)
 
 
-def _pre_law(ops, L: StepLayout, w, noise, p, p_nom):
-    """Sensor, delay and prediction: ``(m_used, m_buf_next, filt_next)``."""
-    _, _, sb, su, sf = L.slices()
-    x = w[0:L.nx]
-    m_k, filt_next = _sense(ops, L, x, w[sf], noise, p)
+def _pre_law(ops, nom_ops, L: StepLayout, w, noise, p, p_nom):
+    """Sensor, delay and prediction: ``(m_used, m_buf_next, filt_next, venc_next)``."""
+    _, _, sb, su, _ = L.slices()
+    m_k, filt_next, venc_next = _sense(ops, L, w, noise, p)
     if L.delay == 0:
-        return m_k, w[sb], filt_next
+        return m_k, w[sb], filt_next, venc_next
     buf = w[sb]
     m_old = buf[0:L.nm]
     m_buf_next = ops.cat([buf[L.nm:], m_k]) if L.delay > 1 else m_k
-    m_used = _predict(ops, L, m_old, w[su], p_nom) if L.predict else m_old
-    return m_used, m_buf_next, filt_next
+    m_used = _predict(nom_ops, L, m_old, w[su], p_nom) if L.predict else m_old
+    return m_used, m_buf_next, filt_next, venc_next
 
 
-def _post_law(ops, L: StepLayout, w, u, zdot, m_buf_next, filt_next, p):
-    """``w_next`` from the law's torque and the controller-state rate."""
+def _rate_limited(ops, L: StepLayout, w, u_law):
+    """The applied torque: ``u_law`` moved at most ``rate_step`` from the last applied torque."""
+    if not L.rate_step:
+        return u_law
+    u_last, r = w[L.extra_slices()[2]], ops.const(L.rate_step)
+    return ops.fmin(ops.fmax(u_law, u_last - r), u_last + r)
+
+
+def _post_law(ops, L: StepLayout, w, u, zdot, m_buf_next, filt_next, venc_next, p):
+    """``w_next`` from the APPLIED torque and the controller-state rate."""
     sx, sz, _, su, _ = L.slices()
     z_next = w[sz] + L.T * zdot if L.nz else w[sz]
     parts = [_plant(ops, L, w[sx], u, p), z_next]
@@ -242,52 +332,65 @@ def _post_law(ops, L: StepLayout, w, u, zdot, m_buf_next, filt_next, p):
         parts += [m_buf_next, ops.cat([ub[L.n:], u]) if L.delay > 1 else u]
     if L.filtered:
         parts.append(filt_next)
+    if L.differentiated:
+        parts.append(venc_next)
+    if L.offset:
+        parts.append(w[L.extra_slices()[1]])
+    if L.rate_step:
+        parts.append(u)
     return ops.cat(parts)
 
 
 def python_sample_step(model, controller, L: StepLayout, w, t: float, r, noise, p):
-    """One sample in numpy: ``(w_next, sample)`` (``sample`` the controller's ControlSample)."""
+    """One sample in numpy: ``(w_next, sample)`` (the controller's ControlSample, ``u`` the APPLIED torque)."""
     ops = _NumpyOps(model)
+    nom_ops = _NumpyOps(controller_model(controller, model)) if L.predict else None
     p_nom = np.asarray(controller.p_nom, dtype=float) if L.predict else None
-    m_used, m_buf_next, filt_next = _pre_law(ops, L, w, noise, p, p_nom)
+    m_used, m_buf_next, filt_next, venc_next = _pre_law(ops, nom_ops, L, w, noise, p, p_nom)
     sz = L.slices()[1]
     z = w[sz]
     r = np.asarray(r, dtype=float).reshape(5, L.n)
     sample = controller.evaluate(t, m_used, z, r)
     zdot = np.asarray(controller.state_derivative(t, m_used, z, r, sample), dtype=float) if L.nz else None
-    return _post_law(ops, L, w, np.asarray(sample.u, dtype=float), zdot, m_buf_next, filt_next, p), sample
+    u = _rate_limited(ops, L, w, np.asarray(sample.u, dtype=float))
+    w_next = _post_law(ops, L, w, u, zdot, m_buf_next, filt_next, venc_next, p)
+    return w_next, (sample._replace(u=u) if L.rate_step else sample)
 
 
-def casadi_sample_step(fns, controller, L: StepLayout, n_par: int):
+def casadi_sample_step(fns, controller, L: StepLayout, n_par: int, nominal_fns=None):
     """``fjm_sample_step(w, r, noise, p) -> (w_next, aux)`` as a CasADi Function (MX graph).
 
     Parameters
     ----------
     fns : dict
-        The model's CasADi Functions ``f``, ``g`` of ``(x, p)``.
+        The plant model's CasADi Functions ``f``, ``g`` of ``(x, p)``.
     controller
         Has ``symbolic_evaluate(m, z, r)`` and ``symbolic_state_derivative(m, z, r, out)``.
     L : StepLayout
     n_par : int
+    nominal_fns : dict, optional
+        The controller's model's ``f``, ``g`` (the predictor's); default ``fns``.
 
     Returns
     -------
     casadi.Function
         Inputs ``w`` (nw,), ``r`` (5n,), ``noise`` (nm,), ``p`` (n_par,); outputs ``w_next`` (nw,),
-        ``aux = [u; s; y_hat]`` (6n,).
+        ``aux = [u; s; y_hat]`` (6n,), ``u`` the applied (rate-limited) torque.
     """
     import casadi as ca
     ops = _CasadiOps(_expanded(fns), L.nx, L.n)
+    nom_ops = _CasadiOps(_expanded(nominal_fns if nominal_fns is not None else fns), L.nx, L.n)
     w, r = ca.MX.sym("w", L.nw), ca.MX.sym("r", 5 * L.n)
     noise, p = ca.MX.sym("noise", L.nm), ca.MX.sym("p", n_par)
     p_nom = ca.DM(np.asarray(controller.p_nom, dtype=float)) if L.predict else None
-    m_used, m_buf_next, filt_next = _pre_law(ops, L, w, noise, p, p_nom)
+    m_used, m_buf_next, filt_next, venc_next = _pre_law(ops, nom_ops, L, w, noise, p, p_nom)
     z = w[L.slices()[1]]
     out = controller.symbolic_evaluate(m_used, z, r)
     zdot = controller.symbolic_state_derivative(m_used, z, r, out) if L.nz else None
-    w_next = _post_law(ops, L, w, out["u"], zdot, m_buf_next, filt_next, p)
+    u = _rate_limited(ops, L, w, out["u"])
+    w_next = _post_law(ops, L, w, u, zdot, m_buf_next, filt_next, venc_next, p)
     return ca.Function("fjm_sample_step", [w, r, noise, p],
-                       [w_next, ca.vertcat(out["u"], out["s"], out["y_hat"])],
+                       [w_next, ca.vertcat(u, out["s"], out["y_hat"])],
                        ["w", "r", "noise", "p"], ["w_next", "aux"])
 
 
@@ -303,19 +406,44 @@ def _expanded(fns):
     return out
 
 
-def initial_step_state(model, L: StepLayout, x0, z0, p_true) -> np.ndarray:
-    """``w_0``: the plant and controller states, the buffers filled with the noise-free measurement of
-    ``x0`` and zero torques (the plant rests at ``x0`` before ``t = 0``), the filter at the true
-    ``tau_J(x0)``, ``dtau_J(x0)``."""
+def initial_step_state(model, L: StepLayout, x0, z0, p_true, seed: int = 0, sensor=None) -> np.ndarray:
+    """``w_0``: the plant and controller states and the loop's memory before sample 0.
+
+    The plant rests at ``x0`` before ``t = 0``: the delay buffers hold the noise-free measurement
+    of ``x0`` and zero torques, the dtau_J filter the true ``tau_J(x0)``, ``dtau_J(x0)``, the
+    velocity filters the true angles and velocities, the last applied torque (rate limit) the true
+    spring torque ``K (q_m - q)`` at ``x0`` (what holds a rest state), and the run's tau_J offset is
+    ``sensor.tau_J_offset * offset_normals(seed)`` (``sensor`` needed only when ``L.offset``).
+    """
     ops = _NumpyOps(model)
+    n = L.n
+    x0 = np.asarray(x0, dtype=float)
     K = ops.take(p_true, L.idx_K) if L.sensing == "torque" else None
-    m0 = np.asarray(_measure(ops, L, np.asarray(x0, dtype=float), K), dtype=float)
+    m0 = np.asarray(_measure(ops, L, x0, K), dtype=float)
     parts = [x0, z0]
     if L.delay:
-        parts += [np.tile(m0, L.delay), np.zeros(L.delay * L.n)]
+        parts += [np.tile(m0, L.delay), np.zeros(L.delay * n)]
     if L.filtered:
-        parts.append(m0[2 * L.n:4 * L.n])
+        parts.append(m0[2 * n:4 * n])
+    if L.differentiated:
+        parts.append(x0[:4 * n])
+    if L.offset:
+        if sensor is None:
+            raise FjmValueError("initial_step_state: this layout has a tau_J offset; pass the sensor")
+        parts.append(sensor.offsets(n) * offset_normals(int(seed), n))
+    if L.rate_step:
+        parts.append(_spring_torque(model, x0, p_true))
     return ops.cat(parts)
+
+
+def _spring_torque(model, x, p) -> np.ndarray:
+    """``K (q_m - q)`` of the plant at ``x``, shape (n,) (zero for a model without the K parameters)."""
+    n = int(model.n)
+    try:
+        idx = stiffness_indices(model)[0]
+    except FjmValueError:
+        return np.zeros(n)
+    return np.asarray(p, dtype=float)[idx] * (x[2 * n:3 * n] - x[0:n])
 
 
 def initial_measurement(model, L: StepLayout, x0, p_true) -> np.ndarray:
@@ -326,8 +454,17 @@ def initial_measurement(model, L: StepLayout, x0, p_true) -> np.ndarray:
 
 
 def sample_step_function(model, controller, L: StepLayout):
-    """The CasADi sample step of ``(model, controller, layout)`` (rebuilt per call: gains are baked in)."""
-    return casadi_sample_step(casadi_functions(model), controller, L, len(model.param_names))
+    """The CasADi sample step of ``(model, controller, layout)`` (rebuilt per call: gains are baked in).
+
+    The predictor integrates the controller's own model (:func:`controller_model`), which differs
+    from the plant when the plant is, e.g., a complete model (:mod:`fjm_runtime.control.coupling`).
+    """
+    nominal = controller_model(controller, model)
+    nominal_fns = casadi_functions(nominal) if (L.predict and nominal is not model) else None
+    if L.predict and nominal is not model and nominal_fns is None:
+        raise FjmValueError(f"predict: the controller's model {getattr(nominal, 'name', nominal)!r} has no CasADi "
+                            "Functions to predict with")
+    return casadi_sample_step(casadi_functions(model), controller, L, len(model.param_names), nominal_fns)
 
 
 def check_loop_settings(sensor, delay_samples, predict):

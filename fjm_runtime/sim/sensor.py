@@ -1,4 +1,4 @@
-"""Sensor model of the sampled-data loop: per-signal Gaussian noise, encoder quantization, dtau_J mode.
+"""Sensor model of the sampled-data loop: noise, encoders, velocity and dtau_J filters, the torque-rate limit.
 
 The noise of a run is generated once, before the run, by :func:`standard_normals` (a
 counter-based generator: the number for sample ``k`` and channel ``c`` depends only on
@@ -11,6 +11,18 @@ Channels: signal block ``b`` times ``n`` plus joint ``i`` (0-based), with the bl
 has the layout of the controller's measurement: ``[q; dq; q_m; dq_m]`` (4n) for state
 sensing (channels 0..4n-1) and ``[q; dq; tau_J; dtau_J; dq_m]`` (5n) for torque sensing
 (channel blocks 0, 1, 4, 5, 3), so a signal gets the same noise whichever sensing is used.
+With ``velocity_mode='differentiated'`` a velocity is not measured but computed from its angle, as a
+robot computes it: the dq slot carries no noise (dq is the filtered difference of the measured q),
+and the dq_m slot carries the noise of the MOTOR ANGLE (channel block 2, level ``q_m``), of which
+dq_m is the filtered difference (:func:`noise_slots`).
+
+A :class:`SensorModel` describes the robot's interface as the controller sees it: what it measures
+and how badly, and the one property of the command channel that the loop must respect, the
+commanded torque's rate limit. Presets (:data:`PRESETS`): ``ideal``, ``panda_white`` (white noise on
+every signal, velocities included: the former ``panda`` preset, optimistic about velocities) and
+``franka_like`` (velocities differentiated from quantized encoders, a torque-sensor offset, the
+1000 N m/s rate limit). A user states their own in a TOML file (:func:`load_sensor_file`, format in
+docs/simulation.md); :func:`sensor_from_spec` takes either.
 """
 from __future__ import annotations
 
@@ -22,14 +34,23 @@ import numpy as np
 
 from ..validation import FjmValueError
 
-__all__ = ["DTAU_MODES", "SIGNALS", "SensorModel", "measurement_blocks", "noise_array", "splitmix64",
-           "standard_normals"]
+__all__ = ["DTAU_MODES", "PRESETS", "SIGNALS", "VELOCITY_MODES", "SensorModel", "linear_noise_levels",
+           "load_sensor_file", "measurement_blocks", "noise_array", "noise_slots", "offset_normals",
+           "sensor_from_spec", "splitmix64", "standard_normals"]
 
 #: Signal blocks of the noise channels, in channel order.
 SIGNALS = ("q", "dq", "q_m", "dq_m", "tau_J", "dtau_J")
 
 #: How dtau_J reaches the controller: measured (with its own noise) or a filtered difference of tau_J.
 DTAU_MODES = ("measured", "filtered")
+
+#: How dq (and dq_m) reach the controller: measured with their own white noise, or the filtered
+#: difference of the measured (noisy, quantized) angle.
+VELOCITY_MODES = ("measured", "differentiated")
+
+#: Channel of the per-run constant tau_J offset of joint i: ``OFFSET_CHANNEL + i`` at sample 0
+#: (far above the per-sample channels ``6n``, so it shares no number with them).
+OFFSET_CHANNEL = 1 << 20
 
 _MASK = (1 << 64) - 1
 _GOLDEN = np.uint64(0x9E3779B97F4A7C15)
@@ -102,24 +123,47 @@ def standard_normals(seed: int, n_samples: int, channels: Sequence[int]) -> np.n
 
 
 def _level(value, name: str) -> Level:
-    a = np.asarray(value, dtype=float)
+    try:
+        a = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        a = np.array(np.nan)
     if a.ndim > 1 or not np.all(np.isfinite(a)) or np.any(a < 0):
         raise FjmValueError(f"SensorModel.{name} = {value!r}: expected a finite level >= 0 "
                             "(a scalar or one per joint)")
     return float(a) if a.ndim == 0 else tuple(a.tolist())
 
 
+def _rate(value) -> Level:
+    try:
+        a = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        a = np.array(np.nan)
+    if a.ndim > 1 or np.any(np.isnan(a)) or np.any(a <= 0):
+        raise FjmValueError(f"SensorModel.torque_rate_limit = {value!r}: expected a rate > 0 N m/s "
+                            "(a scalar or one per joint; inf: none)")
+    return float(a) if a.ndim == 0 else tuple(a.tolist())
+
+
+def _per_joint(value, n: int, name: str) -> np.ndarray:
+    a = np.asarray(value, dtype=float)
+    a = np.broadcast_to(a, (n,)).copy() if a.ndim == 0 else a
+    if a.shape != (n,):
+        raise FjmValueError(f"SensorModel.{name} with {a.size} values: expected 1 or {n} (one per joint)")
+    return a
+
+
 @dataclass(frozen=True)
 class SensorModel:
-    """What the controller measures, and how badly.
+    """What the controller measures and how badly, and the commanded torque's rate limit.
 
     Attributes
     ----------
     q, dq, q_m, dq_m, tau_J, dtau_J : float or tuple of n floats
-        Standard deviation of the additive Gaussian noise on each signal (rad, rad/s,
-        rad, rad/s, N m, N m/s); ``dtau_J`` is used only with ``dtau_mode='measured'``.
+        Standard deviation of the additive white Gaussian noise on each signal (rad, rad/s,
+        rad, rad/s, N m, N m/s); ``dtau_J`` is used only with ``dtau_mode='measured'``, ``dq``
+        and ``dq_m`` only with ``velocity_mode='measured'``.
     q_quant, q_m_quant : float
-        Encoder quantization step of ``q`` and ``q_m`` in rad (0: none); the measured value
+        Encoder quantization step of ``q`` and ``q_m`` in rad (0: none); the measured angle
         is ``step * floor((true + noise) / step + 0.5)``.
     dtau_mode : {'measured', 'filtered'}
         ``'filtered'``: ``dtau_J`` is the first-order filtered difference of the measured
@@ -127,6 +171,20 @@ class SensorModel:
         ``a = 1 - exp(-dtau_cutoff T)``.
     dtau_cutoff : float
         Cutoff of that filter, rad/s (> 0).
+    velocity_mode : {'measured', 'differentiated'}
+        ``'differentiated'``: ``dq`` (and ``dq_m``) are the filtered difference of the measured
+        angle, ``v_k = v_{k-1} + a ((theta_k - theta_{k-1}) / T - v_{k-1})`` with
+        ``a = 1 - exp(-velocity_cutoff T)``, ``theta`` the noisy, quantized ``q`` (``q_m``).
+    velocity_cutoff : float
+        Cutoff of the velocity filter, rad/s (> 0).
+    tau_J_offset : float or tuple of n floats
+        Standard deviation of a constant per-run offset of the torque sensor, N m (drawn once per
+        run from the run's seed, :func:`offset_normals`).
+    torque_rate_limit : float or tuple of n floats
+        Largest change of the commanded torque per second, N m/s (``inf``: none); the sample
+        step limits ``|u_k - u_{k-1}| <= torque_rate_limit T``.
+    name : str
+        The preset or file it came from (reports say which sensor a number is for).
     seed : int
         Seed of :func:`standard_normals` (0 <= seed < 2^64).
     """
@@ -141,60 +199,261 @@ class SensorModel:
     q_m_quant: float = 0.0
     dtau_mode: str = "measured"
     dtau_cutoff: float = 1000.0
+    velocity_mode: str = "measured"
+    velocity_cutoff: float = 300.0
+    tau_J_offset: Level = 0.0
+    torque_rate_limit: Level = math.inf
+    name: str = "custom"
     seed: int = field(default=0)
 
     def __post_init__(self):
-        for name in SIGNALS + ("q_quant", "q_m_quant"):
+        for name in SIGNALS + ("q_quant", "q_m_quant", "tau_J_offset"):
             object.__setattr__(self, name, _level(getattr(self, name), name))
+        object.__setattr__(self, "torque_rate_limit", _rate(self.torque_rate_limit))
         for name in ("q_quant", "q_m_quant"):
             if not isinstance(getattr(self, name), float):
                 raise FjmValueError(f"SensorModel.{name}: expected one quantization step in rad (a scalar)")
         if self.dtau_mode not in DTAU_MODES:
             raise FjmValueError(f"SensorModel.dtau_mode = {self.dtau_mode!r}: expected 'measured' or 'filtered'")
-        if not (np.isfinite(self.dtau_cutoff) and self.dtau_cutoff > 0):
-            raise FjmValueError(f"SensorModel.dtau_cutoff = {self.dtau_cutoff!r}: expected a finite cutoff > 0 rad/s")
-        if int(self.seed) != self.seed or not 0 <= int(self.seed) < 2 ** 64:
+        if self.velocity_mode not in VELOCITY_MODES:
+            raise FjmValueError(f"SensorModel.velocity_mode = {self.velocity_mode!r}: expected 'measured' or "
+                                "'differentiated'")
+        for name in ("dtau_cutoff", "velocity_cutoff"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not (math.isfinite(v) and v > 0):
+                raise FjmValueError(f"SensorModel.{name} = {v!r}: expected a finite cutoff > 0 rad/s")
+        if not isinstance(self.name, str) or not self.name:
+            raise FjmValueError(f"SensorModel.name = {self.name!r}: expected a non-empty string")
+        if isinstance(self.seed, bool) or int(self.seed) != self.seed or not 0 <= int(self.seed) < 2 ** 64:
             raise FjmValueError(f"SensorModel.seed = {self.seed!r}: expected an integer in [0, 2^64)")
+
+    # -- presets ----------------------------------------------------------------------------------
 
     @classmethod
     def ideal(cls, seed: int = 0) -> "SensorModel":
-        """No noise, no quantization, dtau_J measured exactly."""
-        return cls(seed=seed)
+        """No noise, no quantization, no rate limit, dtau_J and velocities measured exactly."""
+        return cls(name="ideal", seed=seed)
+
+    @classmethod
+    def panda_white(cls, seed: int = 0) -> "SensorModel":
+        """White noise on every signal, velocities INCLUDED (the former ``panda`` preset; optimistic).
+
+        tau_J 0.05 N m, q and q_m 1e-4 rad, dq and dq_m 1e-3 rad/s drawn independently of q (a
+        real arm differentiates its encoder angle: 1e-4 rad differentiated and filtered is
+        0.01-0.08 rad/s, :meth:`franka_like`); dtau_J the filtered difference of tau_J (1000 rad/s);
+        no quantization, no offset, no rate limit. Kept because the shipped 1 kHz / d = 1 designs
+        were searched with it.
+        """
+        return cls(q=1e-4, dq=1e-3, q_m=1e-4, dq_m=1e-3, tau_J=0.05, dtau_J=5.0,
+                   dtau_mode="filtered", dtau_cutoff=1000.0, name="panda_white", seed=seed)
 
     @classmethod
     def panda(cls, seed: int = 0) -> "SensorModel":
-        """Levels of a torque-sensed arm like the Panda (our choice where no datasheet number exists).
+        """The former name of :meth:`panda_white` (same levels)."""
+        return cls.panda_white(seed)
 
-        tau_J 0.05 N m and q 1e-4 rad (the levels of the design study); q_m 1e-4 rad;
-        dq and dq_m 1e-3 rad/s (filtered encoder velocities); dtau_J the filtered difference
-        of tau_J with a cutoff of 1000 rad/s (its ``dtau_J`` level, 5 N m/s, applies only if
-        the mode is switched to ``'measured'``); no quantization.
+    @classmethod
+    def franka_like(cls, seed: int = 0) -> "SensorModel":
+        """A torque-sensed arm's interface as a Franka-like robot computes and accepts signals.
+
+        * link angle q: white noise 2e-5 rad on a 20-bit encoder (step 2 pi / 2^20 = 6.0e-6 rad);
+        * dq: NOT measured; the first-order filtered difference of the measured q, cutoff 300 rad/s;
+        * motor angle q_m (link side): white noise 1e-5 rad on a step of 2 pi / 2^21 (a motor
+          encoder seen through the gear); dq_m its filtered difference (state sensing also uses q_m);
+        * tau_J: white noise 0.05 N m plus a constant per-run offset of 0.2 N m (standard deviations);
+        * dtau_J: the filtered difference of tau_J, cutoff 1000 rad/s (as libfranka's dtau_J);
+        * the commanded torque's rate limit: 1000 N m/s per joint (libfranka rejects faster changes:
+          1 N m per 1 ms tick).
+
+        The rate limit and the filtered differences are libfranka's behaviour; the noise levels,
+        resolutions and cutoffs are our choice where no datasheet number exists (say so in results).
         """
-        return cls(q=1e-4, dq=1e-3, q_m=1e-4, dq_m=1e-3, tau_J=0.05, dtau_J=5.0,
-                   dtau_mode="filtered", dtau_cutoff=1000.0, seed=seed)
+        return cls(q=2e-5, q_m=1e-5, tau_J=0.05, dtau_J=0.0, q_quant=2 * math.pi / 2 ** 20,
+                   q_m_quant=2 * math.pi / 2 ** 21, dtau_mode="filtered", dtau_cutoff=1000.0,
+                   velocity_mode="differentiated", velocity_cutoff=300.0, tau_J_offset=0.2,
+                   torque_rate_limit=1000.0, name="franka_like", seed=seed)
 
     def with_seed(self, seed: int) -> "SensorModel":
         """The same sensor with another seed."""
         return replace(self, seed=seed)
 
+    # -- what the sample step reads ----------------------------------------------------------------
+
     def levels(self, sensing: str, n: int) -> np.ndarray:
-        """Noise standard deviations in the measurement layout, shape (4n,) or (5n,)."""
-        out = []
-        for name in measurement_blocks(sensing):
-            level = getattr(self, name)
-            if name == "dtau_J" and self.dtau_mode == "filtered":
-                level = 0.0
-            a = np.broadcast_to(np.asarray(level, dtype=float), (n,)) if np.ndim(level) == 0 \
-                else np.asarray(level, dtype=float)
-            if a.shape != (n,):
-                raise FjmValueError(f"SensorModel.{name} with {a.size} levels: expected 1 or {n} (one per joint)")
-            out.append(a)
-        return np.concatenate(out)
+        """Noise standard deviation of each slot of the noise row, shape (4n,) or (5n,) (:func:`noise_slots`)."""
+        return noise_slots(self, sensing, n)[1]
+
+    def rate_limits(self, n: int) -> np.ndarray:
+        """The torque-rate limit per joint, N m/s, shape (n,) (``inf``: none)."""
+        return _per_joint(self.torque_rate_limit, n, "torque_rate_limit")
+
+    def offsets(self, n: int) -> np.ndarray:
+        """The standard deviation of the tau_J offset per joint, N m, shape (n,)."""
+        return _per_joint(self.tau_J_offset, n, "tau_J_offset")
+
+    def has_rate_limit(self) -> bool:
+        """True when some joint's commanded torque is rate limited."""
+        return bool(np.any(np.isfinite(np.asarray(self.torque_rate_limit))))
 
     def is_ideal(self) -> bool:
-        """True when the sensor adds nothing (no noise, no quantization, dtau_J measured)."""
-        return (all(np.all(np.asarray(getattr(self, s)) == 0) for s in SIGNALS)
-                and self.q_quant == 0 and self.q_m_quant == 0 and self.dtau_mode == "measured")
+        """True when the sensor adds nothing (no noise, quantization, offset or rate limit; raw signals)."""
+        return (all(np.all(np.asarray(getattr(self, s)) == 0) for s in SIGNALS + ("tau_J_offset",))
+                and self.q_quant == 0 and self.q_m_quant == 0 and self.dtau_mode == "measured"
+                and self.velocity_mode == "measured" and not self.has_rate_limit())
+
+    def as_dict(self) -> dict:
+        """The fields as plain JSON values (``inf`` rate limit as ``None``); :meth:`from_dict` inverts it."""
+        out = {}
+        for k in self.__dataclass_fields__:
+            v = getattr(self, k)
+            if k == "torque_rate_limit":
+                v = [None if not math.isfinite(x) else x for x in v] if isinstance(v, tuple) else \
+                    (None if not math.isfinite(v) else v)
+            out[k] = list(v) if isinstance(v, tuple) else v
+        return out
+
+    @classmethod
+    def from_dict(cls, fields: dict, where: str = "sensor") -> "SensorModel":
+        """A SensorModel from :meth:`as_dict` output (or a design file's ``sensor`` record)."""
+        if not isinstance(fields, dict):
+            raise FjmValueError(f"{where}: expected a table of SensorModel fields, got {type(fields).__name__}")
+        unknown = sorted(set(fields) - set(cls.__dataclass_fields__))
+        if unknown:
+            raise FjmValueError(f"{where}: unknown field(s) {unknown}; expected among "
+                                f"{sorted(cls.__dataclass_fields__)}")
+        kw = dict(fields)
+        if "torque_rate_limit" in kw:
+            v = kw["torque_rate_limit"]
+            kw["torque_rate_limit"] = [math.inf if x is None else x for x in v] if isinstance(v, list) else \
+                (math.inf if v is None else v)
+        for k, v in kw.items():
+            if isinstance(v, list):
+                kw[k] = tuple(v)
+        try:
+            return cls(**kw)
+        except FjmValueError as exc:
+            raise FjmValueError(f"{where}: {exc}") from None
+
+
+#: Preset constructors by name (``fjm ... --noise NAME``).
+PRESETS = {"ideal": SensorModel.ideal, "panda_white": SensorModel.panda_white,
+           "franka_like": SensorModel.franka_like}
+#: Former names still accepted on the command line.
+_ALIASES = {"none": "ideal", "panda": "panda_white"}
+
+
+def load_sensor_file(path, seed: int = 0) -> SensorModel:
+    """A SensorModel from a TOML file: optional ``preset = NAME`` as the base, then field overrides.
+
+    Keys are the :class:`SensorModel` fields (``q``, ``dq``, ``q_m``, ``dq_m``, ``tau_J``, ``dtau_J``,
+    ``q_quant``, ``q_m_quant``, ``dtau_mode``, ``dtau_cutoff``, ``velocity_mode``, ``velocity_cutoff``,
+    ``tau_J_offset``, ``torque_rate_limit`` (``"inf"`` or absent: none), ``seed``) in SI units; a level
+    is a number or a list with one per joint. ``name`` defaults to the file's stem.
+
+    Raises
+    ------
+    FjmValueError
+        One line naming the file and the key.
+    """
+    from pathlib import Path
+    try:
+        import tomllib
+    except ImportError:  # Python < 3.11
+        import tomli as tomllib
+    p = Path(path)
+    if not p.is_file():
+        raise FjmValueError(f"sensor file {p}: not found (expected a preset name among {sorted(PRESETS)} "
+                            "or a TOML file)")
+    try:
+        data = tomllib.loads(p.read_text())
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise FjmValueError(f"sensor file {p}: not valid TOML ({exc})") from None
+    base_name = data.pop("preset", "ideal")
+    if base_name not in PRESETS:
+        raise FjmValueError(f"sensor file {p}: preset = {base_name!r}; expected one of {sorted(PRESETS)}")
+    base = PRESETS[base_name](seed=seed).as_dict()
+    base["name"] = p.stem
+    rate = data.get("torque_rate_limit")
+    if isinstance(rate, str):
+        if rate.strip().lower() not in ("inf", "none"):
+            raise FjmValueError(f"sensor file {p}: torque_rate_limit = {rate!r}; expected a rate in N m/s or 'inf'")
+        data["torque_rate_limit"] = None
+    for k, v in data.items():
+        if k in ("dtau_mode", "velocity_mode", "name"):
+            continue
+        vals = v if isinstance(v, list) else [v]
+        if not all(x is None or (isinstance(x, (int, float)) and not isinstance(x, bool)) for x in vals):
+            raise FjmValueError(f"sensor file {p}: {k} = {v!r}; expected a number or a list of numbers")
+    base.update(data)
+    return SensorModel.from_dict(base, where=f"sensor file {p}")
+
+
+def sensor_from_spec(spec, seed: int = 0, what: str = "noise") -> SensorModel:
+    """A preset name (:data:`PRESETS`, or the former names ``none``, ``panda``) or a TOML file path.
+
+    ``what`` names the argument in the error (e.g. ``'--noise'``).
+    """
+    if isinstance(spec, SensorModel):
+        return spec.with_seed(seed)
+    name = _ALIASES.get(str(spec), str(spec))
+    if name in PRESETS:
+        return PRESETS[name](seed=seed)
+    if str(spec).endswith(".toml") or "/" in str(spec):
+        return load_sensor_file(spec, seed=seed)
+    raise FjmValueError(f"{what} {spec!r}: expected a preset among {sorted(PRESETS)} or a .toml sensor file")
+
+
+def noise_slots(sensor: SensorModel, sensing: str, n: int):
+    """``(channels, levels)`` of the noise row: the generator channel and the std of each slot.
+
+    The noise row has the measurement's layout (:func:`measurement_blocks`); slot ``j`` of block
+    ``b`` adds ``levels[j] * standard_normals(seed, k, channels[j])`` to it. With
+    ``velocity_mode='differentiated'`` the dq slot is silent (level 0) and, for torque sensing, the
+    dq_m slot carries the motor ANGLE's noise (channel block ``q_m``, level ``q_m``) that the step
+    differentiates; with ``dtau_mode='filtered'`` the dtau_J slot is silent.
+
+    Returns
+    -------
+    channels : ndarray of int64, shape (nm,)
+    levels : ndarray, shape (nm,)
+    """
+    blocks = measurement_blocks(sensing)
+    diff = sensor.velocity_mode == "differentiated"
+    chans, levs = [], []
+    for name in blocks:
+        src, level = name, getattr(sensor, name)
+        if name == "dtau_J" and sensor.dtau_mode == "filtered":
+            level = 0.0
+        if name in ("dq", "dq_m") and diff:
+            level = 0.0
+            if name == "dq_m" and sensing == "torque":
+                src, level = "q_m", sensor.q_m
+        chans += [SIGNALS.index(src) * n + i for i in range(n)]
+        levs.append(_per_joint(level, n, src))
+    return np.asarray(chans, dtype=np.int64), np.concatenate(levs)
+
+
+def linear_noise_levels(sensor: SensorModel, sensing: str, n: int) -> np.ndarray:
+    """:func:`noise_slots` levels with encoder quantization folded in as uniform noise (``step^2 / 12``).
+
+    For a linear analysis of the loop, which cannot differentiate ``floor``: the quantization error
+    of an angle that moves by many steps between samples is close to white and uniform. Shape (nm,).
+    """
+    chans, lev = noise_slots(sensor, sensing, n)
+    lev = lev.copy()
+    for j, c in enumerate(chans):
+        block = SIGNALS[int(c) // n]
+        step = sensor.q_quant if block == "q" else sensor.q_m_quant if block == "q_m" else 0.0
+        angle_slot = block in ("q", "q_m")
+        if step and angle_slot:
+            lev[j] = math.sqrt(lev[j] ** 2 + step ** 2 / 12.0)
+    return lev
+
+
+def offset_normals(seed: int, n: int) -> np.ndarray:
+    """The standard normals of a run's constant tau_J offsets, shape (n,) (sample 0, channels
+    ``OFFSET_CHANNEL + i``: independent of every per-sample number)."""
+    return standard_normals(seed, 1, [OFFSET_CHANNEL + i for i in range(n)])[0]
 
 
 def noise_array(sensor: SensorModel, sensing: str, n: int, n_samples: int) -> np.ndarray:
@@ -214,9 +473,7 @@ def noise_array(sensor: SensorModel, sensing: str, n: int, n_samples: int) -> np
     ndarray, shape (n_samples, 4n) or (n_samples, 5n)
         ``levels * standard_normals(seed, k, channel)``; zeros where a level is 0.
     """
-    blocks = measurement_blocks(sensing)
-    channels = [SIGNALS.index(b) * n + i for b in blocks for i in range(n)]
-    levels = sensor.levels(sensing, n)
+    channels, levels = noise_slots(sensor, sensing, n)
     if not np.any(levels):
-        return np.zeros((int(n_samples), len(channels)))
+        return np.zeros((int(n_samples), channels.size))
     return standard_normals(sensor.seed, n_samples, channels) * levels[None, :]

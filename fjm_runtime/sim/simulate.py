@@ -167,13 +167,14 @@ def simulate(model, controller, reference, *, duration: float, dt: float = 1e-3,
     t = dt * np.arange(n_steps + 1)
     r0 = np.asarray(reference(0.0), dtype=float)
     z = np.asarray(controller.initial_state(0.0, initial_measurement(model, L, x, p_true), r0), dtype=float)
-    w0 = initial_step_state(model, L, x, z, p_true)
+    w0 = initial_step_state(model, L, x, z, p_true, seed=int(sensor.seed), sensor=sensor)
     R = _reference_rows(reference, t, L.n)
     NOISE = noise_array(sensor, L.sensing, L.n, t.size)
     name = _choose_backend(backend, model, controller)
     W, AUX = LOOPS[name](model, controller, L, p_true, w0, t, R, NOISE, progress, max_state)
     settings = {"rate": 1.0 / float(dt), "dt": float(dt), "substeps": subs, "delay_samples": delay,
-                "predict": bool(predict), "sensing": L.sensing, "seed": int(sensor.seed), "backend": name}
+                "predict": bool(predict), "sensing": L.sensing, "seed": int(sensor.seed), "backend": name,
+                "sensor": sensor.name, "torque_rate_limit": sensor.as_dict()["torque_rate_limit"]}
     return _finish(model, controller, p_true, L, t, W, AUX, R.reshape(-1, 5, L.n), settings)
 
 
