@@ -152,7 +152,7 @@ def sampled_metric_step(model, ctrl, L: StepLayout, max_state: float, width: int
     half, k, first, last, applied, jit_full = (fl[i] for i in range(N_FLAGS))
     g = {name: acc[o:o + size] for name, (o, size) in off.items()}
     w, p = acc[:L.nw], g["p"]
-    w_step, aux = sample_step_function(model, ctrl, L)(w, r, noise, p)
+    w_step, aux = sample_step_function(model, ctrl, L, outline=True)(w, r, noise, p)
     u, s = aux[:n], aux[n:2 * n]
     z = w[L.slices()[1]]
     e1 = w[:n] - r[:n]

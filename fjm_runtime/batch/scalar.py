@@ -208,8 +208,9 @@ int fjm_sampled_batch(int n_runs, int n_samples, int nacc, int nr, int nm, int n
       double *cur = buf, *nxt = buf + nacc, *noise = buf + 2 * nacc, *w = noise + nm;
       memcpy(cur, acc + (size_t)b * nacc, sizeof(double) * nacc);
       uint64_t key = fjm_splitmix64((uint64_t)seeds[b]);
-      const double* arg[4];
-      double* res[1];
+      /* sz_arg, sz_res: a step that calls functions (outlined substeps) passes arg + 4, res + 1 on */
+      const double** arg = (const double**)malloc(sizeof(double*) * (sz_arg > 4 ? sz_arg : 4));
+      double** res = (double**)malloc(sizeof(double*) * (sz_res > 1 ? sz_res : 1));
       for (int k = 0; k < n_samples; ++k) {
         fjm_noise_row(key, (uint64_t)k, nm, levels, chan, noise);
         arg[0] = cur; arg[1] = R + (size_t)k * nr; arg[2] = noise; arg[3] = FL + (size_t)k * nf;
@@ -218,7 +219,7 @@ int fjm_sampled_batch(int n_runs, int n_samples, int nacc, int nr, int nm, int n
         double* t = cur; cur = nxt; nxt = t;
       }
       memcpy(acc + (size_t)b * nacc, cur, sizeof(double) * nacc);
-      free(buf); free(iw);
+      free(buf); free(iw); free((void*)arg); free(res);
     }
   }
   *threads_used = used;

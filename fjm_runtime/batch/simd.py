@@ -59,8 +59,15 @@ class SoaProgram:
     work slot lives: ``("inv", j)`` or ``("w", slot)``.
     """
 
-    def __init__(self, varying: Sequence[int], invariant_from: Optional[int]):
+    def __init__(self, varying: Sequence[int], invariant_from: Optional[int], callees: Optional[dict] = None,
+                 io: Optional[Tuple[Sequence[int], Sequence[int]]] = None):
         self.varying, self.invariant_from = tuple(varying), invariant_from
+        #: Called Functions emitted so far, shared with nested programs: name -> (C name, C text), in
+        #: definition order (a callee's own callees first).
+        self.callees: Dict[str, Tuple[str, str]] = {} if callees is None else callees
+        #: For a callee: the offsets of its inputs and outputs in the flat ``in`` / ``out`` vectors.
+        self.io = io
+        self._sx = None
         self.body: List[str] = []
         self.prologue: List[str] = []
         self.src: Dict[int, Tuple[str, int]] = {}
@@ -90,7 +97,9 @@ class SoaProgram:
 
     def add_input(self, i, o) -> None:
         """``OP_INPUT``: entry ``i[1]`` of input ``i[0]`` into slot ``o[0]``."""
-        if self.invariant_from is not None and i[0] == 0 and i[1] >= self.invariant_from:
+        if self.io is not None:
+            self._set_w(o[0], f"w{o[0]} = in[{self.io[0][i[0]] + i[1]}];")
+        elif self.invariant_from is not None and i[0] == 0 and i[1] >= self.invariant_from:
             self._set_inv(o[0], lambda j: f"memcpy(&inv[{j}], acc + {i[1]}*LANES, sizeof(vd));")
         elif i[0] in self.varying:
             self._set_w(o[0], f"memcpy(&w{o[0]}, arg[{i[0]}] + {i[1]}*LANES, sizeof(vd));")
@@ -125,12 +134,64 @@ class SoaProgram:
             self._set_inv(o[0], lambda j: f"inv[{j}] = V0 + {value!r};")
         elif op == ca.OP_INPUT:
             self.add_input(i, o)
+        elif op == ca.OP_OUTPUT and self.io is not None:
+            self.body.append(f"out[{self.io[1][o[0]] + o[1]}] = {self.ref(i[0])};")
         elif op == ca.OP_OUTPUT:
             self.body.append(f"{{ vd t = {self.ref(i[0])}; memcpy(res[{o[0]}] + {o[1]}*LANES, &t, sizeof(vd)); }}")
+        elif op == ca.OP_CALL:
+            self.add_call(step, k, i, o)
         elif op in UNARY or op in BINARY:
             self.add_operation(op, i, o)
         else:
             raise ValueError(f"soa_source: operation {op} not supported")
+
+
+    def add_call(self, step: ca.Function, k: int, i, o) -> None:
+        """``OP_CALL`` (an SX call node of a ``never_inline`` Function): one call of its SIMD form.
+
+        The callee is emitted once as ``static void fjm_fnJ(const vd* in, vd* out)`` (its inputs'
+        and outputs' nonzeros flattened); here its arguments are gathered, it is called, and each
+        used output lands in its work slot. Nothing is hoisted across the call.
+        """
+        if self._sx is None:
+            self._sx = step.instructions_sx()
+        fn = self._sx[k].which_function()
+        cname = callee_source(fn, self.callees)
+        ins = ", ".join(self.ref(a) for a in i)
+        outs = "".join(f" w{slot} = co[{j}];" for j, slot in enumerate(o) if slot >= 0)
+        self.body.append(f"{{ vd ci[{max(1, len(i))}] = {{{ins}}}; vd co[{max(1, len(o))}]; {cname}(ci, co);{outs} }}")
+        for slot in o:
+            if slot >= 0:
+                self.src[slot] = ("w", slot)
+                self.used.add(slot)
+
+
+def _offsets(sizes) -> List[int]:
+    out, o = [], 0
+    for n in sizes:
+        out.append(o)
+        o += n
+    return out
+
+
+def callee_source(fn: ca.Function, callees: dict) -> str:
+    """The C name of ``fn``'s SIMD form, emitting its definition into ``callees`` on first use."""
+    key = fn.name()
+    if key in callees:
+        return callees[key][0]
+    if not fn.is_a("SXFunction"):
+        raise ValueError(f"soa_source: call of {key}, not an SX Function")
+    io = (_offsets([fn.nnz_in(j) for j in range(fn.n_in())]), _offsets([fn.nnz_out(j) for j in range(fn.n_out())]))
+    prog = SoaProgram((), None, callees, io)
+    for j in range(fn.n_instructions()):
+        prog.add(fn, j)
+    cname = f"fjm_fn{len(callees)}"
+    decl = ", ".join(f"w{j}" for j in sorted(prog.used)) or "w_unused"
+    text = (f"/* {key} */\nstatic void {cname}(const vd* restrict in, vd* restrict out) {{\n"
+            f"  vd inv[{max(1, prog.n_inv)}];\n  vd {decl};"
+            + "".join("\n  " + ln for ln in prog.prologue + prog.body) + "\n}\n")
+    callees[key] = (cname, text)
+    return cname
 
 
 def simd_template() -> Template:
@@ -159,6 +220,7 @@ def soa_source(step: ca.Function, lanes: int, varying=(0,), invariant_from: int 
     from .scalar import noise_source
     return simd_template().substitute(
         lanes=int(lanes), noise=noise_source(), n_inv=max(1, prog.n_inv),
+        callees="".join(text for _, text in prog.callees.values()),
         prologue="".join("\n  " + ln for ln in prog.prologue),
         declarations=", ".join(f"w{j}" for j in sorted(prog.used)) or "w_unused",
         body="".join("\n  " + ln for ln in prog.body))

@@ -27,6 +27,7 @@ static inline vd v_pow(vd x, vd y) { double a[LANES], b[LANES], r[LANES]; memcpy
 static inline vd v_atan2(vd x, vd y) { double a[LANES], b[LANES], r[LANES]; memcpy(a, &x, sizeof x); memcpy(b, &y, sizeof y); for (int l = 0; l < LANES; ++l) r[l] = atan2(a[l], b[l]); memcpy(&x, r, sizeof x); return x; }
 static inline vd v_copysign(vd x, vd y) { double a[LANES], b[LANES], r[LANES]; memcpy(a, &x, sizeof x); memcpy(b, &y, sizeof y); for (int l = 0; l < LANES; ++l) r[l] = copysign(a[l], b[l]); memcpy(&x, r, sizeof x); return x; }
 ${noise}
+${callees}
 #define SZ_INV ${n_inv}
 static void fjm_prologue(const double* restrict acc, vd* restrict inv) {${prologue}
 }

@@ -198,9 +198,25 @@ class _NumpyOps:
 
 
 class _CasadiOps:
-    def __init__(self, fns, nx, n):
+    def __init__(self, fns, nx, n, outline_h=None):
         import casadi as ca
         self.ca, self.fns, self.nx, self.n = ca, fns, nx, n
+        self.substep = None if outline_h is None else self._substep_function(float(outline_h))
+
+    def _substep_function(self, h: float):
+        """One RK4 step of ``h`` as an SX Function kept as a call (``never_inline``): evaluated on SX
+        it stays one call node, so a step of ``s`` substeps holds ``s`` calls, not ``s`` copies."""
+        ca, nx, n = self.ca, self.nx, self.n
+        x, u = ca.SX.sym("x", nx), ca.SX.sym("u", n)
+        p = ca.SX.sym("p", self.fns["f"].size1_in(1))
+        k1 = self.xdot(x, u, p)
+        k2 = self.xdot(x + 0.5 * h * k1, u, p)
+        k3 = self.xdot(x + 0.5 * h * k2, u, p)
+        k4 = self.xdot(x + h * k3, u, p)
+        x_next = x + (h / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+        name = f"fjm_rk4_{self.fns['f'].name()}"
+        return ca.Function(name, [x, u, p], [ca.cse(x_next)], ["x", "u", "p"], ["x_next"],
+                           {"never_inline": True})
 
     def cat(self, parts):
         return self.ca.vertcat(*parts)
@@ -278,6 +294,10 @@ def _sense(ops, L: StepLayout, w, noise, p):
 def _plant(ops, L: StepLayout, x, u, p):
     """``substeps`` RK4 steps of ``T / substeps`` under the held ``u``."""
     h = L.T / L.substeps
+    if getattr(ops, "substep", None) is not None:
+        for _ in range(L.substeps):
+            x = ops.substep(x, u, p)
+        return x
     for _ in range(L.substeps):
         k1 = ops.xdot(x, u, p)
         k2 = ops.xdot(x + 0.5 * h * k1, u, p)
@@ -357,7 +377,7 @@ def python_sample_step(model, controller, L: StepLayout, w, t: float, r, noise, 
     return w_next, (sample._replace(u=u) if L.rate_step else sample)
 
 
-def casadi_sample_step(fns, controller, L: StepLayout, n_par: int, nominal_fns=None):
+def casadi_sample_step(fns, controller, L: StepLayout, n_par: int, nominal_fns=None, outline: bool = False):
     """``fjm_sample_step(w, r, noise, p) -> (w_next, aux)`` as a CasADi Function (MX graph).
 
     Parameters
@@ -370,6 +390,10 @@ def casadi_sample_step(fns, controller, L: StepLayout, n_par: int, nominal_fns=N
     n_par : int
     nominal_fns : dict, optional
         The controller's model's ``f``, ``g`` (the predictor's); default ``fns``.
+    outline : bool
+        Keep each RK4 substep (plant and predictor) a call of one ``never_inline`` SX Function, so
+        that the step evaluated on SX (a batch engine's) grows by one call per substep instead of
+        one copy of the dynamics: code size and compiler memory independent of substeps and delay.
 
     Returns
     -------
@@ -378,8 +402,9 @@ def casadi_sample_step(fns, controller, L: StepLayout, n_par: int, nominal_fns=N
         ``aux = [u; s; y_hat]`` (6n,), ``u`` the applied (rate-limited) torque.
     """
     import casadi as ca
-    ops = _CasadiOps(_expanded(fns), L.nx, L.n)
-    nom_ops = _CasadiOps(_expanded(nominal_fns if nominal_fns is not None else fns), L.nx, L.n)
+    h = L.T / L.substeps if outline else None
+    ops = _CasadiOps(_expanded(fns), L.nx, L.n, h)
+    nom_ops = ops if nominal_fns is None else _CasadiOps(_expanded(nominal_fns), L.nx, L.n, h)
     w, r = ca.MX.sym("w", L.nw), ca.MX.sym("r", 5 * L.n)
     noise, p = ca.MX.sym("noise", L.nm), ca.MX.sym("p", n_par)
     p_nom = ca.DM(np.asarray(controller.p_nom, dtype=float)) if L.predict else None
@@ -453,18 +478,20 @@ def initial_measurement(model, L: StepLayout, x0, p_true) -> np.ndarray:
     return np.asarray(_measure(ops, L, np.asarray(x0, dtype=float), K), dtype=float)
 
 
-def sample_step_function(model, controller, L: StepLayout):
+def sample_step_function(model, controller, L: StepLayout, outline: bool = False):
     """The CasADi sample step of ``(model, controller, layout)`` (rebuilt per call: gains are baked in).
 
     The predictor integrates the controller's own model (:func:`controller_model`), which differs
     from the plant when the plant is, e.g., a complete model (:mod:`fjm_runtime.control.coupling`).
+    ``outline``: see :func:`casadi_sample_step`.
     """
     nominal = controller_model(controller, model)
     nominal_fns = casadi_functions(nominal) if (L.predict and nominal is not model) else None
     if L.predict and nominal is not model and nominal_fns is None:
         raise FjmValueError(f"predict: the controller's model {getattr(nominal, 'name', nominal)!r} has no CasADi "
                             "Functions to predict with")
-    return casadi_sample_step(casadi_functions(model), controller, L, len(model.param_names), nominal_fns)
+    return casadi_sample_step(casadi_functions(model), controller, L, len(model.param_names), nominal_fns,
+                              outline=outline)
 
 
 def check_loop_settings(sensor, delay_samples, predict):
