@@ -114,7 +114,8 @@ class FlexibleJointModel:
     source : dict or None
         Where a model built from a URDF comes from (``urdf`` path relative to
         the repository root, its ``sha256``, ``base``, ``tip``, ``joints`` in q
-        order); recorded in the manifest. None for the built-in formulas.
+        order, ``limits``: the URDF's ``<limit>`` per joint); recorded in the
+        manifest. None for the built-in formulas.
     coupling : sympy.Matrix, shape (n, n), or None
         Complete model only (docs/complete-model.md): the rotor spin coupling
         ``S(q)`` of the inertia matrix ``[[D, S], [S^T, J_m]]``; ``h`` then

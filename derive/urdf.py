@@ -6,8 +6,12 @@ numbers; the URDF elements used here (``link``, ``joint``, ``origin``,
 ``axis``, ``parent``, ``child``, ``inertial``, ``mass``, ``inertia``,
 ``mimic``) are then checked against the URDF specification by this module.
 Nothing is evaluated: numbers are read with :func:`float` from
-whitespace-separated attribute tokens. Visual, collision, limit, dynamics and
-any other elements are ignored (they do not enter the dynamics).
+whitespace-separated attribute tokens. Visual, collision, dynamics and any
+other elements are ignored (they do not enter the dynamics). A moving joint's
+``<limit>`` (``effort``, ``velocity``, ``lower``, ``upper``) does not enter the
+dynamics either; it is read as data (:attr:`UrdfChain.limits`, recorded in the
+manifest for the consumers of the model), as the URDF states it: no
+placeholder is replaced, a missing ``<limit>`` or attribute is None.
 
 Rules (each violation raises :class:`UrdfError` naming the file, the line,
 the element and what was expected):
@@ -17,7 +21,7 @@ the element and what was expected):
   link has at most one parent joint (a second one closes a loop) and the
   joint graph has no cycle;
 * joints on the base -> tip path are ``revolute``, ``continuous`` (both:
-  one generalized coordinate, limits ignored) or ``fixed`` (merged into the
+  one generalized coordinate) or ``fixed`` (merged into the
   parent body); ``prismatic``, ``planar`` and ``floating`` joints and
   ``<mimic>`` joints on the path are refused;
 * the child link of every revolute joint on the path needs an ``<inertial>``
@@ -33,7 +37,10 @@ the element and what was expected):
   ignored and listed in :attr:`UrdfChain.ignored`;
 * links that hang on the base (or on links fixed to it) without moving with
   the chain are ignored: the base is fixed, they do not couple with the
-  chain (listed in :attr:`UrdfChain.ignored` too).
+  chain (listed in :attr:`UrdfChain.ignored` too);
+* a ``<limit>`` on a moving joint of the chain, if present: its attributes
+  are finite numbers, ``effort`` and ``velocity`` >= 0 and ``lower`` <=
+  ``upper`` (each attribute optional: fjm does not require ``<limit>``).
 """
 
 from __future__ import annotations
@@ -49,7 +56,7 @@ import numpy as np
 
 from .chain import Attached, ChainDescription, Inertial, Joint
 
-__all__ = ["UrdfError", "UrdfChain", "parse_urdf", "load_urdf"]
+__all__ = ["UrdfError", "UrdfChain", "JointLimit", "parse_urdf", "load_urdf"]
 
 _JOINT_TYPES = ("revolute", "continuous", "prismatic", "fixed", "floating", "planar")
 
@@ -114,6 +121,26 @@ def _parse_xml(text: Union[str, bytes], source: str) -> _Node:
 
 
 @dataclass(frozen=True)
+class JointLimit:
+    """A joint's ``<limit>`` as the URDF states it (None: attribute or element absent).
+
+    Attributes
+    ----------
+    effort : float or None
+        N m (the joint torque the URDF allows, link side).
+    velocity : float or None
+        rad/s.
+    lower, upper : float or None
+        rad (a ``continuous`` joint has none).
+    """
+
+    effort: Optional[float] = None
+    velocity: Optional[float] = None
+    lower: Optional[float] = None
+    upper: Optional[float] = None
+
+
+@dataclass(frozen=True)
 class UrdfChain:
     """Result of :func:`parse_urdf`.
 
@@ -128,6 +155,8 @@ class UrdfChain:
         Links left out (massless moving branches, links that do not move with the chain).
     sha256 : str
         Of the URDF bytes.
+    limits : tuple of JointLimit
+        The ``<limit>`` of each revolute joint, in q order (same length as ``joints``).
     """
 
     description: ChainDescription
@@ -135,6 +164,7 @@ class UrdfChain:
     joints: Tuple[str, ...]
     ignored: Tuple[str, ...]
     sha256: str
+    limits: Tuple[JointLimit, ...] = ()
 
 
 class _Reader:
@@ -204,6 +234,23 @@ class _Reader:
                             "definite tensor about the centre of mass", self.source, inertia_node.line,
                             f"{link.label()} <inertia>")
         return Inertial(mass=mass, xyz=xyz, rpy=rpy, inertia=tensor)
+
+
+    def limit(self, joint: _Node) -> JointLimit:
+        """The ``<limit>`` of a moving joint (fields None where the URDF states nothing)."""
+        node = joint.find("limit")
+        if node is None:
+            return JointLimit()
+        values = {k: self.floats(node, k, 1, default=(None,), owner=joint)[0]
+                  for k in ("effort", "velocity", "lower", "upper")}
+        for key in ("effort", "velocity"):
+            if values[key] is not None and values[key] < 0:
+                raise UrdfError(f"{key}=\"{node.attrs[key]}\"; expected a number >= 0", self.source, node.line,
+                                f"{joint.label()} <limit>")
+        if values["lower"] is not None and values["upper"] is not None and values["lower"] > values["upper"]:
+            raise UrdfError(f"lower=\"{node.attrs['lower']}\" > upper=\"{node.attrs['upper']}\"; expected "
+                            "lower <= upper", self.source, node.line, f"{joint.label()} <limit>")
+        return JointLimit(**values)
 
 
 Edge = Tuple[_Node, str]  # (joint element, child or parent link name)
@@ -285,13 +332,15 @@ def _base_to_tip(robot: _Node, rd: _Reader, links: Dict[str, _Node], parent_of: 
 
 
 def _path_joints(rd: _Reader, links: Dict[str, _Node], path: List[Edge], base: str,
-                 tips: Sequence[str], tree: bool = False) -> Tuple[List[Joint], List[str]]:
-    """The joints on the path or tree (checked), and the links that move (beyond a moving joint).
+                 tips: Sequence[str], tree: bool = False) -> Tuple[List[Joint], List[str], List[JointLimit]]:
+    """The joints on the path or tree (checked), the links that move (beyond a moving joint), and the
+    ``<limit>`` of each moving joint in q order.
 
     ``path`` lists every parent before its children; with ``tree`` the joints name their parent link.
     """
     chain: List[Joint] = []
     moving_links: List[str] = []
+    limits: List[JointLimit] = []
     tip = ", ".join(tips)
     for jnode, child in path:
         kind = jnode.attrs["type"]
@@ -311,6 +360,7 @@ def _path_joints(rd: _Reader, links: Dict[str, _Node], path: List[Edge], base: s
                 axis = rd.floats(ax, "xyz", 3, owner=jnode)
             if not np.linalg.norm(axis) > 0:
                 raise rd.fail(jnode, f"<axis xyz=\"{' '.join(map(str, axis))}\"> is zero; expected a non-zero axis")
+            limits.append(rd.limit(jnode))
             moving = True
         if moving:
             moving_links.append(child)
@@ -322,7 +372,7 @@ def _path_joints(rd: _Reader, links: Dict[str, _Node], path: List[Edge], base: s
         if end not in moving_links:
             raise UrdfError(f"no revolute or continuous joint between base {base!r} and tip {end!r}; expected "
                             "at least one", rd.source, links[end].line, links[end].label())
-    return chain, moving_links
+    return chain, moving_links, limits
 
 
 def _off_path(rd: _Reader, links: Dict[str, _Node], children: Dict[str, List[Edge]], path: List[Edge],
@@ -424,11 +474,12 @@ def parse_urdf(text: Union[str, bytes], base: str, tip: Union[str, Sequence[str]
         path = _tree_edges(robot, rd, links, parent_of, base, tips)
     else:
         path = _base_to_tip(robot, rd, links, parent_of, base, tips[0] if tips else "")
-    chain, moving_links = _path_joints(rd, links, path, base, tips, tree)
+    chain, moving_links, limits = _path_joints(rd, links, path, base, tips, tree)
     attached, ignored = _off_path(rd, links, children, path, moving_links, base, ", ".join(tips))
     desc = ChainDescription(base=base, joints=tuple(chain), attached=tuple(attached), tips=tips if tree else ())
     return UrdfChain(description=desc, robot=robot.attrs.get("name", ""), joints=desc.revolute_names,
-                     ignored=tuple(sorted(set(ignored))), sha256=hashlib.sha256(data).hexdigest())
+                     ignored=tuple(sorted(set(ignored))), sha256=hashlib.sha256(data).hexdigest(),
+                     limits=tuple(limits))
 
 
 def load_urdf(path: Union[str, Path], base: str, tip: Union[str, Sequence[str]], source: str = None) -> UrdfChain:

@@ -130,10 +130,31 @@ class UrdfModelSpec:
         model = make_spatial(chain.description, self.name, params, description, symbolic=self.symbolic,
                              rotors=rotors, reduced_model=self.reduced_model)
         src = {"urdf": _repo_relative(self.urdf), "sha256": chain.sha256, "base": self.base,
-               **({"tips": list(self.tips)} if self.tips else {"tip": self.tip}), "joints": list(chain.joints)}
+               **({"tips": list(self.tips)} if self.tips else {"tip": self.tip}), "joints": list(chain.joints),
+               "limits": urdf_limits(chain)}
         if chain.ignored:
             src["ignored_links"] = list(chain.ignored)
         return replace(model, source=src)
+
+
+#: Units of the ``limits`` lists of a URDF model's manifest ``source``.
+LIMIT_UNITS = {"effort": "N m", "velocity": "rad/s", "lower": "rad", "upper": "rad"}
+
+
+def urdf_limits(chain: UrdfChain) -> Dict[str, object]:
+    """The URDF's ``<limit>`` per joint in q order, for the manifest (``source["limits"]``).
+
+    Returns
+    -------
+    dict
+        ``effort``, ``velocity``, ``lower``, ``upper``: lists of length n (float, or None where the
+        URDF states nothing), and ``unit``: the unit of each list. The numbers are the URDF's as
+        written (link side); placeholders (Baxter's head: effort 50000 N m) are kept, the consumer
+        decides what to do with them.
+    """
+    out: Dict[str, object] = {key: [getattr(lim, key) for lim in chain.limits] for key in LIMIT_UNITS}
+    out["unit"] = dict(LIMIT_UNITS)
+    return out
 
 
 def _repo_relative(path: Path) -> str:
