@@ -1,0 +1,150 @@
+"""The layout of the sample step's state ``w`` and the settings it is built for (:class:`StepLayout`).
+
+:func:`make_layout` turns a run's model, controller, period, substeps, sensor model, delay and
+prediction flag into the sizes and constants that :mod:`fjm_runtime.sim.sample_step` needs; the
+layout is hashable (a key of the compiled-step caches).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..validation import FjmValueError
+from .sensor import SensorModel
+
+__all__ = ["StepLayout", "controller_model", "make_layout", "stiffness_indices"]
+
+#: The rate limit's stand-in for "none" in the arithmetic (finite, so C and SIMD code see no inf).
+_NO_LIMIT = 1e300
+
+
+def stiffness_indices(model):
+    """Indices of ``K_i`` and ``J_mi`` in ``model.param_names``: ``(idx_K, idx_Jm)``, each shape (n,)."""
+    names, n = list(model.param_names), int(model.n)
+    groups = (["K"], ["J_m"]) if (n == 1 and "K" in names) else \
+        ([f"K{i + 1}" for i in range(n)], [f"Jm{i + 1}" for i in range(n)])
+    try:
+        return tuple(np.array([names.index(g) for g in grp], dtype=int) for grp in groups)
+    except ValueError:
+        raise FjmValueError(f"model {getattr(model, 'name', '?')!r}: torque sensing needs the stiffness "
+                            f"parameters {groups[0]} (found {names})") from None
+
+
+def controller_model(controller, plant):
+    """The model the controller was built on (its predictor's model); ``plant`` if it names none."""
+    for obj in (controller, getattr(controller, "base", None)):
+        m = getattr(obj, "model", None)
+        if m is not None:
+            return m
+    return plant
+
+
+@dataclass(frozen=True)
+class StepLayout:
+    """Sizes and settings of the sample step; ``w = [x | z | m_buf | u_buf | filt | venc | off | u_last]``.
+
+    Attributes
+    ----------
+    n, nx, nz : int
+        Joints, plant states (4n), controller states.
+    sensing : {'state', 'torque'}
+    nm : int
+        Measurement size (4n or 5n).
+    delay : int
+        ``d``: ``m_buf`` holds ``d`` measurements (oldest first), ``u_buf`` ``d`` torques.
+    predict : bool
+    filtered : bool
+        dtau_J as a filtered difference; ``filt = [tau_prev; dtau_filtered]`` (2n), else empty.
+    T : float
+        Control period, s.
+    substeps : int
+    a_filter : float
+        ``1 - exp(-dtau_cutoff T)``.
+    q_quant, q_m_quant : float
+    idx_K : tuple of int
+        Where ``K_i`` sit in the PLANT's parameter vector (the torque sensor measures the true spring).
+    K_nom : tuple of float
+        The controller's nominal ``K_i`` (the predictor's ``q_m = q + K_nom^-1 tau_J``).
+    differentiated : bool
+        Velocities as filtered differences of the measured angles; ``venc = [q_prev; dq; q_m_prev;
+        dq_m]`` (4n), else empty.
+    a_velocity : float
+        ``1 - exp(-velocity_cutoff T)``.
+    offset : bool
+        A constant tau_J offset per run (torque sensing); ``off`` (n), else empty.
+    rate_step : tuple of float
+        The largest torque change per sample per joint, N m (``rate limit x T``); empty: no limit,
+        else ``u_last`` (n) holds the last applied torque.
+    """
+
+    n: int
+    nx: int
+    nz: int
+    sensing: str
+    nm: int
+    delay: int
+    predict: bool
+    filtered: bool
+    T: float
+    substeps: int
+    a_filter: float
+    q_quant: float
+    q_m_quant: float
+    idx_K: tuple
+    K_nom: tuple
+    differentiated: bool = False
+    a_velocity: float = 0.0
+    offset: bool = False
+    rate_step: tuple = ()
+
+    @property
+    def n_venc(self) -> int:
+        return 4 * self.n if self.differentiated else 0
+
+    @property
+    def nw(self) -> int:
+        return (self.nx + self.nz + self.delay * (self.nm + self.n) + (2 * self.n if self.filtered else 0)
+                + self.n_venc + (self.n if self.offset else 0) + (self.n if self.rate_step else 0))
+
+    def slices(self):
+        """``(x, z, m_buf, u_buf, filt)`` slices of ``w`` (:meth:`extra_slices` has the rest)."""
+        a = self.nx; b = a + self.nz; c = b + self.delay * self.nm; d = c + self.delay * self.n
+        e = d + (2 * self.n if self.filtered else 0)
+        return slice(0, a), slice(a, b), slice(b, c), slice(c, d), slice(d, e)
+
+    def extra_slices(self):
+        """``(venc, off, u_last)`` slices of ``w`` (empty when the feature is off)."""
+        d = self.slices()[4].stop
+        e = d + self.n_venc
+        f = e + (self.n if self.offset else 0)
+        return slice(d, e), slice(e, f), slice(f, f + (self.n if self.rate_step else 0))
+
+
+def make_layout(model, controller, T: float, substeps: int, sensor: SensorModel, delay: int,
+                predict: bool) -> StepLayout:
+    """The :class:`StepLayout` of a run (the controller's ``sensing`` decides the measurement)."""
+    n = int(model.n)
+    sensing = getattr(controller, "sensing", "state")
+    if sensing not in ("state", "torque"):
+        raise FjmValueError(f"controller.sensing = {sensing!r}: expected 'state' or 'torque'")
+    torque = sensing == "torque"
+    predicting = bool(predict and delay > 0)
+    idx_K = stiffness_indices(model)[0] if torque else np.zeros(0, dtype=int)
+    K_nom = ()
+    if torque and predicting:
+        nominal = controller_model(controller, model)
+        p_nom = np.asarray(getattr(controller, "p_nom", nominal.params_array({})), dtype=float)
+        K_nom = tuple(float(v) for v in p_nom[stiffness_indices(nominal)[0]])
+    rate = sensor.rate_limits(n)
+    rate_step = tuple(float(r * T) if np.isfinite(r) else _NO_LIMIT for r in rate) \
+        if sensor.has_rate_limit() else ()
+    return StepLayout(n=n, nx=int(model.nx), nz=int(getattr(controller, "n_states", 0)), sensing=sensing,
+                      nm=5 * n if torque else 4 * n, delay=int(delay), predict=predicting,
+                      filtered=torque and sensor.dtau_mode == "filtered", T=float(T), substeps=int(substeps),
+                      a_filter=1.0 - math.exp(-sensor.dtau_cutoff * T), q_quant=sensor.q_quant,
+                      q_m_quant=sensor.q_m_quant, idx_K=tuple(int(i) for i in idx_K), K_nom=K_nom,
+                      differentiated=sensor.velocity_mode == "differentiated",
+                      a_velocity=1.0 - math.exp(-sensor.velocity_cutoff * T),
+                      offset=torque and bool(np.any(sensor.offsets(n) > 0)), rate_step=rate_step)
