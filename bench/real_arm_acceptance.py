@@ -78,7 +78,7 @@ def main() -> None:
                                     ("state, predict", "state", True), ("state", "state", False)):
         c = make_controller("ismc", m, {}, sensing=sensing, **g)
         t0 = time.time()
-        b = simulate_batch(m, c, ref, P, duration=10.0, sensor=SensorModel.panda(seed=7), delay_samples=1,
+        b = simulate_batch(m, c, ref, P, duration=10.0, sensor=SensorModel.panda_white(seed=7), delay_samples=1,
                            predict=predict, x0=x0, threads=2, simd=False)
         out[label] = summary(b) | {"wall_s": time.time() - t0}
         print(label, json.dumps(out[label], allow_nan=False), flush=True)

@@ -36,7 +36,7 @@ def _case():
     rng = np.random.default_rng(0)
     P = np.tile(m.params_array({}), (RUNS, 1))
     P[:, :7] *= rng.uniform(0.7, 1.3, (RUNS, 7))      # K1..K7
-    return m, ctrl, ref, P, SensorModel.panda(seed=0)
+    return m, ctrl, ref, P, SensorModel.panda_white(seed=0)
 
 
 def casadi_map_peer(m, ctrl, ref, P, sensor, subs, threads, duration, x0, seeds):

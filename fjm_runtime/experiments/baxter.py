@@ -86,7 +86,7 @@ def run(model, duration: float, backend: str = "casadi",
             try:
                 out[sensing][label] = simulate(model, ctrl, ref, duration=duration, dt=1.0 / RATE,
                                                true_params=p_true, x0=rest_state(model, ref(0.0)[0], p_true),
-                                               backend=backend, sensor=SensorModel.panda(seed=seed),
+                                               backend=backend, sensor=SensorModel.panda_white(seed=seed),
                                                delay_samples=DELAY, predict=True)
             except SimulationDivergedError as exc:
                 out[sensing][label] = exc

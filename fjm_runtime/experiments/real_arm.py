@@ -1,7 +1,7 @@
 """The demo's real-arm section: the Panda at 1 kHz with delay, sensor noise and unknown K, J_m, payload.
 
 Conditions of a real torque-controlled arm: the controller runs at :data:`RATE` (1 kHz) with a
-computation delay of :data:`DELAY` sample, reads noisy sensors (:meth:`SensorModel.panda`), and
+computation delay of :data:`DELAY` sample, reads noisy sensors (:meth:`SensorModel.panda_white`), and
 knows only the NOMINAL parameters; the TRUE plant (integrated on substeps, zero-order hold) has
 per-joint stiffness ``K = K_nom x U[0.7, 1.3]``, motor inertia ``J_m x U[0.8, 1.2]`` and an unknown
 payload of 0-1 kg (:func:`draws`: :data:`N_RANDOM` random draws plus three corner draws). Four
@@ -112,7 +112,7 @@ def run_all(model, cases: List[dict], duration: float, gains: dict,
             x0 = rest_state(model, ref(0.0)[0], d["params"])
             try:
                 r = simulate(model, ctrl, ref, duration=duration, dt=1.0 / RATE, true_params=d["params"], x0=x0,
-                             backend=backend, sensor=SensorModel.panda(seed=d["seed"]), delay_samples=DELAY,
+                             backend=backend, sensor=SensorModel.panda_white(seed=d["seed"]), delay_samples=DELAY,
                              predict=predict)
             except SimulationDivergedError as exc:
                 r = exc

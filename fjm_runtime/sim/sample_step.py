@@ -377,7 +377,7 @@ def check_loop_settings(sensor, delay_samples, predict):
     if sensor is None:
         sensor = SensorModel.ideal()
     if not isinstance(sensor, SensorModel):
-        raise FjmValueError(f"sensor = {sensor!r}: expected a SensorModel (e.g. SensorModel.panda())")
+        raise FjmValueError(f"sensor = {sensor!r}: expected a SensorModel (e.g. SensorModel.panda_white())")
     if isinstance(delay_samples, bool) or not isinstance(delay_samples, (int, np.integer)) or delay_samples < 0:
         raise FjmValueError(f"delay_samples = {delay_samples!r}: expected an integer >= 0 (samples of delay)")
     if not isinstance(predict, (bool, np.bool_)):

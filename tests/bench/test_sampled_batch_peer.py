@@ -18,7 +18,7 @@ def test_map_peer_gives_each_run_its_own_parameters_and_seed():
     ref = make_reference("sine", 1, amplitude=0.5, omega=1.0)
     P = np.tile(m.params_array({}), (3, 1))
     P[:, list(m.param_names).index("K")] = [100.0, 150.0, 200.0]
-    sensor = SensorModel.panda(seed=5)
+    sensor = SensorModel.panda_white(seed=5)
     x0 = np.array([0.1, 0.0, 0.1, 0.0])
     seeds = 5 + np.arange(3)
     b = simulate_batch(m, ctrl, ref, P, duration=0.02, dt=DT, sensor=sensor, delay_samples=DELAY, simd=False,

@@ -51,7 +51,7 @@ def test_link1_torque_sensed_rows_equal_simulate(simd):
     P = np.tile(m.params_array({}), (3, 1))
     iK = m.param_names.index("K")
     P[:, iK] *= np.array([0.7, 1.0, 1.3])
-    b = _compare(m, ctrl, ref, P, 0.3, SensorModel.panda(seed=11), 1, False, simd)
+    b = _compare(m, ctrl, ref, P, 0.3, SensorModel.panda_white(seed=11), 1, False, simd)
     assert np.any(b.joint_metrics["time_at_limit"] > 0) or np.all(b.joint_metrics["peak_torque"] < 50.0)
     assert len(set(b.joint_metrics["torque_jitter"][:, 0])) == 3   # each row its own noise and plant
 
@@ -68,7 +68,7 @@ def test_planar2_state_feedback_prediction_rows_equal_simulate(simd):
 
 
 def test_seeds_array_and_default_seed_plus_index():
-    s = SensorModel.panda(seed=40)
+    s = SensorModel.panda_white(seed=40)
     assert batch_seeds(s, 3).tolist() == [40, 41, 42]
     assert batch_seeds(s, 2, [7, 9]).tolist() == [7, 9]
     with pytest.raises(FjmValueError, match="seeds"):
@@ -82,7 +82,7 @@ def test_per_run_gains_equal_controllers_built_with_them():
     a = make_controller("ismc", m, {}, lam=20.0, k_s=50.0, delta=1.0, **kw)
     c = make_controller("ismc", m, {}, lam=35.0, k_s=10.0, delta=0.2, **kw)
     P = np.tile(m.params_array({}), (2, 1))
-    sensor = SensorModel.panda(seed=2)
+    sensor = SensorModel.panda_white(seed=2)
     b = simulate_batch(m, a, ref, P, duration=0.2, sensor=sensor, gains=np.vstack([a.gains, c.gains]),
                        seeds=[5, 5], simd=False)
     one = simulate_batch(m, c, ref, P[:1], duration=0.2, sensor=sensor, seeds=[5], simd=False)
@@ -119,7 +119,7 @@ def test_panda_smoke():
     ref = make_reference("sine", 7, amplitude=0.2, omega=1.0)
     P = np.tile(m.params_array({}), (2, 1))
     P[1, [m.param_names.index(f"K{i + 1}") for i in range(7)]] *= 0.7
-    sensor = SensorModel.panda(seed=1)
+    sensor = SensorModel.panda_white(seed=1)
     b = simulate_batch(m, ctrl, ref, P, duration=0.2, sensor=sensor, delay_samples=1, simd=False, threads=2)
     r = simulate(m, ctrl, ref, duration=0.2, true_params=P[1], sensor=sensor.with_seed(2), delay_samples=1,
                  substeps=b.info["substeps"], backend="compiled")

@@ -60,8 +60,11 @@ def test_noise_layout_by_sensing():
 
 def test_presets():
     assert SensorModel.ideal().is_ideal()
-    p = SensorModel.panda()
-    assert (p.tau_J, p.q, p.dtau_mode) == (0.05, 1e-4, "filtered")
+    p = SensorModel.panda_white()
+    assert (p.tau_J, p.q, p.dq, p.dtau_mode, p.velocity_mode) == (0.05, 1e-4, 1e-3, "filtered", "measured")
+    assert SensorModel.panda() == p                       # the former name
+    f = SensorModel.franka_like()
+    assert (f.velocity_mode, f.torque_rate_limit, f.dq, f.tau_J_offset) == ("differentiated", 1000.0, 0.0, 0.2)
 
 
 @pytest.mark.parametrize("kw", [{"q": float("nan")}, {"tau_J": -1.0}, {"dq": float("inf")},
