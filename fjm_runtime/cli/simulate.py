@@ -1,7 +1,10 @@
 """``fjm simulate MODEL ...``: one sampled-data closed loop, metrics as JSON on stdout, optionally a PNG.
 
 ``--json`` prints one object for scripts (docs/simulation.md): ``diverged``, per-joint
-``rms_second_half``, ``peak_torque``, ``time_at_limit``, ``torque_jitter``, and the settings used.
+``rms_second_half``, ``peak_torque``, ``time_at_limit``, ``torque_jitter``, where the gains came from
+(``gains_source``, ``designed_for_these_conditions``) and the settings used. Bad input, a run too
+large to hold and gains for another model are refused before any work
+(:mod:`fjm_runtime.cli.simulate_checks`); a run that diverges or leaves the workspace exits 3.
 """
 from __future__ import annotations
 
@@ -22,6 +25,11 @@ from ..sim.sensor import PRESETS, SensorModel, sensor_from_spec
 from ..sim.simulate import SimulationDivergedError, simulate, stderr_progress
 from ..validation import FjmValueError
 from .common import check_output_file, finite_or_note, parse_assignments
+from .simulate_checks import (DEFAULT_MAX_MEMORY_GB, check_gains_spec, check_pole, check_run_size, check_substeps,
+                              gains_provenance, workspace_exit)
+
+#: ``--lam`` when neither the flag nor a gains file gives it (1/s).
+DEFAULT_LAM = 8.0
 
 
 def add_parser(sub) -> None:
@@ -51,7 +59,8 @@ def add_parser(sub) -> None:
                      help="TRUE plant parameter (repeatable), e.g. --param J_l=1.2")
     sim.add_argument("--nominal", action="append", default=[], metavar="NAME=VALUE",
                      help="NOMINAL controller parameter (repeatable); default: model defaults")
-    sim.add_argument("--lam", type=float, default=8.0, help="pole magnitude lambda, 1/s (default 8)")
+    sim.add_argument("--lam", type=float, default=None,
+                     help=f"pole magnitude lambda, 1/s, at most pi x rate (default {DEFAULT_LAM:g})")
     sim.add_argument("--k-s", type=float, default=None,
                      help="switching gain, rad/s^4 (default: Lemma 1 bound for link1 with K in "
                           f"[--k-min, --k-max]; {FALLBACK_SWITCHING_GAIN:g} otherwise)")
@@ -91,6 +100,9 @@ def _add_sampled_data_flags(sim) -> None:
                      help='JSON {"kind": KIND, "gains": {lam, k_s, delta, k_lin, u_max, ...}} (docs/simulation.md)')
     sim.add_argument("--json", action="store_true",
                      help="print one JSON object for scripts (diverged, per-joint metrics, settings)")
+    sim.add_argument("--max-memory", type=float, default=DEFAULT_MAX_MEMORY_GB, metavar="GB",
+                     help="refuse a run whose estimated peak memory exceeds this, GB "
+                          f"(default {DEFAULT_MAX_MEMORY_GB:g})")
 
 
 def _scales(text: Optional[str], n: int, flag: str) -> Optional[np.ndarray]:
@@ -152,13 +164,20 @@ def _sensor(args) -> SensorModel:
     return SensorModel.from_dict(fields, where=f"--noise {path}")
 
 
-def _gains_file(args) -> dict:
-    """``--gains FILE``: ``{"kind": ..., "gains": {...}}``; the kind checked against --controller."""
+def _gains_file(args, m, rate: float):
+    """``(spec, source)``: ``--gains FILE`` (``{"kind": ..., "gains": {...}}``, the kind checked against
+    --controller), else the shipped design for this model, rate, delay and sensing (any kind unless
+    --controller names one) when no gain flag is given, else the flags (``spec["designed"]`` False).
+    Every spec is checked against the model before any work (:func:`check_gains_spec`)."""
     if args.gains is None:
-        from ..control.designed import designed_gains
-        shipped = None if (args.k_s is not None or args.delta is not None) else designed_gains(
-            args.model, args.controller or "smc", args.sensing, 1.0 / _period(args), args.delay_samples)
-        return shipped or {"kind": args.controller or "smc", "gains": {}}
+        from ..control.designed import find_design
+        flags_given = args.lam is not None or args.k_s is not None or args.delta is not None
+        shipped = None if flags_given else find_design(m.name, args.controller, args.sensing, rate,
+                                                       args.delay_samples)
+        if shipped is None:
+            return {"kind": args.controller or "smc", "gains": {}, "designed": False}, "command line"
+        check_gains_spec(shipped, f"shipped design {shipped['file']}", m)
+        return shipped, f"shipped design {shipped['file']}"
     try:
         spec = json.loads(Path(args.gains).read_text())
     except (OSError, ValueError) as exc:
@@ -170,7 +189,8 @@ def _gains_file(args) -> dict:
     if args.controller is not None and args.controller != spec["kind"]:
         raise FjmValueError(f"--gains {args.gains}: holds gains for {spec['kind']!r}, not --controller "
                             f"{args.controller!r}")
-    return spec
+    check_gains_spec(spec, f"--gains {args.gains}", m)
+    return spec, f"--gains {args.gains}"
 
 
 def _period(args) -> float:
@@ -180,7 +200,27 @@ def _period(args) -> float:
         if not (math.isfinite(args.rate) and args.rate > 0):
             raise FjmValueError(f"--rate {args.rate}: expected a finite rate > 0 Hz")
         return 1.0 / args.rate
+    if args.dt is not None and not (math.isfinite(args.dt) and 0 < args.dt <= args.duration):
+        raise FjmValueError(f"--dt {args.dt}: expected a finite control period 0 < dt <= --duration s")
     return 1e-3 if args.dt is None else args.dt
+
+
+def _check_flags(args, dt: float) -> None:
+    """The run's scalar flags, before any work: a finite duration, a reference a law sampled at
+    ``1/dt`` can follow (sine frequency up to the Nyquist frequency ``pi / dt``), finite set points."""
+    if not (math.isfinite(args.duration) and args.duration > 0):
+        raise FjmValueError(f"--duration {args.duration}: expected a finite time > 0 s")
+    if dt > args.duration:
+        raise FjmValueError(f"--duration {args.duration}: expected at least one control period ({dt:g} s)")
+    nyquist = math.pi / dt
+    if not (math.isfinite(args.omega) and 0 <= args.omega <= nyquist):
+        raise FjmValueError(f"--omega {args.omega}: expected a sine frequency 0 <= omega <= pi x rate = "
+                            f"{nyquist:.4g} rad/s (the Nyquist frequency)")
+    for flag, v in (("--amplitude", args.amplitude), ("--q-d", args.q_d)):
+        if not math.isfinite(v):
+            raise FjmValueError(f"{flag} {v}: expected a finite angle (rad)")
+    if not (math.isfinite(args.rise_time) and args.rise_time > 0):
+        raise FjmValueError(f"--rise-time {args.rise_time}: expected a finite time > 0 s")
 
 
 def _build_controller(m, args, nominal, ref, kind, file_gains):
@@ -191,11 +231,21 @@ def _build_controller(m, args, nominal, ref, kind, file_gains):
         extra["beta_hat"] = paper_beta_hat(m, nominal, k_bounds)
     gain = None
     k_s = file_gains.get("k_s", args.k_s)
-    lam = file_gains.get("lam", args.lam)
+    rate = 1.0 / _period(args)
+    if "lam" in file_gains:
+        lam = check_pole(file_gains["lam"], rate, f"--gains {args.gains or 'shipped design'}: gains.lam =")
+    elif "c" not in file_gains:
+        lam = check_pole(DEFAULT_LAM if args.lam is None else args.lam, rate, "--lam")
+    else:
+        lam = None
     if k_s is None:
         gain = default_switching_gain(m, nominal, lam, ref.derivative_bounds(), k_bounds=k_bounds,
                                       error_bounds=default_error_bounds(args.reference, args.amplitude, args.omega))
         k_s = FALLBACK_SWITCHING_GAIN if gain is None else gain.k_s
+        if not np.all(np.isfinite(np.asarray(k_s, dtype=float))):
+            raise FjmValueError(f"Lemma 1 switching gain {k_s!r} for the nominal parameters and --k-min/--k-max "
+                                f"{args.k_min:g}/{args.k_max:g}: not finite; expected parameters in a physical "
+                                "range (--nominal) or an explicit --k-s")
     delta = file_gains.get("delta", args.delta if args.delta is not None else default_delta(k_s))
     if kind == "adaptive":
         # beta from the estimated stiffness (not the paper's constant); the bounds project K_hat
@@ -204,7 +254,9 @@ def _build_controller(m, args, nominal, ref, kind, file_gains):
             raise FjmValueError(f"--k-min/--k-max = {args.k_min}/{args.k_max}: expected 0 < k_min < k_max "
                                 "for the adaptive controller")
         extra["K_bounds"] = k_bounds
-    kw = {"lam": lam, "k_s": k_s, "delta": delta, "u_max": args.u_max, **extra}
+    kw = {"k_s": k_s, "delta": delta, "u_max": args.u_max, **extra}
+    if lam is not None:
+        kw["lam"] = args.lam = lam
     kw.update({k: v for k, v in file_gains.items() if k not in ("lam", "k_s", "delta")})
     if args.sensing != "state":
         kw["sensing"] = args.sensing
@@ -220,9 +272,14 @@ def _per_joint(values) -> list:
     return [float(v) if math.isfinite(float(v)) else None for v in np.asarray(values, dtype=float)]
 
 
-def _script_report(res, settings: dict, diverged: Optional[SimulationDivergedError]) -> dict:
-    """The ``--json`` object: diverged, per-joint metrics (null plus a reason), the settings."""
-    out: Dict[str, object] = {"diverged": diverged is not None}
+def _script_report(res, settings: dict, diverged: Optional[SimulationDivergedError], provenance: dict,
+                   left=None) -> dict:
+    """The ``--json`` object: diverged (the state blew up, or ``left`` = ``(t, reason)``: the run left the
+    workspace; then with the time and reason but metrics kept), per-joint metrics (null plus a reason),
+    where the gains came from (``provenance``), the settings."""
+    out: Dict[str, object] = {"diverged": diverged is not None or left is not None}
+    if left is not None:
+        out["divergence_time"], out["reason"] = float(left[0]), left[1]
     names = ("rms_second_half", "peak_torque", "time_at_limit", "torque_jitter", "time_at_rate_limit")
     if diverged is not None:
         out.update({k: None for k in names})
@@ -237,6 +294,7 @@ def _script_report(res, settings: dict, diverged: Optional[SimulationDivergedErr
         out["metrics"] = {}
         for k, v in res.metrics.as_dict().items():
             finite_or_note(out["metrics"], k, v)
+    out.update(provenance)
     out["settings"] = settings
     return out
 
@@ -256,7 +314,12 @@ def design_task(m, task: dict):
                    phase=float(task.get("phase", 0.0)))
     x0 = None
     if "holding gravity" in str(task.get("start", "")):
-        x0 = rest_state(m, ref(0.0)[0], m.default_params)
+        try:
+            x0 = rest_state(m, ref(0.0)[0], m.default_params)
+        except ValueError as exc:  # e.g. a complete model (sim/rest.py assumes the reduced one's K)
+            raise FjmValueError(f"--reference task: the design's start ({task.get('start')}) cannot be computed "
+                                f"for {m.name} ({str(exc).splitlines()[0][:80]}); expected a reduced model or "
+                                "--reference sine/step/constant") from None
     return ref, x0
 
 
@@ -277,19 +340,31 @@ def _reference(m, args, spec):
 
 
 def run(args) -> int:
-    """Run ``fjm simulate``; returns the exit status (3: the simulation diverged, without --json)."""
+    """Run ``fjm simulate``; returns the exit status (3: the run diverged or left the workspace)."""
     from .. import load
     if args.plot is not None:
         check_output_file(args.plot, "--plot")
     m = load(args.model)
+    dt = _period(args)
+    _check_flags(args, dt)
     nominal = parse_assignments(args.nominal, "--nominal")
     true = _true_params(m, args, nominal)
     sensor = _sensor(args)
-    spec = _gains_file(args)
-    kind, dt = spec["kind"], _period(args)
+    spec, source = _gains_file(args, m, 1.0 / dt)
+    kind = spec["kind"]
     ref, x0 = _reference(m, args, spec)
     ctrl, gain, k_s, delta = _build_controller(m, args, nominal, ref, kind, spec["gains"])
     args.predict = bool(args.predict or spec.get("predict", False))  # gains designed with prediction keep it
+    _check_size(m, args, ctrl, ref, x0, true, sensor, dt)
+    conditions = {"model": m.name, "kind": kind, "sensing": args.sensing, "rate": 1.0 / dt,
+                  "delay": args.delay_samples, "predict": bool(args.predict), "sensor": sensor}
+    provenance = gains_provenance(source, None if spec.get("designed") is False else spec, conditions,
+                                  None if gain is None else f"K in [{args.k_min:g}, {args.k_max:g}]")
+    if not provenance["designed_for_these_conditions"]:
+        print(f"fjm: warning: the gains ({source}) were not designed for {m.name} under these conditions: "
+              f"{'; '.join(provenance['not_designed_because'])}", file=sys.stderr)
+    elif source.startswith("shipped"):
+        print(f"fjm: using the {source} (designed for these conditions)", file=sys.stderr)
     progress = None if (args.quiet or args.json) else stderr_progress(f"simulating {args.model} ({args.duration:g} s)")
     settings = {"model": m.name, "controller": kind, "rate": 1.0 / dt, "dt": dt, "substeps": args.substeps,
                 "delay_samples": args.delay_samples, "predict": bool(args.predict), "sensing": args.sensing,
@@ -302,18 +377,46 @@ def run(args) -> int:
                        predict=args.predict)
     except SimulationDivergedError as exc:
         if args.json:
-            print(json.dumps(_script_report(None, settings, exc), allow_nan=False))
-            return 0
-        print(f"fjm: {exc}", file=sys.stderr)
+            print(json.dumps(_script_report(None, settings, exc, provenance), allow_nan=False))
+        print(f"fjm: diverged: {exc}", file=sys.stderr)
         return 3
     settings["substeps"] = res.settings["substeps"]
+    left = workspace_exit(res.t, res.x[:, :m.n], res.e1)
     if args.json:
-        print(json.dumps(_script_report(res, settings, None), allow_nan=False))
-        return 0
-    return _legacy_report(m, args, res, kind, true, nominal, k_s, delta, gain, ctrl)
+        print(json.dumps(_script_report(res, settings, None, provenance, left), allow_nan=False))
+        status = 0
+    else:
+        status = _legacy_report(m, args, res, kind, true, nominal, k_s, delta, gain, ctrl, provenance, left)
+    if left is not None:
+        print(f"fjm: diverged: the run {left[1]}", file=sys.stderr)
+        return 3
+    return status
 
 
-def _legacy_report(m, args, res, kind, true, nominal, k_s, delta, gain, ctrl) -> int:
+def _check_size(m, args, ctrl, ref, x0, true, sensor, dt) -> None:
+    """Refuse, before allocating, a run whose substeps or memory are out of reach (:func:`check_run_size`)."""
+    from ..sim.sample_step import check_loop_settings, make_layout
+    from ..sim.substeps import SAFETY, STEP_PER_RADIAN, fastest_mode
+    sensor, delay = check_loop_settings(sensor, args.delay_samples, args.predict)
+    if args.substeps is not None and (isinstance(args.substeps, bool) or args.substeps < 1):
+        raise FjmValueError(f"--substeps {args.substeps}: expected an integer >= 1 (RK4 steps per control sample)")
+    p_true = m.params_array(true)
+    if x0 is None:
+        q0 = np.asarray(ref(0.0), dtype=float)[0]
+        x0 = np.concatenate([q0, np.zeros(m.n), q0, np.zeros(m.n)])
+    with np.errstate(all="ignore"):
+        omega = fastest_mode(m, x0, p_true)
+    if not math.isfinite(omega):
+        raise FjmValueError("the plant's fastest mode at the TRUE parameters is not finite; expected a "
+                            "stiffness and inertia in a physical range (--K, --param, --k-scale, --jm-scale)")
+    subs = args.substeps if args.substeps is not None else max(1.0, SAFETY * dt * omega / STEP_PER_RADIAN)
+    check_substeps(subs, None if args.substeps is not None else omega)
+    subs = int(math.ceil(subs - 1e-12))
+    layout = make_layout(m, ctrl, dt, subs, sensor, delay, args.predict)
+    check_run_size(layout.nw, m.n, layout.nm, args.duration, dt, args.max_memory)
+
+
+def _legacy_report(m, args, res, kind, true, nominal, k_s, delta, gain, ctrl, provenance, left) -> int:
     """The indented report (and the optional PNG) of ``fjm simulate`` without ``--json``."""
     metrics: Dict[str, object] = {}
     for k, v in res.metrics.as_dict().items():
@@ -324,7 +427,10 @@ def _legacy_report(m, args, res, kind, true, nominal, k_s, delta, gain, ctrl) ->
               "lam": args.lam, "k_s": k_s, "delta": delta,
               "lemma1": None if gain is None else {"k_s": gain.k_s, "k_s_tight": gain.k_s_tight, "W": gain.W,
                                                    "H": gain.H, "beta_hat": gain.beta_hat},
-              "settings": res.settings, "metrics": metrics}
+              "settings": res.settings, "metrics": metrics, **provenance,
+              "diverged": left is not None}
+    if left is not None:
+        report["divergence_time"], report["reason"] = float(left[0]), left[1]
     if hasattr(ctrl, "stiffness_estimate"):
         report["K_hat_final"] = ctrl.stiffness_estimate(res.z[-1]).tolist()
     print(json.dumps(report, indent=2, allow_nan=False))

@@ -1,0 +1,294 @@
+"""``fjm simulate``'s checks before and after a run: the gains file, the run's size, where its gains
+came from, and whether the run left the workspace.
+
+Before any work (one-line :class:`~fjm_runtime.validation.FjmValueError`, exit 2):
+
+* :func:`check_gains_spec`: a gains file (or a shipped design) for THIS model: its ``model`` and
+  the lengths of its per-joint gains match, every gain is a finite number of the right sign, the
+  keys the kind needs are there.
+* :func:`check_pole`: ``0 < lam <= pi x rate`` (the Nyquist frequency, rad/s).
+* :func:`check_run_size`: the memory the run will hold and the RK4 substeps per sample, against
+  :data:`DEFAULT_MAX_MEMORY_GB` (``--max-memory``) and :data:`MAX_SUBSTEPS`.
+
+After the run: :func:`gains_provenance` (where the gains came from, and whether they were designed
+for this model and these conditions) and :func:`workspace_exit` (the first sample where a link
+angle or the tracking error is beyond :data:`WORKSPACE_BOUND` / :data:`ERROR_BOUND`).
+"""
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Optional, Tuple
+
+import numpy as np
+
+from ..validation import FjmValueError
+
+__all__ = ["DEFAULT_MAX_MEMORY_GB", "ERROR_BOUND", "MAX_SUBSTEPS", "PEAK_FACTOR", "WORKSPACE_BOUND",
+           "check_gains_spec", "check_pole", "check_run_size", "check_substeps", "gains_provenance", "same_sensor",
+           "workspace_exit"]
+
+#: Default of ``--max-memory``: the largest estimated peak memory of one run, GB.
+DEFAULT_MAX_MEMORY_GB = 4.0
+#: Measured peak resident memory of a run / the arrays it stores (link1 2000 s: 4.4 GB for 0.38 GB
+#: stored, 11.6x; Panda torque-sensed 60 s: 1.0 GB for 0.13 GB, 7.2x; the CasADi loop's copies).
+PEAK_FACTOR = 12.0
+#: Largest number of RK4 plant steps per control sample (the default rule gives 11 for the Panda at
+#: 1 kHz, :mod:`fjm_runtime.sim.substeps`); beyond it the stiffness or inertia is not physical.
+MAX_SUBSTEPS = 10_000
+#: ``|q_i|`` beyond this (rad) is outside any revolute arm's workspace: two full turns each way.
+WORKSPACE_BOUND = 4.0 * math.pi
+#: ``|q_i - q_d,i|`` beyond this (rad) is a tracking error of more than a full turn.
+ERROR_BOUND = 2.0 * math.pi
+
+# gains a file may set: (sign rule, unit); per-joint unless noted in _SCALAR
+_GAIN_RULES = {"lam": ("> 0", "1/s"), "k_s": (">= 0", "rad/s^4"), "delta": ("> 0", "rad/s^3"),
+               "k_lin": (">= 0", "1/s"), "u_max": ("> 0", "N m")}
+_SCALAR = ("lam",)
+# keys the law of each kind reads from a design (one of the tuple's names)
+_REQUIRED = {"smc": (("lam", "c"), ("k_s",), ("delta",)), "ismc": (("lam", "c"), ("k_s",), ("delta",)),
+             "adaptive": (("lam", "c"), ("k_s",), ("delta",)), "sign": (("lam", "c"), ("k_s",)),
+             "fl": (("lam", "c"),)}
+
+
+def _joints_of(spec: dict) -> Optional[int]:
+    """How many joints a design is for: its task's length, or (when it names its model) its per-joint
+    gains' length; else None (a hand-written file: each gain's length is checked on its own)."""
+    gains = spec.get("gains", {})
+    task = spec.get("reference") if isinstance(spec.get("reference"), dict) else {}
+    named = [gains.get(k) for k in _GAIN_RULES if k not in _SCALAR] if spec.get("model") else []
+    for v in [task.get("amplitude")] + named:
+        if isinstance(v, list) and len(v) > 1 and not isinstance(v[0], list):
+            return len(v)
+    return None
+
+
+def _is_real(x) -> bool:
+    return isinstance(x, (int, float)) and not isinstance(x, bool)
+
+
+def check_gains_spec(spec: dict, where: str, model) -> None:
+    """Refuse a gains file that is not for ``model`` or holds a gain that is not a usable number.
+
+    Parameters
+    ----------
+    spec : dict
+        ``{"kind", "gains": {...}, ...}`` (a ``--gains`` file or a shipped design).
+    where : str
+        How the error names it, e.g. ``"--gains g.json"``.
+    model : Model
+        The run's model (``name``, ``n``).
+
+    Raises
+    ------
+    FjmValueError
+        One line: the model mismatch (the design's model and joints vs this one), or the key,
+        the value and what was expected, or the missing key.
+    """
+    n, name = int(model.n), str(model.name)
+    designed_for = spec.get("model")
+    joints = _joints_of(spec)
+    if joints is not None and joints != n:
+        what = f"model {designed_for!r} with {joints} joints" if designed_for else f"{joints} joints"
+        raise FjmValueError(f"{where}: the gains are for {what}; {name} has {n} joint{'s' * (n != 1)} "
+                            f"(expected gains designed for {name}, e.g. from `fjm design {name}`)")
+    gains = spec["gains"]
+    for key, (rule, unit) in _GAIN_RULES.items():
+        if key not in gains:
+            continue
+        v = gains[key]
+        shape = "a finite number" if key in _SCALAR else f"a finite number or a list of {n}"
+        expected = f"expected {shape} {rule} ({unit})"
+        vals = v if (isinstance(v, list) and key not in _SCALAR) else [v]
+        if not all(_is_real(x) for x in vals) or not vals:
+            raise FjmValueError(f"{where}: gains.{key} = {v!r}; {expected}")
+        if isinstance(v, list) and len(v) not in (1, n):
+            raise FjmValueError(f"{where}: gains.{key} has {len(v)} entries; {expected} for {name}")
+        arr = np.asarray(vals, dtype=float)
+        if not np.all(np.isfinite(arr)) or not np.all(arr > 0 if rule == "> 0" else arr >= 0):
+            raise FjmValueError(f"{where}: gains.{key} = {v!r}; {expected}")
+    for options in _REQUIRED.get(spec["kind"], ()):
+        if not any(k in gains for k in options):
+            raise FjmValueError(f"{where}: gains.{options[0]} is missing; expected the {spec['kind']} law's "
+                                f"gains {', '.join(o[0] for o in _REQUIRED[spec['kind']])} (docs/simulation.md)")
+
+
+def check_pole(lam, rate: float, where: str) -> float:
+    """``lam`` as a float with ``0 < lam <= pi x rate``: poles at ``-lam`` beyond the Nyquist frequency
+    ``pi / T`` (rad/s) cannot be realized by a law sampled at ``rate`` (and ``lam^4`` overflows long
+    before a float does)."""
+    top = math.pi * rate
+    if not (_is_real(lam) and math.isfinite(lam) and 0 < lam <= top):
+        raise FjmValueError(f"{where} {lam!r}: expected a pole magnitude 0 < lam <= pi x rate = {top:.4g} 1/s "
+                            f"(the Nyquist frequency at {rate:g} Hz)")
+    return float(lam)
+
+
+def _available_bytes() -> Optional[float]:
+    """``MemAvailable`` of /proc/meminfo in bytes (None where there is none)."""
+    try:
+        for line in Path("/proc/meminfo").read_text().splitlines():
+            if line.startswith("MemAvailable:"):
+                return float(line.split()[1]) * 1024.0
+    except (OSError, ValueError, IndexError):
+        return None
+    return None
+
+
+def check_substeps(substeps: float, omega: Optional[float] = None) -> None:
+    """Refuse more than :data:`MAX_SUBSTEPS` RK4 plant steps per sample (before any work).
+
+    Parameters
+    ----------
+    substeps : float
+        ``--substeps``, or the rule's value (``1.5 T omega / 0.1``, :mod:`fjm_runtime.sim.substeps`).
+    omega : float, optional
+        The fastest mode (rad/s) the rule used (None: ``--substeps`` was given).
+    """
+    if substeps > MAX_SUBSTEPS:
+        why = (f"the plant's fastest mode at the TRUE parameters is {omega:.4g} rad/s: the substeps rule needs "
+               f"{math.ceil(substeps):.4g}" if omega is not None else f"--substeps {substeps}:")
+        raise FjmValueError(f"{why} RK4 substeps per sample; expected at most {MAX_SUBSTEPS} (a stiffness and "
+                            "inertia in a physical range: --K, --param, --k-scale, --jm-scale; or a higher --rate)")
+
+
+def check_run_size(layout_nw: int, n: int, nm: int, duration: float, dt: float, max_memory_gb: float) -> dict:
+    """Refuse, before allocating, a run too large to hold.
+
+    The run stores ``N + 1 = round(duration / dt) + 1`` rows of the step state (``nw``), the
+    applied torque, s and the estimate (``6n``), the reference (``5n``), the noise (``nm``), the
+    true outputs (``4n``) and the error (``n``), 8 bytes each; its measured peak is up to
+    :data:`PEAK_FACTOR` times that.
+
+    Parameters
+    ----------
+    layout_nw : int
+        Columns of the step state (``StepLayout.nw``: plant, controller, delay buffers, filters).
+    n, nm : int
+        Joints; measurement columns (4n or 5n).
+    duration, dt : float
+        s; the period (s).
+    max_memory_gb : float
+        ``--max-memory``.
+
+    Returns
+    -------
+    dict
+        ``samples``, ``columns``, ``stored_bytes``, ``peak_bytes`` (the estimate).
+
+    Raises
+    ------
+    FjmValueError
+        The estimated peak beyond ``--max-memory`` or the machine's available memory.
+    """
+    if not (math.isfinite(max_memory_gb) and max_memory_gb > 0):
+        raise FjmValueError(f"--max-memory {max_memory_gb!r}: expected a finite size > 0 GB")
+    samples = int(round(duration / dt)) + 1
+    columns = int(layout_nw) + 6 * n + 5 * n + int(nm) + 4 * n + n
+    stored = float(samples) * columns * 8.0
+    peak = PEAK_FACTOR * stored
+    limit = max_memory_gb * 1e9
+    avail = _available_bytes()
+    what = (f"--duration {duration:g} s at {1.0 / dt:g} Hz: {samples:.4g} samples x {columns} stored columns x "
+            f"8 bytes = {stored / 1e9:.3g} GB (about {peak / 1e9:.3g} GB at peak)")
+    if peak > limit:
+        raise FjmValueError(f"{what}; expected at most --max-memory {max_memory_gb:g} GB (shorten --duration, "
+                            "lower --rate or --delay-samples, or raise --max-memory)")
+    if avail is not None and peak > avail:
+        raise FjmValueError(f"{what}; this machine has {avail / 1e9:.3g} GB available (shorten --duration "
+                            "or lower --rate)")
+    return {"samples": samples, "columns": columns, "stored_bytes": stored, "peak_bytes": peak}
+
+
+def same_sensor(spec: dict, sensor) -> Tuple[bool, str]:
+    """Whether ``sensor`` (a SensorModel) is the one a design report records, and the design's name.
+
+    The report's ``sensor`` fields are compared (seed and name aside); a report without them is
+    compared by its ``noise`` preset name (former names resolved).
+    """
+    from ..sim.sensor import SensorModel, sensor_from_spec
+    recorded = spec.get("sensor")
+    label = str(spec.get("noise", "?"))
+    try:
+        if isinstance(recorded, dict):
+            design = SensorModel.from_dict(recorded, where="design sensor")
+        elif "noise" in spec:
+            design = sensor_from_spec(spec["noise"])
+        else:
+            return False, "unrecorded"
+    except FjmValueError:
+        return False, label
+    ignore = ("seed", "name")
+    a = {k: v for k, v in design.as_dict().items() if k not in ignore}
+    b = {k: v for k, v in sensor.as_dict().items() if k not in ignore}
+    name = sensor_from_spec(label).name if label in ("panda", "none", "ideal", "panda_white", "franka_like") \
+        else label
+    return a == b, name
+
+
+def gains_provenance(source: str, spec: Optional[dict], conditions: dict, lemma1: Optional[str] = None) -> dict:
+    """Where the run's gains came from and whether they were designed for this model and conditions.
+
+    Parameters
+    ----------
+    source : str
+        ``"shipped design FILE"``, ``"--gains FILE"``, or ``"command line"``.
+    spec : dict or None
+        The design report (None: gains from the flags and their defaults).
+    conditions : dict
+        ``model``, ``kind``, ``sensing``, ``rate``, ``delay``, ``predict``, ``sensor`` of the run.
+    lemma1 : str, optional
+        With ``spec`` None: how the switching gain came from the Lemma 1 bound (it holds for the
+        continuous-time loop, not for a sampled one with delay and noise).
+
+    Returns
+    -------
+    dict
+        ``gains_source``, ``designed_for_these_conditions`` (bool) and, when False,
+        ``not_designed_because`` (list of reasons).
+    """
+    from ..control.designed import design_mismatches
+    if spec is None:
+        reasons = ["the gains are the command line's or their generic defaults (--lam, --k-s, --delta); "
+                   "no design exists for these conditions (`fjm design` finds one)"]
+        if lemma1:
+            reasons.append(f"k_s is the Lemma 1 bound ({lemma1}) for the continuous-time loop, not a design "
+                           "for the sampled loop")
+    else:
+        reasons = design_mismatches(spec, conditions, same_sensor)
+    out = {"gains_source": source, "designed_for_these_conditions": not reasons}
+    if reasons:
+        out["not_designed_because"] = reasons
+    return out
+
+
+def workspace_exit(t: np.ndarray, q: np.ndarray, e1: np.ndarray) -> Optional[Tuple[float, str]]:
+    """The first sample where a link angle leaves the workspace or the error exceeds a full turn.
+
+    Parameters
+    ----------
+    t : ndarray, shape (N+1,)
+    q : ndarray, shape (N+1, n)
+        Link angles, rad.
+    e1 : ndarray, shape (N+1, n)
+        ``q - q_d``, rad.
+
+    Returns
+    -------
+    (float, str) or None
+        The time and a one-line reason (joint, value, bound), or None when the run stayed inside
+        ``|q| <= WORKSPACE_BOUND`` and ``|e1| <= ERROR_BOUND``.
+    """
+    q, e1 = np.abs(np.asarray(q, dtype=float)), np.abs(np.asarray(e1, dtype=float))
+    bad = (q > WORKSPACE_BOUND) | (e1 > ERROR_BOUND) | ~np.isfinite(q) | ~np.isfinite(e1)
+    rows = np.flatnonzero(bad.any(axis=1))
+    if rows.size == 0:
+        return None
+    k = int(rows[0])
+    j = int(np.flatnonzero(bad[k])[0])
+    tk = float(t[k])
+    if not (q[k, j] <= WORKSPACE_BOUND):
+        why = f"link angle |q_{j + 1}| = {q[k, j]:.4g} rad beyond the workspace bound 4 pi = {WORKSPACE_BOUND:.4g}"
+    else:
+        why = f"tracking error |e_{j + 1}| = {e1[k, j]:.4g} rad beyond a full turn (2 pi)"
+    return tk, f"left the workspace at t = {tk:.4f} s: {why}"
