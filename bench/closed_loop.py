@@ -1,13 +1,16 @@
-"""Closed-loop peers for link1 (paper's tracking case, 10 s at 1 kHz, RK4 + SMC).
+"""Closed-loop peers for link1 (paper's tracking case, 10 s at 1 kHz): THE sample step with one RK4
+substep, an ideal sensor, no delay and the stateless SMC law (the sampled loop's form that a hand-written
+loop can match: ``u_k = law(x_k)`` held over the sample, one RK4 step of the plant).
 
-* generated: :func:`fjm_runtime.sim.compiled.closed_loop_library` (the fused step + a C loop,
-  cached), and the whole ``simulate(..., backend="compiled")`` call;
+* generated: :func:`fjm_runtime.sim.compiled.sampled_loop_library` (the sample step + a C loop,
+  cached), and the whole ``simulate(..., backend="compiled", substeps=1)`` call;
 * hand C: ``bench/hand_loop.c``, the same loop written by hand, same flags;
 * Python loop: ``simulate(..., backend="python")`` (numpy RK4 calling the CasADi Functions),
   timed against the whole compiled ``simulate()`` call (same arguments);
 * scipy: ``solve_ivp`` (RK45) of the same closed loop with the control law evaluated
   continuously (no zero-order hold), rtol 1e-6, atol 1e-9;
-* numpy batch: RK4 vectorized over the runs (closed forms, same metrics as simulate_batch).
+* numpy batch: RK4 vectorized over the runs (closed forms, same metrics as
+  ``simulate_batch(..., substeps=1)``).
 """
 from __future__ import annotations
 
@@ -22,8 +25,10 @@ from fjm_runtime.analysis.lemma1 import beta_bounds_link1, lemma1_gain
 from fjm_runtime.control.factory import DEFAULT_LAYER_RATE, default_delta, make_controller
 from fjm_runtime.control.laws import coefficients_from_pole
 from fjm_runtime.control.references import Sinusoid
-from fjm_runtime.sim.compiled import closed_loop_runner
+from fjm_runtime.sim.compiled import sampled_loop_runner
 from fjm_runtime.sim.metrics import metrics_from_sums
+from fjm_runtime.sim.sample_step import initial_step_state, make_layout
+from fjm_runtime.sim.sensor import SensorModel
 
 from .ccutil import compile_object, link_shared
 
@@ -87,14 +92,25 @@ class Case:
     def n_steps(self) -> int:
         return int(round(self.duration / self.dt))
 
-    def reference_arrays(self):
-        N, dt = self.n_steps, self.dt
-        rh = self.reference.sample(0.5 * dt * np.arange(2 * N + 1)).reshape(2 * N + 1, 5)
-        return rh[0:-1:2].copy(), rh[1::2].copy(), rh[2::2].copy()
+    def layout(self):
+        """The sample step's layout: one RK4 substep, ideal sensor, no delay (``w = x`` for the SMC law)."""
+        return make_layout(self.model, self.controller, self.dt, 1, SensorModel.ideal(), 0, False)
+
+    def reference_rows(self):
+        """The reference at ``t_k``, ``k = 0 .. N-1``, shape (N, 5) (what sample k reads)."""
+        return self.reference.sample(self.dt * np.arange(self.n_steps)).reshape(self.n_steps, 5)
+
+    def noise(self):
+        """The sensor noise rows of the ideal sensor: zeros, shape (N, nm)."""
+        return np.zeros((self.n_steps, self.layout().nm))
 
     def x0(self):
         r0 = self.reference(0.0)
         return np.array([r0[0, 0], 0.0, r0[0, 0], 0.0])
+
+    def w0(self):
+        """The sample step's initial state for :meth:`x0` (the stateless law has no z)."""
+        return initial_step_state(self.model, self.layout(), self.x0(), np.zeros(0), self.p_true)
 
 
 def link1_case(K_true: float = 120.0, duration: float = 10.0, dt: float = 1e-3) -> Case:
@@ -107,16 +123,21 @@ def link1_case(K_true: float = 120.0, duration: float = 10.0, dt: float = 1e-3) 
 
 
 class GeneratedLoop:
-    """The compiled mapaccum runner with the reference pre-sampled (timing excludes sampling)."""
+    """The sample step's compiled ``mapaccum`` (:func:`sampled_loop_runner`, through ``casadi.external``)
+    with the reference pre-sampled (timing excludes sampling); ``() -> (W (N, nw), AUX (N, 6))``."""
 
     def __init__(self, case: Case):
         self.case = case
-        self.runner = closed_loop_runner(case.model, case.controller, case.dt, case.n_steps)
-        self.R0, self.RH, self.R1 = (a.T.copy() for a in case.reference_arrays())
-        self.w0 = case.x0()
+        self.runner = sampled_loop_runner(case.model, case.controller, case.layout(), case.n_steps)
+        self.R, self.NOISE = case.reference_rows().T.copy(), case.noise().T.copy()
+        self.w0 = case.w0()
+
+    def args(self):
+        """The runner's inputs ``(w0, R, NOISE, p_true)``."""
+        return self.w0, self.R, self.NOISE, self.case.p_true
 
     def __call__(self):
-        W, A = self.runner(self.w0, self.R0, self.RH, self.R1, self.case.p_true)
+        W, A = self.runner(*self.args())
         return np.asarray(W).T, np.asarray(A).T
 
 
@@ -130,9 +151,9 @@ class HandLoop:
         self.lib = ctypes.CDLL(str(link_shared([obj], workdir / "hand_loop.so")))
         dp = ctypes.POINTER(ctypes.c_double)
         self.lib.hand_loop.argtypes = [ctypes.c_int, ctypes.c_double, dp, dp, dp, ctypes.c_double,
-                                       ctypes.c_double, ctypes.c_double, dp, dp, dp, dp, dp, dp]
+                                       ctypes.c_double, ctypes.c_double, dp, dp, dp, dp]
         self.case = case
-        self.R0, self.RH, self.R1 = case.reference_arrays()
+        self.R = np.ascontiguousarray(case.reference_rows())
         self.w0 = case.x0()
         self.c = np.ascontiguousarray(case.controller.c)
         N = case.n_steps
@@ -145,16 +166,16 @@ class HandLoop:
         bh = float(c.controller.beta_hat[0, 0]) if c.controller.beta_hat is not None else -1.0
         self.lib.hand_loop(c.n_steps, c.dt, ptr(c.p_true), ptr(c.p_nom), ptr(self.c),
                            float(c.controller.k_s[0]), float(c.controller.delta[0]), bh,
-                           ptr(self.R0), ptr(self.RH), ptr(self.R1), ptr(self.w0),
+                           ptr(self.R), ptr(self.w0),
                            ptr(self.W), ptr(self.A))
         return self.W, self.A
 
 
 def simulate_call(case: Case, backend: str):
-    """The whole ``simulate(..., backend=backend)`` call of the case (references, outputs, metrics)."""
+    """The whole ``simulate(..., backend=backend, substeps=1)`` call of the case (references, outputs, metrics)."""
     from fjm_runtime.sim.simulate import simulate
     return simulate(case.model, case.controller, case.reference, duration=case.duration, dt=case.dt,
-                    true_params=case.p_true, x0=case.x0(), backend=backend)
+                    true_params=case.p_true, x0=case.x0(), backend=backend, substeps=1)
 
 
 def python_loop(case: Case):
@@ -177,7 +198,8 @@ def solve_ivp_loop(case: Case, rtol: float = 1e-6, atol: float = 1e-9):
 
 
 def numpy_batch(case: Case, K_values: np.ndarray) -> dict:
-    """RK4 closed loop vectorized over runs (link1, plant K per run), same metrics as simulate_batch."""
+    """The sampled loop with one RK4 step per sample, vectorized over runs (link1, plant K per run; ideal
+    sensor, no delay, the stateless SMC law): the same metrics as ``simulate_batch(..., substeps=1)``."""
     B = K_values.size
     dt, N = case.dt, case.n_steps
     pt = case.p_true
@@ -189,7 +211,6 @@ def numpy_batch(case: Case, K_values: np.ndarray) -> dict:
     k_s, delta = float(case.controller.k_s[0]), float(case.controller.delta[0])
     bh = case.controller.beta_hat
     beta_hat = float(bh[0, 0]) if bh is not None else None
-    R0, _, _ = case.reference_arrays()
     R = case.reference.sample(dt * np.arange(N + 1)).reshape(N + 1, 5)
     x0 = case.x0()
     q, dq, qm, dqm = (np.full(B, v) for v in x0)

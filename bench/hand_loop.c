@@ -1,14 +1,15 @@
-/* Hand-written C of the link1 closed loop the generated code runs (the bench's peer).
+/* Hand-written C of the link1 closed loop the generated code runs (the bench's peer): the sampled-data
+ * loop's sample step with one RK4 substep, an ideal sensor, no delay and the stateless SMC law.
  *
  * Plant (TRUE parameters p):  J_l q'' + M g0 L sin q + K (q - q_m) = 0,
  *                              J_m q_m'' + B_m q_m' - K (q - q_m) = u.
- * Controller (NOMINAL parameters pn), paper's SMC with boundary layer:
+ * Controller (NOMINAL parameters pn), paper's SMC with boundary layer, at t_k from x_k:
  *   y = T(x; pn), e = y - r[0..3], s = c1 e1 + c2 e2 + c3 e3 + e4,
  *   nu = r4 - (c1 e2 + c2 e3 + c3 e4) - k_s sat(s / delta),
  *   u = alpha(x; pn) + beta_hat nu   (beta_hat > 0 constant; beta_hat <= 0: beta(x; pn)).
- * Zero-order hold over each step, classical RK4. Parameters in param_names
- * order: J_l, J_m, K, M, g0, L, B_m. References row-major (N, 5).
- * Outputs: W (N, 4) state after each step, AUX (N, 6) = [u, s, y1..y4].
+ * Zero-order hold over each sample, one classical RK4 step. Parameters in param_names
+ * order: J_l, J_m, K, M, g0, L, B_m. Reference R row-major (N, 5), row k at t_k.
+ * Outputs: W (N, 4) state after each sample, AUX (N, 6) = [u, s, y1..y4].
  */
 #include <math.h>
 
@@ -23,15 +24,14 @@ static inline void plant(const double* x, double u, const Plant* P, double* dx) 
 }
 
 int hand_loop(int N, double dt, const double* p, const double* pn, const double* c,
-              double k_s, double delta, double beta_hat, const double* R0, const double* RH,
-              const double* R1, const double* w0, double* W, double* AUX) {
+              double k_s, double delta, double beta_hat, const double* R, const double* w0,
+              double* W, double* AUX) {
   const double Jl = pn[0], Jm = pn[1], K = pn[2], MgL = pn[3] * pn[4] * pn[5], Bm = pn[6];
   const double iJl = 1.0 / Jl, iJm = 1.0 / Jm, beta = Jl * Jm / K;  /* hoisted constants */
   const Plant P = {1.0 / p[0], 1.0 / p[1], p[2], p[3] * p[4] * p[5], p[6]};
   double x[4] = {w0[0], w0[1], w0[2], w0[3]};
-  (void)R1; (void)RH;
   for (int k = 0; k < N; ++k) {
-    const double* r = R0 + 5 * k;
+    const double* r = R + 5 * k;
     const double q0 = x[0], dq0 = x[1];
     const double sq = sin(x[0]), cq = cos(x[0]);
     const double spring = K * (x[0] - x[2]);

@@ -1,6 +1,7 @@
-"""Sections ``closed_loop`` and ``batch``: the link1 closed loop (bare compiled loop vs hand-written C,
-the whole ``simulate()`` call vs the Python backend, mapaccum and solve_ivp for context) and 1000
-closed loops of ``simulate_batch`` against the NumPy batch peer (:mod:`bench.closed_loop`)."""
+"""Sections ``closed_loop`` and ``batch``: the link1 sampled-data loop with one RK4 substep per sample
+(bare compiled loop vs hand-written C, the whole ``simulate()`` call vs the Python backend, mapaccum and
+solve_ivp for context) and 1000 closed loops of ``simulate_batch(..., substeps=1)`` against the NumPy
+batch peer (:mod:`bench.closed_loop`)."""
 from __future__ import annotations
 
 import os
@@ -18,15 +19,16 @@ __all__ = ["bench_batch", "bench_closed_loop"]
 def bench_closed_loop(work: Path, reps: int, slow_reps: int, checks: list) -> dict:
     import casadi as ca
     from fjm_runtime.batch.runner import METRIC_NAMES
-    from fjm_runtime.sim.compiled import closed_loop_library
+    from fjm_runtime.sim.compiled import sampled_loop_library
     from .closed_loop import GeneratedLoop, HandLoop, link1_case, simulate_call, solve_ivp_loop
     case = link1_case()
     log("closed loop link1 10 s @ 1 kHz: compiling generated and hand C ...")
-    lib = closed_loop_library(case.model, case.controller, case.dt)
-    R0, RH, R1 = case.reference_arrays()
-    w0 = case.x0()
-    W, A = lib(w0, R0, RH, R1, case.p_true)
-    out = (np.empty_like(W), np.empty_like(A))
+    lib = sampled_loop_library(case.model, case.controller, case.layout())
+    R, NOISE = case.reference_rows(), case.noise()
+    w0 = case.w0()
+    W, A = lib(w0, R, NOISE, case.p_true)
+    W = W[:, :case.model.nx]                  # w = x here (stateless law, ideal sensor, no delay)
+    out = (np.empty((case.n_steps, w0.size)), np.empty_like(A))
     hand = HandLoop(case, work / "hand")
     Wh, Ah = hand()
     check(checks, "closed_loop.hand_c_states", "link1 loop: hand-written C vs generated, states (max abs)",
@@ -34,7 +36,7 @@ def bench_closed_loop(work: Path, reps: int, slow_reps: int, checks: list) -> di
     check(checks, "closed_loop.hand_c_outputs", "link1 loop: hand-written C vs generated, u, s, y_hat (relative)",
           rel_diff(Ah, A), TOLERANCES["hand_c_outputs"])
     # 1. the bare compiled loop (preallocated outputs) vs the hand-written C loop: same work
-    gen_call = lambda: lib(w0, R0, RH, R1, case.p_true, out=out)  # noqa: E731
+    gen_call = lambda: lib(w0, R, NOISE, case.p_true, out=out)  # noqa: E731
     gen_s, hand_s = alternate([gen_call, hand], 3 * reps, [1, 1])
     # 2. the whole simulate() call, backend="compiled" vs backend="python": same arguments
     log("closed loop: whole simulate() call, compiled and python backends ...")
@@ -56,8 +58,8 @@ def bench_closed_loop(work: Path, reps: int, slow_reps: int, checks: list) -> di
     gl = GeneratedLoop(case)
     Wm, _ = gl()
     check(checks, "closed_loop.mapaccum_states", "link1 loop: mapaccum via casadi.external vs the C loop, states",
-          float(np.max(np.abs(Wm - W))), TOLERANCES["mapaccum_states"])
-    dm_args = [ca.DM(gl.w0), ca.DM(gl.R0), ca.DM(gl.RH), ca.DM(gl.R1), ca.DM(case.p_true)]
+          float(np.max(np.abs(Wm[:, :case.model.nx] - W))), TOLERANCES["mapaccum_states"])
+    dm_args = [ca.DM(a) for a in gl.args()]
     mapaccum_s = median_time(lambda: gl.runner.call(dm_args), reps)
     log("closed loop: scipy solve_ivp RK45 ...")
     ivp = solve_ivp_loop(case)
@@ -98,7 +100,7 @@ def bench_batch(reps: int, slow_reps: int, checks: list, n_runs: int = 1000) -> 
         with warnings.catch_warnings():
             warnings.simplefilter("error", SimdFallbackWarning)   # an error here, not a footnote
             return simulate_batch(case.model, case.controller, case.reference, P, duration=case.duration,
-                                  dt=case.dt, x0=case.x0(), simd=simd, threads=threads)
+                                  dt=case.dt, x0=case.x0(), substeps=1, simd=simd, threads=threads)
 
     log(f"batch {n_runs} x 10 s: compiling ...")
     one, allt, scal = run(threads=1), run(), run(simd=False)

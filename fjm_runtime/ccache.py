@@ -1,6 +1,6 @@
 """A cache of compiled C: source -> shared object, built once, verified before every load.
 
-Used by the compiled closed loop (:mod:`fjm_runtime.sim.compiled`) and the batch
+Used by the compiled sampled-data loop (:mod:`fjm_runtime.sim.compiled`) and the batch
 runners (:mod:`fjm_runtime.batch`); any C source (a CasADi Function code-generated
 with :func:`generate_source`, plus a driver) goes through :func:`compile_library`
 or, for a Function loaded back with :func:`casadi.external`, :func:`compile_function`.
@@ -15,9 +15,6 @@ and already-loaded libraries are safe. A build holds an exclusive lock on
 ``<key>.lock`` (``fcntl.flock``, POSIX): a second process that wants the same
 entry (e.g. another pytest-xdist worker) waits for the first build and loads
 its result instead of compiling the same source again.
-
-:func:`fold_driver` is the one C driver loop (runs x samples, OpenMP across runs)
-that folds a code-generated step; the single-run and the batch loops both use it.
 """
 from __future__ import annotations
 
@@ -211,68 +208,3 @@ def compile_function(fn: ca.Function, flags: Sequence[str] = DEFAULT_FLAGS,
                     ext = ca.external(fn.name(), str(_build(source, key, flags, root, fn.name())))
         _memo[memo_key] = ext
         return ext
-
-
-_FOLD_DRIVER = r"""
-/* fjm driver: for each run, fold FJM_STEP over the samples (runs spread over OpenMP threads when
- * built with -fopenmp); with W (AUX) given, the state (second output) after every step is stored
- * row by row, else only the final state is written back into acc. E: 5th input, stride ne (0: constant). */
-#include <stdlib.h>
-#include <string.h>
-#ifdef _OPENMP
-#include <omp.h>
-#endif
-static int fjm_fold(int n_runs, int n_samples, int nw, int nr, int ne, int naux, double* acc,
-                    const double* R0, const double* RH, const double* R1, const double* E,
-                    double* W, double* AUX, int n_threads, int* threads_used) {
-  casadi_int sz_arg, sz_res, sz_iw, sz_w;
-  FJM_STEP_work(&sz_arg, &sz_res, &sz_iw, &sz_w);
-  int failed = 0, used = 1, nt = 1;
-#ifdef _OPENMP
-  nt = n_threads > 0 ? n_threads : omp_get_max_threads();
-#endif
-  (void)nt; (void)n_threads;
-  #pragma omp parallel num_threads(nt)
-  {
-#ifdef _OPENMP
-    #pragma omp single
-    used = omp_get_num_threads();
-#endif
-    #pragma omp for schedule(dynamic, 4) reduction(|:failed)
-    for (int b = 0; b < n_runs; ++b) {
-      double* buf = (double*)malloc(sizeof(double) * (2 * nw + sz_w + 1));
-      casadi_int* iw = (casadi_int*)malloc(sizeof(casadi_int) * (sz_iw + 1));
-      double *a = buf, *a2 = buf + nw, *w = buf + 2 * nw;
-      memcpy(a, acc + (size_t)b * nw, sizeof(double) * nw);
-      const double* cur = a;
-      const double* arg[8];
-      double* res[4];
-      for (int k = 0; k < n_samples; ++k) {
-        size_t row = (size_t)b * n_samples + k;
-        double* dst = W ? W + row * nw : (cur == a ? a2 : a);
-        arg[0] = cur; arg[1] = R0 + (size_t)k * nr; arg[2] = RH + (size_t)k * nr;
-        arg[3] = R1 + (size_t)k * nr; arg[4] = E + (size_t)k * ne;
-        res[0] = dst; res[1] = AUX ? AUX + row * naux : 0;
-        failed |= FJM_STEP(arg, res, iw, w, 0);
-        cur = dst;
-      }
-      memcpy(acc + (size_t)b * nw, cur, sizeof(double) * nw);
-      free(buf); free(iw);
-    }
-  }
-  *threads_used = used;
-  return failed;
-}
-"""
-
-
-def fold_driver(step_name: str) -> str:
-    """C of the one driver loop ``fjm_fold`` over runs and samples, calling the step ``step_name``.
-
-    Used by the single-run compiled loop (``fjm_run``: one run, every state stored) and by
-    the scalar batch (``fjm_batch`` in :mod:`fjm_runtime.batch`: many runs, final
-    accumulators only).
-    """
-    return _FOLD_DRIVER.replace("FJM_STEP", step_name)
-
-

@@ -1,14 +1,12 @@
 """Batch closed-loop runs: many TRUE plants, one controller, one compiled call.
 
-:func:`simulate_batch` folds THE sample step of :mod:`fjm_runtime.sim.sample_step`
-(:mod:`fjm_runtime.batch.sampled`, noise generated in C per run and sample);
-``loop='legacy'`` folds the former closed-loop step of :mod:`fjm_runtime.sim.step`
-over all samples while accumulating the per-run metrics of
-:func:`fjm_runtime.sim.metrics.compute_metrics` (so no trajectory is stored), maps
-that over the runs (OpenMP when the compiler supports it) and compiles the
-whole thing once (cached like the single-run backend, :mod:`fjm_runtime.ccache`).
-The scalar loop is :mod:`fjm_runtime.batch.scalar`, the SIMD form
-:mod:`fjm_runtime.batch.simd`.
+:func:`simulate_batch` folds THE sample step of :mod:`fjm_runtime.sim.sample_step` over the
+samples while accumulating the per-run metrics (:mod:`fjm_runtime.batch.sampled`; sensor noise
+generated in C per run and sample, so no trajectory is stored), maps that over the runs (OpenMP
+when the compiler supports it) and compiles the whole thing once (cached like the single-run
+backend, :mod:`fjm_runtime.ccache`). The inputs, the runner choice and the metrics are
+:mod:`fjm_runtime.batch.sampled_runner`; the scalar C loop is :mod:`fjm_runtime.batch.scalar`,
+the SIMD form :mod:`fjm_runtime.batch.simd`.
 
 Which code ran is recorded in :attr:`BatchResult.info` (``info["path"]`` is one
 of :data:`PATHS`); a requested SIMD form that cannot be used falls back to the
@@ -22,15 +20,11 @@ from typing import Dict, List, Optional
 
 import numpy as np
 
-from ..ccache import DEFAULT_FLAGS
-from ..validation import FjmValueError
-from ..sim.metrics import metrics_from_sums
-from . import simd
-from .scalar import BatchRunner, batch_runner, metric_step, scalar_runner, threads_arg
-from .simd import SimdBatchRunner, simd_batch_runner, vector_isa
+from ..sim.loops import check_loop_name
+from .scalar import threads_arg
+from .simd import vector_isa
 
-__all__ = ["METRIC_NAMES", "PATHS", "BatchResult", "BatchRunner", "SimdBatchRunner", "SimdFallbackWarning",
-           "batch_runner", "simd_batch_runner", "simulate_batch", "vector_isa"]
+__all__ = ["METRIC_NAMES", "PATHS", "BatchResult", "SimdFallbackWarning", "simulate_batch", "vector_isa"]
 
 METRIC_NAMES = ("final_error", "rms_error", "rms_error_second_half", "max_abs_u",
                 "reaching_time", "total_variation_u")
@@ -127,9 +121,10 @@ def simulate_batch(model, controller, reference, params_true_array, *, duration:
     parallel, simd, threads
         OpenMP across runs; vector lanes across runs (falls back to the scalar loop with a
         :class:`SimdFallbackWarning`); threads for this call (default all cores).
-    loop : {'sampled', 'legacy'}
-        ``'legacy'``: the former batch (one RK4 step per sample, no sensor, delay or substeps),
-        kept for the benchmark peers written against it.
+    loop : {'sampled'}
+        The one loop; ``'legacy'`` (the former one-RK4-step-per-sample batch) was retired: it
+        raises :class:`FjmValueError` (``substeps=1`` and no sensor, delay or prediction is the
+        sampled loop closest to it).
 
     Returns
     -------
@@ -137,14 +132,7 @@ def simulate_batch(model, controller, reference, params_true_array, *, duration:
         ``metrics`` (the :class:`Metrics` fields) and ``joint_metrics`` (per joint, shape (B, n):
         ``rms_second_half``, ``peak_torque``, ``time_at_limit``, ``torque_jitter``).
     """
-    if loop == "legacy":
-        if (substeps, sensor, delay_samples, predict, seeds, gains) != (None, None, 0, False, None, None):
-            raise FjmValueError("loop = 'legacy' takes no substeps, sensor, delay_samples, predict, seeds or gains")
-        return _simulate_batch_legacy(model, controller, reference, params_true_array, duration=duration, dt=dt,
-                                      x0=x0, max_state=max_state, trajectories=trajectories, parallel=parallel,
-                                      simd=simd, threads=threads)
-    if loop != "sampled":
-        raise FjmValueError(f"loop = {loop!r}: expected 'sampled' or 'legacy'")
+    check_loop_name(loop)
     from .sampled_runner import run_sampled_batch
     P = _true_params_rows(model, params_true_array)
     threads_arg(threads)
@@ -158,40 +146,6 @@ def _warn_fallback(reason: str) -> None:
     warnings.warn(f"simulate_batch: scalar loop instead of SIMD: {reason}", SimdFallbackWarning, stacklevel=4)
 
 
-def _simulate_batch_legacy(model, controller, reference, params_true_array, *, duration: float,
-                           dt: float = 1e-3, x0=None, max_state: float = 1e6, trajectories: bool = False,
-                           parallel: bool = True, simd: bool = True,
-                           threads: Optional[int] = None) -> BatchResult:
-    """The former batch (``loop='legacy'``: one RK4 step per sample, the controller state
-    integrated with the plant, no sensor): :func:`simulate_batch` before the sampled-data step."""
-    from ..sim.simulate import simulate
-    n = int(model.n)
-    P = _true_params_rows(model, params_true_array)
-    if not (np.isfinite(duration) and duration > 0):
-        raise ValueError(f"duration = {duration!r}: expected a finite value > 0 s")
-    if not (np.isfinite(dt) and 0 < dt <= duration):
-        raise ValueError(f"dt = {dt!r}: expected a finite step with 0 < dt <= duration")
-    n_steps = int(round(duration / dt))
-    t, x0, z0, ACC0, refs, FL = _batch_inputs(model, controller, reference, P, x0, dt, n_steps)
-    threads_arg(threads)  # validate before compiling anything
-    step = metric_step(model, controller, float(dt), float(max_state))
-    runner, reason = _runner(step, len(model.param_names), simd, parallel)
-    acc, used = runner.run(ACC0, *refs, FL, threads if parallel else 1)
-    info = {"path": runner.path_name, "reason": reason, "threads": used, "lanes": runner.lanes,
-            "openmp": runner.openmp, "instructions": int(step.n_instructions()),
-            "library": str(runner.path)}
-    metrics, diverged, first_bad, x_fin = _batch_metrics(model, acc, z0.size, t, refs[0][n_steps, :n])
-    results = None
-    if trajectories:
-        results = [simulate(model, controller, reference, duration=duration, dt=dt, true_params=P[i],
-                            x0=x0, max_state=max_state, backend="compiled", loop="legacy")
-                   if not diverged[i] else None
-                   for i in range(P.shape[0])]
-    return BatchResult(params=P, metrics=metrics, diverged=diverged,
-                       divergence_time=np.where(diverged, first_bad * dt, np.nan),
-                       x_final=x_fin, results=results, info=info)
-
-
 def _true_params_rows(model, params_true_array) -> np.ndarray:
     """``params_true_array`` checked, shape (B, n_params) (one row given as a vector is one run)."""
     P = np.asarray(params_true_array, dtype=float)
@@ -203,67 +157,3 @@ def _true_params_rows(model, params_true_array) -> np.ndarray:
     if not np.all(np.isfinite(P)):
         raise ValueError("params_true_array: expected finite values")
     return P
-
-
-def _batch_inputs(model, controller, reference, P, x0, dt, n_steps):
-    """The arrays of the compiled call.
-
-    Returns
-    -------
-    t : ndarray, shape (N+1,)
-    x0 : ndarray, shape (4n,)
-    z0 : ndarray, shape (nz,)
-    ACC0 : ndarray, shape (B, nacc)
-        Initial accumulators (layout of :func:`~fjm_runtime.batch.scalar.metric_step`).
-    refs : tuple of 3 ndarray, shape (N+1, 5n)
-        Reference rows at ``t_k``, ``t_k + dt/2``, ``t_k + dt``.
-    FL : ndarray, shape (N+1, 4)
-        ``[in_second_half, k, is_first, is_last]`` per sample.
-    """
-    n, nx = int(model.n), int(model.nx)
-    r_half = reference.sample(0.5 * dt * np.arange(2 * n_steps + 3)).reshape(-1, 5 * n)
-    R = r_half[0::2]
-    if x0 is None:
-        x0 = np.zeros(nx)
-        x0[0:n] = R[0, :n]
-        x0[2 * n:3 * n] = R[0, :n]
-    x0 = np.asarray(x0, dtype=float)
-    if x0.shape != (nx,) or not np.all(np.isfinite(x0)):
-        raise ValueError(f"x0 with shape {x0.shape}: expected finite ({nx},) = [q_l; dq_l; q_m; dq_m]")
-    z0 = np.asarray(controller.initial_state(0.0, x0, R[0].reshape(5, n)), dtype=float)
-    acc0 = np.concatenate([x0, z0, np.zeros(n), [0.0, 0.0, 0.0, -1.0, 0.0, -1.0]])
-    ACC0 = np.hstack([np.tile(acc0, (P.shape[0], 1)), P])
-    t = dt * np.arange(n_steps + 1)
-    half = (t >= 0.5 * t[-1]).astype(float)
-    FL = np.vstack([half, np.arange(n_steps + 1, dtype=float),
-                    (np.arange(n_steps + 1) == 0).astype(float),
-                    (np.arange(n_steps + 1) == n_steps).astype(float)])
-    refs = (R[:n_steps + 1], r_half[1:2 * n_steps + 2:2], R[1:n_steps + 2])
-    return t, x0, z0, ACC0, refs, FL.T
-
-
-def _runner(step, n_par: int, want_simd: bool, parallel: bool):
-    """``(runner, reason)``: the SIMD runner if wanted and usable, else the scalar one (warns why)."""
-    runner, reason = None, "simd=False requested"
-    if want_simd:
-        runner, reason = simd.simd_runner_or_reason(step, n_par, parallel)
-        if runner is None:
-            warnings.warn(f"simulate_batch: scalar loop instead of SIMD: {reason}",
-                          SimdFallbackWarning, stacklevel=3)
-    if runner is None:
-        runner = scalar_runner(step, DEFAULT_FLAGS, parallel)
-    return runner, reason
-
-
-def _batch_metrics(model, acc, nz: int, t, q_end):
-    """``(metrics, diverged, first_bad, x_final)`` from the final accumulators ``acc`` (B, nacc)."""
-    n, nx = int(model.n), int(model.nx)
-    nw = nx + nz
-    sum_e2, sum_half, max_u, last_out, tv, first_bad = (acc[:, nw + n + i] for i in range(6))
-    x_fin = acc[:, :nx]
-    metrics = metrics_from_sums(t, np.max(np.abs(x_fin[:, :n] - q_end), axis=1), sum_e2, sum_half,
-                                max_u, last_out, tv, n)
-    diverged = first_bad >= 0
-    for v in metrics.values():
-        v[diverged] = np.nan
-    return metrics, diverged, first_bad, x_fin

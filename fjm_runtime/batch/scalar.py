@@ -1,10 +1,10 @@
-"""The scalar batch loop: the closed-loop step with running metrics, folded in C over runs and samples.
+"""The scalar sampled-data batch loop: the batch sample step folded in C over runs and samples.
 
-:func:`metric_step` is the one sample of a run as a CasADi Function of an accumulator
-(state, running sums of the metrics of :func:`fjm_runtime.sim.metrics.metrics_from_sums`,
-the TRUE parameters); :class:`BatchRunner` is the ctypes handle on it compiled with
-the fold driver of :mod:`fjm_runtime.ccache` (OpenMP across runs when it builds).
-The SIMD form of the same step is :mod:`fjm_runtime.batch.simd`.
+:class:`SampledBatchRunner` is the ctypes handle on a step of
+:func:`fjm_runtime.batch.sampled.sampled_metric_step` compiled with :data:`SAMPLED_DRIVER`
+(scalar, OpenMP across runs when it builds) or with the SIMD driver of
+:mod:`fjm_runtime.batch.simd`; the sensor noise is generated in C per run and sample
+(``noise.c``, :func:`noise_source`).
 """
 from __future__ import annotations
 
@@ -13,63 +13,7 @@ from typing import Optional, Sequence
 import casadi as ca
 import numpy as np
 
-from ..ccache import DEFAULT_FLAGS, CompileError, compile_library, fold_driver, generate_source
-from ..sim.step import casadi_functions, symbolic_closed_loop_rk4
-
-
-def metric_step(model, controller, dt: float, max_state: float) -> ca.Function:
-    """``(acc, r0, rh, r1, flags) -> acc_next`` for one sample (SX).
-
-    ``acc = [w; u_prev; sum_e2; sum_e2_half; max_u; last_outside_k; tv; first_bad_k; p]``
-    (the TRUE parameters ``p`` ride along unchanged, so a fold maps only the references);
-    ``flags = [in_second_half, k, is_first, is_last]``.
-    """
-    fns = casadi_functions(model)
-    if fns is None or not hasattr(controller, "symbolic_evaluate"):
-        raise ValueError("simulate_batch: needs a model with CasADi Functions and a controller "
-                         "with symbolic_evaluate")
-    n, nx = int(model.n), int(model.nx)
-    nz = int(getattr(controller, "n_states", 0))
-    nw = nx + nz
-    n_par = len(model.param_names)
-    acc = ca.SX.sym("acc", nw + n + 6 + n_par)
-    r0, rh, r1 = (ca.SX.sym(nm, 5 * n) for nm in ("r0", "rh", "r1"))
-    fl = ca.SX.sym("flags", 4)
-    p = acc[nw + n + 6:]
-    w, u_prev = acc[:nw], acc[nw:nw + n]
-    sum_e2, sum_e2_half, max_u, last_out, tv, first_bad = (acc[nw + n + i] for i in range(6))
-    half, k, first, last = fl[0], fl[1], fl[2], fl[3]
-    x = w[:nx]
-    w_step, out = symbolic_closed_loop_rk4(fns, controller, w, r0, rh, r1, p, nx, n, dt)
-    u, s = out["u"], out["s"]
-    w_next = ca.if_else(last, w, w_step)
-    e1 = x[:n] - r0[:n]
-    e2 = ca.sumsqr(e1)
-    delta = ca.DM(np.asarray(getattr(controller, "delta", np.full(n, np.inf)), dtype=float))
-    outside = ca.mmax(ca.fabs(s) - delta) > 0
-    absw = ca.fabs(w_next)
-    ok = (ca.mmax(absw) <= max_state) * (ca.sum1(absw) <= 1e308)  # NaN compares false
-    acc_next = ca.vertcat(
-        w_next, u,
-        sum_e2 + e2, sum_e2_half + half * e2,
-        ca.fmax(max_u, ca.mmax(ca.fabs(u))),
-        ca.if_else(outside, k, last_out),
-        tv + (1 - first) * ca.sum1(ca.fabs(u - u_prev)),
-        ca.if_else((1 - ok) * (first_bad < 0) * (1 - last), k + 1, first_bad),
-        p,
-    )
-    # cse: T and alpha share sin(q), cos(q) etc. once the model Functions are inlined
-    return ca.Function("fjm_metric_step", [acc, r0, rh, r1, fl], [ca.cse(acc_next)])
-
-
-#: C of the scalar batch entry ``fjm_batch`` (the fold driver over runs and samples, final accumulators only).
-DRIVER = fold_driver("fjm_metric_step") + r"""
-int fjm_batch(int n_runs, int n_samples, int nacc, int nr, double* acc,
-              const double* R0, const double* RH, const double* R1, const double* FL,
-              int n_threads, int* threads_used) {
-  return fjm_fold(n_runs, n_samples, nacc, nr, 4, 0, acc, R0, RH, R1, FL, 0, 0, n_threads, threads_used);
-}
-"""
+from ..ccache import CompileError, compile_library, generate_source
 
 
 def threads_arg(threads: Optional[int]) -> int:
@@ -80,95 +24,6 @@ def threads_arg(threads: Optional[int]) -> int:
     if t < 1:
         raise ValueError(f"threads = {threads!r}: expected None (all cores) or an integer >= 1")
     return t
-
-
-class BatchRunner:
-    """ctypes handle on the compiled batch loop (step + driver, cached by source hash).
-
-    Attributes
-    ----------
-    path : Path
-        The shared object.
-    lanes : int
-        Runs per statement (1: scalar loop).
-    openmp : bool
-        Built with ``-fopenmp`` (runs spread over threads).
-    """
-
-    lanes = 1
-    isa = None
-    _entry = "fjm_batch"
-
-    def __init__(self, so_path, nacc: int, nr: int, openmp: bool = False):
-        import ctypes
-        self.lib = ctypes.CDLL(str(so_path))
-        fn = getattr(self.lib, self._entry)
-        dp = ctypes.POINTER(ctypes.c_double)
-        fn.argtypes = [ctypes.c_int] * 4 + [dp] * 5 + [ctypes.c_int, ctypes.POINTER(ctypes.c_int)]
-        fn.restype = ctypes.c_int
-        self._fn = fn
-        self.nacc, self.nr, self.path, self.openmp = nacc, nr, so_path, bool(openmp)
-
-    @property
-    def path_name(self) -> str:
-        """The ``BatchResult.info["path"]`` of this runner (one of :data:`PATHS`)."""
-        return "scalar"
-
-    def _pack(self, ACC0):
-        return np.ascontiguousarray(ACC0, dtype=float).copy(), ACC0.shape[0]
-
-    def _unpack(self, acc, B):
-        return acc
-
-    def run(self, ACC0, R0, RH, R1, FL, threads: Optional[int] = None):
-        """``ACC0`` (B, nacc); ``R*`` (S, 5n) and ``FL`` (S, 4) row-major.
-
-        Returns ``(acc, threads_used)`` with ``acc`` of shape (B, nacc).
-        """
-        import ctypes
-        ACC0 = np.asarray(ACC0, dtype=float)
-        if ACC0.ndim != 2 or ACC0.shape[1] != self.nacc:
-            raise ValueError("BatchRunner: inconsistent argument shapes")
-        arrs = [np.ascontiguousarray(a, dtype=float) for a in (R0, RH, R1, FL)]
-        S = arrs[0].shape[0]
-        if any(a.shape[0] != S for a in arrs):
-            raise ValueError("BatchRunner: inconsistent argument shapes")
-        acc, count = self._pack(ACC0)
-        ptr = lambda a: a.ctypes.data_as(ctypes.POINTER(ctypes.c_double))  # noqa: E731
-        used = ctypes.c_int(0)
-        flag = self._fn(count, S, self.nacc, self.nr, ptr(acc), *map(ptr, arrs),
-                        threads_arg(threads), ctypes.byref(used))
-        if flag:
-            raise RuntimeError("compiled batch step returned an error flag")
-        return self._unpack(acc, ACC0.shape[0]), int(used.value)
-
-    def __call__(self, ACC0, R0, RH, R1, FL, threads: Optional[int] = None) -> np.ndarray:
-        """:meth:`run` without the thread count: the final accumulators (B, nacc)."""
-        return self.run(ACC0, R0, RH, R1, FL, threads)[0]
-
-
-def scalar_runner(step: ca.Function, flags: Sequence[str], parallel: bool) -> BatchRunner:
-    """Compile (cached) ``step`` (a :func:`metric_step`) with the scalar driver; OpenMP when ``parallel`` builds."""
-    nacc, nr = step.size1_in(0), step.size1_in(1)
-    source = generate_source(step) + DRIVER
-    if parallel:
-        try:
-            so = compile_library(source, "fjm_batch", tuple(flags) + ("-fopenmp",))
-            return BatchRunner(so, nacc, nr, openmp=True)
-        except CompileError:
-            pass
-    return BatchRunner(compile_library(source, "fjm_batch", flags), nacc, nr)
-
-
-def batch_runner(model, controller, dt: float, max_state: float = 1e6,
-                 flags: Sequence[str] = DEFAULT_FLAGS, parallel: bool = True) -> BatchRunner:
-    """Compile (once, cached) the metric step plus a scalar C loop over runs and samples.
-
-    The number of runs and steps is a run-time argument: one build serves
-    every batch size and duration. Runs are spread over cores with OpenMP
-    when ``parallel`` and ``-fopenmp`` works (falls back to serial).
-    """
-    return scalar_runner(metric_step(model, controller, float(dt), float(max_state)), flags, parallel)
 
 
 def noise_source() -> str:

@@ -1,4 +1,4 @@
-"""SIMD across runs: the batch metric step emitted "structure of arrays".
+"""SIMD across runs: the batch sample step (:mod:`fjm_runtime.batch.sampled`) emitted "structure of arrays".
 
 Every scalar instruction of the SX Function becomes one statement on a vector of
 ``LANES`` runs (GCC vector extensions), which the compiler turns into AVX-512, AVX2
@@ -18,7 +18,7 @@ import casadi as ca
 import numpy as np
 
 from ..ccache import DEFAULT_FLAGS, CompileError, compile_library
-from .scalar import BatchRunner, metric_step
+from .scalar import SampledBatchRunner, noise_source
 
 #: Largest step (SX instructions) emitted in SIMD form (a guard against pathological
 #: compile times; gcc handles the vector-extension code in about linear time:
@@ -196,7 +196,7 @@ def callee_source(fn: ca.Function, callees: dict) -> str:
 
 def simd_template() -> Template:
     """The fixed C text of the SIMD batch (``simd_template.c``: vector helpers, prologue and
-    step frames, the OpenMP driver ``fjm_batch_soa``) with ``$`` placeholders."""
+    step frames, the OpenMP driver ``fjm_sampled_batch_soa``) with ``$`` placeholders."""
     return Template(resources.files(__package__).joinpath("simd_template.c").read_text(encoding="utf-8"))
 
 
@@ -207,7 +207,8 @@ def soa_source(step: ca.Function, lanes: int, varying=(0,), invariant_from: int 
     ``lanes`` doubles (compiled to AVX-512/AVX2/SSE2 instructions); sin/cos and friends
     go through short lane loops that gcc maps to glibc's vector math (libmvec).
     Defines ``fjm_prologue(acc, inv)``, ``fjm_step_soa(inv, arg, res)`` and the driver
-    ``fjm_batch_soa``; varying inputs and every output are laid out ``[nz][lane]``.
+    ``fjm_sampled_batch_soa`` (the noise of each lane generated in C); varying inputs and every
+    output are laid out ``[nz][lane]``.
     Entries ``>= invariant_from`` of input 0 are constant along a run (the TRUE
     parameters riding in the accumulator): every instruction that depends on them and
     constants only is hoisted into the prologue (once per run group, not once per
@@ -217,7 +218,6 @@ def soa_source(step: ca.Function, lanes: int, varying=(0,), invariant_from: int 
     prog = SoaProgram(varying, invariant_from)
     for k in range(step.n_instructions()):
         prog.add(step, k)
-    from .scalar import noise_source
     return simd_template().substitute(
         lanes=int(lanes), noise=noise_source(), n_inv=max(1, prog.n_inv),
         callees="".join(text for _, text in prog.callees.values()),
@@ -255,70 +255,11 @@ def vector_isa() -> tuple:
     return "generic", ()
 
 
-class SimdBatchRunner(BatchRunner):
-    """ctypes handle on the SIMD batch loop; same calls as :class:`BatchRunner`.
-
-    Runs are packed ``lanes`` at a time ("structure of arrays"); the last group
-    is filled with copies of the last run.
-    """
-
-    _entry = "fjm_batch_soa"
-
-    def __init__(self, so_path, nacc: int, nr: int, lanes: int, isa: str = "generic",
-                 openmp: bool = True):
-        super().__init__(so_path, nacc, nr, openmp=openmp)
-        self.lanes, self.isa = int(lanes), isa
-
-    @property
-    def path_name(self) -> str:
-        return f"simd-{self.isa}"
-
-    def _pack(self, A):
-        B, L = A.shape[0], self.lanes
-        G = -(-B // L)
-        pad = np.vstack([A, np.repeat(A[-1:], G * L - B, axis=0)])   # fill the last group
-        return np.ascontiguousarray(pad.reshape(G, L, self.nacc).transpose(0, 2, 1)), G
-
-    def _unpack(self, soa, B):
-        return soa.transpose(0, 2, 1).reshape(-1, self.nacc)[:B].copy()
-
-
-def simd_runner(step: ca.Function, n_par: int, flags: Sequence[str], lanes: Optional[int],
-                parallel: bool = True) -> SimdBatchRunner:
-    """Compile (cached) ``step`` (a :func:`~fjm_runtime.batch.scalar.metric_step`) in SIMD form.
-
-    ``lanes`` runs per statement (default 8); the last ``n_par`` entries of the
-    accumulator are the per-run constants hoisted into the prologue.
-    """
-    lanes = int(lanes) if lanes else 8
-    isa, vflags = vector_isa()
-    extra = ("-fno-math-errno", "-ffp-contract=off") + (("-fopenmp",) if parallel else ()) + vflags
-    source = soa_source(step, lanes, invariant_from=step.size1_in(0) - n_par)
-    so = compile_library(source, "fjm_batch_soa", tuple(flags) + extra)
-    return SimdBatchRunner(so, step.size1_in(0), step.size1_in(1), lanes, isa, openmp=parallel)
-
-
-def simd_batch_runner(model, controller, dt: float, max_state: float = 1e6,
-                      flags: Sequence[str] = DEFAULT_FLAGS, lanes: Optional[int] = None,
-                      parallel: bool = True) -> SimdBatchRunner:
-    """Compile (cached) the SIMD-across-runs batch loop (``lanes`` runs per instruction,
-    default 8: one AVX-512 vector, two AVX2 vectors or four SSE2 vectors per operation).
-
-    ``-ffp-contract=off`` keeps the arithmetic identical to the scalar code (no FMA
-    contraction); only sin/cos (libmvec) may differ by a few ulp. Raises
-    :class:`~fjm_runtime.ccache.CompileError` or ``ValueError`` (an operation
-    :func:`soa_source` does not support) instead of falling back.
-    """
-    step = metric_step(model, controller, float(dt), float(max_state))
-    return simd_runner(step, len(model.param_names), flags, lanes, parallel)
-
-
 def sampled_simd_runner(step: ca.Function, n_par: int, nm: int, flags: Sequence[str], lanes: Optional[int],
                         parallel: bool = True):
     """Compile (cached) a :func:`~fjm_runtime.batch.sampled.sampled_metric_step` in SIMD form (driver
     ``fjm_sampled_batch_soa``: the noise generated per lane in C); the last ``n_par`` accumulator
     entries (TRUE parameters) are hoisted into the prologue."""
-    from .scalar import SampledBatchRunner
     lanes = int(lanes) if lanes else 8
     isa, vflags = vector_isa()
     extra = ("-fno-math-errno", "-ffp-contract=off") + (("-fopenmp",) if parallel else ()) + vflags
@@ -328,8 +269,9 @@ def sampled_simd_runner(step: ca.Function, n_par: int, nm: int, flags: Sequence[
                               openmp=parallel)
 
 
-def simd_runner_or_reason(step: ca.Function, n_par: int, parallel: bool, nm: Optional[int] = None):
-    """``(runner, None)`` with the SIMD form of ``step``, or ``(None, reason)`` when it cannot be used.
+def simd_runner_or_reason(step: ca.Function, n_par: int, parallel: bool, nm: int):
+    """``(runner, None)`` with the SIMD form of ``step`` (a sampled metric step with ``nm`` noise
+    channels), or ``(None, reason)`` when it cannot be used.
 
     Reasons: the step exceeds :data:`SIMD_MAX_INSTRUCTIONS`, an operation
     :func:`soa_source` does not support, or a failed build (the message is kept).
@@ -338,8 +280,6 @@ def simd_runner_or_reason(step: ca.Function, n_par: int, parallel: bool, nm: Opt
         return None, (f"the step has {step.n_instructions()} SX instructions > "
                       f"SIMD_MAX_INSTRUCTIONS = {SIMD_MAX_INSTRUCTIONS}")
     try:
-        if nm is not None:
-            return sampled_simd_runner(step, n_par, nm, DEFAULT_FLAGS, None, parallel), None
-        return simd_runner(step, n_par, DEFAULT_FLAGS, None, parallel), None
+        return sampled_simd_runner(step, n_par, nm, DEFAULT_FLAGS, None, parallel), None
     except (CompileError, ValueError) as exc:
         return None, f"SIMD build failed: {type(exc).__name__}: {str(exc)[:2000]}"

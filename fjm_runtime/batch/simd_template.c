@@ -1,4 +1,4 @@
-/* fjm: SIMD-across-runs form of the closed-loop metric step (generated, do not edit). */
+/* fjm: SIMD-across-runs form of the sampled-data batch step (generated, do not edit). */
 #define __FAST_MATH__ 1  /* only to expose glibc's vector math declarations (libmvec) */
 #include <math.h>
 #undef __FAST_MATH__
@@ -38,44 +38,6 @@ static void fjm_step_soa(const vd* restrict inv, const double** arg, double** re
 #ifdef _OPENMP
 #include <omp.h>
 #endif
-int fjm_batch_soa(int n_groups, int n_samples, int nacc, int nr, double* acc,
-                  const double* R0, const double* RH, const double* R1, const double* FL,
-                  int n_threads, int* threads_used) {
-  int used = 1, nt = 1;
-#ifdef _OPENMP
-  nt = n_threads > 0 ? n_threads : omp_get_max_threads();
-#endif
-  (void)nt; (void)n_threads;
-  #pragma omp parallel num_threads(nt)
-  {
-#ifdef _OPENMP
-    #pragma omp single
-    used = omp_get_num_threads();
-#endif
-    #pragma omp for schedule(dynamic, 1)
-    for (int g = 0; g < n_groups; ++g) {
-      vd* inv = aligned_alloc(64, sizeof(vd) * SZ_INV);
-      double* buf = malloc(sizeof(double) * 2 * nacc * LANES);
-      double *cur = buf, *nxt = buf + nacc * LANES;
-      memcpy(cur, acc + (size_t)g * nacc * LANES, sizeof(double) * nacc * LANES);
-      fjm_prologue(cur, inv);
-      const double* arg[5];
-      double* res[1];
-      for (int k = 0; k < n_samples; ++k) {
-        arg[0] = cur; arg[1] = R0 + (size_t)k * nr; arg[2] = RH + (size_t)k * nr;
-        arg[3] = R1 + (size_t)k * nr; arg[4] = FL + (size_t)k * 4;
-        res[0] = nxt;
-        fjm_step_soa(inv, arg, res);
-        double* t = cur; cur = nxt; nxt = t;
-      }
-      memcpy(acc + (size_t)g * nacc * LANES, cur, sizeof(double) * nacc * LANES);
-      free(inv); free(buf);
-    }
-  }
-  *threads_used = used;
-  return 0;
-}
-
 /* The sampled-data batch: per group of LANES runs, the noise rows of each sample from the runs'
  * seeds (noise.c), then the step on [nacc][LANES] (input 2, the noise, varies per lane). */
 int fjm_sampled_batch_soa(int n_groups, int n_samples, int nacc, int nr, int nm, int nf, double* acc,

@@ -15,7 +15,7 @@ from typing import Callable, Optional
 
 import numpy as np
 
-from ..sim.loops import LOOPS
+from ..sim.loops import LOOPS, check_loop_name
 from ..sim.metrics import Metrics, compute_metrics
 from ..sim.sample_step import check_loop_settings, initial_measurement, initial_step_state, make_layout
 from ..sim.sensor import SensorModel, noise_array
@@ -139,10 +139,10 @@ def simulate(model, controller, reference, *, duration: float, dt: float = 1e-3,
     predict : bool
         With ``d > 0``: predict the measurement ``d`` samples ahead with the NOMINAL model
         under the torques already sent (see :mod:`fjm_runtime.sim.sample_step`).
-    loop : {'sampled', 'legacy'}
-        ``'legacy'``: the former loop (:mod:`fjm_runtime.sim.legacy`: one RK4 step per sample,
-        controller state integrated with the plant), only to compare with the batch engine;
-        it takes no substeps, sensor, delay or prediction.
+    loop : {'sampled'}
+        The one loop; ``'legacy'`` (the former one-RK4-step-per-sample loop) was retired: it
+        raises :class:`FjmValueError` (``substeps=1`` and no sensor, delay or prediction is the
+        sampled loop closest to it).
 
     Returns
     -------
@@ -156,11 +156,7 @@ def simulate(model, controller, reference, *, duration: float, dt: float = 1e-3,
         The state became non-finite or exceeded ``max_state``; ``.t`` is the time.
     """
     p_true, x, n_steps = _initial_conditions(model, controller, reference, duration, dt, true_params, x0)
-    if loop == "legacy":
-        return _simulate_legacy(model, controller, reference, p_true, x, dt, n_steps, progress, max_state,
-                                backend, (substeps, sensor, delay_samples, predict))
-    if loop != "sampled":
-        raise FjmValueError(f"loop = {loop!r}: expected 'sampled' or 'legacy'")
+    check_loop_name(loop)
     sensor, delay = check_loop_settings(sensor, delay_samples, predict)
     subs = resolve_substeps(substeps, model, x, p_true, float(dt))
     L = make_layout(model, controller, float(dt), subs, sensor, delay, predict)
@@ -176,25 +172,6 @@ def simulate(model, controller, reference, *, duration: float, dt: float = 1e-3,
                 "predict": bool(predict), "sensing": L.sensing, "seed": int(sensor.seed), "backend": name,
                 "sensor": sensor.name, "torque_rate_limit": sensor.as_dict()["torque_rate_limit"]}
     return _finish(model, controller, p_true, L, t, W, AUX, R.reshape(-1, 5, L.n), settings)
-
-
-def _simulate_legacy(model, controller, reference, p_true, x, dt, n_steps, progress, max_state, backend,
-                     extras) -> SimulationResult:
-    """The former loop (:mod:`fjm_runtime.sim.legacy`), without the sampled-data settings."""
-    from .legacy import LEGACY_LOOPS
-    if extras != (None, None, 0, False):
-        raise FjmValueError("loop = 'legacy' takes no substeps, sensor, delay_samples or predict")
-    z = np.asarray(controller.initial_state(0.0, x, np.asarray(reference(0.0), dtype=float)), dtype=float)
-    name = _choose_backend(backend, model, controller)
-    t, X, Z, U, S, Yh, R = LEGACY_LOOPS[name](model, controller, reference, p_true, x, z, dt, n_steps,
-                                              progress, max_state)
-    n, nz = int(model.n), z.size
-    W = np.hstack([X, Z])
-    AUX = np.hstack([U, S, Yh.reshape(-1, 4 * n)])
-    L = make_layout(model, controller, float(dt), 1, SensorModel.ideal(), 0, False)
-    settings = {"rate": 1.0 / float(dt), "dt": float(dt), "substeps": 1, "delay_samples": 0, "predict": False,
-                "sensing": L.sensing, "seed": 0, "backend": name, "loop": "legacy"}
-    return _finish(model, controller, p_true, L, t, W, AUX, R, settings)
 
 
 def _reference_rows(reference, t, n):

@@ -61,44 +61,54 @@ def test_compiled_alpha_beta_drivers_agree(tmp_path, name):
         assert checksum == pytest.approx(want, rel=1e-10, abs=1e-12)
 
 
+def _generated(case):
+    """The sample step (one substep, ideal sensor, no delay) in C: ``(W (N, nw), AUX (N, 6n))``."""
+    from fjm_runtime.sim.compiled import sampled_loop_library
+    lib = sampled_loop_library(case.model, case.controller, case.layout())
+    return lib(case.w0(), case.reference_rows(), case.noise(), case.p_true)
+
+
 def test_hand_c_loop_equals_generated_loop(tmp_path):
     from bench.closed_loop import GeneratedLoop, HandLoop, link1_case
-    from fjm_runtime.sim.compiled import closed_loop_library
     case = link1_case(K_true=130.0, duration=1.0)
     hand = HandLoop(case, tmp_path)
     W_h, A_h = hand()
-    lib = closed_loop_library(case.model, case.controller, case.dt)
-    W_g, A_g = lib(case.x0(), *case.reference_arrays(), case.p_true)
+    W_g, A_g = _generated(case)
+    assert W_g.shape == W_h.shape == (1000, 4)   # w = x: the stateless law, ideal sensor, no delay
     assert np.max(np.abs(W_h - W_g)) < 1e-9
     assert np.max(np.abs(A_h - A_g)) < 1e-9 * max(1.0, np.max(np.abs(A_g)))
     W_m, A_m = GeneratedLoop(case)()          # the mapaccum + casadi.external form
     assert np.max(np.abs(W_m - W_g)) < 1e-12
+    # the peer is not trivially equal: another plant (K) moves the states by far more than the tolerance
+    W_o, _ = HandLoop(link1_case(K_true=180.0, duration=1.0), tmp_path / "other")()
+    assert np.max(np.abs(W_o - W_g)) > 1e-4
 
 
 def test_python_and_solve_ivp_peers_track_the_same_loop():
-    from bench.closed_loop import link1_case, python_loop, solve_ivp_loop
-    from fjm_runtime.sim.compiled import closed_loop_library
+    from bench.closed_loop import link1_case, python_loop, simulate_call, solve_ivp_loop
     case = link1_case(duration=0.3)
-    lib = closed_loop_library(case.model, case.controller, case.dt)
-    W, _ = lib(case.x0(), *case.reference_arrays(), case.p_true)
+    W, _ = _generated(case)
     assert np.max(np.abs(python_loop(case).x[1:] - W)) < 1e-9
+    assert np.max(np.abs(simulate_call(case, "compiled").x[1:] - W)) < 1e-12
     ivp = solve_ivp_loop(case)
     assert ivp.success
     assert np.max(np.abs(ivp.y.T[1:] - W)) < 5e-3   # continuous law vs zero-order hold
 
 
 def test_numpy_batch_peer_equals_simulate_batch():
+    """The NumPy peer (one RK4 step per sample, closed forms) == the sampled batch with substeps=1, row by row."""
     from bench.closed_loop import link1_case, numpy_batch
     from fjm_runtime.batch.runner import METRIC_NAMES, simulate_batch
     case = link1_case(duration=1.0)
     Ks = np.array([100.0, 140.0, 200.0])
     P = np.tile(case.p_true, (3, 1))
     P[:, 2] = Ks
-    b = simulate_batch(case.model, case.controller, case.reference, P, duration=1.0, x0=case.x0(), loop="legacy")
+    b = simulate_batch(case.model, case.controller, case.reference, P, duration=1.0, x0=case.x0(), substeps=1)
     nb = numpy_batch(case, Ks)
     for k in METRIC_NAMES:
         assert np.allclose(b.metrics[k], nb[k], rtol=1e-9, atol=1e-12), k
     assert np.allclose(b.x_final, nb["x_final"], rtol=1e-9, atol=1e-12)
+    assert len(set(np.round(b.x_final[:, 0], 9))) == 3        # three different plants
 
 
 def test_closed_loop_design_is_computed_not_pasted(monkeypatch):

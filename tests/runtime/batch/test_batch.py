@@ -1,22 +1,22 @@
-"""simulate_batch(loop="legacy"), the former batch: a batch of one equals a single run; each row is its own plant; the
-SIMD path runs where the CPU has it, equals the scalar path, and never fails silently."""
+"""simulate_batch (THE sampled loop, ideal sensor): a batch of one equals a single run; each row is its own plant;
+the SIMD path runs where the CPU has it, equals the scalar path, and never fails silently; loop='legacy' is retired."""
 import warnings
 
 import numpy as np
 import pytest
 
 import fjm_runtime
+import fjm_runtime.batch.sampled_runner as sampled_runner
 import fjm_runtime.batch.simd as batch_mod
-import functools
-
-from fjm_runtime.batch.runner import METRIC_NAMES, SimdFallbackWarning, simulate_batch as _simulate_batch
-
-#: This file checks the former batch against simulate(loop='legacy').
-simulate_batch = functools.partial(_simulate_batch, loop="legacy")
-from fjm_runtime.ccache import CompileError
+from fjm_runtime.batch.runner import METRIC_NAMES, SimdFallbackWarning, simulate_batch
+from fjm_runtime.batch.sampled import GainInput, jitter_half_width, sampled_metric_step
+from fjm_runtime.ccache import DEFAULT_FLAGS, CompileError
 from fjm_runtime.control.factory import make_controller
 from fjm_runtime.control.references import Sinusoid, SmoothStep
+from fjm_runtime.sim.sample_step import make_layout
+from fjm_runtime.sim.sensor import SensorModel
 from fjm_runtime.sim.simulate import simulate
+from fjm_runtime.validation import FjmValueError
 
 
 pytestmark = pytest.mark.slow  # builds C, a wheel or derives in a subprocess: `pytest -m 'not slow'` skips it
@@ -33,13 +33,18 @@ def _assert_same_metrics(single, batch, i, rel=1e-9):
         assert b == pytest.approx(a, rel=rel, abs=1e-12), k
 
 
+def _single(m, ctrl, ref, batch, i, duration, backend):
+    """Row ``i`` of ``batch`` as one :func:`simulate` run: same TRUE parameters, substeps and seed."""
+    return simulate(m, ctrl, ref, duration=duration, true_params=batch.params[i], substeps=batch.info["substeps"],
+                    sensor=SensorModel.ideal().with_seed(int(batch.seeds[i])), backend=backend)
+
+
 def test_batch_of_one_equals_single_run():
     m = fjm_runtime.load("link1")
     ctrl = _link1_ctrl(m)
     ref = Sinusoid(0.5, 1.0)
-    p = m.params_array({"K": 120.0})
-    single = simulate(m, ctrl, ref, duration=2.0, true_params=p, backend="python", loop="legacy")
-    batch = simulate_batch(m, ctrl, ref, p[None], duration=2.0)
+    batch = simulate_batch(m, ctrl, ref, m.params_array({"K": 120.0})[None], duration=0.5)
+    single = _single(m, ctrl, ref, batch, 0, 0.5, "python")
     _assert_same_metrics(single, batch, 0)
     assert np.max(np.abs(batch.x_final[0] - single.x[-1])) < 1e-9
     assert not batch.diverged[0]
@@ -57,9 +62,10 @@ def test_each_row_is_its_own_plant(parallel, simd):
         batch = simulate_batch(m, ctrl, ref, P, duration=1.0, parallel=parallel, simd=simd)
     assert (batch.info["path"] != "scalar") == simd
     assert batch.info["threads"] == 1 or parallel
-    for i, k in enumerate(Ks):
-        single = simulate(m, ctrl, ref, duration=1.0, true_params={"K": k}, backend="compiled", loop="legacy")
+    for i in range(len(Ks)):
+        single = _single(m, ctrl, ref, batch, i, 1.0, "compiled")
         _assert_same_metrics(single, batch, i)
+        assert np.max(np.abs(batch.x_final[i] - single.x[-1])) < 1e-9
     assert len(set(np.round(batch.metrics["rms_error"], 12))) == len(Ks)
 
 
@@ -70,15 +76,14 @@ def test_planar2_batch_matches_single():
     P = np.array([m.params_array({"K1": 120.0}), m.params_array({"K2": 190.0})])
     batch = simulate_batch(m, ctrl, ref, P, duration=0.5)
     for i in range(2):
-        single = simulate(m, ctrl, ref, duration=0.5, true_params=P[i], backend="python", loop="legacy")
-        _assert_same_metrics(single, batch, i)
+        _assert_same_metrics(_single(m, ctrl, ref, batch, i, 0.5, "casadi"), batch, i)
 
 
 def test_divergence_is_flagged_not_raised():
     m = fjm_runtime.load("link1")
     ctrl = _link1_ctrl(m)
     P = np.array([m.params_array({"K": 150.0}), m.params_array({"K": 150.0, "J_m": 1e-6})])
-    batch = simulate_batch(m, ctrl, Sinusoid(0.5, 1.0), P, duration=1.0, max_state=1e3)
+    batch = simulate_batch(m, ctrl, Sinusoid(0.5, 1.0), P, duration=1.0, max_state=1e3, substeps=1)
     assert not batch.diverged[0] and np.isfinite(batch.metrics["rms_error"][0])
     assert batch.diverged[1] and np.isnan(batch.metrics["rms_error"][1])
     assert 0 < batch.divergence_time[1] <= 1.0
@@ -88,6 +93,17 @@ def test_bad_params_shape_is_a_clear_error():
     m = fjm_runtime.load("link1")
     with pytest.raises(ValueError, match="params_true_array"):
         simulate_batch(m, _link1_ctrl(m), Sinusoid(0.5, 1.0), np.zeros((3, 2)), duration=1.0)
+
+
+@pytest.mark.parametrize("loop", ["legacy", "fused"])
+def test_only_the_sampled_loop_is_accepted(loop):
+    """loop='legacy' was retired (one line naming what to use); any other name is refused too."""
+    m = fjm_runtime.load("link1")
+    with pytest.raises(FjmValueError) as exc:
+        simulate_batch(m, _link1_ctrl(m), Sinusoid(0.5, 1.0), m.params_array({})[None], duration=0.1, loop=loop)
+    msg = str(exc.value)
+    assert "\n" not in msg and f"loop = {loop!r}" in msg
+    assert ("retired: use loop='sampled'" in msg) if loop == "legacy" else msg.endswith("expected 'sampled'")
 
 
 def _expected_simd_path():
@@ -152,8 +168,11 @@ def _broken_c(*args, **kwargs):
 def test_a_failing_simd_build_warns_names_the_reason_and_runs_scalar(monkeypatch, broken, exc, match):
     m, ctrl, ref, P = _padded_case()
     monkeypatch.setattr(batch_mod, "soa_source", broken)
+    monkeypatch.setattr(sampled_runner, "_RUNNERS", {})     # no runner built by an earlier test
+    L = make_layout(m, GainInput(ctrl), 1e-3, 1, SensorModel.ideal(), 0, False)
+    step, A = sampled_metric_step(m, GainInput(ctrl), L, 1e6, 2 * jitter_half_width(1e-3) + 1)
     with pytest.raises(exc):                       # the explicit builder never falls back
-        batch_mod.simd_batch_runner(m, ctrl, 1e-3)
+        batch_mod.sampled_simd_runner(step, A.n_par, L.nm, DEFAULT_FLAGS, None)
     with pytest.warns(SimdFallbackWarning, match=match):
         b = simulate_batch(m, ctrl, ref, P, duration=0.2)
     assert b.info["path"] == "scalar"
@@ -165,6 +184,7 @@ def test_a_failing_simd_build_warns_names_the_reason_and_runs_scalar(monkeypatch
 def test_a_step_beyond_the_simd_limit_warns(monkeypatch):
     m, ctrl, ref, P = _padded_case()
     monkeypatch.setattr(batch_mod, "SIMD_MAX_INSTRUCTIONS", 10)
+    monkeypatch.setattr(sampled_runner, "_RUNNERS", {})
     with pytest.warns(SimdFallbackWarning, match="SIMD_MAX_INSTRUCTIONS = 10"):
         b = simulate_batch(m, ctrl, ref, P[:2], duration=0.1)
     assert b.info["path"] == "scalar" and b.info["instructions"] > 10

@@ -1,5 +1,5 @@
-"""`fjm simulate`: bad input refused in one line before any work (issue 26, item 7), where the gains
-came from and whether they were designed for the run (item 5), and runs that leave the workspace.
+"""`fjm simulate`: bad input refused in one line before any work, where the gains
+came from and whether they were designed for the run, and runs that leave the workspace.
 
 Each expected number is computed here from its definition (the layout's columns, the Nyquist
 frequency, the time a sine crosses 4 pi), not copied from the output.

@@ -1,4 +1,4 @@
-"""Compiled closed loop (fjm_runtime.sim.compiled): same trajectories as Python; a robust cache."""
+"""Compiled sampled-data loop (fjm_runtime.sim.compiled): same trajectories as Python; a robust cache."""
 import json
 import os
 import subprocess
@@ -10,7 +10,9 @@ import pytest
 
 import fjm_runtime
 from fjm_runtime.ccache import cache_dir
-from fjm_runtime.sim.compiled import closed_loop_runner
+from fjm_runtime.sim.compiled import sampled_loop_runner
+from fjm_runtime.sim.sample_step import make_layout
+from fjm_runtime.sim.sensor import SensorModel
 from fjm_runtime.control.factory import make_controller
 from fjm_runtime.control.references import Sinusoid
 from fjm_runtime.sim.simulate import simulate
@@ -96,9 +98,10 @@ def test_cache_key_changes_with_the_source(private_cache):
     m = fjm_runtime.load("link1")
     c1 = make_controller("smc", m, {}, lam=8.0, k_s=300.0, delta=2.0)
     c2 = make_controller("smc", m, {}, lam=9.0, k_s=300.0, delta=2.0)
-    closed_loop_runner(m, c1, 1e-3, 10)
-    closed_loop_runner(m, c2, 1e-3, 10)
-    closed_loop_runner(m, c1, 1e-3, 10)
+    L = make_layout(m, c1, 1e-3, 1, SensorModel.ideal(), 0, False)
+    sampled_loop_runner(m, c1, L, 10)
+    sampled_loop_runner(m, c2, L, 10)
+    sampled_loop_runner(m, c1, L, 10)
     assert len(_entries(cache_dir())[0]) == 2
 
 

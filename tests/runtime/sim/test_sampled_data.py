@@ -179,12 +179,22 @@ def test_bad_settings_are_one_line_errors(link1, kw, text):
     assert text in str(exc.value) and "\n" not in str(exc.value)
 
 
-def test_legacy_loop_is_the_former_single_step_loop(link1):
-    """loop='legacy' (what the batch still folds) equals one RK4 step of [x; z] per sample."""
+def test_one_substep_and_a_stateless_law_is_the_former_single_step_loop(link1):
+    """substeps=1, ideal sensor, no delay, a stateless law: one RK4 step of x per sample under the law's
+    u_k = law(x_k) held (the retired loop='legacy'), written here as the plain loop above with d = 0."""
     ctrl = make_controller("smc", link1, {}, lam=8.0, k_s=100.0, delta=2.0)
     ref = Sinusoid(0.5, 1.0)
-    legacy = simulate(link1, ctrl, ref, duration=0.2, loop="legacy")
-    sampled = simulate(link1, ctrl, ref, duration=0.2, substeps=1)
-    assert np.max(np.abs(legacy.x - sampled.x)) < 1e-12     # stateless law, one substep: the same loop
-    with pytest.raises(FjmValueError):
-        simulate(link1, ctrl, ref, duration=0.2, loop="legacy", delay_samples=1)
+    p = link1.params_array({"K": 130.0})
+    res = simulate(link1, ctrl, ref, duration=0.2, true_params=p, substeps=1, backend="compiled")
+    us = _reference_delay_loop(link1, ctrl, ref, p, 0, 200)
+    assert np.max(np.abs(res.u[:200] - us)) < 1e-9 * max(1.0, np.max(np.abs(us)))
+
+
+@pytest.mark.parametrize("loop", ["legacy", "continuous"])
+def test_only_the_sampled_loop_is_accepted(link1, loop):
+    """loop='legacy' was retired: a one-line error naming what to use instead; other names are refused."""
+    with pytest.raises(FjmValueError) as exc:
+        simulate(link1, _ismc(link1), Sinusoid(0.5, 1.0), duration=0.01, loop=loop)
+    msg = str(exc.value)
+    assert "\n" not in msg and f"loop = {loop!r}" in msg
+    assert ("retired: use loop='sampled'" in msg) if loop == "legacy" else msg.endswith("expected 'sampled'")

@@ -74,10 +74,11 @@ def test_batch_on_elbow3_rows_are_their_own_plants():
     ctrl = make_controller("ismc", m, m.default_params, lam=8.0, k_s=50.0, delta=0.5, u_max=20.0)
     ref = _ref(m)
     P = sample_parameters(m, 3, seed=2, k_relative=(0.8, 1.2))
-    batch = simulate_batch(m, ctrl, ref, P, duration=0.5, parallel=False, loop="legacy")
+    batch = simulate_batch(m, ctrl, ref, P, duration=0.5, parallel=False)
     assert not batch.diverged.any()
     for i, row in enumerate(P):
-        single = simulate(m, ctrl, ref, duration=0.5, true_params=row, backend="compiled", loop="legacy")
+        single = simulate(m, ctrl, ref, duration=0.5, true_params=row, backend="compiled",
+                          substeps=batch.info["substeps"])
         for k in METRIC_NAMES:
             assert batch.metrics[k][i] == pytest.approx(getattr(single.metrics, k), rel=1e-9, abs=1e-12), k
         np.testing.assert_allclose(batch.x_final[i], single.x[-1], rtol=0, atol=1e-9)
