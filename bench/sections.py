@@ -18,7 +18,7 @@ from .timing import log
 __all__ = ["SECTIONS", "plan"]
 
 SECTIONS = ("derive", "alpha_beta", "spatial", "closed_loop", "batch", "realtime", "sampled_batch", "scaling",
-            "sampled_loop")
+            "sampled_loop", "design")
 
 
 def sampled_batch_section(checks: list) -> dict:
@@ -40,6 +40,12 @@ def scaling_section(work: Path, results: dict) -> dict:
     return bench_scaling(work / "scaling", spatial=spatial if isinstance(spatial, dict) else None, log=log)
 
 
+def design_section(work: Path) -> dict:
+    """The design section (:mod:`bench.design_timing`): ``fjm design`` on the Panda, cold and warm."""
+    from .design_timing import bench_design
+    return bench_design(work / "design", log=log)
+
+
 def plan(work: Path, quick: bool, checks: list, results: dict) -> list:
     """``[(name, run)]`` in :data:`SECTIONS` order; ``run()`` returns the section's results.
 
@@ -55,4 +61,5 @@ def plan(work: Path, quick: bool, checks: list, results: dict) -> list:
             ("realtime", lambda: bench_realtime(work, 10 ** 4 if quick else 10 ** 6, checks, check)),
             ("sampled_batch", lambda: sampled_batch_section(checks)),
             ("scaling", lambda: scaling_section(work, results)),
-            ("sampled_loop", lambda: sampled_loop_section())]
+            ("sampled_loop", lambda: sampled_loop_section()),
+            ("design", lambda: design_section(work))]
