@@ -13,6 +13,11 @@ once.
 Without ``scheduler`` a local cluster is started (``n_workers`` processes,
 one thread each); with ``scheduler="tcp://host:port"`` an existing
 ``dask.distributed`` scheduler is used.
+
+The runs are THE sampled loop of :func:`fjm_runtime.sim.simulate.simulate` (sensing, sensor model,
+delay, prediction: :class:`SweepSpec`). What the local batch would decide from all rows is decided
+once for the whole sweep: the RK4 substeps (the largest of the rule over every row) and each run's
+noise seed (``sensor.seed + run``), so the table does not depend on the chunking.
 """
 
 from __future__ import annotations
@@ -40,10 +45,24 @@ class SweepSpec:
     controller_options : dict
         Extra keyword arguments of the controller (``lam``, ``k_s``, ``delta`` ...).
     reference : str
-        ``step`` or ``sine`` (see :func:`fjm_runtime.control.references.make_reference`).
+        ``step`` or ``sine`` (see :func:`fjm_runtime.control.references.make_reference`), or ``task``:
+        the per-joint sines ``offset + amplitude sin(omega t + phase)`` of a design file's task
+        (``reference_options``: its ``offset``, ``amplitude``, ``omega``, ``phase``).
     reference_options : dict
     duration, dt : float
-        Seconds.
+        Seconds (``dt``: the control period, 1 / rate).
+    sensing : {'state', 'torque'}
+        What the controller measures.
+    sensor : SensorModel, optional
+        Noise, encoders, filters and the torque-rate limit (default ideal).
+    delay_samples : int
+        Computation delay, samples.
+    predict : bool
+        Delay compensation by the nominal-model predictor.
+    substeps : int, optional
+        RK4 steps per sample; :func:`sweep` sets the largest of the rule over all rows.
+    x0 : tuple of float, optional
+        Initial state of every run (default: at rest on the reference's start).
     """
 
     model: str = "link1"
@@ -53,6 +72,12 @@ class SweepSpec:
     reference_options: Dict[str, float] = field(default_factory=dict)
     duration: float = 10.0
     dt: float = 1e-3
+    sensing: str = "state"
+    sensor: Optional[object] = None
+    delay_samples: int = 0
+    predict: bool = False
+    substeps: Optional[int] = None
+    x0: Optional[tuple] = None
 
 
 def sample_parameters(model, n_samples: int, seed: int = 0, k_range=(100.0, 200.0),
@@ -104,40 +129,63 @@ def sample_parameters(model, n_samples: int, seed: int = 0, k_range=(100.0, 200.
 def _build(spec: SweepSpec):
     from .. import load
     from ..control.factory import make_controller
-    from ..control.references import make_reference
     model = load(spec.model)
-    controller = make_controller(spec.controller, model, model.default_params, **spec.controller_options)
-    reference = make_reference(spec.reference, model.n, **spec.reference_options)
-    return model, controller, reference
+    controller = make_controller(spec.controller, model, model.default_params, sensing=spec.sensing,
+                                 **spec.controller_options)
+    return model, controller, sweep_reference(spec.reference, spec.reference_options, int(model.n))
 
 
-def run_chunk(spec: SweepSpec, params: np.ndarray) -> Dict[str, np.ndarray]:
+def sweep_reference(kind: str, options: dict, n: int):
+    """The reference of a sweep: :func:`make_reference` of ``kind``, or ``'task'``: a design file's sines."""
+    from ..control.references import Sinusoid, make_reference
+    if kind == "task":
+        return Sinusoid(list(options["amplitude"]), list(options["omega"]), n=n, offset=list(options["offset"]),
+                        phase=float(options.get("phase", 0.0)))
+    return make_reference(kind, n, **options)
+
+
+def run_chunk(spec: SweepSpec, params: np.ndarray, seeds=None) -> Dict[str, np.ndarray]:
     """Run one chunk of samples with the compiled batch (executed on a worker).
+
+    ``seeds``: the noise seed of each row (default ``sensor.seed + i`` within the chunk).
 
     Returns
     -------
     dict str -> ndarray, each of shape (len(params),)
-        The metrics of :class:`fjm_runtime.batch.BatchResult` plus ``diverged``.
+        The metrics of :class:`fjm_runtime.batch.BatchResult`, ``diverged``, ``divergence_time``
+        and per joint ``<metric>_<j>`` (``rms_second_half``, ``peak_torque``, ``time_at_limit``,
+        ``torque_jitter``, ``time_at_rate_limit``; joints from 1).
     """
     from ..batch.runner import simulate_batch
     model, controller, reference = _build(spec)
     res = simulate_batch(model, controller, reference, params, duration=spec.duration, dt=spec.dt,
-                         parallel=False)  # one thread per Dask worker: no oversubscription
+                         substeps=spec.substeps, sensor=spec.sensor, delay_samples=spec.delay_samples,
+                         predict=spec.predict, seeds=seeds, x0=None if spec.x0 is None else np.asarray(spec.x0),
+                         threads=1)  # one thread per Dask worker (no oversubscription), the local run's library
     out = {k: np.asarray(v) for k, v in res.metrics.items()}
     out["diverged"] = res.diverged.astype(float)
+    out["divergence_time"] = np.asarray(res.divergence_time, dtype=float)
+    for k, v in res.joint_metrics.items():
+        for j in range(v.shape[1]):
+            out[f"{k}_{j + 1}"] = np.asarray(v[:, j], dtype=float)
     return out
 
 
-def _client(scheduler: Optional[str], n_workers: int):
-    try:
-        from dask.distributed import Client, LocalCluster
-    except ImportError as exc:  # pragma: no cover - depends on the install
-        raise RuntimeError("fjm sweep needs dask.distributed: pip install 'fjm[sweep]'") from exc
-    if scheduler:
-        return Client(scheduler), None
-    cluster = LocalCluster(n_workers=int(n_workers), threads_per_worker=1, processes=True,
-                           dashboard_address=None)
-    return Client(cluster), cluster
+def resolve_spec(spec: SweepSpec, params: np.ndarray) -> SweepSpec:
+    """``spec`` with the substeps of the whole sweep: the largest of the rule over every row (unless set)."""
+    if spec.substeps is not None:
+        return spec
+    from dataclasses import replace
+    from .distributed import batch_substeps, initial_state
+    model, _controller, reference = _build(spec)
+    x0 = initial_state(model, reference, spec.x0)
+    return replace(spec, substeps=batch_substeps(model, x0, params, spec.dt))
+
+
+def run_seeds(spec: SweepSpec, n: int) -> np.ndarray:
+    """The noise seed of every run of a sweep: ``sensor.seed + run`` (uint64, shape (n,))."""
+    base = 0 if spec.sensor is None else int(spec.sensor.seed)
+    return np.array([(base + i) % 2 ** 64 for i in range(int(n))], dtype=np.uint64)
 
 
 def sweep(spec: SweepSpec, params: np.ndarray, chunk_size: int = 250, scheduler: Optional[str] = None,
@@ -151,8 +199,8 @@ def sweep(spec: SweepSpec, params: np.ndarray, chunk_size: int = 250, scheduler:
         TRUE parameters, e.g. from :func:`sample_parameters`.
     chunk_size : int
         Runs per Dask task.
-    scheduler : str, optional
-        Address of an existing scheduler; default: a local cluster.
+    scheduler : str or dask.distributed.Client, optional
+        Address of an existing scheduler (or a client); default: a local cluster.
     n_workers : int
         Workers of the local cluster.
     progress : callable (done, total), optional
@@ -165,21 +213,13 @@ def sweep(spec: SweepSpec, params: np.ndarray, chunk_size: int = 250, scheduler:
     P = np.atleast_2d(np.asarray(params, dtype=float))
     if int(chunk_size) < 1:
         raise FjmValueError(f"chunk_size = {chunk_size!r}: expected an integer >= 1")
-    chunks = [P[i:i + int(chunk_size)] for i in range(0, len(P), int(chunk_size))]
-    client, cluster = _client(scheduler, n_workers)
-    try:
-        from dask.distributed import as_completed
-        futures = client.map(run_chunk, [spec] * len(chunks), chunks, pure=False)
-        index = {f.key: i for i, f in enumerate(futures)}
-        parts: List[Optional[Dict[str, np.ndarray]]] = [None] * len(chunks)
-        for done, fut in enumerate(as_completed(futures), 1):
-            parts[index[fut.key]] = fut.result()
-            if progress:
-                progress(done, len(chunks))
-    finally:
-        client.close()
-        if cluster is not None:
-            cluster.close()
+    from .distributed import client_for, map_ordered
+    spec = resolve_spec(spec, P)
+    seeds = run_seeds(spec, len(P))
+    size = int(chunk_size)
+    args = [(spec, P[i:i + size], seeds[i:i + size]) for i in range(0, len(P), size)]
+    with client_for(scheduler, n_workers) as client:
+        parts: List[Dict[str, np.ndarray]] = map_ordered(client, run_chunk, args, progress)
     return {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
 
 

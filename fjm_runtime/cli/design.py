@@ -18,15 +18,39 @@ def add_parser(sub) -> None:
     p = sub.add_parser("design", help="search gains over sampled closed loops (batch engine)",
                        description="Search the integral sliding-mode gains (lam, k_lin, k_s, delta) for a model, "
                                    "control rate, delay and sensor model over draws of the TRUE plant "
-                                   "(docs/design-command.md); writes the gains file fjm simulate --gains reads.")
+                                   "(docs/design-command.md); writes the gains file fjm simulate --gains reads. "
+                                   "Exit status 1 when the gains miss a threshold (the file records "
+                                   "\"meets\": false and the misses).")
     p.add_argument("model")
     p.add_argument("--controller", default="ismc", choices=("ismc",), help="law (default ismc)")
     p.add_argument("--sensing", default="torque", choices=("state", "torque"), help="default torque")
     p.add_argument("--rate", type=float, default=1000.0, help="control rate, Hz (default 1000)")
     p.add_argument("--delay-samples", type=int, default=1, help="computation delay, samples (default 1)")
-    p.add_argument("--noise", default="panda", choices=("none", "panda"), help="sensor model (default panda)")
+    p.add_argument("--noise", default="panda_white", metavar="PRESET|FILE",
+                   help="sensor model: a preset (ideal, panda_white, franka_like; former names none, panda) or a "
+                        "TOML sensor file (docs/simulation.md); default panda_white")
+    p.add_argument("--params", type=Path, default=None, metavar="FILE",
+                   help="TOML parameter file: the controller's nominal values ([parameters], model-file form) and "
+                        "the spread of the TRUE plant draws ([spread]); default K x U[0.7, 1.3], J_m x U[0.8, 1.2], "
+                        "payload U[0, 1] kg (docs/design-command.md)")
+    p.add_argument("--max-rms", type=float, default=2e-3,
+                   help="threshold: second-half RMS tracking error of every joint, rad (default 2e-3)")
+    p.add_argument("--max-jitter", type=float, default=3.0,
+                   help="threshold: torque jitter on the --jitter-joints, N m (default 3)")
+    p.add_argument("--max-at-limit", type=float, default=2.0,
+                   help="threshold: time at a torque limit of every joint, percent (default 2)")
+    p.add_argument("--jitter-joints", default="1-4",
+                   help="joints of the jitter threshold: '1-4', '1,2,3', '1-3,6' or 'all' (default 1-4, those the "
+                        "model has)")
     p.add_argument("--draws", type=int, default=200, help="plant draws of the final check (default 200)")
+    p.add_argument("--recheck-draws", type=int, default=None,
+                   help="fresh plant draws and noise seeds on which passing gains are re-checked (default: --draws; "
+                        "0: no re-check)")
     p.add_argument("--duration", type=float, default=10.0, help="final run length, s (default 10)")
+    p.add_argument("--screen-draws", type=int, default=12,
+                   help="plant draws of the search stages (the first are the box's corners; default 12)")
+    p.add_argument("--screen-duration", type=float, default=2.0, help="run length of the search stages, s (default 2)")
+    p.add_argument("--rounds", type=int, default=6, help="rounds of the pattern search (default 6)")
     p.add_argument("--seed", type=int, default=0, help="draws and noise seed (default 0)")
     p.add_argument("--threads", type=int, default=None, help="OpenMP threads (default all cores)")
     p.add_argument("--simd", action=argparse.BooleanOptionalAction, default=True,
@@ -38,14 +62,21 @@ def add_parser(sub) -> None:
                    help="auto: the demo's task where the model has one (Panda: joint-space sines about the ready "
                         "pose; Baxter: both arms on sines, the head still; from rest holding gravity); sine: "
                         "0.5 rad sines about q = 0 from rest")
+    p.add_argument("--screen", default="none", choices=("none", "linear"),
+                   help="linear: reject candidates by the linear sampled-data analysis before Monte Carlo (spectral "
+                        "radius and predicted jitter on the box's corners; slow on 7 joints) and name what limits a "
+                        "failed design from it; default none")
+    p.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                   help="run the Monte Carlo stages on an existing dask.distributed scheduler, e.g. "
+                        "tcp://10.0.0.5:8786 (same gains and costs as here, bit for bit; default: this process)")
     p.add_argument("--out", type=Path, default=None, help="gains file (default: print the JSON)")
 
 
-def demo_task(m) -> dict:
+def demo_task(m, nominal=None) -> dict:
     """The demo's task for ``m`` as :func:`fjm_runtime.analysis.design.design` keywords; ``{}`` if it has none.
 
     Panda: joint-space sines about the ready pose; Baxter: both arms on the same sines, the head still.
-    Both start at rest holding gravity (nominal parameters).
+    Both start at rest holding gravity (``nominal`` parameters; default the model's).
     """
     if m.name == "panda":
         from ..experiments import panda as demo  # the demo's task: cli sits on top, like experiments
@@ -60,27 +91,75 @@ def demo_task(m) -> dict:
         return {}
     from ..sim.rest import rest_state
     ref = demo.reference()
-    return {"reference": ref, "x0": rest_state(m, ref(0.0)[0], m.default_params),
+    return {"reference": ref, "x0": rest_state(m, ref(0.0)[0], m.default_params if nominal is None else nominal),
             "task": {"kind": kind, "offset": offset, "amplitude": amplitude, "omega": omega,
                      "phase": -0.5 * math.pi, "start": "at rest holding gravity (nominal parameters)"}}
 
 
+#: Largest reference table (samples x 5n doubles) a batch may hold, bytes.
+MAX_REFERENCE_BYTES = 2e9
+
+
+def check_samples(duration: float, rate: float, n: int, flags: str) -> None:
+    """Refuse a run whose reference table (``duration x rate + 1`` samples of ``5n`` doubles) exceeds
+    :data:`MAX_REFERENCE_BYTES`, before any work (one-line FjmValueError)."""
+    need = (duration * rate + 1) * 5 * n * 8
+    if need > MAX_REFERENCE_BYTES:
+        raise FjmValueError(f"{flags}: {duration * rate:.3g} samples per run would hold {need / 1e9:.3g} GB of "
+                            f"reference samples; expected at most {MAX_REFERENCE_BYTES / 1e9:g} GB (shorter "
+                            "runs or a lower rate)")
+
+
+def _settings(args, m):
+    """``(sensor, thresholds, spread)`` from the flags, checked before any work."""
+    from ..analysis.design_draws import default_spread, load_params_file
+    from ..analysis.design_thresholds import Thresholds, parse_joints
+    from ..sim.sensor import sensor_from_spec
+    sensor = sensor_from_spec(args.noise, seed=args.seed, what="--noise")
+    for flag, v in (("--max-rms", args.max_rms), ("--max-jitter", args.max_jitter),
+                    ("--max-at-limit", args.max_at_limit)):
+        if not (math.isfinite(v) and v > 0):
+            raise FjmValueError(f"{flag} {v!r}: expected a finite threshold > 0")
+    if args.max_at_limit > 100:
+        raise FjmValueError(f"--max-at-limit {args.max_at_limit!r}: expected a percentage in (0, 100]")
+    joints = None if args.jitter_joints.strip() == "1-4" else parse_joints(args.jitter_joints, int(m.n))
+    thresholds = Thresholds(max_rms=args.max_rms, max_jitter=args.max_jitter, max_at_limit=args.max_at_limit / 100.0,
+                            jitter_joints=joints)
+    spread = default_spread(m) if args.params is None else load_params_file(args.params, m)
+    return sensor, thresholds, spread
+
+
 def run(args) -> int:
-    """Run ``fjm design``; prints or writes the gains file, progress on stderr."""
+    """Run ``fjm design``; prints or writes the gains file, progress and the verdict on stderr.
+
+    Returns 0 when the gains meet every threshold (final check and re-check), 1 otherwise.
+    """
     from .. import load
     from ..analysis.design import design
-    from ..sim.sensor import SensorModel
+    from ..analysis.design_report import summary_lines
     if args.out is not None and not args.out.parent.is_dir():
         raise FjmValueError(f"--out {args.out}: the directory {args.out.parent} does not exist")
     if args.draws < 1 or args.duration <= 0 or args.delay_samples < 0 or args.rate <= 0:
         raise FjmValueError("--draws/--duration/--delay-samples/--rate: expected >= 1, > 0 s, >= 0, > 0 Hz")
+    if args.recheck_draws is not None and args.recheck_draws < 0:
+        raise FjmValueError(f"--recheck-draws {args.recheck_draws}: expected >= 0 (0: no re-check)")
+    if not (math.isfinite(args.duration) and math.isfinite(args.rate)):
+        raise FjmValueError("--duration/--rate: expected finite values")
+    if args.screen_draws < 1 or not (math.isfinite(args.screen_duration) and args.screen_duration > 0) \
+            or args.rounds < 0:
+        raise FjmValueError(f"--screen-draws {args.screen_draws} / --screen-duration {args.screen_duration} / "
+                            f"--rounds {args.rounds}: expected >= 1, a finite duration > 0 s, >= 0")
     m = load(args.model)
-    sensor = SensorModel.panda(seed=args.seed) if args.noise == "panda" else SensorModel.ideal(seed=args.seed)
-    task = demo_task(m) if args.task == "auto" else {}
+    check_samples(max(args.duration, args.screen_duration), args.rate, int(m.n), "--duration/--rate")
+    sensor, thresholds, spread = _settings(args, m)
+    task = demo_task(m, spread.nominal) if args.task == "auto" else {}
     t0 = time.perf_counter()
     out = design(m, kind=args.controller, sensing=args.sensing, rate=args.rate, delay=args.delay_samples,
                  sensor=sensor, draws=args.draws, duration=args.duration, seed=args.seed, threads=args.threads,
-                 simd=args.simd, predict=args.predict, **task)
+                 simd=args.simd, predict=args.predict, thresholds=thresholds, spread=spread,
+                 recheck_draws=args.recheck_draws, scheduler=args.scheduler, screen_draws=args.screen_draws,
+                 screen=None if args.screen == "none" else args.screen,
+                 screen_duration=args.screen_duration, rounds=args.rounds, **task)
     out["wall_seconds"] = time.perf_counter() - t0
     out["noise"] = args.noise
     text = json.dumps(out, indent=2, allow_nan=False)
@@ -89,4 +168,6 @@ def run(args) -> int:
     else:
         args.out.write_text(text + "\n")
         print(f"fjm design: wrote {args.out} ({out['wall_seconds']:.0f} s)", file=sys.stderr)
-    return 0
+    for line in summary_lines(out):
+        print(f"fjm design: {line}", file=sys.stderr)
+    return 0 if out["meets"] else 1

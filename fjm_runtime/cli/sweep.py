@@ -40,14 +40,30 @@ def add_parser(sub) -> None:
     sw.add_argument("--k-rel", type=float, nargs=2, default=None, metavar=("LO", "HI"),
                     help="instead of --k-min/--k-max: every stiffness = its nominal x U[LO, HI] "
                          "(spatial arms, e.g. panda --k-rel 0.7 1.3)")
-    sw.add_argument("--controller", default="smc", choices=CONTROLLER_KINDS, help="controller (default smc)")
+    sw.add_argument("--controller", default=None, choices=CONTROLLER_KINDS,
+                    help="controller (default: the kind of --gains, else smc)")
     sw.add_argument("--lam", type=float, default=8.0, help="pole magnitude lambda, 1/s (default 8)")
     sw.add_argument("--k-s", type=float, default=1000.0, help="switching gain, rad/s^4 (default 1000)")
     sw.add_argument("--delta", type=float, default=None,
                     help=f"boundary layer (default max(k_s, 1) / {DEFAULT_LAYER_RATE:g})")
-    sw.add_argument("--reference", default="sine", help=f"one of {', '.join(REFERENCE_KINDS)} (default sine)")
+    sw.add_argument("--reference", default=None,
+                    help=f"one of {', '.join(REFERENCE_KINDS)}, or 'task': the task a --gains design file records "
+                         "(default: 'task' when the gains file records one, else sine)")
     sw.add_argument("--duration", type=float, default=10.0, help="simulated time, s (default 10)")
-    sw.add_argument("--dt", type=float, default=1e-3, help="RK4 step, s (default 1e-3)")
+    sw.add_argument("--dt", type=float, default=None, help="control period, s (default 1e-3; or --rate)")
+    sw.add_argument("--rate", type=float, default=None, help="control rate, Hz (instead of --dt)")
+    sw.add_argument("--sensing", default=None, choices=("state", "torque"),
+                    help="what the controller measures (default: the gains file's sensing, else state)")
+    sw.add_argument("--delay-samples", type=int, default=0, help="computation delay, samples (default 0)")
+    sw.add_argument("--predict", action="store_true",
+                    help="delay compensation by the nominal-model predictor (on when the gains file was designed "
+                         "with it)")
+    sw.add_argument("--noise", default="ideal", metavar="PRESET|FILE",
+                    help="sensor model: a preset (ideal, panda_white, franka_like) or a TOML sensor file "
+                         "(docs/simulation.md); run i gets noise seed --seed + i (default ideal)")
+    sw.add_argument("--gains", type=Path, default=None, metavar="FILE",
+                    help='gains file (a fjm design output, or JSON {"kind": KIND, "gains": {...}}): its kind and '
+                         "gains replace --controller/--lam/--k-s/--delta")
     sw.add_argument("--scheduler", default=None, metavar="ADDRESS",
                     help="existing dask.distributed scheduler, e.g. tcp://127.0.0.1:8786 (default: local cluster)")
     sw.add_argument("--workers", type=int, default=2, help="workers of the local cluster (default 2)")
@@ -98,19 +114,88 @@ def summary(P, metrics, seconds: float, path) -> dict:
     return out
 
 
+def gains_file(path: Path, controller) -> dict:
+    """``--gains FILE``: ``{"kind", "gains", ...}`` checked (kind against ``--controller``, finite gains)."""
+    try:
+        spec = json.loads(Path(path).read_text())
+    except (OSError, ValueError) as exc:
+        raise FjmValueError(f"--gains {path}: cannot read a JSON object ({exc})") from None
+    if not isinstance(spec, dict) or not isinstance(spec.get("gains"), dict) or \
+            spec.get("kind") not in CONTROLLER_KINDS:
+        raise FjmValueError(f"--gains {path}: expected {{\"kind\": one of {', '.join(CONTROLLER_KINDS)}, "
+                            "\"gains\": {...}}")
+    if controller is not None and controller != spec["kind"]:
+        raise FjmValueError(f"--gains {path}: holds gains for {spec['kind']!r}, not --controller {controller!r}")
+    for k, v in spec["gains"].items():
+        vals = v if isinstance(v, list) else [v]
+        if not all(isinstance(x, (int, float)) and not isinstance(x, bool) and np.isfinite(x) for x in vals):
+            raise FjmValueError(f"--gains {path}: gains.{k} = {v!r}; expected a finite number or a list of them")
+    return spec
+
+
+def _period(args) -> float:
+    if args.rate is not None and args.dt is not None:
+        raise FjmValueError("--rate and --dt: give one of them (the control period is 1 / rate)")
+    dt = 1e-3 if args.rate is None and args.dt is None else (args.dt if args.rate is None else 1.0 / args.rate)
+    if not (np.isfinite(dt) and 0 < dt <= args.duration):
+        raise FjmValueError(f"--rate/--dt: control period {dt!r} s; expected 0 < period <= --duration")
+    return dt
+
+
+def _reference(m, args, file_spec):
+    """``(reference kind, options, x0)``: the gains file's task, or --reference (sine by default)."""
+    task = (file_spec or {}).get("reference")
+    has_task = isinstance(task, dict) and all(k in task for k in ("offset", "amplitude", "omega"))
+    if args.reference == "task" and not has_task:
+        raise FjmValueError("--reference task: expected a --gains design file that records its task")
+    if args.reference in (None, "task") and has_task:
+        from ..batch.sweep import sweep_reference
+        from ..sim.rest import rest_state
+        opts = {k: task[k] for k in ("offset", "amplitude", "omega")}
+        opts["phase"] = float(task.get("phase", 0.0))
+        x0 = None
+        if "holding gravity" in str(task.get("start", "")):
+            ref = sweep_reference("task", opts, int(m.n))
+            x0 = tuple(rest_state(m, ref(0.0)[0], m.default_params).tolist())
+        return "task", opts, x0
+    return args.reference or "sine", {}, None
+
+
+def _spec(m, args):
+    """The :class:`SweepSpec` of the flags (controller, gains, sampled-loop settings), checked."""
+    from ..batch.sweep import SweepSpec
+    from ..sim.sensor import sensor_from_spec
+    if args.delay_samples < 0:
+        raise FjmValueError(f"--delay-samples {args.delay_samples}: expected >= 0")
+    dt = _period(args)
+    from .design import check_samples
+    check_samples(args.duration, 1.0 / dt, int(m.n), "--duration/--rate")
+    sensor = sensor_from_spec(args.noise, seed=args.seed, what="--noise")
+    file_spec = gains_file(args.gains, args.controller) if args.gains is not None else None
+    if file_spec is not None:
+        kind, options = file_spec["kind"], dict(file_spec["gains"])
+        sensing = args.sensing or file_spec.get("sensing", "state")
+        predict = bool(args.predict or file_spec.get("predict", False))
+    else:
+        kind = args.controller or "smc"
+        options = {"lam": args.lam, "delta": args.delta if args.delta is not None else default_delta(args.k_s)}
+        if kind != "fl":
+            options["k_s"] = args.k_s
+        sensing, predict = args.sensing or "state", bool(args.predict)
+    reference, ref_options, x0 = _reference(m, args, file_spec)
+    return SweepSpec(model=args.model, controller=kind, controller_options=options, reference=reference,
+                     reference_options=ref_options, duration=args.duration, dt=dt, sensing=sensing, sensor=sensor,
+                     delay_samples=int(args.delay_samples), predict=predict, x0=x0)
+
+
 def run(args) -> int:
     """Run ``fjm sweep``; returns the exit status."""
     from .. import load
-    from ..batch.sweep import SweepSpec, sample_parameters, sweep, write_table
+    from ..batch.sweep import sample_parameters, sweep, write_table
     check_output_file(args.out, "--out", make_parent=True)
     m = load(args.model)
     k_range, k_rel = stiffness_range(m, args.k_min, args.k_max, args.k_rel)
-    delta = args.delta if args.delta is not None else default_delta(args.k_s)
-    options = {"lam": args.lam, "delta": delta}
-    if args.controller != "fl":
-        options["k_s"] = args.k_s
-    spec = SweepSpec(model=args.model, controller=args.controller, controller_options=options,
-                     reference=args.reference, duration=args.duration, dt=args.dt)
+    spec = _spec(m, args)
     P = sample_parameters(m, args.samples, seed=args.seed, k_range=k_range, k_relative=k_rel)
     t0 = time.perf_counter()
     metrics = sweep(spec, P, chunk_size=args.chunk, scheduler=args.scheduler, n_workers=args.workers,
@@ -118,5 +203,10 @@ def run(args) -> int:
                                                 flush=True))
     print(file=sys.stderr)
     path = write_table(args.out, m, P, metrics)
-    print(json.dumps(summary(P, metrics, time.perf_counter() - t0, path), indent=2, allow_nan=False))
+    out = summary(P, metrics, time.perf_counter() - t0, path)
+    out["settings"] = {"controller": spec.controller, "sensing": spec.sensing, "rate": 1.0 / spec.dt,
+                       "delay_samples": spec.delay_samples, "predict": spec.predict, "noise": args.noise,
+                       "sensor": spec.sensor.name, "reference": spec.reference,
+                       "gains": None if args.gains is None else str(args.gains)}
+    print(json.dumps(out, indent=2, allow_nan=False))
     return 0
