@@ -1,4 +1,5 @@
-"""``fjm design`` on the Panda at 1 kHz, delay 2, the ``franka_like`` sensor: wall time and compiler memory.
+"""``fjm design`` on the Panda at 1 kHz, delay 2, the ``franka_like`` sensor: wall time and compiler memory;
+the Monte Carlo throughput in this process and on a 2-worker dask cluster.
 
 The issue's targets: within 10 minutes on a cold C cache and 4 minutes warm (2 cores), no compiler
 process above 1.5 GB resident. The command runs twice as a user runs it (``python -m fjm_runtime.cli
@@ -6,6 +7,12 @@ design ...``, a process of its own): first with an empty ``$FJM_CACHE`` (every C
 search, the final check and the delay margins up to ``d + 3``), then again with that cache (warm).
 Every compiler process is started through a wrapper (``$CC``) that records its peak resident set
 (:mod:`bench.peak_rss`), so the compiler's memory is measured apart from the design process's own.
+
+Throughput (:func:`bench_draws`): the same rows (Panda, shipped 1 kHz / d = 1 gains, ``panda_white``,
+10 s runs) through ``simulate_batch`` on this process's 2 threads and through
+:func:`fjm_runtime.batch.distributed.run_on_cluster` on a ``LocalCluster`` of 2 worker processes of
+one thread each (the same compiled library, loaded by each worker); draws per wall second, the
+cluster's start excluded, the per-run metrics checked equal.
 """
 from __future__ import annotations
 
@@ -39,6 +46,48 @@ def _compiler_peak(work: Path) -> float:
     return max((int(f.read_text()) for f in files), default=0) / 1e9
 
 
+def bench_draws(draws: int = 16, duration: float = 10.0) -> dict:
+    """Draws per second locally (2 threads) and on 2 dask workers, same rows; the results equal."""
+    import time
+
+    import numpy as np
+
+    import fjm_runtime
+    from fjm_runtime.batch.distributed import LoopSpec, batch_substeps, client_for, run_on_cluster
+    from fjm_runtime.batch.runner import BatchResult, simulate_batch
+    from fjm_runtime.cli.design import demo_task
+    from fjm_runtime.control.designed import designed_gains
+    from fjm_runtime.control.factory import make_controller
+    from fjm_runtime.analysis.design_draws import draw_params
+    from fjm_runtime.sim.sensor import SensorModel
+    m = fjm_runtime.load("panda")
+    gains = designed_gains("panda", "ismc", "torque", 1000, 1)["gains"]
+    ctrl = make_controller("ismc", m, {}, sensing="torque", **gains)
+    task = demo_task(m)
+    P = draw_params(m, draws, 0)
+    seeds = np.arange(draws, dtype=np.uint64)
+    subs = batch_substeps(m, task["x0"], P, 1e-3)
+    sensor = SensorModel.panda_white()
+    kw = dict(duration=duration, sensor=sensor, delay_samples=1, predict=True, seeds=seeds, substeps=subs,
+              x0=task["x0"])
+    simulate_batch(m, ctrl, task["reference"], P[:1], **{**kw, "seeds": seeds[:1], "duration": 0.01})  # build
+    t0 = time.perf_counter()
+    local = simulate_batch(m, ctrl, task["reference"], P, threads=2, **kw)
+    t_local = time.perf_counter() - t0
+    spec = LoopSpec(model=str(m.directory), model_name=m.name, kind="ismc", sensing="torque",
+                    nominal={}, options=dict(gains), reference=task["reference"], duration=duration, dt=1e-3,
+                    substeps=subs, sensor=sensor, delay=1, predict=True, x0=tuple(task["x0"]), simd=True)
+    with client_for(None, n_workers=2, processes=True) as client:
+        run_on_cluster(client, spec, P[:2], seeds[:2], None, BatchResult)          # workers build / load once
+        t0 = time.perf_counter()
+        dist = run_on_cluster(client, spec, P, seeds, None, BatchResult)
+        t_dist = time.perf_counter() - t0
+    same = all(np.array_equal(local.joint_metrics[k], dist.joint_metrics[k], equal_nan=True)
+               for k in local.joint_metrics)
+    return {"draws": draws, "duration_s": duration, "local_2threads_draws_per_s": draws / t_local,
+            "cluster_2workers_draws_per_s": draws / t_dist, "identical": bool(same)}
+
+
 def bench_design(work: Path, log=print) -> dict:
     """Run ``fjm design`` cold then warm; the section's results (seconds, peaks, outcome, targets)."""
     work.mkdir(parents=True, exist_ok=True)
@@ -63,6 +112,8 @@ def bench_design(work: Path, log=print) -> dict:
         else:
             out[f"{label}_error"] = r["stderr"][-2000:]
     out["compiler_peak_gb"] = max(out["cold_compiler_peak_gb"], out["warm_compiler_peak_gb"])
+    log("design: draws per second, locally and on 2 dask workers")
+    out["throughput"] = bench_draws()
     out["met"] = {"cold_seconds": out["cold_seconds"] <= TARGETS["cold_seconds"],
                   "warm_seconds": out["warm_seconds"] <= TARGETS["warm_seconds"],
                   "compiler_peak_gb": out["compiler_peak_gb"] <= TARGETS["compiler_peak_gb"]}
