@@ -348,7 +348,7 @@ def _design(model, kind, sensing, rate, delay, sensor, draws, duration, seed, u_
             rounds, max_extra_delay, threads, simd, say, predict, reference, x0, task, active_sets, thresholds,
             spread, recheck_draws, client, screen) -> dict:
     from .design_report import binding_miss, report
-    from .design_screen import linear_screen
+    from .design_screen_linear import linear_screen
     t0 = time.perf_counter()
     prob = DesignLoops(model, kind, sensing, rate, delay, sensor, u_max, threads, simd, predict, reference, x0, task,
                        nominal=spread.nominal, thresholds=thresholds, client=client)

@@ -24,7 +24,7 @@ from typing import List, Optional, Protocol
 
 from .design_thresholds import DIVERGED_COST
 
-__all__ = ["SCREENED_COST", "Screen", "Verdict", "linear_screen", "screen_costs"]
+__all__ = ["SCREENED_COST", "Screen", "Verdict", "screen_costs"]
 
 #: Cost of a candidate the screen rejected (as a diverged run: never chosen over a simulated one).
 SCREENED_COST = DIVERGED_COST
@@ -60,29 +60,3 @@ def screen_costs(screen, cands):
         raise RuntimeError(f"screen {getattr(screen, 'name', screen)!r}: {len(verdicts)} verdicts for "
                            f"{len(cands)} candidates")
     return [i for i, v in enumerate(verdicts) if v.ok], verdicts
-
-
-def linear_screen(loops, spread, margin: Optional[float] = None) -> Optional[Screen]:
-    """The linear analysis as a screen, or None when :mod:`fjm_runtime.analysis.sampled_linear` is absent.
-
-    Parameters
-    ----------
-    loops : DesignLoops
-        Model, law, rate, delay, sensor, prediction, reference and thresholds of the design.
-    spread : PlantSpread
-        The corners of its box are analysed.
-    margin : float, optional
-        Required distance of the spectral radius below 1 (default: the decay-rate margin of
-        :data:`fjm_runtime.analysis.design_screen_linear.MIN_DECAY`).
-    """
-    import importlib.util
-    import warnings
-    if importlib.util.find_spec(f"{__package__}.sampled_linear") is None:
-        return None
-    try:
-        from .design_screen_linear import LinearScreen
-        return LinearScreen(loops, spread, margin)
-    except (ImportError, AttributeError, TypeError) as exc:   # the analysis's interface moved on
-        warnings.warn(f"design: the linear analysis is installed but its screen could not be built ({exc}); "
-                      "every candidate is simulated", RuntimeWarning, stacklevel=2)
-        return None

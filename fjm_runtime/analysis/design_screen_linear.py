@@ -23,9 +23,9 @@ from typing import List, Optional
 
 import numpy as np
 
-from .design_screen import Verdict
+from .design_screen import Screen, Verdict
 
-__all__ = ["JITTER_SLACK", "MIN_DECAY", "LinearScreen"]
+__all__ = ["JITTER_SLACK", "MIN_DECAY", "LinearScreen", "linear_screen"]
 
 #: Slowest decay rate allowed of the sampled loop's modes, 1/s.
 MIN_DECAY = 1.0
@@ -115,3 +115,19 @@ class LinearScreen:
         return (f"linear analysis: predicted jitter {v:.3g} N m on joint {j + 1} (limit {self.max_jitter:g}; "
                 f"{plant} plant, {point}), limited by {channel} noise"
                 + (f" ({100 * frac:.0f} % of its variance)" if frac is not None else ""))
+
+
+def linear_screen(loops, spread, margin: Optional[float] = None) -> Screen:
+    """The linear analysis (:mod:`fjm_runtime.analysis.sampled_linear`) as a screen.
+
+    Parameters
+    ----------
+    loops : DesignLoops
+        Model, law, rate, delay, sensor, prediction, reference and thresholds of the design.
+    spread : PlantSpread
+        The corners of its box are analysed.
+    margin : float, optional
+        Required distance of the spectral radius below 1 (default: the decay-rate margin of
+        :data:`MIN_DECAY`).
+    """
+    return LinearScreen(loops, spread, margin)

@@ -40,7 +40,7 @@ class Thresholds:
     max_rms : float
         Second-half RMS tracking error of each joint, rad. Default 2e-3 rad: about 3x the worst
         joint of the shipped Panda 1 kHz / d = 1 design (6.9e-4 rad over its 200 draws) and below
-        the 5.4e-3 rad of the failed d = 2 search (issue 26); 1.6 mm at the Panda's 0.8 m reach.
+        the 5.4e-3 rad of the failed d = 2 search before these thresholds; 1.6 mm at the Panda's 0.8 m reach.
     max_jitter : float
         Torque jitter (std of the commanded torque about its 20 ms moving mean), N m, on the joints
         of ``jitter_joints``.
