@@ -3,13 +3,16 @@ from __future__ import annotations
 
 import numpy as np
 
+from .step_layout import stiffness_indices
+
 __all__ = ["rest_state"]
 
 
 def rest_state(model, q, p) -> np.ndarray:
     """State at rest at link angles ``q`` holding gravity: ``q_m = q + K^-1 G(q)`` (parameters ``p``).
 
-    ``G(q) = -D(q) ddq`` with ``ddq`` the link acceleration of ``f`` at ``q_m = q``, ``dq = 0``.
+    ``G(q) = -D(q) ddq`` with ``ddq`` the link acceleration of ``f`` at ``q_m = q``, ``dq = 0`` (for a
+    complete model, the link rows of ``-M [ddq; ddq_m]`` with its coupled inertia ``M`` (2n, 2n)).
 
     Parameters
     ----------
@@ -27,9 +30,11 @@ def rest_state(model, q, p) -> np.ndarray:
     n = int(model.n)
     q = np.asarray(q, dtype=float)
     x = np.concatenate([q, np.zeros(n), q, np.zeros(n)])
-    ddq = np.asarray(model.f(x, p), dtype=float).ravel()[n:2 * n]
-    G = -np.asarray(model.inertia(x, p), dtype=float) @ ddq
-    pv = model.params_array(p)
-    K = pv[[list(model.param_names).index(f"K{i + 1}") for i in range(n)]]
+    f = np.asarray(model.f(x, p), dtype=float).ravel()
+    M = np.atleast_2d(np.asarray(model.inertia(x, p), dtype=float))
+    # the reduced model's inertia is the links' D (n, n); a complete model's couples links and motors (2n, 2n)
+    acc = f[n:2 * n] if M.shape[0] == n else np.concatenate([f[n:2 * n], f[3 * n:4 * n]])
+    G = -(M @ acc)[:n]
+    K = np.asarray(model.params_array(p), dtype=float)[stiffness_indices(model)[0]]
     x[2 * n:3 * n] = q + G / K
     return x

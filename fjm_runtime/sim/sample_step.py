@@ -17,7 +17,9 @@ At sample ``k`` (``t_k = k T``), from the step state ``w_k`` (layout :class:`Ste
     u_law, s_k, y_hat_k = law(m_used, z_k, r_k)          (NOMINAL parameters; saturation and
                                                           anti-windup inside the law)
     u_k    = clip(u_law, u_{k-1} - R T, u_{k-1} + R T)   (the torque-rate limit R, when finite)
-    z_{k+1} = z_k + T z_dot(m_used, z_k, r_k, u_law)      (a digital controller: once per sample)
+    z_{k+1} = z_k + T z_dot(m_used, z_k, r_k, u_law)      (a digital controller: once per sample;
+             with a rate limit, an error integral is frozen on a joint whose u_k lags u_law in the
+             direction its error asks for: conditional integration, as at the torque limit)
     x_{k+1} = substeps RK4 steps of T / substeps of x' = f(x; p) + g(x; p) u_k   (TRUE p, u held)
 
 The CasADi form (:func:`casadi_sample_step`) is ``fjm_sample_step(w, r, noise, p) -> (w_next, aux)``
@@ -207,6 +209,22 @@ def _rate_limited(ops, L: StepLayout, w, u_law):
     return ops.fmin(ops.fmax(u_law, u_last - r), u_last + r)
 
 
+def _rate_windup(ops, L: StepLayout, zdot, u_law, u, e1):
+    """``zdot`` with the error integral of the joints the rate limit holds back frozen.
+
+    A joint is frozen while the applied ``u`` lags the law's ``u_law`` in the direction the
+    measured error ``e1 = q - q_d`` asks for (``u_law > u`` with ``e1 < 0``, or ``u_law < u`` with
+    ``e1 > 0``): integrating then only winds up (the law's own anti-windup sees its torque limit,
+    not the rate limit, which acts after it).
+    """
+    if not L.integral:
+        return zdot
+    n = L.n
+    held = (u_law > u) * (e1 < 0) + (u_law < u) * (e1 > 0)
+    frozen = zdot[:n] * (1 - held)
+    return ops.cat([frozen, zdot[n:L.nz]]) if L.nz > n else frozen
+
+
 def _post_law(ops, L: StepLayout, w, u, zdot, m_buf_next, filt_next, venc_next, p):
     """``w_next`` from the APPLIED torque and the controller-state rate."""
     sx, sz, _, su, _ = L.slices()
@@ -238,6 +256,8 @@ def python_sample_step(model, controller, L: StepLayout, w, t: float, r, noise, 
     sample = controller.evaluate(t, m_used, z, r)
     zdot = np.asarray(controller.state_derivative(t, m_used, z, r, sample), dtype=float) if L.nz else None
     u = _rate_limited(ops, L, w, np.asarray(sample.u, dtype=float))
+    if L.integral:
+        zdot = _rate_windup(ops, L, zdot, np.asarray(sample.u, dtype=float), u, m_used[:L.n] - r[0])
     w_next = _post_law(ops, L, w, u, zdot, m_buf_next, filt_next, venc_next, p)
     return w_next, (sample._replace(u=u) if L.rate_step else sample)
 
@@ -278,6 +298,8 @@ def casadi_sample_step(fns, controller, L: StepLayout, n_par: int, nominal_fns=N
     out = controller.symbolic_evaluate(m_used, z, r)
     zdot = controller.symbolic_state_derivative(m_used, z, r, out) if L.nz else None
     u = _rate_limited(ops, L, w, out["u"])
+    if L.integral:
+        zdot = _rate_windup(ops, L, zdot, out["u"], u, m_used[:L.n] - r[:L.n])
     w_next = _post_law(ops, L, w, u, zdot, m_buf_next, filt_next, venc_next, p)
     return ca.Function("fjm_sample_step", [w, r, noise, p],
                        [w_next, ca.vertcat(u, out["s"], out["y_hat"])],
@@ -300,7 +322,9 @@ def initial_step_state(model, L: StepLayout, x0, z0, p_true, seed: int = 0, sens
     """``w_0``: the plant and controller states and the loop's memory before sample 0.
 
     The plant rests at ``x0`` before ``t = 0``: the delay buffers hold the noise-free measurement
-    of ``x0`` and zero torques, the dtau_J filter the true ``tau_J(x0)``, ``dtau_J(x0)``, the
+    of ``x0`` and the torques that held it there (the true spring torque ``K (q_m - q)``: a robot
+    hands over to the controller while holding; zeros would make the predictor see the arm fall
+    for ``d`` samples and kick the law at start), the dtau_J filter the true ``tau_J(x0)``, ``dtau_J(x0)``, the
     velocity filters the true angles and velocities, the last applied torque (rate limit) the true
     spring torque ``K (q_m - q)`` at ``x0`` (what holds a rest state), and the run's tau_J offset is
     ``sensor.tau_J_offset * offset_normals(seed)`` (``sensor`` needed only when ``L.offset``).
@@ -311,8 +335,9 @@ def initial_step_state(model, L: StepLayout, x0, z0, p_true, seed: int = 0, sens
     K = ops.take(p_true, L.idx_K) if L.sensing == "torque" else None
     m0 = np.asarray(_measure(ops, L, x0, K), dtype=float)
     parts = [x0, z0]
+    spring = _spring_torque(model, x0, p_true)
     if L.delay:
-        parts += [np.tile(m0, L.delay), np.zeros(L.delay * n)]
+        parts += [np.tile(m0, L.delay), np.tile(spring, L.delay)]
     if L.filtered:
         parts.append(m0[2 * n:4 * n])
     if L.differentiated:
@@ -322,7 +347,7 @@ def initial_step_state(model, L: StepLayout, x0, z0, p_true, seed: int = 0, sens
             raise FjmValueError("initial_step_state: this layout has a tau_J offset; pass the sensor")
         parts.append(sensor.offsets(n) * offset_normals(int(seed), n))
     if L.rate_step:
-        parts.append(_spring_torque(model, x0, p_true))
+        parts.append(spring)
     return ops.cat(parts)
 
 

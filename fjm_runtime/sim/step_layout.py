@@ -77,6 +77,10 @@ class StepLayout:
     rate_step : tuple of float
         The largest torque change per sample per joint, N m (``rate limit x T``); empty: no limit,
         else ``u_last`` (n) holds the last applied torque.
+    integral : bool
+        The law's first ``n`` states are the integral of the tracking error (``ismc``, ``adaptive``):
+        with a rate limit they are frozen while the limit holds the torque back from where the
+        error pushes it (conditional integration, as the law does at its torque limit).
     """
 
     n: int
@@ -98,6 +102,7 @@ class StepLayout:
     a_velocity: float = 0.0
     offset: bool = False
     rate_step: tuple = ()
+    integral: bool = False
 
     @property
     def n_venc(self) -> int:
@@ -147,4 +152,20 @@ def make_layout(model, controller, T: float, substeps: int, sensor: SensorModel,
                       q_m_quant=sensor.q_m_quant, idx_K=tuple(int(i) for i in idx_K), K_nom=K_nom,
                       differentiated=sensor.velocity_mode == "differentiated",
                       a_velocity=1.0 - math.exp(-sensor.velocity_cutoff * T),
-                      offset=torque and bool(np.any(sensor.offsets(n) > 0)), rate_step=rate_step)
+                      offset=torque and bool(np.any(sensor.offsets(n) > 0)), rate_step=rate_step,
+                      integral=bool(rate_step) and str(_law_kind(controller)).split("_")[0] in INTEGRAL_LAWS
+                      and int(getattr(controller, "n_states", 0)) >= n)
+
+
+#: Laws whose first ``n`` controller states integrate the tracking error ``e1 = q - q_d`` (their
+#: torque-sensed forms too: ``ismc_tau``).
+INTEGRAL_LAWS = ("ismc", "adaptive")
+
+
+def _law_kind(controller):
+    """The emitted law's kind (``None`` for a controller that names none)."""
+    for obj in (controller, getattr(controller, "base", None)):
+        kind = getattr(obj, "law_kind", None)
+        if kind is not None:
+            return kind
+    return None

@@ -188,6 +188,31 @@ def test_rate_limit_holds_sample_by_sample(link1):
     assert np.max(np.abs(np.diff(free.u[:-1], axis=0))) > 2 * R * T   # without the limit it moves faster
 
 
+def test_error_integral_is_frozen_while_the_rate_limit_holds_the_torque_back(link1):
+    """Conditional integration under the rate limit: on samples where the applied torque lags the law's in
+    the direction the error asks for, the integral state z does not move; on the others it moves by T e1
+    (the ismc law's z' = e1). Both backends agree. Broken (z integrating through the limit), the frozen
+    samples would change z by T |e1|, about 1e-4 here."""
+    ctrl = make_controller("ismc", link1, nominal_params={}, lam=30, k_s=300, delta=5, sensing="torque")
+    ref = make_reference("step", 1, q_d=1.0, rise_time=0.05)    # no torque limit: only the rate limit acts
+    T, R = 1e-3, 150.0
+    sensor = replace(SensorModel.ideal(), torque_rate_limit=R)
+    runs = [simulate(link1, ctrl, ref, duration=0.3, dt=T, sensor=sensor, backend=b) for b in ("casadi", "python")]
+    assert np.max(np.abs(runs[0].z - runs[1].z)) < 1e-12
+    res = runs[0]
+    u_law = np.array([ctrl.evaluate(t, np.r_[res.x[k, :2], 150.0 * (res.x[k, 2] - res.x[k, 0]),
+                                               150.0 * (res.x[k, 3] - res.x[k, 1]), res.x[k, 3]],
+                                    res.z[k], res.ref[k]).u[0] for k, t in enumerate(res.t[:-1])])
+    e1 = res.x[:-1, 0] - res.ref[:-1, 0, 0]
+    lag = u_law - res.u[:-1, 0]                                # zero to rounding where the limit is not hit
+    held = ((lag > 1e-9) & (e1 < 0)) | ((lag < -1e-9) & (e1 > 0))
+    dz = np.diff(res.z[:, 0])
+    assert 10 <= held.sum() < held.size - 10                   # both kinds of samples occur
+    assert np.all(dz[held] == 0.0)
+    assert np.allclose(dz[~held], T * e1[~held], rtol=1e-9, atol=1e-15)
+    assert np.max(np.abs(T * e1[held])) > 1e-5                 # what integrating would have added
+
+
 def test_tau_offset_is_one_constant_per_run(link1):
     spy = Spy(_torque_law(link1, 150.0))
     sensor = SensorModel(tau_J_offset=0.3, seed=9)
