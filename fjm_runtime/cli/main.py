@@ -20,11 +20,11 @@ import importlib.util
 import sys
 from typing import List, Optional
 
-from . import derive, design, export, figures, models, simulate, sweep
+from . import analyze, derive, design, export, figures, models, simulate, sweep
 from ..validation import FjmValueError
 
 #: Sub-commands with an ``add_parser(sub)`` and a ``run(args)``, in ``--help`` order.
-COMMANDS = {"simulate": simulate, "design": design, "sweep": sweep, "figures": figures, "models": models, "export": export}
+COMMANDS = {"simulate": simulate, "design": design, "analyze": analyze, "sweep": sweep, "figures": figures, "models": models, "export": export}
 
 
 def _tune_module():
@@ -56,6 +56,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     simulate.add_parser(sub)
     design.add_parser(sub)
+    analyze.add_parser(sub)
     derive.add_parser(sub)
     sweep.add_parser(sub)
     figures.add_parser(sub)

@@ -1,0 +1,231 @@
+"""The linear analysis of one law over plants, operating points, delays and stiffness scales.
+
+:class:`LinearAnalyzer` holds the conditions (:class:`~fjm_runtime.analysis.sampled_linear.Conditions`)
+and the plants (nominal plus the corners of the parameter box, :func:`default_plants`); its
+:meth:`~LinearAnalyzer.analyze` takes a gains dict and returns a plain dict (JSON-able). The CasADi
+jacobian Functions are cached per layout (:func:`~fjm_runtime.analysis.sampled_linear.linear_step`),
+with the gains as an input, so screening many candidates builds nothing after the first.
+"""
+from __future__ import annotations
+
+import time
+from typing import Optional, Sequence
+
+import numpy as np
+
+from ..sim.rest import rest_state
+from ..sim.substeps import resolve_substeps
+from .sampled_linear import (Conditions, assess, channel_names, finite, linear_step, noise_levels, respring,
+                             scaled_stiffness, spectral)
+
+__all__ = ["LinearAnalyzer", "default_plants", "MAX_EXTRA_DELAY"]
+
+#: Delays tried by the delay margin: ``d + 1 .. d + MAX_EXTRA_DELAY``.
+MAX_EXTRA_DELAY = 4
+#: Stiffness factors bracketing the scale range, and the bisection steps (ratio 2 -> 2^(1/64)).
+SCALE_BRACKET, SCALE_BISECTIONS = (2.0, 4.0, 8.0, 16.0), 6
+
+
+def default_plants(model, spread=None):
+    """``[(name, p)]``: the nominal plant, then the nine corners of ``draw_params`` (the design's box)."""
+    from .design_draws import default_spread, draw_params
+    spread = default_spread(model) if spread is None else spread
+    p0 = np.asarray(model.params_array(spread.nominal), dtype=float)
+    rows = draw_params(model, 9, 0, spread)
+    labels = ("K low", "K high", "K alternating")
+    ends = ("", ", other spreads low", ", other spreads high")
+    return [("nominal", p0)] + [(f"corner {i + 1}: {labels[i % 3]}{ends[i // 3]}", rows[i]) for i in range(9)]
+
+
+class LinearAnalyzer:
+    """The linear analysis of laws of one kind under :class:`Conditions`.
+
+    Parameters
+    ----------
+    cond : Conditions
+    plants : list of (str, ndarray), optional
+        TRUE plants (default :func:`default_plants`); the first is the nominal one.
+    task_times : sequence of float
+        Frozen-time points along the task, s (besides ``rest``).
+    catch_up : float
+        Seconds of noise-free loop that settle a task point on another plant or delay.
+    substeps : int, optional
+        RK4 substeps (default: the largest of the rule over the plants).
+    """
+
+    def __init__(self, cond: Conditions, plants=None, task_times: Sequence[float] = (0.5, 1.0, 2.0),
+                 catch_up: float = 0.05, substeps: Optional[int] = None):
+        from ..batch.sampled import jitter_half_width
+        self.cond, m = cond, cond.model
+        self.model, self.n, self.T = m, int(m.n), float(cond.dt)
+        self.plants = default_plants(m) if plants is None else [(str(a), np.asarray(b, dtype=float))
+                                                                 for a, b in plants]
+        self.p_nom = np.asarray(m.params_array(cond.nominal), dtype=float)
+        self.substeps = int(substeps) if substeps else max(
+            resolve_substeps(None, m, cond.x0, p, self.T) for _, p in self.plants)
+        self.sensor = cond.linear_sensor()
+        self.levels = noise_levels(cond.sensor, cond.sensing, self.n)
+        self.names = channel_names(cond.sensor, cond.sensing, self.n)
+        self.h = jitter_half_width(self.T)
+        self.task_k = sorted({int(round(t / self.T)) for t in task_times if t > 0})
+        self.catch = max(1, int(round(catch_up / self.T)))
+        q0 = np.asarray(cond.reference(0.0), dtype=float)[0]
+        self.q0, self.r_rest = q0, np.concatenate([q0, np.zeros(4 * self.n)])
+        self._R = None
+        self._chords: dict = {}      # delay -> the nominal plant's rest linearization (this candidate's)
+
+    # -- operating points --------------------------------------------------------------------------
+    def points(self):
+        """Names of the operating points: ``rest`` and ``t=<s>`` per task point."""
+        return ["rest"] + [f"t={k * self.T:g}s" for k in self.task_k]
+
+    def _step(self, ctrl, delay):
+        c = self.cond
+        return linear_step(self.model, ctrl, self.T, self.substeps, self.sensor, delay, c.predict)
+
+    def _rows(self):
+        if self._R is None and self.task_k:
+            t = self.T * np.arange(self.task_k[-1] + 1)
+            self._R = np.asarray(self.cond.reference.sample(t), dtype=float).reshape(t.size, 5 * self.n)
+        return self._R
+
+    def _nominal_run(self, ctrl, g):
+        """``{k: w_k}`` of the noise-free run on the nominal plant at the design's delay (each task
+        point and the start of its catch-up)."""
+        if not self.task_k:
+            return {}
+        S = self._step(ctrl, self.cond.delay)
+        w0 = S.core_state(self.cond.x0, np.zeros(S.n_law), self.p_nom, self.sensor)
+        R = self._rows()
+        W = np.vstack([w0[None], S.run(w0, R[:-1], self.p_nom, g)])
+        return {k: W[k] for j in self.task_k for k in (j, max(0, j - self.catch))}
+
+    def operating_point(self, ctrl, g, point: int, p, delay, run):
+        """``(S, w, r)``: the step and the point (``point`` 0: rest, else the task point's index + 1)."""
+        S = self._step(ctrl, delay)
+        if point == 0:
+            x = rest_state(self.model, self.q0, p)
+            chord = self._chords.get(delay)
+            w, _ok = S.equilibrium(S.core_state(x, np.zeros(S.n_law), p, self.sensor), self.r_rest, p, g, chord)
+            return S, w, self.r_rest
+        k = self.task_k[point - 1]
+        R = self._rows()
+        if delay == self.cond.delay and np.array_equal(p, self.p_nom):
+            return S, run[k], R[k]
+        k0 = max(0, k - self.catch)
+        S0 = self._step(ctrl, self.cond.delay)
+        w_from = run[k0] if k0 in run else self._nominal_w(ctrl, g, k0)
+        x = respring(self.model, w_from[:self.model.nx], self.p_nom, p)
+        w = S.core_state(x, S0.z_law(w_from), p, self.sensor)
+        W = S.run(w, R[k0:k], p, g)
+        return S, (W[-1] if W.shape[0] else w), R[k]
+
+    def _nominal_w(self, ctrl, g, k):
+        S = self._step(ctrl, self.cond.delay)
+        w0 = S.core_state(self.cond.x0, np.zeros(S.n_law), self.p_nom, self.sensor)
+        return w0 if k == 0 else S.run(w0, self._rows()[:k], self.p_nom, g)[-1]
+
+    def rho(self, ctrl, g, point, p, delay, run) -> float:
+        S, w, r = self.operating_point(ctrl, g, point, p, delay, run)
+        if not np.all(np.isfinite(w)):
+            return float("inf")
+        lin = S.linearize(w, r, p, g)
+        if point == 0:
+            self._chords.setdefault(delay, lin)
+        return spectral(lin, self.n)[0]
+
+    # -- margins -----------------------------------------------------------------------------------
+    def delay_margin(self, ctrl, g, point, p, run):
+        """First delay ``d' > d`` (up to ``d + MAX_EXTRA_DELAY``) with spectral radius >= 1, or None
+        (:meth:`analyze` records ``d`` itself when the loop is unstable at ``d``)."""
+        d = self.cond.delay
+        for dd in range(d + 1, d + 1 + MAX_EXTRA_DELAY):
+            if self.rho(ctrl, g, point, p, dd, run) >= 1.0:
+                return dd
+        return None
+
+    def scale_range(self, ctrl, g, point, run):
+        """``[g_lo, g_hi]``: the stiffness factors (all K x g, TRUE plant) at which the radius reaches 1.
+
+        Bisection in log g to a ratio ``2^(1/64)``; None on a side that stays stable over the bracket
+        (``1/16 .. 16``). ``[None, None]`` with ``unstable`` when g = 1 itself is unstable.
+        """
+        d = self.cond.delay
+        stable = lambda s: self.rho(ctrl, g, point, scaled_stiffness(self.model, self.p_nom, s), d, run) < 1.0
+        if not stable(1.0):
+            return {"range": [None, None], "unstable": True}
+        out = []
+        for sign in (-1.0, 1.0):
+            ok, bad = 1.0, None
+            for b in SCALE_BRACKET:
+                s = b ** sign
+                if stable(s):
+                    ok = s
+                else:
+                    bad = s
+                    break
+            if bad is None:
+                out.append(None)
+                continue
+            for _ in range(SCALE_BISECTIONS):
+                mid = float(np.sqrt(ok * bad))
+                ok, bad = (mid, bad) if stable(mid) else (ok, mid)
+            out.append(float(np.sqrt(ok * bad)))
+        return {"range": out, "unstable": False}
+
+    # -- the whole analysis ------------------------------------------------------------------------
+    def analyze(self, gains: dict, margins: bool = True, attribution: bool = True,
+                points: Optional[Sequence[int]] = None) -> dict:
+        """The analysis of ``gains`` (a law gains dict, or a controller) as a JSON-able dict.
+
+        ``points``: indices into :meth:`points` (default all). Margins: the delay margin for every
+        plant at rest and for the nominal plant (the first) at every point; the stiffness-scale range
+        for the nominal plant at every point.
+        """
+        t0 = time.perf_counter()
+        ctrl = gains if hasattr(gains, "law_kind") else self.cond.controller(gains)
+        g = np.asarray(ctrl.gains, dtype=float)
+        self._chords = {}
+        pts = list(range(len(self.task_k) + 1)) if points is None else list(points)
+        run = self._nominal_run(ctrl, g) if any(i > 0 for i in pts) else {}
+        names = self.points()
+        table = []
+        for name, p in self.plants:
+            row = {"plant": name, "params": {k: float(v) for k, v in zip(self.model.param_names, p)}, "points": {}}
+            for i in pts:
+                S, w, r = self.operating_point(ctrl, g, i, p, self.cond.delay, run)
+                lin = S.linearize(w, r, p, g) if np.all(np.isfinite(w)) else None
+                if i == 0 and lin is not None:
+                    self._chords.setdefault(self.cond.delay, lin)
+                fig = assess(lin, self.levels, self.h, self.names, attribution) if lin is not None else \
+                    {"rho": float("inf"), "stable": False, "dominant_joint": None}
+                if lin is not None:
+                    s_k = np.asarray(S.step(w, r, np.zeros(S.L.nm), p, g)[1]).ravel()[self.n:2 * self.n]
+                    fig["s_over_delta"] = (np.abs(s_k) / np.asarray(ctrl.delta, dtype=float)).tolist()
+                if margins and (i == 0 or name == self.plants[0][0]):
+                    fig["first_unstable_delay"] = self.cond.delay if not fig["stable"] else \
+                        self.delay_margin(ctrl, g, i, p, run)
+                row["points"][names[i]] = fig
+            table.append(row)
+        out = {"points": [names[i] for i in pts], "plants": table, "summary": _summary(table, self.n)}
+        if margins:
+            out["stiffness_scale"] = {names[i]: self.scale_range(ctrl, g, i, run) for i in pts}
+        out["settings"] = {"rate": 1.0 / self.T, "delay": self.cond.delay, "predict": self.cond.predict,
+                           "sensing": self.cond.sensing, "sensor": self.cond.sensor.name, "substeps": self.substeps,
+                           "jitter_window_samples": 2 * self.h + 1, "catch_up_samples": self.catch,
+                           "noise_levels": dict(zip(self.names, self.levels.tolist()))}
+        out["seconds"] = time.perf_counter() - t0
+        return out
+
+
+def _summary(table, n):
+    """Worst over plants and points: radius, jitter and error std per joint, first unstable delay."""
+    figs = [f for row in table for f in row["points"].values()]
+    rho = max(f["rho"] for f in figs)
+    stable = [f for f in figs if f["stable"]]
+    worst = lambda key: [finite(max(f[key][j] for f in stable)) for j in range(n)] if len(stable) == len(figs) \
+        else [None] * n
+    delays = [f.get("first_unstable_delay") for f in figs if "first_unstable_delay" in f]
+    return {"rho": finite(rho), "stable_everywhere": len(stable) == len(figs),
+            "torque_jitter": worst("torque_jitter"), "q_error_std": worst("q_error_std"),
+            "first_unstable_delay": (min((d for d in delays if d is not None), default=None) if delays else None)}

@@ -1,0 +1,316 @@
+"""The linear sampled-data analysis of a law with given gains (``fjm analyze``; the screen of ``fjm design``).
+
+The whole sampled loop of :mod:`fjm_runtime.sim.sample_step` (plant over one period with the torque
+held on the same RK4 substeps, the delay buffer, the predictor, the sensor filters, the rate limit,
+the law inside its boundary layer) is linearized about an operating point by CasADi jacobians of
+``fjm_sample_step`` with respect to the step state ``w`` and the noise row::
+
+    w_{k+1} = A w_k + B n_k,        u_k = C w_k + D n_k
+
+The step is treated generically: nothing here knows the layout of ``w`` beyond its blocks
+``x`` (the plant state, first) and ``z`` (the controller state, where the gains ride as constants,
+:class:`~fjm_runtime.batch.sampled.GainInput`, so one jacobian Function serves every candidate).
+States the step holds constant (``A`` row = unit row, ``B`` row = 0: a per-run sensor offset, for
+instance) are inputs, not dynamics, and are dropped. Encoder quantization (``floor``, derivative 0)
+is switched off in the linearized step and enters as uniform noise ``step^2 / 12``
+(:func:`fjm_runtime.sim.sensor.linear_noise_levels`).
+
+Operating points (:class:`LinearAnalyzer`): ``rest`` (the equilibrium holding gravity at the task's
+start with a constant set point, solved by a chord-Newton iteration on ``w = F(w)`` for each plant
+and layout) and task points ``t_j`` (frozen time: ``w_k`` and ``r_k`` of a noise-free run of the
+loop on the nominal plant; for another plant or delay, the run's plant state at ``t_j - catch_up``
+(the spring deflection rescaled to keep the spring torque) seeds a short noise-free run to ``t_j``).
+Figures (:mod:`fjm_runtime.analysis.sampled_noise` for the noise ones): the spectral radius of ``A``
+and the joint its eigenvector lives on; the first delay ``d' > d`` (up to ``d + 4``) at which the
+spectral radius reaches 1; the range ``[g_lo, g_hi]`` of one factor on every TRUE stiffness that
+keeps it below 1 (bisection); the stationary torque jitter (the metric of
+:func:`fjm_runtime.sim.metrics.torque_jitter`) and link-angle error std per joint, and which noise
+channel dominates each joint's jitter.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, replace
+from typing import Optional, Sequence
+
+import numpy as np
+
+from ..sim.sample_step import initial_step_state, make_layout, sample_step_function, stiffness_indices
+from ..sim.sensor import SIGNALS, noise_slots
+from ..validation import FjmValueError
+from .sampled_noise import channel_variances, stationary_covariance, torque_jitter_variance
+
+__all__ = ["LinearStep", "Linearization", "linear_step", "noise_levels", "assess", "spectral"]
+
+
+def noise_levels(sensor, sensing: str, n: int) -> np.ndarray:
+    """Std per noise slot with quantization folded in (``linear_noise_levels``, else ``levels``), shape (nm,)."""
+    from ..sim import sensor as sensor_mod
+    fn = getattr(sensor_mod, "linear_noise_levels", None)
+    return np.asarray(fn(sensor, sensing, n) if fn is not None else sensor.levels(sensing, n), dtype=float)
+
+
+def channel_names(sensor, sensing: str, n: int):
+    """A label per noise slot: the signal whose noise it carries and the joint (``'q_m3'``)."""
+    chans = noise_slots(sensor, sensing, n)[0]
+    return [f"{SIGNALS[int(c) // n]}{int(c) % n + 1}" for c in chans]
+
+
+@dataclass
+class Linearization:
+    """One linearization: ``A`` (nd, nd) on the dynamic states, ``B`` (nd, nm), ``C`` (n, nd), ``D`` (n, nm).
+
+    ``w`` is the operating point (core state, gains excluded), ``dyn`` the core indices kept.
+    """
+
+    A: np.ndarray
+    B: np.ndarray
+    C: np.ndarray
+    D: np.ndarray
+    w: np.ndarray
+    dyn: np.ndarray
+    nx: int
+
+
+class LinearStep:
+    """The sample step of one (model, law structure, layout) and its jacobians, gains as an input.
+
+    ``step(wc, r, noise, p, g) -> (wc_next, aux)`` and ``jac(...) -> (wc_next, aux, A, B, C, D)``
+    (CasADi Functions) on the CORE state ``wc`` (``w`` without the riding gains).
+    """
+
+    def __init__(self, model, controller, L):
+        import casadi as ca
+        from ..batch.sampled import GainInput
+        gi = GainInput(controller)
+        self.model, self.L, self.n, self.n_law, self.n_gains = model, L, L.n, gi.n_law, gi.n_gains
+        F = sample_step_function(model, gi, L, outline=True)
+        a = L.slices()[1].start + gi.n_law
+        self._a = a
+        nc = L.nw - gi.n_gains
+        wc, g = ca.MX.sym("w", nc), ca.MX.sym("g", gi.n_gains)
+        r, noise, p = ca.MX.sym("r", 5 * L.n), ca.MX.sym("noise", L.nm), ca.MX.sym("p", len(model.param_names))
+        w_next, aux = F(ca.vertcat(wc[:a], g, wc[a:]), r, noise, p)
+        wcn = ca.vertcat(w_next[:a], w_next[a + gi.n_gains:])
+        u = aux[:L.n]
+        args = [wc, r, noise, p, g]
+        self.step = ca.Function("fjm_lin_step", args, [wcn, aux])
+        self.jac = ca.Function("fjm_lin_jac", args, [wcn, aux, ca.jacobian(wcn, wc), ca.jacobian(wcn, noise),
+                                                     ca.jacobian(u, wc), ca.jacobian(u, noise)])
+        self._runs: dict = {}
+
+    def core_state(self, x0, z_law, p, sensor) -> np.ndarray:
+        """The core ``w`` of a loop starting at ``x0`` with law state ``z_law``: the loop's memory at rest
+        (:func:`~fjm_runtime.sim.sample_step.initial_step_state`: the delay buffer holds the spring
+        torques that held ``x0``), the per-run sensor offset 0 (an input, not a state of the analysis)."""
+        z = np.concatenate([np.asarray(z_law, dtype=float), np.zeros(self.n_gains)])
+        w = initial_step_state(self.model, self.L, x0, z, p, seed=0, sensor=sensor)
+        if getattr(self.L, "offset", False):
+            w[self.L.extra_slices()[1]] = 0.0
+        return np.r_[w[:self._a], w[self._a + self.n_gains:]]
+
+    def z_law(self, wc) -> np.ndarray:
+        """The law's state in a core ``w``."""
+        s = self.L.slices()[1]
+        return np.asarray(wc[s.start:s.start + self.n_law], dtype=float)
+
+    def run(self, wc, R, p, g) -> np.ndarray:
+        """Noise-free run from ``wc`` over the reference rows ``R`` (N, 5n): the states ``w_1..w_N`` (N, nc)."""
+        N = R.shape[0]
+        if N == 0:
+            return np.zeros((0, wc.size))
+        fn = self._runs.get(N)
+        if fn is None:
+            fn = self._runs[N] = self.step.mapaccum("fjm_lin_run", N)
+        W, _ = fn(wc, R.T, np.zeros((self.L.nm, N)), p, g)
+        return np.asarray(W).T
+
+    def linearize(self, wc, r, p, g) -> Linearization:
+        """``A, B, C, D`` at ``(wc, r)`` with the constant states dropped."""
+        _, _, A, B, C, D = (np.asarray(v) for v in self.jac(wc, r, np.zeros(self.L.nm), p, g))
+        A, B, C, D = (np.atleast_2d(np.asarray(v, dtype=float)) for v in (A, B, C, D))
+        eye = np.eye(A.shape[0])
+        const = np.all(A == eye, axis=1) & ~np.any(B, axis=1)
+        dyn = np.flatnonzero(~const)
+        return Linearization(A[np.ix_(dyn, dyn)], B[dyn], C[:, dyn], D, np.asarray(wc, dtype=float), dyn,
+                             int(self.model.nx))
+
+    def equilibrium(self, wc, r, p, g, chord: Optional[Linearization] = None, iterations: int = 40,
+                    tol: float = 1e-11, _own: bool = True):
+        """``(w*, converged)``: ``w* = F(w*)`` by chord-Newton from ``wc``.
+
+        The chord matrix is ``chord.A`` when given (e.g. the nominal plant's linearization, for a
+        corner plant), else the jacobian at ``wc``; refreshed at ``w`` every 5 iterations without
+        convergence; a chord that does not converge is dropped for the jacobian at ``wc``.
+        """
+        if chord is not None and _own:
+            w, ok = self.equilibrium(wc, r, p, g, chord, 12, tol, _own=False)
+            if ok:
+                return w, ok
+        w = np.asarray(wc, dtype=float).copy()
+        lin = chord if chord is not None and not _own and chord.dyn.size == chord.A.shape[0] and \
+            chord.w.size == w.size else self.linearize(w, r, p, g)
+        for it in range(iterations):
+            res = np.asarray(self.step(w, r, np.zeros(self.L.nm), p, g)[0]).ravel() - w
+            if not np.all(np.isfinite(res)):
+                return np.asarray(wc, dtype=float), False
+            if np.max(np.abs(res)) <= tol * (1.0 + np.max(np.abs(w))):
+                return w, True
+            try:
+                w[lin.dyn] += np.linalg.solve(np.eye(lin.dyn.size) - lin.A, res[lin.dyn])
+            except np.linalg.LinAlgError:
+                return np.asarray(wc, dtype=float), False
+            if it % 5 == 4:                   # slow contraction: refresh the chord
+                lin = self.linearize(w, r, p, g)
+        return w, False
+
+
+_STEPS: dict = {}
+
+
+def linear_step(model, controller, T, substeps, sensor, delay, predict) -> LinearStep:
+    """The :class:`LinearStep` of these settings, built once per (model, law structure, nominal, layout).
+
+    ``sensor`` is the linearized one (quantization off). The gains are NOT part of the key.
+    """
+    from ..batch.sampled import GainInput
+    L = make_layout(model, GainInput(controller), float(T), int(substeps), sensor, int(delay), bool(predict))
+    key = (id(model), controller.law_kind, tuple(np.asarray(controller.p_nom, dtype=float).tolist()), L)
+    hit = _STEPS.get(key)
+    if hit is None or hit.model is not model:
+        if len(_STEPS) > 64:
+            _STEPS.clear()
+        hit = _STEPS[key] = LinearStep(model, controller, L)
+    return hit
+
+
+def spectral(lin: Linearization, n: int):
+    """``(rho, joint)``: the spectral radius of ``A`` and the joint (0-based) its eigenvector lives on.
+
+    The joint: the largest share of the eigenvector's plant-state entries (``x = [q; dq; q_m; dq_m]``),
+    each of the four blocks normalised by its own norm first; ``None`` when the mode has no plant part.
+    """
+    vals, vecs = np.linalg.eig(lin.A)
+    k = int(np.argmax(np.abs(vals)))
+    v = np.abs(vecs[:, k])
+    xrows = lin.dyn < lin.nx
+    vx = np.zeros(lin.nx)
+    vx[lin.dyn[xrows]] = v[xrows]
+    blocks = vx.reshape(-1, n)
+    norms = np.linalg.norm(blocks, axis=1, keepdims=True)
+    share = np.sum(np.divide(blocks, norms, out=np.zeros_like(blocks), where=norms > 0), axis=0)
+    joint = int(np.argmax(share)) if np.any(share > 0) else None
+    return float(np.abs(vals[k])), joint
+
+
+def assess(lin: Linearization, levels, h: int, names: Sequence[str], attribution: bool = False) -> dict:
+    """Spectral radius and, when stable, the predicted jitter and link-angle error std per joint.
+
+    Returns
+    -------
+    dict
+        ``rho, stable, dominant_joint`` (1-based), ``torque_jitter`` (n,) N m, ``q_error_std`` (n,) rad;
+        with ``attribution``: ``noise_share`` {joint: {channel: share of the jitter variance}} (top 3)
+        and ``dominant_noise`` (n,) channel labels.
+    """
+    n = lin.C.shape[0]
+    rho, joint = spectral(lin, n)
+    out = {"rho": rho, "stable": bool(rho < 1.0), "dominant_joint": None if joint is None else joint + 1}
+    if rho >= 1.0:
+        return out
+    levels = np.asarray(levels, dtype=float)
+    BS, DS = lin.B * levels[None, :], lin.D * levels[None, :]
+    qrows = [int(np.flatnonzero(lin.dyn == i)[0]) for i in range(n)]
+    if attribution:
+        jit_c, q_c = channel_variances(lin.A, BS, lin.C, DS, h, qrows)
+        jit, qv = jit_c.sum(axis=0), q_c.sum(axis=0)
+        share = jit_c / np.maximum(jit[None, :], 1e-300)
+        out["dominant_noise"] = [names[int(np.argmax(share[:, i]))] for i in range(n)]
+        out["noise_share"] = {str(i + 1): {names[c]: float(share[c, i]) for c in np.argsort(-share[:, i])[:3]}
+                              for i in range(n)}
+    else:
+        P = stationary_covariance(lin.A, BS)
+        jit = torque_jitter_variance(lin.A, BS, lin.C, DS, h, P)
+        qv = np.diag(P)[qrows]
+    out["torque_jitter"] = np.sqrt(jit).tolist()
+    out["q_error_std"] = np.sqrt(np.maximum(qv, 0.0)).tolist()
+    return out
+
+
+@dataclass(frozen=True)
+class Conditions:
+    """The loop a law runs in: what :class:`LinearAnalyzer` needs (``DesignLoops`` has the same names).
+
+    Attributes
+    ----------
+    model : fjm_runtime.Model
+    kind, sensing : str
+    dt : float
+        Control period, s.
+    delay : int
+    predict : bool
+    sensor : SensorModel
+        As simulated (quantization included: the analysis switches it off and folds it into the noise).
+    reference : object
+        ``reference(t) -> (5, n)`` (and ``sample(t)``).
+    x0 : ndarray (nx,)
+        The task's start (at rest holding gravity, nominal parameters).
+    nominal : dict
+        The controller's nominal parameters.
+    u_max : sequence of float or None
+    """
+
+    model: object
+    kind: str
+    sensing: str
+    dt: float
+    delay: int
+    predict: bool
+    sensor: object
+    reference: object
+    x0: np.ndarray = field(compare=False)
+    nominal: dict = field(compare=False, default_factory=dict)
+    u_max: Optional[tuple] = None
+
+    @classmethod
+    def from_loops(cls, loops) -> "Conditions":
+        """From a :class:`~fjm_runtime.analysis.design_runs.DesignLoops`."""
+        return cls(loops.model, loops.kind, loops.sensing, float(loops.dt), int(loops.delay), bool(loops.predict),
+                   loops.sensor, loops.reference, np.asarray(loops.x0, dtype=float), dict(loops.nominal),
+                   None if loops.u_max is None else tuple(loops.u_max))
+
+    def controller(self, gains: dict):
+        """The law with ``gains`` (``lam, k_lin, k_s, delta``; ``u_max`` from the conditions unless given)."""
+        from ..control.factory import make_controller
+        g = dict(gains)
+        u_max = g.pop("u_max", self.u_max)
+        try:
+            return make_controller(self.kind, self.model, self.nominal, sensing=self.sensing, u_max=u_max, **g)
+        except (TypeError, ValueError) as exc:
+            raise FjmValueError(f"gains {sorted(gains)}: {exc}") from None
+
+    def linear_sensor(self):
+        """The sensor of the linearized step: quantization off (folded into the noise levels)."""
+        return replace(self.sensor, q_quant=0.0, q_m_quant=0.0)
+
+
+def scaled_stiffness(model, p, g: float) -> np.ndarray:
+    """``p`` with every stiffness ``K_i`` times ``g`` (the TRUE plant)."""
+    p = np.asarray(p, dtype=float).copy()
+    p[stiffness_indices(model)[0]] *= g
+    return p
+
+
+def respring(model, x, p_from, p_to) -> np.ndarray:
+    """``x`` with the motor angles moved so that the spring torque ``K (q_m - q)`` is the same under ``p_to``."""
+    n = int(model.n)
+    iK = stiffness_indices(model)[0]
+    x = np.asarray(x, dtype=float).copy()
+    ratio = np.asarray(p_from, dtype=float)[iK] / np.asarray(p_to, dtype=float)[iK]
+    x[2 * n:3 * n] = x[0:n] + (x[2 * n:3 * n] - x[0:n]) * ratio
+    return x
+
+
+def finite(v) -> Optional[float]:
+    """``v`` as a float, or None when not finite (JSON)."""
+    return float(v) if v is not None and math.isfinite(float(v)) else None

@@ -1,0 +1,107 @@
+"""Stationary noise response of a linear sampled loop: covariance, torque jitter, tracking error.
+
+The loop linearized about an operating point (:mod:`fjm_runtime.analysis.sampled_linear`)::
+
+    w_{k+1} = A w_k + B n_k          n_k white, E[n n'] = diag(sigma^2)   (nm channels)
+    u_k     = C w_k + D n_k
+
+has, when ``rho(A) < 1``, the stationary covariance ``P = A P A' + B S B'`` (discrete Lyapunov
+equation, ``S = diag(sigma^2)``) and the torque autocovariance (``tau >= 1``)::
+
+    R(0)   = C P C' + D S D'
+    R(tau) = E[u_{k+tau} u_k'] = C A^tau P C' + C A^(tau-1) B S D'
+
+The torque jitter of :func:`fjm_runtime.sim.metrics.torque_jitter` is the std of
+``v_k = u_k - mean(u_{k-h} .. u_{k+h})`` = ``sum_i c_i u_{k+i}`` with ``c_0 = 1 - 1/W``,
+``c_i = -1/W`` (``W = 2h + 1``), so ``Var(v) = sum_tau a(tau) R(tau)`` with
+``a(tau) = sum_i c_i c_{i+tau}`` (the autocorrelation of ``c``). Because the channels are
+independent, every variance is the sum of one term per channel (:func:`channel_variances`).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["jitter_weights", "stationary_covariance", "torque_jitter_variance", "channel_variances"]
+
+
+def jitter_weights(h: int) -> np.ndarray:
+    """``a(tau)`` for ``tau = 0..2h``: the autocorrelation of the centred-moving-mean filter, shape (2h+1,)."""
+    width = 2 * h + 1
+    c = np.full(width, -1.0 / width)
+    c[h] += 1.0
+    return np.array([np.dot(c[:width - t], c[t:]) for t in range(width)])
+
+
+def stationary_covariance(A, BS, tol: float = 1e-14, max_doublings: int = 60) -> np.ndarray:
+    """``P`` with ``P = A P A' + BS BS'``; ``BS`` = ``B sqrt(S)`` (nw, nm). Shape (nw, nw).
+
+    The series ``P = sum_k A^k Q A'^k`` (``Q = BS BS'``) summed by doubling (Smith's method):
+    ``P <- P + A_j P A_j'``, ``A_j <- A_j^2``, each pass doubling the number of terms, until a pass
+    adds less than ``tol`` of ``P`` (numpy only: the runtime needs no SciPy). A radius of 0.9999
+    takes about 18 passes.
+
+    Raises
+    ------
+    ValueError
+        The series does not converge (``rho(A) >= 1``): no stationary covariance.
+    """
+    Aj = np.asarray(A, dtype=float)
+    BS = np.asarray(BS, dtype=float)
+    P = BS @ BS.T
+    with np.errstate(over="ignore", invalid="ignore"):     # an unstable A overflows: refused below
+        for _ in range(max_doublings):
+            add = Aj @ P @ Aj.T
+            P = P + add
+            if not np.all(np.isfinite(P)):
+                break
+            if np.max(np.abs(add)) <= tol * max(np.max(np.abs(P)), 1e-300):
+                return 0.5 * (P + P.T)
+            Aj = Aj @ Aj
+    raise ValueError("stationary_covariance: the series does not converge (spectral radius of A >= 1)")
+
+
+def torque_jitter_variance(A, BS, C, DS, h: int, P=None) -> np.ndarray:
+    """Variance of the jitter metric's ``u_k - centred moving mean`` per joint, shape (n,).
+
+    Parameters
+    ----------
+    A : ndarray (nw, nw)
+    BS, DS : ndarray (nw, nm), (n, nm)
+        ``B`` and ``D`` with each noise column scaled by its standard deviation.
+    C : ndarray (n, nw)
+    h : int
+        Half-width of the 20 ms window in samples (:func:`fjm_runtime.batch.sampled.jitter_half_width`).
+    P : ndarray (nw, nw), optional
+        The stationary covariance (computed when not given).
+    """
+    P = stationary_covariance(A, BS) if P is None else P
+    a = jitter_weights(h)
+    var = a[0] * (np.einsum("ij,jk,ik->i", C, P, C) + np.sum(DS * DS, axis=1))
+    X = P @ C.T                    # A^tau P C'
+    Y = BS @ DS.T                  # A^(tau-1) B S D'
+    for tau in range(1, a.size):
+        X = A @ X
+        var += 2.0 * a[tau] * (np.einsum("ij,ji->i", C, X) + np.einsum("ij,ji->i", C, Y))
+        Y = A @ Y
+    return np.maximum(var, 0.0)
+
+
+def channel_variances(A, BS, C, DS, h: int, rows_q):
+    """Per noise channel: the jitter variance per joint and the link-angle variance per joint.
+
+    Returns
+    -------
+    jitter : ndarray (nm, n)
+    q : ndarray (nm, n)
+        ``Var(q_i)`` due to channel ``c`` alone (``rows_q``: the rows of ``w`` holding ``q``).
+    """
+    nm = BS.shape[1]
+    n = C.shape[0]
+    jit, q = np.zeros((nm, n)), np.zeros((nm, len(rows_q)))
+    for c in range(nm):
+        if not np.any(BS[:, c]) and not np.any(DS[:, c]):
+            continue
+        P = stationary_covariance(A, BS[:, c:c + 1])
+        jit[c] = torque_jitter_variance(A, BS[:, c:c + 1], C, DS[:, c:c + 1], h, P)
+        q[c] = np.diag(P)[rows_q]
+    return jit, q

@@ -1,0 +1,179 @@
+"""``fjm analyze MODEL --gains FILE``: the linear sampled-data analysis of a law with given gains.
+
+Defaults to the gains file's own conditions (rate, delay, prediction, sensing, sensor, task); flags
+override them. Prints a table per plant (nominal and the corners of the parameter box) and operating
+point (at rest, and frozen-time points along the task): spectral radius, the joint of its mode, the
+first unstable delay, the predicted torque jitter and link-angle error std per joint; then the
+stiffness-scale range and the noise channel that dominates each joint's jitter. ``--json`` prints the
+record, ``--out`` writes it (docs/design-command.md, "The linear analysis").
+"""
+from __future__ import annotations
+
+import json
+import math
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from ..validation import FjmValueError
+
+__all__ = ["add_parser", "run", "conditions_from_spec"]
+
+
+def add_parser(sub) -> None:
+    """Register ``fjm analyze``."""
+    p = sub.add_parser("analyze", help="linear sampled-data analysis of gains (radius, margins, jitter)",
+                       description="Linearize the whole sampled loop (plant on its substeps, delay buffer, predictor, "
+                                   "sensor filters, the law in its boundary layer) at rest and along the task, for "
+                                   "the nominal plant and the corners of the parameter box; report the spectral "
+                                   "radius, delay margin, stiffness-scale range and the torque jitter and tracking "
+                                   "error predicted from the sensor noise (docs/design-command.md).")
+    p.add_argument("model")
+    p.add_argument("--gains", type=Path, required=True, help="gains file (a fjm design output or {kind, gains})")
+    p.add_argument("--rate", type=float, default=None, help="control rate, Hz (default: the file's, else 1000)")
+    p.add_argument("--delay-samples", type=int, default=None, help="delay, samples (default: the file's, else 0)")
+    p.add_argument("--predict", action=__import__("argparse").BooleanOptionalAction, default=None,
+                   help="delay compensation (default: the file's)")
+    p.add_argument("--sensing", choices=("state", "torque"), default=None, help="default: the file's, else torque")
+    p.add_argument("--noise", default=None, metavar="PRESET|FILE",
+                   help="sensor model: preset or TOML file (default: the file's sensor)")
+    p.add_argument("--task-times", default="0.5,1,2", metavar="S[,S..]",
+                   help="frozen-time points along the task, s (default 0.5,1,2; 'none': rest only)")
+    p.add_argument("--plants", choices=("corners", "nominal"), default="corners",
+                   help="nominal plant and the 9 corners of the box (default), or the nominal plant only")
+    p.add_argument("--no-margins", action="store_true", help="skip the delay margin and stiffness-scale range")
+    p.add_argument("--json", action="store_true", help="print the JSON record instead of the table")
+    p.add_argument("--out", type=Path, default=None, help="also write the JSON record to this file")
+
+
+def _read_spec(path: Path, m) -> dict:
+    from ..control.factory import CONTROLLER_KINDS
+    from .simulate_checks import check_gains_spec
+    try:
+        spec = json.loads(Path(path).read_text())
+    except (OSError, ValueError) as exc:
+        raise FjmValueError(f"--gains {path}: cannot read a JSON object ({exc})") from None
+    if not isinstance(spec, dict) or not isinstance(spec.get("gains"), dict) or spec.get("kind") not in CONTROLLER_KINDS:
+        raise FjmValueError(f"--gains {path}: expected {{\"kind\": one of {', '.join(CONTROLLER_KINDS)}, "
+                            "\"gains\": {...}}")
+    check_gains_spec(spec, f"--gains {path}", m)
+    return spec
+
+
+def _sensor(args, spec):
+    from ..sim.sensor import SensorModel, sensor_from_spec
+    if args.noise is not None:
+        return sensor_from_spec(args.noise, what="--noise")
+    if isinstance(spec.get("sensor"), dict):
+        fields = {k: v for k, v in spec["sensor"].items() if k in SensorModel.__dataclass_fields__}
+        fields.setdefault("name", str(spec.get("noise") or "design file"))
+        return SensorModel.from_dict(fields, where=f"--gains {args.gains}: sensor")
+    return sensor_from_spec(spec.get("noise", "ideal"), what=f"--gains {args.gains}: noise")
+
+
+def _task(m, spec):
+    """``(reference, x0)``: the file's task, the demo's, or 0.5 rad sines at 1 rad/s from rest."""
+    from ..batch.distributed import initial_state
+    from ..control.references import make_reference
+    from .design import demo_task
+    from .simulate import design_task
+    task = design_task(m, spec.get("reference"))
+    if task is not None:
+        ref, x0 = task
+        return ref, initial_state(m, ref, x0)
+    demo = demo_task(m)
+    if demo:
+        return demo["reference"], demo["x0"]
+    ref = make_reference("sine", int(m.n), amplitude=0.5, omega=1.0)
+    return ref, initial_state(m, ref, None)
+
+
+def conditions_from_spec(m, spec: dict, args):
+    """The :class:`~fjm_runtime.analysis.sampled_linear.Conditions` of a gains file, flags overriding."""
+    from ..analysis.sampled_linear import Conditions
+    rate = args.rate if args.rate is not None else float(spec.get("rate", 1000.0))
+    delay = args.delay_samples if args.delay_samples is not None else int(spec.get("delay", 0))
+    if not (math.isfinite(rate) and 0 < rate <= 1e6):
+        raise FjmValueError(f"--rate {rate}: expected a finite control rate in (0, 1e6] Hz")
+    if delay < 0 or delay > 100:
+        raise FjmValueError(f"--delay-samples {delay}: expected an integer in [0, 100]")
+    predict = bool(spec.get("predict", False)) if args.predict is None else bool(args.predict)
+    sensing = args.sensing or spec.get("sensing", "torque")
+    ref, x0 = _task(m, spec)
+    u_max = spec["gains"].get("u_max")
+    return Conditions(m, spec["kind"], sensing, 1.0 / rate, int(delay), predict, _sensor(args, spec), ref,
+                      np.asarray(x0, dtype=float), {}, None if u_max is None else tuple(np.broadcast_to(
+                          np.asarray(u_max, dtype=float), (int(m.n),)).tolist()))
+
+
+def _times(text: str):
+    if text.strip().lower() == "none":
+        return ()
+    try:
+        vals = tuple(float(v) for v in text.split(","))
+    except ValueError:
+        raise FjmValueError(f"--task-times {text!r}: expected times in s separated by commas, or 'none'") from None
+    if not all(math.isfinite(v) and 0 < v <= 60 for v in vals):
+        raise FjmValueError(f"--task-times {text!r}: expected times in (0, 60] s")
+    return vals
+
+
+def _fmt(vals, spec="{:.3g}"):
+    return " ".join("-" if v is None else spec.format(v) for v in vals)
+
+
+def table_lines(out: dict):
+    """The readable report of an analysis record."""
+    s = out["settings"]
+    lines = [f"{s['rate']:g} Hz, delay {s['delay']}{' + prediction' if s['predict'] else ''}, sensing {s['sensing']}, "
+             f"sensor {s['sensor']}, {s['substeps']} substeps; jitter window {s['jitter_window_samples']} samples"]
+    for row in out["plants"]:
+        lines.append(f"{row['plant']}:")
+        for name, f in row["points"].items():
+            d = f.get("first_unstable_delay", "n/a")
+            head = f"  {name:>8}  rho {f['rho']:.4f}{'' if f['stable'] else ' UNSTABLE'}  mode on joint " \
+                   f"{f['dominant_joint']}  first unstable delay {'> d+4' if d is None else d}"
+            lines.append(head)
+            if max(f.get("s_over_delta", [0.0])) > 1.0:
+                lines.append(f"            the law is OUTSIDE its boundary layer here (|s|/delta up to "
+                             f"{max(f['s_over_delta']):.3g}): saturated, the linearization is not the loop's")
+            if f["stable"]:
+                lines.append(f"            jitter N m  {_fmt(f['torque_jitter'])}")
+                lines.append(f"            q std rad   {_fmt(f['q_error_std'])}")
+                if "dominant_noise" in f:
+                    lines.append(f"            dominant noise  {' '.join(f['dominant_noise'])}")
+    for name, sc in out.get("stiffness_scale", {}).items():
+        lo, hi = sc["range"]
+        lines.append(f"stiffness scale (nominal plant, {name}): " + ("unstable at g = 1" if sc["unstable"] else
+                     f"K x [{'< 1/16' if lo is None else f'{lo:.3g}'}, {'> 16' if hi is None else f'{hi:.3g}'}]"))
+    sm = out["summary"]
+    lines.append(f"worst: rho {sm['rho']}, jitter N m {_fmt(sm['torque_jitter'])}, q std rad {_fmt(sm['q_error_std'])}")
+    lines.append(f"({out['seconds']:.1f} s)")
+    return lines
+
+
+def run(args) -> int:
+    """Run ``fjm analyze``; 0 when the loop is stable at every plant and point, 1 otherwise."""
+    from .. import load
+    from ..analysis.sampled_analysis import LinearAnalyzer, default_plants
+    from .common import check_output_file
+    if args.out is not None:
+        check_output_file(args.out, "--out")
+    m = load(args.model)
+    spec = _read_spec(args.gains, m)
+    cond = conditions_from_spec(m, spec, args)
+    times = _times(args.task_times)
+    plants = default_plants(m)
+    analyzer = LinearAnalyzer(cond, plants=plants if args.plants == "corners" else plants[:1], task_times=times)
+    from ..control.designed import law_gains
+    out = analyzer.analyze(dict(law_gains(spec), u_max=cond.u_max), margins=not args.no_margins)
+    out.update({"model": m.name, "kind": spec["kind"], "gains_file": str(args.gains)})
+    text = json.dumps(out, indent=2, allow_nan=False, default=lambda v: None)
+    if args.out is not None:
+        args.out.write_text(text + "\n")
+    if args.json:
+        print(text)
+    else:
+        print("\n".join(table_lines(out)))
+    return 0 if out["summary"]["stable_everywhere"] else 1
