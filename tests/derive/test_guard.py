@@ -183,7 +183,9 @@ def _wait_for(proc, marker: bytes, timeout: float) -> bytes:
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT], ids=["SIGTERM", "SIGINT"])
+# SIGTERM takes the same handler path as SIGINT: it runs in the exhaustive pass (.ci/run)
+@pytest.mark.parametrize("sig", [pytest.param(signal.SIGTERM, marks=pytest.mark.exhaustive), signal.SIGINT],
+                         ids=["SIGTERM", "SIGINT"])
 def test_signal_ends_a_long_derivation_within_a_second(tmp_path, sig):
     # 21 joints: about 4 s of emission after the marker on a fast idle machine (14 joints ended
     # within 0.1 s of the signal's planned time there)

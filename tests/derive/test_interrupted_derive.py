@@ -116,7 +116,9 @@ def _read_until(proc: subprocess.Popen, marker: bytes, timeout: float) -> bytes:
     return buf
 
 
-@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT], ids=["SIGTERM", "SIGINT"])
+# SIGTERM takes the same handler path as SIGINT: it runs in the exhaustive pass (.ci/run)
+@pytest.mark.parametrize("sig", [pytest.param(signal.SIGTERM, marks=pytest.mark.exhaustive), signal.SIGINT],
+                         ids=["SIGTERM", "SIGINT"])
 def test_interrupted_derive_leaves_tree_untouched(marked_copy, sig):
     out = marked_copy
     before = tree_bytes(out)
@@ -154,7 +156,9 @@ def test_uninterrupted_control_run_replaces_only_requested_models(marked_copy):
     assert not leftovers, f"left behind next to the output: {leftovers}"
 
 
-@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT], ids=["SIGTERM", "SIGINT"])
+# SIGTERM takes the same handler path as SIGINT: it runs in the exhaustive pass (.ci/run)
+@pytest.mark.parametrize("sig", [pytest.param(signal.SIGTERM, marks=pytest.mark.exhaustive), signal.SIGINT],
+                         ids=["SIGTERM", "SIGINT"])
 def test_interrupt_during_swap_keeps_a_complete_tree(marked_copy, sig):
     """A signal between the renames of the swap must leave either the old or the complete new tree."""
     out = marked_copy

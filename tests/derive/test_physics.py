@@ -155,6 +155,7 @@ def test_structured_derivation_equals_brute_force(name):
             np.testing.assert_allclose(got.ravel(), want.ravel(), rtol=1e-10, atol=1e-10, err_msg=k)
 
 
+@pytest.mark.exhaustive  # ~15 s of stiff integrations
 def test_rigid_limit_as_stiffness_grows():
     """K -> infinity: the flexible arm moves like the rigid one with the motor inertias added.
 

@@ -2,12 +2,15 @@
 
 Quick mode shortens every run (1 s) and the Monte Carlo (2 samples), so this smoke test checks
 the files and the structure of the summary, not the documented numbers (those are checked by the
-controller tests).
+controller tests). About 100 s (the demo's compiled steps): ``exhaustive``, run by ``.ci/run`` after
+``make test``.
 """
 import math
 import re
 
 import pytest
+
+pytestmark = pytest.mark.exhaustive
 
 from fjm_runtime.cli.main import main
 
