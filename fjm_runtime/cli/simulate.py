@@ -339,6 +339,30 @@ def _reference(m, args, spec):
     return make_reference(args.reference, m.n, **ref_kw), None
 
 
+def _design_nominal(spec: dict, m) -> Dict[str, float]:
+    """The nominal values a design was made for (its ``params.nominal``, from ``fjm design --params``).
+
+    The gains hold for the controller's nominal model they were searched with; ``--nominal`` still
+    overrides them one by one. Unknown names or non-finite values are refused in one line.
+    """
+    nominal = (spec.get("params") or {}).get("nominal") if isinstance(spec.get("params"), dict) else None
+    if not nominal:
+        return {}
+    out = {}
+    for k, v in dict(nominal).items():
+        if k not in m.param_names:
+            raise FjmValueError(f"gains file params.nominal.{k}: not a parameter of {m.name}; expected one of "
+                                f"{', '.join(m.param_names)}")
+        try:
+            val = float(v)
+        except (TypeError, ValueError):
+            val = float("nan")
+        if not math.isfinite(val):
+            raise FjmValueError(f"gains file params.nominal.{k} = {v!r}: expected a finite number")
+        out[k] = val
+    return out
+
+
 def run(args) -> int:
     """Run ``fjm simulate``; returns the exit status (3: the run diverged or left the workspace)."""
     from .. import load
@@ -347,10 +371,10 @@ def run(args) -> int:
     m = load(args.model)
     dt = _period(args)
     _check_flags(args, dt)
-    nominal = parse_assignments(args.nominal, "--nominal")
-    true = _true_params(m, args, nominal)
     sensor = _sensor(args)
     spec, source = _gains_file(args, m, 1.0 / dt)
+    nominal = {**_design_nominal(spec, m), **parse_assignments(args.nominal, "--nominal")}
+    true = _true_params(m, args, nominal)
     kind = spec["kind"]
     ref, x0 = _reference(m, args, spec)
     ctrl, gain, k_s, delta = _build_controller(m, args, nominal, ref, kind, spec["gains"])
@@ -370,6 +394,7 @@ def run(args) -> int:
                 "delay_samples": args.delay_samples, "predict": bool(args.predict), "sensing": args.sensing,
                 "seed": args.seed, "noise": args.noise, "duration": args.duration,
                 "true_params": dict(zip(m.param_names, m.params_array(true).tolist())),
+                "nominal_params": dict(zip(m.param_names, m.params_array(nominal).tolist())),
                 "gains": str(args.gains) if args.gains is not None else spec.get("file")}
     try:
         res = simulate(m, ctrl, ref, duration=args.duration, dt=dt, true_params=true, progress=progress, x0=x0,

@@ -71,6 +71,7 @@ def test_check_fails_and_names_every_stale_file(repo_copy):
     assert len(named) == 3, err
 
 
+@pytest.mark.exhaustive  # a full derive in a subprocess (~12 s); byte-identity also: test_determinism.py
 def test_timings_file_gets_per_model_seconds_and_generated_stays_byte_identical(repo_copy, tmp_path):
     gen = repo_copy / "generated"
     before = tree_bytes(gen)

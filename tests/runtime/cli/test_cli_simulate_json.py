@@ -85,3 +85,23 @@ def test_designed_gains_run_on_their_task_by_default():
     args = SimpleNamespace(reference="task", amplitude=0.5, omega=1.0, q_d=1.0, rise_time=2.0)
     with pytest.raises(FjmValueError, match="record no task"):
         _reference(m, args, {"gains": {}})
+
+
+def test_the_designs_nominal_values_are_the_controllers(capsys, tmp_path):
+    """A gains file from ``fjm design --params`` records ``params.nominal``: simulate builds the law on those
+    values (``--nominal`` still overrides one by one); the TRUE plant's k-scale is relative to them; a name the
+    model lacks is a one-line error."""
+    spec = {"kind": "ismc", "gains": {"lam": 8.0, "k_s": 100.0, "delta": 2.0},
+            "params": {"source": "my.toml", "nominal": {"K1": 120.0, "Jm2": 0.7}}}
+    gains = tmp_path / "g.json"
+    gains.write_text(json.dumps(spec))
+    status, out, _ = _run(capsys, ["simulate", "planar2", "--gains", str(gains), "--duration", "0.05", "--json",
+                                   "--nominal", "Jm2=0.9", "--k-scale", "0.5"])
+    assert status == 0
+    s = json.loads(out)["settings"]
+    assert (s["nominal_params"]["K1"], s["nominal_params"]["Jm2"]) == (120.0, 0.9)
+    assert s["true_params"]["K1"] == pytest.approx(60.0, rel=1e-12)           # 0.5 x the design's nominal
+    spec["params"]["nominal"] = {"K9": 1.0}
+    gains.write_text(json.dumps(spec))
+    status, _, err = _run(capsys, ["simulate", "planar2", "--gains", str(gains), "--duration", "0.05", "--json"])
+    assert status == 2 and "params.nominal.K9" in err and len(err.strip().splitlines()) == 1
