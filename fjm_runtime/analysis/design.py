@@ -21,8 +21,8 @@ Cost of a run: the worst joint's RMS error (rad) plus ``PENALTY`` times the exce
 thresholds, each relative to its limit, summed over joints; a diverged run costs
 :data:`DIVERGED_COST`. The objective of a candidate is the worst cost over the draws.
 
-Search (deterministic by seed): a log grid on ``lam`` x ``k_s`` (``k_lin = LIN_RATIO lam``,
-``delta = k_s / 200``, the same on every joint) on a screening set of draws and a short run, then a
+Search (deterministic by seed): a log grid on ``lam`` x ``k_s`` x the layer's slope ``k_s / delta``
+(``k_lin = LIN_RATIO lam``, slopes :data:`LAYER_SLOPES`, the same on every joint) on a screening set of draws and a short run, then a
 pattern search: each round tries every coordinate (``lam``, and ``k_lin_j``, ``k_s_j``, ``delta_j``
 of every joint) times and divided by a factor ``f``, plus the candidate that takes every improving
 move at once (the joints are weakly coupled, so their moves mostly add); the best of these replaces
@@ -104,10 +104,17 @@ PER_JOINT = ("k_lin", "k_s", "delta")
 LIN_FLOOR = 1.25
 
 
-def _grid(lams, kss, n: int):
+#: Boundary-layer slopes ``k_s / delta`` of the grid stage (N m per unit of ``s``). The former grid had 200
+#: only: on the Panda with velocities differentiated from the encoders (``franka_like``) every such
+#: candidate diverged (the layer's slope through the velocity filter's lag); ``lam 40, k_lin 200`` at 25
+#: held every joint but the wrist's (4 s, one draw) and the linear analysis puts it at radius 0.983.
+LAYER_SLOPES = (25.0, 200.0)
+
+
+def _grid(lams, kss, n: int, slopes=LAYER_SLOPES):
     """The grid stage's candidates: the same gains on every joint (per-joint lists of length ``n``)."""
     return [{"lam": float(lam), "k_lin": [LIN_RATIO * float(lam)] * n, "k_s": [float(ks)] * n,
-             "delta": [float(ks) / 200.0] * n} for lam in lams for ks in kss]
+             "delta": [float(ks) / float(slope)] * n} for slope in slopes for lam in lams for ks in kss]
 
 
 def move_gain(gains: dict, coord, factor: float) -> dict:
