@@ -49,7 +49,7 @@ def add_parser(sub) -> None:
 
 def _read_spec(path: Path, m) -> dict:
     from ..control.factory import CONTROLLER_KINDS
-    from .simulate_checks import check_gains_spec
+    from ..control.gains_spec import check_gains_spec
     try:
         spec = json.loads(Path(path).read_text())
     except (OSError, ValueError) as exc:

@@ -15,9 +15,18 @@ def add_parser(sub) -> None:
                                     "links, a rotor hinge <joint>_rotor per joint (angle N q_m), a tendon spring "
                                     "<joint>_spring, a motor <joint>_motor (ctrl = u) and sensors <joint>_q, _dq, "
                                     "_q_m, _dq_m, _tau_J. Parameters at full precision (see docs/mujoco.md).")
-    ex.add_argument("format", choices=("mjcf",), help="output format (mjcf: MuJoCo XML)")
+    ex.add_argument("format", choices=("mjcf", "controller"),
+                    help="output format (mjcf: MuJoCo XML; controller: the designed sampled controller as a C99 "
+                         "library directory, needs --gains)")
     ex.add_argument("model", help="model name, e.g. panda, elbow3, link1, planar2 (see `fjm models`)")
-    ex.add_argument("--out", type=Path, required=True, help="output file, e.g. panda.xml (its directory must exist)")
+    ex.add_argument("--out", type=Path, required=True,
+                    help="output file, e.g. panda.xml (its directory must exist); controller: a directory")
+    ex.add_argument("--gains", type=Path, default=None,
+                    help="controller: a design file (`fjm design` output, e.g. "
+                         "fjm_runtime/control/designed/panda_ismc_tau_1000hz_d1.json)")
+    ex.add_argument("--substeps", type=int, default=None,
+                    help="controller: RK4 substeps of the predictor per sample (default: the substeps rule)")
+    ex.add_argument("--name", default=None, help="controller: C prefix (default <model>_<kind>[_tau])")
     ex.add_argument("--complete", action="store_true",
                     help="the complete model (rotor i on link i-1, spin coupling; gear ratios N1..Nn from "
                          "<model>_complete): needs a generated <model>_complete")
@@ -45,8 +54,35 @@ def _model(args):
     return m
 
 
+def _run_controller(args) -> int:
+    """``fjm export controller MODEL --gains FILE --out DIR``."""
+    import json
+    from .. import load
+    from ..export.controller import design_controller, export_controller
+    if args.gains is None:
+        raise FjmValueError("export controller: --gains FILE is required (a design file from `fjm design`)")
+    try:
+        spec = json.loads(Path(args.gains).read_text())
+    except (OSError, ValueError) as exc:
+        raise FjmValueError(f"--gains {args.gains}: cannot read a JSON object ({exc})") from None
+    if not isinstance(spec, dict):
+        raise FjmValueError(f"--gains {args.gains}: expected a JSON object (a design report)")
+    m = load(args.model)
+    if spec.get("model") not in (None, m.name):
+        raise FjmValueError(f"--gains {args.gains}: designed for model {spec['model']!r}, not {m.name!r}")
+    spec.setdefault("file", str(args.gains))
+    design = design_controller(m, spec, where=f"--gains {args.gains}", substeps=args.substeps, name=args.name)
+    files = export_controller(design, args.out)
+    print(f"wrote {len(files)} files to {args.out} ({design.name}: {m.name}, {design.controller.law_kind}, "
+          f"{1.0 / design.layout.T:g} Hz, delay {design.layout.delay}, {design.layout.substeps} substeps); "
+          f"build with `make -C {args.out}`")
+    return 0
+
+
 def run(args) -> int:
     """Run ``fjm export``; returns the exit status."""
+    if args.format == "controller":
+        return _run_controller(args)
     check_output_file(args.out, "--out")
     m = _model(args)
     params = parse_assignments(args.param, "--param")

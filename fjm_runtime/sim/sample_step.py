@@ -126,8 +126,14 @@ def _difference(L: StepLayout, angle, prev, v_prev):
     return v_prev + L.a_velocity * ((angle - prev) / L.T - v_prev)
 
 
-def _sense(ops, L: StepLayout, w, noise, p):
-    """``(m_k, filt_next, venc_next)``: the noisy, quantized, filtered measurement of sample k."""
+def _reading(ops, L: StepLayout, w, noise, p):
+    """The raw reading of sample k (nm): what the robot hands the controller, before any filter.
+
+    The noisy measurement with quantized angles and the tau_J offset; with
+    ``velocity_mode='differentiated'`` the velocity slots are not read (the controller differentiates
+    the angles) except that, with torque sensing, the dq_m slot carries the measured MOTOR ANGLE
+    (the angle dq_m is differentiated from; state sensing reads q_m in its own slot).
+    """
     n = L.n
     x = w[0:L.nx]
     K = ops.take(p, L.idx_K) if L.sensing == "torque" else None
@@ -138,24 +144,38 @@ def _sense(ops, L: StepLayout, w, noise, p):
         parts[2] = _quantize(ops, parts[2], L.q_m_quant)
     elif L.offset:
         parts[2] = parts[2] + w[L.extra_slices()[1]]
-    venc_next = w[L.extra_slices()[0]]
-    if L.differentiated:
+    if L.differentiated and L.sensing == "torque":
         # the dq_m slot of a torque measurement carries the motor ANGLE's noise (sensor.noise_slots)
-        qm = parts[2] if L.sensing == "state" else \
-            _quantize(ops, x[2 * n:3 * n] + noise[4 * n:5 * n], L.q_m_quant)
+        parts[4] = _quantize(ops, x[2 * n:3 * n] + noise[4 * n:5 * n], L.q_m_quant)
+    return parts
+
+
+def _condition(ops, L: StepLayout, parts, venc, filt):
+    """The controller's sensor pre-processing of a raw reading (blocks ``parts``, :func:`_reading`):
+    ``(m_k, filt_next, venc_next)`` with the differentiated velocities and the filtered dtau_J."""
+    n = L.n
+    parts = list(parts)
+    venc_next = venc
+    if L.differentiated:
+        qm = parts[2] if L.sensing == "state" else parts[4]
         enc = venc_next
         dq = _difference(L, parts[0], enc[0:n], enc[n:2 * n])
         dqm = _difference(L, qm, enc[2 * n:3 * n], enc[3 * n:4 * n])
         parts[1] = dq
         parts[3 if L.sensing == "state" else 4] = dqm
         venc_next = ops.cat([parts[0], dq, qm, dqm])
-    filt_next = w[L.slices()[4]]
+    filt_next = filt
     if L.filtered:
         tau, tau_prev, d_prev = parts[2], filt_next[0:n], filt_next[n:2 * n]
         d = d_prev + L.a_filter * ((tau - tau_prev) / L.T - d_prev)
         parts[3] = d
         filt_next = ops.cat([tau, d])
     return ops.cat(parts), filt_next, venc_next
+
+
+def _sense(ops, L: StepLayout, w, noise, p):
+    """``(m_k, filt_next, venc_next)``: the noisy, quantized, filtered measurement of sample k."""
+    return _condition(ops, L, _reading(ops, L, w, noise, p), w[L.extra_slices()[0]], w[L.slices()[4]])
 
 
 def _plant(ops, L: StepLayout, x, u, p):
@@ -174,38 +194,47 @@ def _plant(ops, L: StepLayout, x, u, p):
     return x
 
 
-def _predict(nom_ops, L: StepLayout, m_old, u_buf, p_nom):
-    """The measurement predicted ``d`` samples ahead from ``m_old`` with the controller's NOMINAL model."""
+def _predict(nom_ops, L: StepLayout, m_old, u_buf, p_nom, K_nom=None):
+    """The measurement predicted ``d`` samples ahead from ``m_old`` with the controller's NOMINAL model.
+
+    ``K_nom``: the nominal stiffnesses (torque sensing; default the layout's constants ``L.K_nom``).
+    """
     n = L.n
+    K = None
     if L.sensing == "state":
         x = m_old
     else:
-        K = nom_ops.const(L.K_nom)
+        K = nom_ops.const(L.K_nom) if K_nom is None else K_nom
         q, dq, tau, dqm = m_old[0:n], m_old[n:2 * n], m_old[2 * n:3 * n], m_old[4 * n:5 * n]
         x = nom_ops.cat([q, dq, q + tau / K, dqm])
     for j in range(L.delay):
         x = _plant(nom_ops, L, x, u_buf[j * n:(j + 1) * n], p_nom)
-    return _measure(nom_ops, L, x, nom_ops.const(L.K_nom) if L.sensing == "torque" else None)
+    return _measure(nom_ops, L, x, K)
+
+
+def _delayed(ops, nom_ops, L: StepLayout, m_k, buf, u_buf, p_nom, K_nom=None):
+    """The delay buffer and the prediction: ``(m_used, m_buf_next)`` (``buf``, ``u_buf`` the buffers)."""
+    if L.delay == 0:
+        return m_k, buf
+    m_old = buf[0:L.nm]
+    m_buf_next = ops.cat([buf[L.nm:], m_k]) if L.delay > 1 else m_k
+    m_used = _predict(nom_ops, L, m_old, u_buf, p_nom, K_nom) if L.predict else m_old
+    return m_used, m_buf_next
 
 
 def _pre_law(ops, nom_ops, L: StepLayout, w, noise, p, p_nom):
     """Sensor, delay and prediction: ``(m_used, m_buf_next, filt_next, venc_next)``."""
     _, _, sb, su, _ = L.slices()
     m_k, filt_next, venc_next = _sense(ops, L, w, noise, p)
-    if L.delay == 0:
-        return m_k, w[sb], filt_next, venc_next
-    buf = w[sb]
-    m_old = buf[0:L.nm]
-    m_buf_next = ops.cat([buf[L.nm:], m_k]) if L.delay > 1 else m_k
-    m_used = _predict(nom_ops, L, m_old, w[su], p_nom) if L.predict else m_old
+    m_used, m_buf_next = _delayed(ops, nom_ops, L, m_k, w[sb], w[su], p_nom)
     return m_used, m_buf_next, filt_next, venc_next
 
 
-def _rate_limited(ops, L: StepLayout, w, u_law):
-    """The applied torque: ``u_law`` moved at most ``rate_step`` from the last applied torque."""
+def _rate_limited(ops, L: StepLayout, u_last, u_law):
+    """The applied torque: ``u_law`` moved at most ``rate_step`` from the last applied torque ``u_last``."""
     if not L.rate_step:
         return u_law
-    u_last, r = w[L.extra_slices()[2]], ops.const(L.rate_step)
+    r = ops.const(L.rate_step)
     return ops.fmin(ops.fmax(u_law, u_last - r), u_last + r)
 
 
@@ -255,7 +284,7 @@ def python_sample_step(model, controller, L: StepLayout, w, t: float, r, noise, 
     r = np.asarray(r, dtype=float).reshape(5, L.n)
     sample = controller.evaluate(t, m_used, z, r)
     zdot = np.asarray(controller.state_derivative(t, m_used, z, r, sample), dtype=float) if L.nz else None
-    u = _rate_limited(ops, L, w, np.asarray(sample.u, dtype=float))
+    u = _rate_limited(ops, L, w[L.extra_slices()[2]], np.asarray(sample.u, dtype=float))
     if L.integral:
         zdot = _rate_windup(ops, L, zdot, np.asarray(sample.u, dtype=float), u, m_used[:L.n] - r[0])
     w_next = _post_law(ops, L, w, u, zdot, m_buf_next, filt_next, venc_next, p)
@@ -297,7 +326,7 @@ def casadi_sample_step(fns, controller, L: StepLayout, n_par: int, nominal_fns=N
     z = w[L.slices()[1]]
     out = controller.symbolic_evaluate(m_used, z, r)
     zdot = controller.symbolic_state_derivative(m_used, z, r, out) if L.nz else None
-    u = _rate_limited(ops, L, w, out["u"])
+    u = _rate_limited(ops, L, w[L.extra_slices()[2]], out["u"])
     if L.integral:
         zdot = _rate_windup(ops, L, zdot, out["u"], u, m_used[:L.n] - r[:L.n])
     w_next = _post_law(ops, L, w, u, zdot, m_buf_next, filt_next, venc_next, p)

@@ -1,0 +1,230 @@
+"""The controller half of THE sample step as CasADi Functions: what ``fjm export controller`` compiles.
+
+The sample step (:mod:`fjm_runtime.sim.sample_step`) is a plant and a digital controller. The
+controller half, from the raw reading of sample ``k`` on, is::
+
+    m_k      = condition(m_raw)            differentiated velocities, filtered dtau_J (as the step)
+    m_used   = delay buffer / prediction   over d samples of the NOMINAL model, RK4 substeps
+    u_law    = law(m_used, z, r; p_nom, gains)    saturation and anti-windup inside the law
+    u        = clip(u_law, u_last - R T, u_last + R T)
+    z_next   = z + T zdot  (error integral frozen while the rate limit holds the torque back)
+
+Two Functions, both of plain vectors (``nc`` = controller-state size, :class:`ControllerLayout`):
+
+``<name>_ctrl_step(c, m, r, p, gains) -> (u, c_next, s, y_hat, held)``
+    ``c`` (nc) the controller state, ``m`` (nm) the raw reading (:func:`raw_reading`), ``r`` (5n)
+    the reference rows at ``t_k`` stacked, ``p`` the NOMINAL parameters (``model.param_names``),
+    ``gains`` the law's gains vector (manifest layout, ``controller.gains``); ``u`` the applied
+    torque, ``held`` per joint: 1 if the torque limit clipped it, + 2 if the rate limit did.
+``<name>_ctrl_reset(m0, p) -> (c0, u0)``
+    The rest state of :func:`fjm_runtime.sim.sample_step.initial_step_state` from a reading of the
+    arm at rest: buffers full of ``m0``, the torques that hold it (torque sensing: the measured
+    tau_J; state sensing: ``K_nom (q_m - q)``), filters at the reading, zero integral.
+
+The arithmetic is the sample step's own helpers (``_condition``, ``_delayed``, ``_rate_limited``,
+``_rate_windup``), so the library and the simulator cannot drift apart; only ``p`` and ``gains``
+are inputs here instead of constants.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import casadi as ca
+import numpy as np
+
+from ..sim import sample_step as ss
+from ..sim.step import casadi_functions
+from ..sim.step_layout import StepLayout, stiffness_indices
+from ..validation import FjmValueError
+
+__all__ = ["ControllerLayout", "controller_functions", "raw_reading", "rest_reading"]
+
+
+@dataclass(frozen=True)
+class ControllerLayout:
+    """Where things sit in the controller state ``c = [z | m_buf | u_buf | filt | venc | u_last]``.
+
+    It is the sample step's ``w`` without the plant state ``x`` and the sensor's offset (those are
+    the robot's): ``c = w[nx:]`` with the offset slice removed (:meth:`from_step_state`).
+    """
+
+    step: StepLayout
+
+    @property
+    def nc(self) -> int:
+        L = self.step
+        return L.nw - L.nx - (L.n if L.offset else 0)
+
+    def blocks(self):
+        """``[(name, offset, size)]`` of ``c`` in order (sizes may be 0)."""
+        L = self.step
+        sizes = [("z", L.nz), ("m_buf", L.delay * L.nm), ("u_buf", L.delay * L.n),
+                 ("filt", 2 * L.n if L.filtered else 0), ("venc", L.n_venc),
+                 ("u_last", L.n if L.rate_step else 0)]
+        out, o = [], 0
+        for name, size in sizes:
+            out.append((name, o, size))
+            o += size
+        return out
+
+    def split(self, c):
+        """The blocks of ``c`` by name (slices of a CasADi vector or ndarray)."""
+        return {name: c[o:o + size] for name, o, size in self.blocks()}
+
+    def from_step_state(self, W) -> np.ndarray:
+        """``c`` of step states ``W`` (nw,) or (N, nw): ``w[nx:]`` without the offset slice."""
+        W = np.asarray(W, dtype=float)
+        L = self.step
+        keep = np.ones(L.nw, dtype=bool)
+        keep[:L.nx] = False
+        keep[L.extra_slices()[1]] = False
+        return W[..., keep]
+
+
+def raw_reading(model, L: StepLayout, w, noise, p_true) -> np.ndarray:
+    """The raw reading of sample k that the robot hands the controller (NumPy), shape (nm,).
+
+    Noise, quantization and the tau_J offset included; with ``velocity_mode='differentiated'`` and
+    torque sensing the dq_m slot carries the measured motor angle (:func:`~fjm_runtime.sim.sample_step._reading`).
+    """
+    ops = ss._NumpyOps(model)
+    return np.asarray(ops.cat(ss._reading(ops, L, np.asarray(w, dtype=float), np.asarray(noise, dtype=float),
+                                          np.asarray(p_true, dtype=float))), dtype=float)
+
+
+def rest_reading(model, L: StepLayout, x0, p_true) -> np.ndarray:
+    """The exact reading of a rest state ``x0`` (no noise, quantization or offset), shape (nm,).
+
+    What ``initial_step_state`` starts the simulator's buffers from, in the raw-reading layout
+    (torque sensing with differentiated velocities: the motor angle in the dq_m slot).
+    """
+    ops = ss._NumpyOps(model)
+    x0 = np.asarray(x0, dtype=float)
+    K = ops.take(np.asarray(p_true, dtype=float), L.idx_K) if L.sensing == "torque" else None
+    m = np.array(ss._measure(ops, L, x0, K), dtype=float)
+    if L.differentiated and L.sensing == "torque":
+        m[4 * L.n:] = x0[2 * L.n:3 * L.n]
+    return m
+
+
+class _RuntimeLaw:
+    """The emitted law with the nominal parameters and gains as symbols (not constants)."""
+
+    def __init__(self, controller, p, gains):
+        self.law, self.zdot = controller.law_functions()
+        self.p, self.gains = p, gains
+
+    def evaluate(self, m, z, r):
+        u, s, _, u_cmd, y_hat = self.law(m, z, r, self.p, self.gains)
+        return {"u": u, "u_cmd": u_cmd, "s": s, "y_hat": y_hat}
+
+    def state_derivative(self, m, z, r, out):
+        return self.zdot(m, z, r, self.p, self.gains, out["u_cmd"], out["u"])
+
+
+def _blocks(v, L: StepLayout):
+    n = L.n
+    return [v[b * n:(b + 1) * n] for b in range(L.nm // n)]
+
+
+def controller_functions(model, controller, L: StepLayout, name: str):
+    """``(step, reset)``: the controller's CasADi Functions (SX, each RK4 substep one outlined call).
+
+    Parameters
+    ----------
+    model : Model
+        The controller's (nominal) model: its ``f``, ``g`` predict, its ``param_names`` order ``p``.
+    controller : SlidingModeController
+        Supplies the emitted law (``law_functions``) and ``law_kind``; its gains are NOT baked in.
+    L : StepLayout
+        The design's loop (period, substeps, sensor pre-processing, delay, prediction, rate limit).
+    name : str
+        C prefix: the Functions are ``<name>_ctrl_step`` and ``<name>_ctrl_reset``.
+
+    Returns
+    -------
+    (casadi.Function, casadi.Function)
+    """
+    if not hasattr(controller, "law_functions") or getattr(controller, "_law_z_offset", lambda: 0)() != 0:
+        raise FjmValueError(f"controller {type(controller).__name__}: expected a sliding-mode controller with an "
+                            "emitted law (smc, ismc, fl, sign, torque-sensed or not)")
+    fns = casadi_functions(model)
+    if fns is None:
+        raise FjmValueError(f"model {model.name!r}: no CasADi Functions f, g to predict with")
+    n, n_par = L.n, len(model.param_names)
+    CL = ControllerLayout(L)
+    n_gains = int(np.asarray(controller.gains).size)
+    h = L.T / L.substeps
+    ops = ss._CasadiOps(ss._expanded(fns), L.nx, n, h)
+    c, m_raw = ca.MX.sym("c", CL.nc), ca.MX.sym("m", L.nm)
+    r, p, gains = ca.MX.sym("r", 5 * n), ca.MX.sym("p", n_par), ca.MX.sym("gains", n_gains)
+    K_nom = None
+    if L.sensing == "torque":
+        K_nom = ops.take(p, stiffness_indices(model)[0])
+    b = CL.split(c)
+    m_k, filt_next, venc_next = ss._condition(ops, L, _blocks(m_raw, L), b["venc"], b["filt"])
+    m_used, m_buf_next = ss._delayed(ops, ops, L, m_k, b["m_buf"], b["u_buf"], p, K_nom)
+    law = _RuntimeLaw(controller, p, gains)
+    out = law.evaluate(m_used, b["z"], r)
+    u_law = out["u"]
+    u = ss._rate_limited(ops, L, b["u_last"], u_law)
+    parts = []
+    if L.nz:
+        zdot = law.state_derivative(m_used, b["z"], r, out)
+        if L.integral:
+            zdot = ss._rate_windup(ops, L, zdot, u_law, u, m_used[:n] - r[:n])
+        parts.append(b["z"] + L.T * zdot)
+    if L.delay:
+        ub = b["u_buf"]
+        parts += [m_buf_next, ops.cat([ub[n:], u]) if L.delay > 1 else u]
+    if L.filtered:
+        parts.append(filt_next)
+    if L.differentiated:
+        parts.append(venc_next)
+    if L.rate_step:
+        parts.append(u)
+    c_next = ca.vertcat(*parts) if parts else ca.MX(0, 1)
+    held = ((out["u_cmd"] > u_law) + (out["u_cmd"] < u_law)) + 2 * ((u_law > u) + (u_law < u))
+    step = ca.Function(f"{name}_ctrl_step", [c, m_raw, r, p, gains], [u, c_next, out["s"], out["y_hat"], held],
+                       ["c", "m", "r", "p", "gains"], ["u", "c_next", "s", "y_hat", "held"])
+    return _sx(step), _sx(_reset_function(model, L, CL, name, ops))
+
+
+def _reset_function(model, L: StepLayout, CL: ControllerLayout, name: str, ops):
+    """``<name>_ctrl_reset(m0, p) -> (c0, u0)`` (the conventions of ``initial_step_state``)."""
+    n = L.n
+    m0, p = ca.MX.sym("m0", L.nm), ca.MX.sym("p", len(model.param_names))
+    parts = _blocks(m0, L)
+    zero = ca.MX.zeros(n, 1)
+    qm = None
+    if L.differentiated:                      # computed velocities of an arm at rest: zero
+        qm = parts[2] if L.sensing == "state" else parts[4]
+        parts[1] = zero
+        parts[3 if L.sensing == "state" else 4] = zero
+    if L.filtered:
+        parts[3] = zero
+    m_rest = ca.vertcat(*parts)
+    if L.sensing == "torque":
+        spring = parts[2]
+    else:
+        idx = stiffness_indices(model)[0]
+        spring = ops.take(p, idx) * (parts[2] - parts[0])
+    out = [ca.MX.zeros(L.nz, 1)] if L.nz else []
+    if L.delay:
+        out += [ca.repmat(m_rest, L.delay, 1), ca.repmat(spring, L.delay, 1)]
+    if L.filtered:
+        out.append(m_rest[2 * n:4 * n])
+    if L.differentiated:
+        out.append(ca.vertcat(parts[0], parts[1], qm, parts[3 if L.sensing == "state" else 4]))
+    if L.rate_step:
+        out.append(spring)
+    c0 = ca.vertcat(*out) if out else ca.MX(0, 1)
+    return ca.Function(f"{name}_ctrl_reset", [m0, p], [c0, spring], ["m0", "p"], ["c0", "u0"])
+
+
+def _sx(fn):
+    """``fn`` expanded to SX (straight-line C; outlined substeps stay calls)."""
+    try:
+        return fn.expand()
+    except Exception:  # noqa: BLE001 - a graph that cannot be expanded stays MX (still code-generatable)
+        return fn

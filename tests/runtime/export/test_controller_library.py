@@ -1,0 +1,345 @@
+"""``fjm export controller``: the C library IS the controller the simulator verified.
+
+The reference is the simulator's own run (:func:`fjm_runtime.simulate`, the sampled loop of
+:mod:`fjm_runtime.sim.sample_step`): its plant states, the run's sensor noise and tau_J offset give
+the raw reading of every sample exactly as the step makes it (``raw_reading``); fed sample after
+sample to the exported library (ctypes), the torques must be the run's applied torques ``res.u``
+(double: to 1e-12 of each joint's largest torque; float: a bounded deviation, printed). Bad readings
+never give a NaN torque; two controllers interleaved give the torques of each alone.
+"""
+from __future__ import annotations
+
+import ctypes
+import json
+
+import numpy as np
+import pytest
+
+import fjm_runtime
+from fjm_runtime.ccache import compile_library
+from fjm_runtime.control.designed import designed_gains
+from fjm_runtime.export.controller import amalgamation, design_controller, export_controller
+from fjm_runtime.export.controller_step import raw_reading, rest_reading
+from fjm_runtime.sim.sensor import noise_array, offset_normals
+from fjm_runtime.sim.simulate import simulate
+
+STRICT = ("-O2", "-fPIC", "-shared", "-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic")
+OK, SATURATED, NOT_FINITE, BAD = 0, 1, 2, 3
+
+
+class CController:
+    """One controller struct of an exported library, driven through ctypes (double or float)."""
+
+    def __init__(self, lib, name, design, real):
+        self.lib, self.name, self.real = lib, name, real
+        L = design.layout
+        self.n, self.nm = L.n, L.nm
+        ptr = ctypes.POINTER(ctypes.c_float if real == "float" else ctypes.c_double)
+        self.nc = design.cstate.nc
+        for fn in ("init", "reset", "step", "set_state", "get_state"):
+            lib[f"{name}_{fn}"].restype = ctypes.c_int
+        lib[f"{name}_sizeof"].restype = ctypes.c_size_t
+        self.buf = ctypes.create_string_buffer(int(lib[f"{name}_sizeof"]()))
+        self._ptr, self.dtype = ptr, np.float32 if real == "float" else np.float64
+        assert lib[f"{name}_init"](self.buf, None, None) == OK
+
+    def _p(self, v):
+        a = np.ascontiguousarray(v, dtype=self.dtype)
+        return a, a.ctypes.data_as(self._ptr)
+
+    def reset(self, m0):
+        m0, p0 = self._p(m0)
+        return self.lib[f"{self.name}_reset"](self.buf, p0)
+
+    def set_state(self, c, u_last):
+        (c, pc), (u, pu) = self._p(c), self._p(u_last)
+        return self.lib[f"{self.name}_set_state"](self.buf, pc, pu)
+
+    def get_state(self):
+        (c, pc) = self._p(np.zeros(max(self.nc, 1)))
+        assert self.lib[f"{self.name}_get_state"](self.buf, pc, None) == OK
+        return c[:self.nc].astype(float)
+
+    def step(self, m, r):
+        (m, pm), (r, pr), (u, pu) = self._p(m), self._p(r), self._p(np.zeros(self.n))
+        st = self.lib[f"{self.name}_step"](self.buf, pm, pr, pu)
+        return st, u.astype(float)
+
+
+_LIBS: dict = {}
+
+
+def _library(design, tmp_factory, real="double"):
+    """The exported library of ``design`` compiled (strict flags, through the C cache) and loaded."""
+    key = (design.name, json.dumps(design.spec, sort_keys=True, default=str), real)
+    if key not in _LIBS:
+        out = tmp_factory.mktemp(design.name)
+        export_controller(design, out)
+        flags = STRICT + (("-Dcasadi_real=float",) if real == "float" else ())
+        so = compile_library(amalgamation(out, design.name), f"{design.name}_controller", flags)
+        _LIBS[key] = ctypes.CDLL(str(so))
+    return CController(_LIBS[key], design.name, design, real)
+
+
+class Run:
+    """The simulator's run of a design (true plant = nominal): the sample step folded by the casadi
+    runner :func:`fjm_runtime.simulate` uses, so its step states ``W`` are at hand.
+
+    ``W`` (N+1, nw) step states, ``U`` (N+1, n) applied torques (aux), ``R`` (N+1, 5n) reference rows,
+    ``M`` (N+1, nm) the raw reading of every sample as the step made it, ``C`` (N+1, nc) the
+    controller states, ``m0`` the rest reading, ``u0`` the torque holding the rest state.
+    """
+
+    def __init__(self, design, duration, reference=None, x0=None):
+        from fjm_runtime.cli.simulate import design_task
+        from fjm_runtime.sim.loops import run_casadi
+        from fjm_runtime.sim.sample_step import initial_step_state
+        model, L, sensor, ctrl = design.model, design.layout, design.sensor, design.controller
+        if reference is None:
+            reference, x0 = design_task(model, design.spec.get("reference"))
+        p = np.asarray(ctrl.p_nom, dtype=float)
+        t = L.T * np.arange(int(round(duration / L.T)) + 1)
+        if x0 is None:
+            q0 = np.asarray(reference(0.0))[0]
+            x0 = np.concatenate([q0, np.zeros(L.n), q0, np.zeros(L.n)])
+        w0 = initial_step_state(model, L, x0, np.zeros(L.nz), p, seed=int(sensor.seed), sensor=sensor)
+        self.R = np.asarray(reference.sample(t), dtype=float).reshape(t.size, 5 * L.n)
+        NOISE = noise_array(sensor, L.sensing, L.n, t.size)
+        self.W, AUX = run_casadi(model, ctrl, L, p, w0, t, self.R, NOISE, None, 1e6)
+        self.U = AUX[:, :L.n]
+        self.M = np.stack([raw_reading(model, L, self.W[k], NOISE[k], p) for k in range(t.size)])
+        self.C = design.cstate.from_step_state(self.W)
+        self.m0 = rest_reading(model, L, x0, p)
+        self.u0 = self.C[0][design.cstate.split(np.arange(design.cstate.nc))["u_buf"]][:L.n] \
+            if L.delay else None
+
+
+def _free_running(ctrl, run, samples=None):
+    """The library from ``reset(m0)`` on the run's readings: torques (k, n) and statuses."""
+    k_end = run.M.shape[0] if samples is None else samples
+    assert ctrl.reset(run.m0) == OK
+    U, S = np.empty((k_end, ctrl.n)), np.empty(k_end, dtype=int)
+    for k in range(k_end):
+        S[k], U[k] = ctrl.step(run.M[k], run.R[k])
+    return U, S
+
+
+def _per_sample(ctrl, run):
+    """The library's torque at every sample, and its next controller state, from the SIMULATOR's
+    controller state at that sample: ``(U, S, C_next)``."""
+    U, S = np.empty_like(run.U), np.empty(run.U.shape[0], dtype=int)
+    C_next = np.empty_like(run.C)
+    for k in range(run.M.shape[0]):
+        assert ctrl.set_state(run.C[k], run.U[k - 1] if k else run.U[0]) == OK
+        S[k], U[k] = ctrl.step(run.M[k], run.R[k])
+        C_next[k] = ctrl.get_state()
+    return U, S, C_next
+
+
+def _relative(U, U_ref):
+    """Per joint: the largest deviation over the run / that joint's largest torque; the worst joint."""
+    scale = np.maximum(np.max(np.abs(U_ref), axis=0), 1e-300)
+    return float(np.max(np.max(np.abs(U - U_ref), axis=0) / scale))
+
+
+def _panda_design():
+    return design_controller(fjm_runtime.load("panda"), designed_gains("panda", "ismc", "torque", 1000.0, 1))
+
+
+def _design(model, kind, sensing, noise, delay=1, u_max=None, **gains):
+    spec = {"model": model, "kind": kind, "sensing": sensing, "rate": 1000.0, "delay": delay, "predict": delay > 0,
+            "noise": noise, "gains": {"lam": 20.0, "k_s": 200.0, "delta": 5.0, **gains}}
+    if u_max is not None:
+        spec["gains"]["u_max"] = u_max
+    return design_controller(fjm_runtime.load(model), spec)
+
+
+def _sine(design, amplitude=0.5, omega=2.0):
+    from fjm_runtime.control.references import make_reference
+    return make_reference("sine", design.layout.n, amplitude=amplitude, omega=omega)
+
+
+#: Samples of the free-running comparison (from reset): the predictor and the law in replay, without
+#: the plant, amplify a rounding difference by up to ~1.26 a sample (the Panda design), so only the
+#: first samples of a free-running replay can agree to 1e-12; every sample is compared from the
+#: simulator's own controller state (:func:`_per_sample`).
+FREE_SAMPLES = 10
+
+
+def _check_equal(design, tmp_path_factory, duration, reference=None, float_bound=None):
+    run = Run(design, duration, reference)
+    lib = _library(design, tmp_path_factory)
+    U, S, C_next = _per_sample(lib, run)
+    rel = _relative(U, run.U)
+    rel_c = _relative(C_next[:-1], run.C[1:]) if run.C.shape[1] else 0.0
+    Uf, _ = _free_running(lib, run, FREE_SAMPLES)
+    rel_free = _relative(Uf, run.U[:FREE_SAMPLES])
+    print(f"\n{design.name} ({design.sensor.name}, {duration:g} s): double max rel dev per sample {rel:.3g}, "
+          f"free-running first {FREE_SAMPLES} samples {rel_free:.3g}, state {rel_c:.3g}")
+    assert np.all(np.isfinite(U)) and np.all(S != NOT_FINITE)
+    assert rel <= 1e-12, f"{design.name}: the C torques deviate from the simulator's by {rel:.3g} (relative)"
+    assert rel_c <= 1e-12, f"{design.name}: the C controller state deviates by {rel_c:.3g} (relative)"
+    assert rel_free <= 1e-12, f"{design.name}: from reset, the C torques deviate by {rel_free:.3g} (relative)"
+    if float_bound is not None:
+        U32, _, _ = _per_sample(_library(design, tmp_path_factory, "float"), run)
+        rel_f = _relative(U32, run.U)
+        print(f"{design.name}: float max rel dev per sample {rel_f:.3g}")
+        assert rel_f <= float_bound, f"{design.name}: float build deviates by {rel_f:.3g} > {float_bound:g}"
+    return run, S
+
+
+# -- equality with the simulator --------------------------------------------------------------------
+
+@pytest.mark.slow
+def test_panda_shipped_design_equals_simulator(tmp_path_factory):
+    """The Panda's shipped design (torque-sensed ismc, panda_white noise, filtered dtau_J, delay 1 with
+    prediction, 11 substeps): 1 s of the design's task, C torques == the run's to 1e-12."""
+    _check_equal(_panda_design(), tmp_path_factory, 1.0, float_bound=5e-2)
+
+
+@pytest.mark.slow
+@pytest.mark.exhaustive
+def test_panda_shipped_design_equals_simulator_10s(tmp_path_factory):
+    _check_equal(_panda_design(), tmp_path_factory, 10.0, float_bound=5e-2)
+
+
+#: Gains that track on a 2 s sine with a torque limit below the run's peak (the limit is reached,
+#: but most samples are the unclipped law).
+_SOFT = {"lam": 5.0, "k_s": 10.0, "delta": 20.0}
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("model,kind,sensing,noise,gains,u_max", [
+    # rate limit + conditional integration, differentiated velocities, quantization, tau_J offset
+    ("link1", "ismc", "torque", "franka_like", {"lam": 10.0, "k_s": 20.0, "delta": 20.0}, 25.0),
+    ("link1", "smc", "state", "panda_white", {"lam": 10.0, "k_s": 20.0, "delta": 20.0}, 10.0),
+    ("planar3", "ismc", "torque", "panda_white", _SOFT, 60.0),
+    ("planar3", "ismc", "state", "franka_like", _SOFT, 40.0),
+    ("planar3", "fl", "torque", "panda_white", _SOFT, 60.0),
+])
+def test_small_models_equal_simulator(tmp_path_factory, model, kind, sensing, noise, gains, u_max):
+    """Each sensing, law and sensor pre-processing: 2 s, C == simulator to 1e-12; the limits are
+    reached on some samples and most samples are the unclipped law."""
+    design = _design(model, kind, sensing, noise, u_max=u_max, **gains)
+    run, S = _check_equal(design, tmp_path_factory, 2.0, _sine(design), float_bound=1e-3)
+    print(f"{design.name}: limited on {np.mean(S == SATURATED):.1%} of the samples")
+    assert np.any(S == SATURATED), "the run never reaches a limit: the limits are not exercised"
+    assert np.mean(S == OK) > 0.5, "the run is mostly at a limit: the law itself is hardly compared"
+
+
+@pytest.mark.slow
+def test_rate_limit_is_applied_in_c(tmp_path_factory):
+    """franka_like (1000 N m/s): the C torque never changes by more than 1 N m a sample, and it does
+    change by exactly that while the limit holds it (the clip is in the library, not the caller)."""
+    design = _design("link1", "ismc", "torque", "franka_like", u_max=25.0, lam=10.0, k_s=20.0, delta=20.0)
+    run = Run(design, 1.0, _sine(design))
+    U, S = _free_running(_library(design, tmp_path_factory), run)
+    dU = np.abs(np.diff(np.vstack([run.u0[None], U]), axis=0))
+    assert np.max(dU) <= 1.0 + 1e-9
+    at_limit = np.isclose(dU[:, 0], 1.0, rtol=0, atol=1e-9)
+    assert np.sum(at_limit) > 10
+    assert np.all(S[at_limit] == SATURATED)
+
+
+# -- robustness and independence ---------------------------------------------------------------------
+
+@pytest.mark.slow
+@pytest.mark.parametrize("bad", [np.nan, np.inf, -np.inf])
+def test_non_finite_reading_holds_the_last_torque(tmp_path_factory, bad):
+    """A NaN/inf reading (any slot) or reference: the last torque again, status INPUT_NOT_FINITE, the
+    state kept (the next good sample gives, bit for bit, the torque it gives without the bad one)."""
+    design = _design("planar3", "ismc", "torque", "panda_white", u_max=60.0, **_SOFT)
+    run = Run(design, 0.1, _sine(design))
+    U_ref, _ = _free_running(_library(design, tmp_path_factory), run)
+    ctrl = _library(design, tmp_path_factory)
+    assert ctrl.reset(run.m0) == OK
+    k_bad = 50
+    for k in range(run.M.shape[0]):
+        if k == k_bad:
+            for slot in range(run.M.shape[1]):
+                m = run.M[k].copy(); m[slot] = bad
+                st, u = ctrl.step(m, run.R[k])
+                assert st == NOT_FINITE and np.array_equal(u, U_ref[k - 1]), f"slot {slot}"
+            for slot in range(run.R.shape[1]):
+                r = run.R[k].copy(); r[slot] = bad
+                st, u = ctrl.step(run.M[k], r)
+                assert st == NOT_FINITE and np.array_equal(u, U_ref[k - 1]), f"reference slot {slot}"
+        st, u = ctrl.step(run.M[k], run.R[k])
+        assert st in (OK, SATURATED)
+        np.testing.assert_array_equal(u, U_ref[k])
+
+
+@pytest.mark.slow
+def test_overflowing_reading_never_gives_a_nan_torque(tmp_path_factory):
+    """A finite reading whose law overflows (1e308 rad): the result is checked too; the torque is
+    finite whatever the status."""
+    design = _design("planar3", "ismc", "torque", "panda_white", u_max=60.0, **_SOFT)
+    run = Run(design, 0.02, _sine(design))
+    for slot in range(run.M.shape[1]):
+        ctrl = _library(design, tmp_path_factory)
+        assert ctrl.reset(run.m0) == OK
+        m = run.M[5].copy(); m[slot] = 1e308
+        st, u = ctrl.step(m, run.R[5])
+        assert np.all(np.isfinite(u)), f"slot {slot}: status {st}, u {u}"
+
+
+@pytest.mark.slow
+def test_two_controllers_interleaved_equal_each_alone(tmp_path_factory):
+    """Two structs of one library, stepped alternately on different readings: each gives, bit for
+    bit, the torques it gives alone (no hidden shared state)."""
+    design = _design("planar3", "ismc", "state", "franka_like", u_max=40.0, **_SOFT)
+    run_a, run_b = Run(design, 0.5, _sine(design)), Run(design, 0.5, _sine(design, 0.3, 3.0))
+    U_a, _ = _free_running(_library(design, tmp_path_factory), run_a)
+    U_b, _ = _free_running(_library(design, tmp_path_factory), run_b)
+    a, b = _library(design, tmp_path_factory), _library(design, tmp_path_factory)
+    assert a.reset(run_a.m0) == OK and b.reset(run_b.m0) == OK
+    for k in range(run_a.M.shape[0]):
+        _, ua = a.step(run_a.M[k], run_a.R[k])
+        _, ub = b.step(run_b.M[k], run_b.R[k])
+        np.testing.assert_array_equal(ua, U_a[k])
+        np.testing.assert_array_equal(ub, U_b[k])
+    assert np.max(np.abs(U_a - U_b)) > 1.0      # the two runs differ: a shared state would show
+
+
+@pytest.mark.slow
+def test_step_before_reset_is_refused(tmp_path_factory):
+    """``step`` before ``reset``: BAD_ARGUMENT and no torque written."""
+    design = _design("link1", "smc", "state", "ideal", delay=0)
+    lib = _library(design, tmp_path_factory)
+    st, u = lib.step(np.zeros(4), np.zeros(5))
+    assert st == BAD and np.all(u == 0)
+
+
+@pytest.mark.slow
+def test_cli_export_builds_strict_in_double_float_and_cxx(tmp_path):
+    """``fjm export controller`` + ``make``: -std=c99 -Wall -Wextra -Werror -pedantic in double and float,
+    and g++ -std=c++17 -Wall -Wextra -Werror, without a diagnostic; a C++ caller links the library."""
+    import shutil
+    import subprocess
+    from fjm_runtime.cli.main import main
+    if shutil.which("make") is None or shutil.which("g++") is None:
+        pytest.skip("make and g++ needed")
+    gains = tmp_path / "design.json"
+    gains.write_text(json.dumps({"model": "link1", "kind": "ismc", "sensing": "torque", "rate": 1000.0, "delay": 1,
+                                 "predict": True, "noise": "franka_like",
+                                 "gains": {"lam": 10.0, "k_s": 20.0, "delta": 20.0, "u_max": 25.0}}))
+    out = tmp_path / "lib"
+    assert main(["export", "controller", "link1", "--gains", str(gains), "--out", str(out)]) == 0
+    proc = subprocess.run(["make", "-C", str(out)], capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert "warning" not in proc.stderr.lower()
+    for lib in ("liblink1_ismc_tau.a", "liblink1_ismc_tau_float.a"):
+        assert (out / lib).is_file()
+    cxx = tmp_path / "use.cpp"
+    cxx.write_text('#include "link1_ismc_tau_controller.h"\n#include <cmath>\n'
+                   "int main() { link1_ismc_tau_controller c; double m0[5] = {0.1, 0, 0, 0, 0.1};\n"
+                   "  double r[5] = {0.1, 0, 0, 0, 0}; double u[1];\n"
+                   "  if (link1_ismc_tau_init(&c, nullptr, nullptr) != LINK1_ISMC_TAU_OK) return 1;\n"
+                   "  if (link1_ismc_tau_reset(&c, m0) != LINK1_ISMC_TAU_OK) return 2;\n"
+                   "  if (link1_ismc_tau_step(&c, m0, r, u) > LINK1_ISMC_TAU_SATURATED) return 3;\n"
+                   "  return std::isfinite(u[0]) ? 0 : 4; }\n")
+    exe = tmp_path / "use"
+    proc = subprocess.run(["g++", "-std=c++17", "-Wall", "-Wextra", "-Werror", f"-I{out}", str(cxx),
+                           str(out / "liblink1_ismc_tau.a"), "-lm", "-o", str(exe)], capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert subprocess.run([str(exe)]).returncode == 0
