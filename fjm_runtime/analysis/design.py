@@ -183,6 +183,10 @@ def _refine(search: _Search, best, best_cost, P, duration, seed, rounds, say, f:
 #: duration of that pass (x ``screen_duration``): a draw that fails only after 2 s (measured on the
 #: Panda: K1, K2 soft with K3 stiff, torque jitter and the limit from 3 s on) needs a longer run.
 ACTIVE_ADD, ACTIVE_DURATION, ACTIVE_ROUNDS = 4, 2.0, 2
+#: The active set's runs last at least this factor times the latest divergence time of the draws it
+#: adds (capped at the final duration): Panda designs with franka_like diverged on one corner at
+#: 6.2-6.5 s in the final check, which the 4 s active-set runs never reached.
+LATE_MARGIN = 1.25
 
 
 def _active_set(search, best, best_cost, worst, b, P, screen_draws, duration, active_duration, seed, passes, say):
@@ -190,7 +194,8 @@ def _active_set(search, best, best_cost, worst, b, P, screen_draws, duration, ac
 
     Each pass adds up to :data:`ACTIVE_ADD` draws of the final check that cost more than the
     screening objective, runs :data:`ACTIVE_ROUNDS` rounds of the pattern search on them at
-    ``active_duration`` (from factor sqrt(2)) and repeats the final check.
+    ``active_duration`` (from factor sqrt(2); lengthened to :data:`LATE_MARGIN` x the latest
+    divergence time of the added draws) and repeats the final check.
     """
     prob = search.prob
     rows = np.arange(screen_draws)
@@ -200,6 +205,10 @@ def _active_set(search, best, best_cost, worst, b, P, screen_draws, duration, ac
         if not add:
             break
         rows = np.r_[rows, add]
+        # a run that diverged late must be run past that time, or the refinement cannot see it
+        late = [float(b.divergence_time[i]) for i in add if b.diverged[i] and np.isfinite(b.divergence_time[i])]
+        if late:
+            active_duration = min(duration, max(active_duration, LATE_MARGIN * max(late)))
         best_cost = evaluate_gains(prob, best, P[rows], active_duration, seed + rows)[0]
         say(f"active set {k + 1}/{passes}: + draws {add} (final-check costs "
             f"{', '.join(f'{run[i]:.3g}' for i in add)}); {len(rows)} draws x {active_duration:g} s: {best_cost:.4g}")
