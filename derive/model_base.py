@@ -23,7 +23,7 @@ from .program import Program
 
 __all__ = ["Param", "RigidBody", "FlexibleJointModel", "state_symbols", "PLANAR_GROUPS", "ELASTIC_GROUPS",
            "planar_param_names", "elastic_param_names", "param_group", "coriolis_gravity",
-           "SPATIAL_NAMES", "MODEL_NAMES", "COMPLETE_NAMES"]
+           "SPATIAL_NAMES", "MODEL_NAMES", "COMPLETE_NAMES", "SPRING_NAMES"]
 
 #: Built-in spatial arms: each is the URDF model file ``derive/robots/<name>/<name>.toml``.
 SPATIAL_NAMES: Tuple[str, ...] = ("elbow3", "panda", "baxter")
@@ -32,8 +32,11 @@ SPATIAL_NAMES: Tuple[str, ...] = ("elbow3", "panda", "baxter")
 #: Built-in complete models (rotor gyroscopics, docs/complete-model.md) and their reduced models.
 COMPLETE_NAMES: Tuple[str, ...] = ("link1_complete", "planar2_complete", "panda_complete")
 
+#: Built-in models with nonlinear joint springs (:mod:`derive.spring`).
+SPRING_NAMES: Tuple[str, ...] = ("link1_hd",)
+
 MODEL_NAMES: Tuple[str, ...] = (("link1",) + tuple(f"planar{n}" for n in range(1, 8)) + SPATIAL_NAMES
-                                + COMPLETE_NAMES)
+                                + COMPLETE_NAMES + SPRING_NAMES)
 
 #: Per-link parameter groups of ``planar<n>``, in ``param_names`` order (then ``g0``).
 PLANAR_GROUPS: Tuple[str, ...] = ("m", "l", "r", "I", "K", "Jm", "Bm")
@@ -134,7 +137,9 @@ class FlexibleJointModel:
     bodies : tuple of RigidBody or None
         Reduced spatial models: the chain's (or tree's) bodies in q order, for the emitter's
         Taylor recursion of the RNEA (:mod:`derive.emit.rnea_jets`). None for the planar closed
-        forms and the complete models.
+        forms and the complete models.    springs : tuple of derive.spring.CubicSpring or None
+        Nonlinear joint springs ``tau_J = psi(q_m - q)`` (:mod:`derive.spring`), one per joint;
+        ``K`` then holds each ``psi'(0)``. None: the linear springs ``K (q_m - q)``.
     """
 
     name: str
@@ -159,6 +164,7 @@ class FlexibleJointModel:
     rotors: Optional[object] = None  # complete model: its derive.rotors.Rotors (for chain.json)
     inverse_dynamics: Optional[Tuple[Tuple[sp.Symbol, ...], sp.Matrix]] = None
     bodies: Optional[Tuple[RigidBody, ...]] = None
+    springs: Optional[Tuple[object, ...]] = None  # nonlinear springs: derive.spring.CubicSpring per joint
 
     @property
     def state(self) -> Tuple[sp.Symbol, ...]:

@@ -1,6 +1,7 @@
 """Model registry: the built-in models by name (:data:`MODEL_NAMES`, :func:`build`).
 
-``link1`` and ``planar1..7`` are closed forms (:mod:`derive.planar`); the
+``link1`` and ``planar1..7`` are closed forms (:mod:`derive.planar`), ``link1_hd`` its cubic-spring
+variant (:mod:`derive.spring`); the
 spatial arms ``elbow3`` and ``panda`` are URDF model files shipped in
 ``derive/robots/<name>/<name>.toml`` (read by :mod:`derive.model_file`, built
 by :mod:`derive.spatial`). This module sits on top of both: nothing in
@@ -39,6 +40,9 @@ def build(name: str) -> FlexibleJointModel:
     match = re.fullmatch(r"planar([1-7])", name or "")
     if match:
         return make_planar(int(match.group(1)))
+    if name == "link1_hd":
+        from .spring import make_link1_hd
+        return make_link1_hd()
     if name == "link1_complete":
         return make_link1_complete()
     if name == "planar2_complete":

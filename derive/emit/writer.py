@@ -269,6 +269,9 @@ def write_model(lin: Linearization, outdir: Path,
         The manifest written to ``manifest.json``.
     """
     m = lin.model
+    if m.springs is not None:  # nonlinear springs: their own emitter (same names and layout)
+        from .spring import write_spring_model
+        return write_spring_model(lin, outdir, progress)
     progress = progress or (lambda stage: None)
     outdir.mkdir(parents=True, exist_ok=True)
     complete = m.coupling is not None  # complete model: plant functions only, no static FL laws

@@ -1,0 +1,278 @@
+"""Emit a model with nonlinear joint springs (:mod:`derive.spring`): CasADi Functions, C, manifest, report.
+
+The same file names, Function names and signatures as a linear model (:mod:`derive.emit.writer`),
+so ``fjm_runtime.load("link1_hd")`` gives the usual :class:`Model`:
+
+* ``f, g, ad, T, alpha, beta, energy, inertia`` of ``(x, p)``: the explicit SymPy results of
+  :func:`derive.spring.linearize_spring` converted to SX (the spring law substituted: ``psi``,
+  ``psi'``, ``psi''`` of ``phi = q_m - q`` appear as polynomials in ``phi``), CSE'd;
+* ``T_tau, alpha_tau, beta_tau`` of ``(m, p)``, ``m = [q; dq; tau_J; dtau_J; dq_m]``: ``tau_J`` and
+  ``dtau_J`` read directly, ``psi'`` and ``psi''`` at the implied deflection
+  ``phi_J = psi^-1(tau_J)``, :data:`derive.spring.NEWTON_STEPS` Newton steps unrolled
+  (:func:`derive.spring.newton_inverse`);
+* the laws ``control_{smc,ismc,fl}`` and ``control_{smc,ismc,fl}_tau`` (:mod:`derive.emit.controls`,
+  the same arithmetic around this model's cores). Not emitted: ``adaptive`` (it estimates a linear
+  ``K``) and ``pdg`` (its motor set-point needs ``psi^-1(G(q_d))``);
+* ``spring(phi, p) -> (psi, dpsi, ddpsi)`` and ``spring_inverse(tau_J, p) -> phi_J`` (the inverse map
+  the torque laws use), listed under ``springs`` in the manifest.
+
+No timestamps or paths: the bytes depend on the model and the tool versions only.
+"""
+
+from __future__ import annotations
+
+import json
+import tempfile
+from pathlib import Path
+from typing import Callable, Dict, List, Optional
+
+import casadi as ca
+import sympy as sp
+
+from ..linearize import Linearization
+from ..spring import NEWTON_STEPS, newton_inverse, spring_functions
+from .controls import KINDS, TORQUE_KINDS, _law_pair, build_core, manifest_entry
+from .functions import QUANTITIES, operation_count
+from .sx import SympyToSX
+from .torque import TORQUE_QUANTITIES
+from .writer import HEADER, _comment_block, _generate_c, _layout_lines, argument_layout, tool_versions
+
+__all__ = ["EMITTED_KINDS", "build_spring_functions", "write_spring_model"]
+
+#: The laws emitted for a nonlinear-spring model, in file order.
+EMITTED_KINDS = ("smc", "ismc", "fl", "smc_tau", "ismc_tau", "fl_tau")
+
+_MEANING = dict(KINDS + TORQUE_KINDS)
+
+#: Quantities with their meaning for this model (the spring in them).
+SPRING_QUANTITIES = (
+    ("f", "drift vector field f(x), (4n,); link and motor rows carry psi(q_m - q)"),
+    ("g", "input vector fields g(x) = [0; 0; 0; J_m^-1], (4n, n)"),
+    ("ad", "brackets [g, ad_f g, ad_f^2 g, ad_f^3 g] (paper's sign), (4n, 4n); psi', psi'' in them"),
+    ("T", "linearizing coordinates [q; dq; y3; y4], y3 = (psi(phi) - h)/J_l, y4 carries psi'(phi)(dq_m - dq), (4n,)"),
+    ("alpha", "alpha(x) = -L_g y4^-1 L_f y4, (n,); psi, psi', psi'' of phi = q_m - q"),
+    ("beta", "beta(x) = L_g y4^-1 = J_m D(q) / psi'(q_m - q), (n, n)"),
+    ("energy", "total mechanical energy (links, motors, spring potential integral of psi, gravity), scalar"),
+    ("inertia", "link inertia matrix D(q), (n, n)"),
+)
+
+_TORQUE_MEANING = {
+    "T_tau": "linearizing coordinates from m = [q; dq; tau_J; dtau_J; dq_m]: [q; dq; y3; y4], "
+             "y3 = D^-1 (tau_J - h), y4 = D^-1 (dtau_J - h'), no spring law in them, (4n,)",
+    "alpha_tau": "alpha in torque coordinates, psi', psi'' at phi_J = psi^-1(tau_J) (Newton), (n,)",
+    "beta_tau": "beta in torque coordinates: J_m D(q) / psi'(phi_J), phi_J = psi^-1(tau_J), (n, n)",
+}
+
+
+def _spring_sx(model, phi: ca.SX, p: ca.SX, order: int) -> List[ca.SX]:
+    """``[psi(phi), psi'(phi), ...]`` (``order + 1`` entries) per joint's law, SX of ``phi`` and ``p``."""
+    s = model.springs[0]
+    a = sp.Symbol("phi_arg", real=True)
+    conv = SympyToSX({**{sym: p[j] for j, sym in enumerate(model.param_symbols)}, a: phi})
+    return [conv(sp.expand(s.derivative(k, a))) for k in range(order + 1)]
+
+
+def _newton_sx(model, tau: ca.SX, p: ca.SX) -> ca.SX:
+    """``phi_J = psi^-1(tau)`` by :func:`derive.spring.newton_inverse` in SX."""
+    k1 = p[list(model.param_names).index(str(model.springs[0].k1))]
+    return newton_inverse(lambda v: _spring_sx(model, v, p, 0)[0], lambda v: _spring_sx(model, v, p, 1)[1],
+                          tau, k1, NEWTON_STEPS)
+
+
+def build_spring_functions(lin: Linearization) -> Dict[str, ca.Function]:
+    """Every SX Function of the model: quantities, torque functions, ``spring``, ``spring_inverse``.
+
+    Returns
+    -------
+    dict str -> casadi.Function
+        Keys: the names of :data:`derive.emit.functions.QUANTITIES` (inputs ``x``, ``p``), of
+        :data:`derive.emit.torque.TORQUE_QUANTITIES` (inputs ``m``, ``p``), ``"spring"`` and
+        ``"spring_inverse"``.
+    """
+    m = lin.model
+    n, n_p = m.n, len(m.params)
+    x, p = ca.SX.sym("x", 4 * n), ca.SX.sym("p", n_p)
+    pbind = {s: p[j] for j, s in enumerate(m.param_symbols)}
+    conv = SympyToSX({**{s: x[i] for i, s in enumerate(m.state)}, **pbind})
+    out: Dict[str, ca.Function] = {}
+    for name, _ in QUANTITIES:
+        v = conv(lin.outputs[name])
+        v = ca.vec(v) if v.shape[1] == 1 and name != "energy" else v
+        out[name] = ca.Function(f"{m.name}_{name}", [x, p], [ca.cse(v)], ["x", "p"], [name])
+
+    ms = ca.SX.sym("m", 5 * n)
+    phiJ = [_newton_sx(m, ms[2 * n + i], p) for i in range(n)]
+    tconv = SympyToSX({**{s: ms[i] for i, s in enumerate(lin.outputs["measurement"])}, **pbind,
+                       **{s: phiJ[i] for i, s in enumerate(lin.outputs["implied"])}})
+    for name, _ in TORQUE_QUANTITIES:
+        v = tconv(lin.outputs[name])
+        v = ca.vec(v) if v.shape[1] == 1 else v
+        out[name] = ca.Function(f"{m.name}_{name}", [ms, p], [ca.cse(v)], ["m", "p"], [name])
+
+    phi, tau = ca.SX.sym("phi", n), ca.SX.sym("tau_J", n)
+    values = _spring_sx(m, phi, p, 2)
+    out["spring"] = ca.Function(f"{m.name}_spring", [phi, p], [ca.cse(v) for v in values],
+                                ["phi", "p"], ["psi", "dpsi", "ddpsi"])
+    out["spring_inverse"] = ca.Function(f"{m.name}_spring_inverse", [tau, p], [ca.cse(_newton_sx(m, tau, p))],
+                                        ["tau_J", "p"], ["phi_J"])
+    return out
+
+
+def build_spring_laws(lin: Linearization, fns: Dict[str, ca.Function]) -> Dict[str, ca.Function]:
+    """``control_core``, ``control_core_tau`` and the laws of :data:`EMITTED_KINDS` (with ``_zdot``)."""
+    m = lin.model
+    n, n_p = m.n, len(m.params)
+    core = build_core(m, fns)
+    ms, p = ca.SX.sym("m", 5 * n), ca.SX.sym("p_hat", n_p)
+    core_tau = ca.Function(f"{m.name}_control_core_tau", [ms, p],
+                           ca.cse([fns["T_tau"](ms, p), fns["alpha_tau"](ms, p), fns["beta_tau"](ms, p)]),
+                           ["m", "p_hat"], ["y_hat", "alpha", "beta"])
+    out = {"control_core": core, "control_core_tau": core_tau}
+    for kind in EMITTED_KINDS:
+        tau = kind.endswith("_tau")
+        out.update(_law_pair(m, kind, core_tau if tau else core, (5 if tau else 4) * n, "m" if tau else "x", None))
+    return out
+
+
+def _ops(fn: ca.Function) -> int:
+    return operation_count(fn.expand() if fn.is_a("MXFunction") else fn)
+
+
+def _meaning(name: str) -> str:
+    if name == "control_core":
+        return "y_hat = T(x; p_hat), alpha(x; p_hat), beta(x; p_hat): the model part of every state law"
+    if name == "control_core_tau":
+        return "y_hat, alpha, beta of the torque measurement m (5n): the model part of every torque-sensed law"
+    if name == "spring":
+        return "the spring law: psi(phi), psi'(phi), psi''(phi) per joint (N m, N m/rad, N m/rad^2)"
+    if name == "spring_inverse":
+        return f"the implied deflection phi_J = psi^-1(tau_J) per joint ({NEWTON_STEPS} Newton steps from tau_J / k1)"
+    if name in _TORQUE_MEANING:
+        return _TORQUE_MEANING[name]
+    if name.endswith("_zdot"):
+        return f"controller-state derivative of {name[len('control_'):-len('_zdot')]} under a held torque"
+    return f"control law {name[len('control_'):]}: {_MEANING[name[len('control_'):]]}"
+
+
+def _law_lines() -> List[str]:
+    return [
+        "control laws: <model>_control_<kind>(x, z, r, p, gains) -> (u, s, z_dot, u_cmd, y_hat), kinds smc ismc fl;",
+        "  <model>_control_<kind>_tau(m, z, r, p, gains), m = [q; dq; tau_J; dtau_J; dq_m] (5n), tau_J = psi(q_m - q);",
+        "  layouts of z and gains as link1's (manifest.json, controls); adaptive and pdg are not emitted.",
+    ]
+
+
+def write_spring_model(lin: Linearization, outdir: Path,
+                       progress: Optional[Callable[[str], None]] = None) -> Dict[str, object]:
+    """Emit every file of a nonlinear-spring model into ``outdir`` (see the module docstring); returns the manifest."""
+    m = lin.model
+    progress = progress or (lambda stage: None)
+    outdir.mkdir(parents=True, exist_ok=True)
+    progress("CasADi functions")
+    fns = build_spring_functions(lin)
+    progress("control laws")
+    laws = build_spring_laws(lin, fns)
+    versions = tool_versions()
+    everything = {**fns, **laws}
+    ops = {name: _ops(fn) for name, fn in everything.items()}
+    sizes: Dict[str, int] = {}
+    progress(".casadi files")
+    for name, fn in everything.items():
+        lines = [HEADER, f"model: {m.name}; function: {fn.name()} -- {_meaning(name) if name not in dict(SPRING_QUANTITIES) else dict(SPRING_QUANTITIES)[name]}",
+                 f"tools: casadi {versions['casadi']}, sympy {versions['sympy']}", *_layout_lines(lin)]
+        if name.startswith("control_"):
+            lines += _law_lines()
+        text = _comment_block(lines + [f"operations: {ops[name]}"], "# ") + fn.serialize() + "\n"
+        (outdir / f"{name}.casadi").write_text(text)
+        sizes[name] = len(text.encode())
+    progress("C sources")
+    with tempfile.TemporaryDirectory() as tmp:
+        sources = _generate_c(m.name, everything, Path(tmp))
+    c_header = _comment_block(
+        [HEADER, f"model: {m.name} -- {m.description}", f"tools: casadi {versions['casadi']}, sympy {versions['sympy']}",
+         *_layout_lines(lin), *_law_lines(),
+         "operations: " + ", ".join(f"{m.name}_{k} {v}" for k, v in ops.items())], " * ")
+    for fname, body in sources.items():
+        (outdir / fname).write_text("/* " + c_header[3:] + " */\n" + body)
+
+    def entry(name, inputs, **extra):
+        return {"casadi_file": f"{name}.casadi", "c_name": f"{m.name}_{name}", "meaning": _meaning(name),
+                "inputs": inputs, **extra, "operations": ops[name], "casadi_bytes": sizes[name]}
+
+    controls = {}
+    for kind in EMITTED_KINDS:
+        first = "m" if kind.endswith("_tau") else "x"
+        e = entry(f"control_{kind}", [first, "z", "r", "p", "gains"], outputs=["u", "s", "z_dot", "u_cmd", "y_hat"])
+        if f"control_{kind}_zdot" in laws:
+            z = f"control_{kind}_zdot"
+            e["zdot"] = {"casadi_file": f"{z}.casadi", "c_name": f"{m.name}_{z}",
+                         "inputs": [first, "z", "r", "p", "gains", "u_cmd", "u"], "operations": ops[z]}
+        e.update(manifest_entry(kind, m.n))
+        if kind.endswith("_tau"):
+            e["measurement"]["meaning"] = ("first argument is the torque measurement m (5n), not the state x; "
+                                           "tau_J = psi(q_m - q), dtau_J its rate, both measured")
+        controls[kind] = e
+    spring = m.springs[0]
+    manifest = {
+        "header": HEADER, "model": m.name, "description": m.description, "n": m.n, "nx": 4 * m.n,
+        "parameters": [{"name": p.name, "default": p.default, "meaning": p.meaning, "unit": p.unit} for p in m.params],
+        "arguments": argument_layout(lin),
+        "functions": {name: {"casadi_file": f"{name}.casadi", "c_name": f"{m.name}_{name}", "meaning": meaning,
+                             "shape": list(fns[name].size_out(0)), "operations": ops[name],
+                             "casadi_bytes": sizes[name]} for name, meaning in SPRING_QUANTITIES},
+        "controls": controls,
+        "control_core": entry("control_core", ["x", "p_hat"], outputs=["y_hat", "alpha", "beta"],
+                              shapes_out=[list(laws["control_core"].size_out(i)) for i in range(3)]),
+        "torque_functions": {name: entry(name, ["m", "p"], shape=list(fns[name].size_out(0)))
+                             for name, _ in TORQUE_QUANTITIES},
+        "control_core_tau": entry("control_core_tau", ["m", "p_hat"], outputs=["y_hat", "alpha", "beta"],
+                                  shapes_out=[list(laws["control_core_tau"].size_out(i)) for i in range(3)]),
+        "measurement": {"m": "[q; dq; tau_J; dtau_J; dq_m] (5n): link position and rate, link-side joint torque "
+                             "tau_J = psi(q_m - q) and its rate (measured), motor rate", "size": 5 * m.n},
+        "springs": {
+            "joints": [{"joint": spring.joint, "law": "cubic", "psi": f"{spring.k1} phi + {spring.k3} phi^3",
+                        "phi": "q_m - q", "parameters": [str(spring.k1), str(spring.k3)],
+                        "deflection_range": [-spring.deflection_range, spring.deflection_range]}],
+            "inverse": {"method": "newton", "steps": NEWTON_STEPS, "start": "tau_J / k1"},
+            "functions": {name: entry(name, inputs) for name, inputs in
+                          (("spring", ["phi", "p"]), ("spring_inverse", ["tau_J", "p"]))},
+        },
+        "c_sources": {fname: len((outdir / fname).read_bytes()) for fname in sorted(sources)},
+        "tools": versions,
+        "derivation_seconds": "not stored here (would break byte-identity); see build/derive-timings.json",
+    }
+    progress("report")
+    (outdir / "REPORT.md").write_text(_report(lin, ops))
+    lines = json.dumps(manifest, indent=2).split("\n")
+    (outdir / "manifest.json").write_text("\n".join(["{" + lines[1].strip()] + lines[2:]) + "\n")
+    return manifest
+
+
+def _report(lin: Linearization, ops: Dict[str, int]) -> str:
+    """``REPORT.md``: the spring, the derived expressions (abstract psi), the paper's test, op counts."""
+    m = lin.model
+    a = lin.outputs["abstract"]
+    chk = lin.outputs["check"]
+    spring = m.springs[0]
+    tex = lambda e: sp.latex(e)  # noqa: E731
+    lines = [f"<!-- {HEADER} -->", f"# {m.name}", "", m.description, "",
+             "## Parameters", "", "| name | default | unit | meaning |", "|---|---|---|---|"]
+    lines += [f"| `{p.name}` | {p.default:g} | {p.unit} | {p.meaning} |" for p in m.params]
+    r = spring.deflection_range
+    k = {p.name: p.default for p in m.params}
+    lines += ["", "## Spring", "",
+              f"`{spring.describe()}`, `phi = q_m - q`, declared range `|phi| <= {r:g} rad`. At the defaults "
+              f"`psi'(0) = {k['k1']:g}`, `psi'(0.1) = {k['k1'] + 3 * k['k3'] * 0.01:g}`, "
+              f"`psi'({r:g}) = {k['k1'] + 3 * k['k3'] * r * r:g}` N m/rad.",
+              "", "## Derived (psi_1 = psi, psi_1_d1 = psi', psi_1_d2 = psi'' of phi)", ""]
+    for name in ("f", "T", "alpha", "beta", "ad", "T_tau", "alpha_tau", "beta_tau"):
+        lines += [f"- `{name}`: $" + tex(a[name]) + "$"]
+    lines += ["", "## The paper's feedback-linearizability test", "",
+              "$\\det[g, ad_f g, ad_f^2 g, ad_f^3 g] = " + tex(chk["controllability"]) + "$: rank 4 exactly "
+              "where $\\psi' \\ne 0$, i.e. on the whole declared range ($\\psi' > 0$ there).", "",
+              "Involutivity of span$\\{g, ad_f g, ad_f^2 g\\}$: $\\det[g, ad_f g, ad_f^2 g, [v_i, v_j]]$ = "
+              + ", ".join(f"{e} for $(v_{i}, v_{j})$" for (i, j), e in chk["involutive"])
+              + " (every bracket lies in the span, for any $\\psi$).", "",
+              "## Operations", "", "| function | operations |", "|---|---|"]
+    lines += [f"| `{m.name}_{name}` | {n} |" for name, n in ops.items()]
+    return "\n".join(lines) + "\n"

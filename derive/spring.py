@@ -1,0 +1,319 @@
+"""Nonlinear joint springs ``tau_J = psi(phi)``, ``phi = q_m - q``, and their feedback linearization.
+
+The linear model (:mod:`derive.model_base`) has ``tau_J = K (q_m - q)``. A harmonic drive stiffens
+with the deflection; the usual fit is the cubic ``psi(phi) = k1 phi + k3 phi^3``. With such a spring
+the model is::
+
+    D(q) ddq + h(q, dq) = psi(q_m - q)
+    J_m ddq_m + B_m dq_m + psi(q_m - q) = u
+
+and the linearizing coordinates carry the spring and its stiffness::
+
+    y3 = D^-1 (psi(phi) - h),   y4 = L_f y3 (contains psi'(phi) (dq_m - dq)),
+    beta = L_g y4^-1 = J_m D / psi'(phi),   alpha = -beta L_f y4
+
+Everything is derived, not written out: the spring enters as SymPy functions ``psi_k(phi)``
+(:func:`spring_functions`, the k-th derivative of psi, each one's derivative the next one) so
+that :func:`derive.lie.lie_derivative` and :func:`derive.lie.ad_iterates` differentiate through
+it by the chain rule; the spring law (:class:`CubicSpring`) is substituted at the end.
+
+Torque coordinates (the measurement ``m = [q; dq; tau_J; dtau_J; dq_m]``) read ``tau_J`` and
+``dtau_J`` directly; where ``psi'`` and ``psi''`` are needed they are evaluated at the deflection
+the measurement implies, ``phi_J = psi^-1(tau_J)`` (:func:`newton_inverse`, bound numerically at
+emission), and ``dphi = dtau_J / psi'(phi_J)``.
+
+Only one-joint models (``link1_hd``) for now: ``D`` is inverted in closed form. Pure math: no I/O.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Dict, List, Tuple
+
+import sympy as sp
+
+from .lie import DirectionalDerivative, ad_iterates, lie_bracket, lie_derivative
+from .linearize import Linearization
+from .model_base import FlexibleJointModel, Param, state_symbols
+from .torque import inverse_dynamics_derivatives
+
+__all__ = ["CubicSpring", "SpringError", "spring_functions", "check_spring", "make_link1_hd",
+           "linearize_spring", "newton_inverse", "NEWTON_STEPS", "LINK1_HD_RANGE"]
+
+#: Highest derivative of psi the derivation may ask for (the involutivity brackets reach psi''').
+_ORDERS = 5
+
+#: Newton steps of the emitted inverse ``phi = psi^-1(tau_J)`` (unrolled; see :func:`newton_inverse`).
+NEWTON_STEPS = 12
+
+#: Declared deflection range of ``link1_hd``, rad: ``|phi| <= LINK1_HD_RANGE``.
+LINK1_HD_RANGE = 0.25
+
+
+class SpringError(ValueError):
+    """A spring law that is not a spring on its declared range (one line, names joint and deflection)."""
+
+
+def _make_psi(k: int, joint: int):
+    def fdiff(self, argindex=1):
+        if k + 1 >= _ORDERS:
+            raise ValueError(f"spring derivative of order {k + 1} requested; only {_ORDERS - 1} are defined")
+        return spring_functions(joint)[k + 1](self.args[0])
+    name = f"psi{joint}" if k == 0 else f"psi{joint}_d{k}"
+    return type(name, (sp.Function,), {"nargs": 1, "fdiff": fdiff, "order": k, "joint": joint})
+
+
+_CLASSES: Dict[int, Tuple[type, ...]] = {}
+
+
+def spring_functions(joint: int) -> Tuple[type, ...]:
+    """``(psi, psi', psi'', ...)`` of joint ``joint`` as SymPy function classes (cached).
+
+    ``psi_k(a).diff(a) = psi_{k+1}(a)``, so SymPy's chain rule carries them through any
+    Jacobian; :meth:`CubicSpring.substitute` replaces them by the law.
+    """
+    if joint not in _CLASSES:
+        _CLASSES[joint] = tuple(_make_psi(k, joint) for k in range(_ORDERS))
+    return _CLASSES[joint]
+
+
+@dataclass(frozen=True)
+class CubicSpring:
+    """``psi(phi) = k1 phi + k3 phi^3`` (N m), ``phi`` in rad, of one joint.
+
+    Attributes
+    ----------
+    joint : int
+        Joint number, 1-based (names the ``psi`` functions and the errors).
+    k1, k3 : sympy.Symbol
+        The coefficients (runtime parameters, N m/rad and N m/rad^3).
+    deflection_range : float
+        Declared range ``|phi| <= deflection_range`` (rad) on which ``psi' > 0`` must hold.
+    """
+
+    joint: int
+    k1: sp.Symbol
+    k3: sp.Symbol
+    deflection_range: float
+
+    def law(self, phi: sp.Expr) -> sp.Expr:
+        """``psi(phi)``."""
+        return self.k1 * phi + self.k3 * phi ** 3
+
+    def derivative(self, k: int, phi: sp.Expr) -> sp.Expr:
+        """``psi^(k)(phi)``, the k-th derivative of the law."""
+        a = sp.Dummy("a", real=True)
+        return sp.diff(self.law(a), a, k).subs(a, phi) if k else self.law(phi)
+
+    def potential(self, phi: sp.Expr) -> sp.Expr:
+        """``integral_0^phi psi = k1 phi^2 / 2 + k3 phi^4 / 4`` (spring energy)."""
+        a = sp.Dummy("a", real=True)
+        return sp.integrate(self.law(a), (a, 0, phi))
+
+    def substitute(self, e):
+        """``e`` with every ``psi_k(.)`` of this joint replaced by the law's k-th derivative."""
+        for k, cls in enumerate(spring_functions(self.joint)):
+            e = e.replace(cls, lambda a, k=k: self.derivative(k, a))
+        return e
+
+    def describe(self) -> str:
+        return f"psi(phi) = {self.k1} phi + {self.k3} phi^3"
+
+
+def check_spring(model: str, spring: CubicSpring, values: Dict[str, float]) -> None:
+    """Raise :class:`SpringError` unless the coefficients are finite and ``psi' > 0`` on the range.
+
+    ``psi'(phi) = k1 + 3 k3 phi^2`` is even and monotone in ``|phi|``, so its minimum over
+    ``|phi| <= r`` is at ``phi = 0`` or ``|phi| = r``: both are checked (exact, no sampling).
+    """
+    import math
+    j = spring.joint
+    k1, k3 = (float(values[str(s)]) for s in (spring.k1, spring.k3))
+    for name, v in ((str(spring.k1), k1), (str(spring.k3), k3)):
+        if not math.isfinite(v):
+            raise SpringError(f"{model} joint {j}: spring coefficient {name} = {v!r}; expected a finite number")
+    r = float(spring.deflection_range)
+    if not (math.isfinite(r) and r > 0):
+        raise SpringError(f"{model} joint {j}: deflection range {r!r} rad; expected a finite number > 0")
+    for phi in (0.0, r):
+        stiffness = k1 + 3.0 * k3 * phi * phi
+        if not stiffness > 0:
+            raise SpringError(f"{model} joint {j}: spring stiffness psi'(phi) = {stiffness:g} N m/rad <= 0 at "
+                              f"deflection phi = {phi:g} rad (declared range |phi| <= {r:g} rad); "
+                              "expected psi' > 0 over the range")
+
+
+def newton_inverse(psi, dpsi, tau, k1, steps: int = NEWTON_STEPS):
+    """``phi`` with ``psi(phi) = tau`` by ``steps`` Newton steps from ``phi_0 = tau / k1``.
+
+    Works on numbers, SymPy or CasADi (no branches). For the cubic with ``psi' > 0`` the
+    iterates are monotone: ``psi`` is convex on ``phi > 0`` when ``k3 >= 0`` (then ``tau / k1``
+    lies beyond the root and Newton descends to it) and concave when ``k3 < 0`` (then it lies
+    short of it and Newton climbs to it); odd symmetry gives ``tau < 0``. ``k3 = 0`` is exact
+    after one step.
+    """
+    phi = tau / k1
+    for _ in range(steps):
+        phi = phi - (psi(phi) - tau) / dpsi(phi)
+    return phi
+
+
+def make_link1_hd() -> FlexibleJointModel:
+    """``link1`` with a cubic harmonic-drive spring ``psi(phi) = k1 phi + k3 phi^3``, ``phi = q_m - q``.
+
+    Values and where they come from:
+
+    * ``k1 = 75 N m/rad``: half of link1's nominal ``K = 150`` (the small-deflection stiffness of a
+      harmonic drive is well below its loaded stiffness; issue: "half the nominal");
+    * ``k3 = 2500 N m/rad^3``: the stiffness ``psi'(phi) = k1 + 3 k3 phi^2`` reaches link1's
+      ``K = 150`` at ``phi = 0.1 rad`` (``3 k3 0.1^2 = 75``), where the spring carries
+      ``psi(0.1) = 10 N m``, about the largest gravity torque ``M g0 L = 9.8 N m``: at full load
+      the drive is as stiff as link1's spring, softer below;
+    * declared deflection range ``|phi| <= 0.25 rad`` (2.5 x that load; ``psi' <= 543.75`` there).
+
+    Everything else is link1's (paper Table 1). ``K`` of the model record is ``k1 = psi'(0)``.
+    """
+    params = (
+        Param("J_l", 1.0, "link inertia about the joint axis", "kg m^2"),
+        Param("J_m", 2.0, "motor (rotor) inertia", "kg m^2"),
+        Param("k1", 75.0, "spring: linear coefficient psi'(0) (half of link1's K)", "N m/rad"),
+        Param("k3", 2500.0, "spring: cubic coefficient (psi' = 150 at phi = 0.1 rad)", "N m/rad^3"),
+        Param("M", 1.0, "link mass", "kg"),
+        Param("g0", 9.8, "gravitational acceleration", "m/s^2"),
+        Param("L", 1.0, "distance joint -> link centre of mass", "m"),
+        Param("B_m", 0.0, "motor viscous damping", "N m s/rad"),
+    )
+    (q,), (dq,), (qm,), (dqm,) = (tuple(b) for b in state_symbols(1))
+    J_l, J_m, k1, k3, M, g0, L, B_m = (sp.Symbol(p.name, real=True) for p in params)
+    spring = CubicSpring(1, k1, k3, LINK1_HD_RANGE)
+    check_spring("link1_hd", spring, {p.name: p.default for p in params})
+    return FlexibleJointModel(
+        name="link1_hd", n=1, params=params,
+        q=(q,), dq=(dq,), qm=(qm,), dqm=(dqm,),
+        D=sp.Matrix([[J_l]]), h=sp.Matrix([M * g0 * L * sp.sin(q)]), potential=-M * g0 * L * sp.cos(q),
+        K=(k1,), Jm=(J_m,), Bm=(B_m,),
+        description=(
+            "Single-link flexible joint of the paper with a cubic (harmonic-drive) spring: "
+            "J_l q'' + M g0 L sin(q) = psi(q_m - q), J_m q_m'' + B_m q_m' + psi(q_m - q) = u, "
+            "psi(phi) = k1 phi + k3 phi^3 (psi' > 0 on |phi| <= 0.25 rad)."
+        ),
+        springs=(spring,),
+    )
+
+
+def _abstract_spring(m: FlexibleJointModel) -> sp.Matrix:
+    """``[psi_1(q_m1 - q_1); ...]`` with the abstract spring functions."""
+    return sp.Matrix([spring_functions(i + 1)[0](m.qm[i] - m.q[i]) for i in range(m.n)])
+
+
+def _substitute(m: FlexibleJointModel, e):
+    for s in m.springs:
+        e = s.substitute(e)
+    return e
+
+
+def _spans(vectors: List[sp.Matrix], w: sp.Matrix) -> sp.Expr:
+    """``det [v_1 .. v_k w ...]`` restricted: 0 iff ``w`` lies in the span (square case k + 1 = N)."""
+    return sp.simplify(sp.Matrix.hstack(*vectors, w).det())
+
+
+def linearize_spring(m: FlexibleJointModel) -> Linearization:
+    """f, g, brackets, T, alpha, beta and the torque-coordinate laws of a model with nonlinear springs.
+
+    Returns
+    -------
+    Linearization
+        ``Y3 = Y4 = ()`` (everything explicit). ``outputs``: ``f`` (4, 1), ``g`` (4, 1), ``ad`` (4, 4),
+        ``T`` (4, 1), ``alpha`` (1, 1), ``beta`` (1, 1), ``energy``, ``inertia``; the torque-coordinate
+        ``T_tau``, ``alpha_tau``, ``beta_tau`` of the measurement symbols ``measurement`` (5,) with the
+        implied deflection ``phi_J`` (``implied``, bound by Newton at emission); and the report's
+        ``check`` (the controllability determinant and the involutivity determinants, abstract psi).
+    """
+    if m.n != 1:
+        raise ValueError(f"{m.name}: nonlinear springs are derived for one-joint models only (n = {m.n})")
+    x = m.state
+    q, dq, qm, dqm = (sp.Matrix(b) for b in (m.q, m.dq, m.qm, m.dqm))
+    Dinv = m.D.inv()
+    Jinv = sp.diag(*[1 / j for j in m.Jm])
+    Bd = sp.diag(*m.Bm)
+    psi = _abstract_spring(m)
+    f = sp.Matrix.vstack(dq, Dinv * (psi - m.h), dqm, Jinv * (-psi - Bd * dqm))
+    g = sp.Matrix.vstack(sp.zeros(3 * m.n, m.n), Jinv)
+    # y1 = q; y_{k+1} = L_f y_k; relative degree 4: L_g y1..y3 = 0 (checked)
+    ys = [q]
+    for _ in range(3):
+        ys.append(lie_derivative(ys[-1], f, x).applyfunc(sp.expand))
+    for k, y in enumerate(ys[:3]):
+        if not sp.simplify(lie_derivative(y, g, x)).is_zero_matrix:
+            raise ValueError(f"{m.name}: L_g y{k + 1} != 0; the output q does not have relative degree 4")
+    a = lie_derivative(ys[3], f, x)
+    b = lie_derivative(ys[3], g, x)
+    beta = b.inv().applyfunc(sp.factor)
+    alpha = (-beta * a).applyfunc(sp.expand)
+    ad = ad_iterates(f, g, x, 3)
+    # the paper's test: rank [g, ad_f g, ad_f^2 g, ad_f^3 g] = 4 and span{g, ad_f g, ad_f^2 g} involutive
+    cols = [ad[:, k] for k in range(4)]
+    controllability = sp.factor(sp.simplify(ad.det()))
+    involutive = [((i, j), _spans(cols[:3], lie_bracket(cols[i], cols[j], x))) for i in range(3) for j in range(i + 1, 3)]
+
+    phi = qm - q
+    energy = ((dq.T * m.D * dq)[0, 0] / 2 + sum(m.Jm[i] * m.dqm[i] ** 2 for i in range(m.n)) / 2
+              + sum(s.potential(phi[s.joint - 1]) for s in m.springs) + m.potential)
+
+    torque = _torque_form(m, ys)
+    state = {"f": f, "g": g, "ad": ad, "T": sp.Matrix.vstack(*ys), "alpha": alpha, "beta": beta,
+             "energy": sp.Matrix([[energy]]), "inertia": m.D}
+    outputs = {name: _substitute(m, e) for name, e in state.items()}
+    outputs.update({name: _substitute(m, e) for name, e in torque.items() if name not in ("measurement", "implied")})
+    outputs["measurement"] = torque["measurement"]
+    outputs["implied"] = torque["implied"]
+    outputs["abstract"] = {name: e for name, e in state.items()}
+    outputs["abstract"].update({name: torque[name] for name in ("T_tau", "alpha_tau", "beta_tau")})
+    outputs["check"] = {"controllability": controllability, "involutive": involutive}
+    return Linearization(model=m, Y3=(), Y4=(), W=sp.zeros(0, 0), rhs3=f[m.n:2 * m.n, :], rhs4=None,
+                         outputs=outputs)
+
+
+def _torque_form(m: FlexibleJointModel, ys) -> Dict[str, object]:
+    """``T_tau``, ``alpha_tau``, ``beta_tau`` of ``m = [q; dq; tau_J; dtau_J; dq_m]`` (abstract psi).
+
+    As :mod:`derive.torque` (``E0 = D y3 + h - tau_J``, differentiated twice along the motion), with
+    ``ddtau_J`` the second time derivative of ``tau_J = psi(phi)``: ``psi''(phi) dphi^2 + psi'(phi)
+    ddphi``, ``ddphi = ddq_m - ddq = J_m^-1 (u - tau_J - B_m dq_m) - y3``, ``dphi = dtau_J / psi'(phi)``
+    at the implied ``phi = phi_J``. ``A = nu`` (``A = dy4/dt``) is solved for ``u = alpha_tau + beta_tau nu``.
+    """
+    n = m.n
+    tau = tuple(sp.Symbol(f"tauJ{i + 1}", real=True) for i in range(n))
+    dtau = tuple(sp.Symbol(f"dtauJ{i + 1}", real=True) for i in range(n))
+    phiJ = tuple(sp.Symbol(f"phiJ{i + 1}", real=True) for i in range(n))
+    Y3 = tuple(sp.Symbol(f"y3_{i + 1}", real=True) for i in range(n))
+    Y4 = tuple(sp.Symbol(f"y4_{i + 1}", real=True) for i in range(n))
+    Dinv = m.D.inv()
+    R1, W = inverse_dynamics_derivatives(m, Y3, Y4)
+    y3 = Dinv * (sp.Matrix(tau) - m.h)
+    y4 = Dinv * (sp.Matrix(dtau) - R1)
+    u = tuple(sp.Symbol(f"u{i + 1}", real=True) for i in range(n))
+    nu = tuple(sp.Symbol(f"nu{i + 1}", real=True) for i in range(n))
+    # second time derivative of tau_J = psi(phi) along phi -> dphi -> ddphi (chain rule through psi_k)
+    dphi, ddphi = (tuple(sp.Symbol(f"{p}{i + 1}", real=True) for i in range(n)) for p in ("dphi", "ddphi"))
+    ddtau = []
+    for i in range(n):
+        d_t = DirectionalDerivative({phiJ[i]: dphi[i], dphi[i]: ddphi[i]})
+        psi_i = spring_functions(i + 1)
+        ddtau.append(d_t(d_t(psi_i[0](phiJ[i]))).subs(
+            ddphi[i], (u[i] - tau[i] - m.Bm[i] * m.dqm[i]) / m.Jm[i] - Y3[i]).subs(
+            dphi[i], dtau[i] / psi_i[1](phiJ[i])))
+    # E2 = D A + W - ddtau_J = 0 with A = nu, solved for u (linear in u)
+    E2 = m.D * sp.Matrix(nu) + W - sp.Matrix(ddtau)
+    bind = {Y3[i]: y3[i] for i in range(n)}
+    bind.update({Y4[i]: y4[i].subs(bind) for i in range(n)})
+    E2 = E2.subs(bind)
+    sol = sp.solve(list(E2), list(u), dict=True)
+    if len(sol) != 1:
+        raise ValueError(f"{m.name}: E2 = 0 is not uniquely solvable for u")
+    u_sol = sp.Matrix([sol[0][ui] for ui in u])
+    alpha = u_sol.subs({v: 0 for v in nu}).applyfunc(sp.expand)
+    beta = u_sol.jacobian(nu).applyfunc(sp.factor)
+    return {"T_tau": sp.Matrix.vstack(sp.Matrix(m.q), sp.Matrix(m.dq), y3, y4.subs(bind)),
+            "alpha_tau": alpha, "beta_tau": beta,
+            "measurement": tuple(m.q) + tuple(m.dq) + tau + dtau + tuple(m.dqm), "implied": phiJ}
