@@ -195,20 +195,22 @@ def _active_set(search, best, best_cost, worst, b, P, screen_draws, duration, ac
     Each pass adds up to :data:`ACTIVE_ADD` draws of the final check that cost more than the
     screening objective, runs :data:`ACTIVE_ROUNDS` rounds of the pattern search on them at
     ``active_duration`` (from factor sqrt(2); lengthened to :data:`LATE_MARGIN` x the latest
-    divergence time of the added draws) and repeats the final check.
+    divergence time in the final check of its draws, screening ones included: a pass runs even when
+    no draw is added if that lengthens the runs) and repeats the final check.
     """
     prob = search.prob
     rows = np.arange(screen_draws)
     for k in range(passes):
         run = run_cost(b, prob.thresholds)
         add = [int(i) for i in np.argsort(run)[::-1][:ACTIVE_ADD] if run[i] > best_cost and i not in rows]
-        if not add:
+        rows = np.r_[rows, add].astype(int)
+        # a run that diverged late must be run past that time, or the refinement cannot see it (also when
+        # the draw is a screening one: its short screening runs ended before it failed)
+        late = [float(b.divergence_time[i]) for i in rows if b.diverged[i] and np.isfinite(b.divergence_time[i])]
+        longer = min(duration, max(active_duration, LATE_MARGIN * max(late))) if late else active_duration
+        if not add and longer <= active_duration:
             break
-        rows = np.r_[rows, add]
-        # a run that diverged late must be run past that time, or the refinement cannot see it
-        late = [float(b.divergence_time[i]) for i in add if b.diverged[i] and np.isfinite(b.divergence_time[i])]
-        if late:
-            active_duration = min(duration, max(active_duration, LATE_MARGIN * max(late)))
+        active_duration = longer
         best_cost = evaluate_gains(prob, best, P[rows], active_duration, seed + rows)[0]
         say(f"active set {k + 1}/{passes}: + draws {add} (final-check costs "
             f"{', '.join(f'{run[i]:.3g}' for i in add)}); {len(rows)} draws x {active_duration:g} s: {best_cost:.4g}")
