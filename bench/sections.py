@@ -17,8 +17,14 @@ from .timing import log
 
 __all__ = ["SECTIONS", "plan"]
 
-SECTIONS = ("derive", "alpha_beta", "spatial", "closed_loop", "batch", "realtime", "sampled_batch", "scaling",
-            "sampled_loop", "design")
+SECTIONS = ("derive", "alpha_beta", "spatial", "closed_loop", "batch", "realtime", "controller_step", "sampled_batch",
+            "scaling", "sampled_loop", "design")
+
+
+def controller_step_section(work: Path, steps: int, checks: list) -> dict:
+    """The exported controller library's step (:mod:`bench.controller_step`): the Panda design, timed in C."""
+    from .controller_step import bench_controller_step
+    return bench_controller_step(work, steps, checks, check)
 
 
 def sampled_batch_section(checks: list) -> dict:
@@ -59,6 +65,7 @@ def plan(work: Path, quick: bool, checks: list, results: dict) -> list:
             ("closed_loop", lambda: bench_closed_loop(work, reps, slow, checks)),
             ("batch", lambda: bench_batch(reps, slow, checks)),
             ("realtime", lambda: bench_realtime(work, 10 ** 4 if quick else 10 ** 6, checks, check)),
+            ("controller_step", lambda: controller_step_section(work, 10 ** 4 if quick else 10 ** 5, checks)),
             ("sampled_batch", lambda: sampled_batch_section(checks)),
             ("scaling", lambda: scaling_section(work, results)),
             ("sampled_loop", lambda: sampled_loop_section()),

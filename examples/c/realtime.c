@@ -37,7 +37,8 @@
 
 /* ---- configuration per model (gains are runtime inputs of the law: no re-derive to retune) ---- */
 #if NU == 7 /* panda: torque-sensed, sines about Franka's ready pose, 1 kHz, effort limits with anti-windup */
-/* hand-found gains (fjm_runtime.control.defaults.PANDA_ISMC_TAU_START), not the result of a search */
+/* hand-found gains (fjm_runtime.control.defaults.PANDA_ISMC_TAU_START), not the result of a search;
+ * the controller `fjm design` verified (its gains, noise, delay) is designed_controller.c */
 #define RATE_HZ 1000.0
 #define LAMBDA 80.0
 #define K_S 2000.0

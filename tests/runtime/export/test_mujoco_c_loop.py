@@ -1,0 +1,109 @@
+"""examples/mujoco_c_controller.py: the exported C library of the Panda's shipped design closes the loop
+around MuJoCo's COMPLETE Panda (rotor coupling the law was not designed with) with the design's
+sensor noise and one sample of delay, and holds the design's thresholds.
+
+The torques the library sent are, sample by sample, the simulator's controller's: at every sample the
+simulator's sample step (:func:`fjm_runtime.sim.sample_step.sample_step_function`) is evaluated on a
+step state made of MuJoCo's plant state and the library's controller state read back with
+``get_state``, with the run's noise (so its reading is the library's); its applied torque must be the
+library's torque and its next controller state the library's next state (1e-9 of each joint's
+largest torque / each slot's largest value). Free-running replays are not compared: the predictor and
+the law without the plant amplify rounding ~1.26x per sample (test_controller_library.py).
+"""
+from __future__ import annotations
+
+import importlib.util
+
+import casadi as ca
+import numpy as np
+import pytest
+
+from fjm_runtime.ccache import compile_library
+from fjm_runtime.export.controller import amalgamation, export_controller
+from fjm_runtime.sim.sample_step import sample_step_function
+from support.paths import REPO
+
+pytest.importorskip("mujoco")
+
+STRICT = ("-O2", "-fPIC", "-shared", "-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic")
+
+
+def _example():
+    spec = importlib.util.spec_from_file_location("mujoco_c_controller", REPO / "examples" / "mujoco_c_controller.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+@pytest.fixture(scope="module")
+def loop(tmp_path_factory):
+    """``(example module, design, compiled library path)``: the library built through the C cache
+    (the same strict flags as the example's Makefile; ``make`` itself is exercised by the CLI test)."""
+    ex = _example()
+    design = ex.load_design()
+    out = tmp_path_factory.mktemp("panda_lib")
+    export_controller(design, out)
+    so = compile_library(amalgamation(out, design.name), f"{design.name}_controller", STRICT)
+    return ex, design, so
+
+
+def _step_states(design, res):
+    """The simulator's step state ``w_k`` of every sample: MuJoCo's x_k, the library's controller state
+    c_k (before its step) and the run's tau_J offset, shape (N+1, nw)."""
+    L = design.layout
+    keep = np.ones(L.nw, dtype=bool)
+    keep[:L.nx] = False
+    keep[L.extra_slices()[1]] = False
+    W = np.zeros((res.t.size, L.nw))
+    W[:, :L.nx] = res.x
+    W[:, keep] = res.c
+    if L.offset:
+        W[:, L.extra_slices()[1]] = res.offset
+    return W
+
+
+def _runtime_torques(design, res):
+    """The simulator's sample step on every ``w_k``: ``(applied torques (N+1, n), next controller states)``."""
+    L = design.layout
+    F = sample_step_function(design.model, design.controller, L)
+    W = _step_states(design, res)
+    Fm = F.map(res.t.size)
+    w_next, aux = Fm(ca.DM(W.T), ca.DM(res.r.T), ca.DM(res.noise.T), ca.repmat(ca.DM(res.p), 1, res.t.size))
+    w_next, aux = np.asarray(w_next).T, np.asarray(aux).T
+    return aux[:, :L.n], design.cstate.from_step_state(w_next)
+
+
+def _relative(A, B):
+    scale = np.maximum(np.max(np.abs(B), axis=0), 1e-300)
+    return float(np.max(np.max(np.abs(A - B), axis=0) / scale))
+
+
+def _check(loop, duration, tmp_path):
+    ex, design, so = loop
+    res = ex.run(design, ex.CController(so, design), duration, tmp_path, record=True)
+    fig = ex.figures(res)
+    print("\n" + ex.report(design, res, fig))
+    U_ref, C_next_ref = _runtime_torques(design, res)
+    rel_u = _relative(res.u, U_ref)
+    rel_c = _relative(res.c[1:], C_next_ref[:-1])
+    print(f"C library vs the simulator's sample step, per sample: torque {rel_u:.2e}, controller state {rel_c:.2e} "
+          "(relative to each slot's largest value)")
+    assert np.all(res.status != ex.NOT_FINITE)
+    assert rel_u <= 1e-9, f"the library's torques differ from the simulator's controller by {rel_u:.3g}"
+    assert rel_c <= 1e-9, f"the library's controller state differs from the simulator's by {rel_c:.3g}"
+    assert fig["holds"], ex.report(design, res, fig)
+    return res, fig
+
+
+@pytest.mark.slow
+def test_shipped_design_holds_on_mujoco_complete_panda(loop, tmp_path):
+    """1.5 s: the design's thresholds hold; the torques are the simulator's controller's to 1e-9."""
+    res, fig = _check(loop, 1.5, tmp_path)
+    assert np.max(fig["rms"]) > 0.0 and np.max(fig["jitter"][:4]) > 0.1   # noise reached the loop
+
+
+@pytest.mark.slow
+@pytest.mark.exhaustive
+def test_shipped_design_holds_on_mujoco_complete_panda_10s(loop, tmp_path):
+    """The design's 10 s task."""
+    _check(loop, 10.0, tmp_path)
