@@ -120,9 +120,11 @@ def derive_into(root: Path, models: List[str], log=print,
     longer than :data:`derive.guard.LONG_SECONDS` prints its estimate and one
     stderr line per stage (model, linearize, emit: ...); the others print one line.
     """
+    from .emit.spring import write_spring_model
     from .emit.writer import write_model
     from .linearize import linearize
     from .registry import build
+    from .spring import linearize_spring
 
     timings: Dict[str, Dict[str, float]] = {}
     builders, estimates = builders or {}, estimates or {}
@@ -139,10 +141,12 @@ def derive_into(root: Path, models: List[str], log=print,
         stage("model (kinematics, dynamics)")
         model = builders[name]() if name in builders else build(name)
         stage("linearize (Lie derivatives, T, alpha, beta, brackets)")
-        lin = linearize(model)
+        # nonlinear springs take their own (explicit) derivation and emitter, with the same names and layout
+        spring = model.springs is not None
+        lin = linearize_spring(model) if spring else linearize(model)
         t1 = time.perf_counter()
         extra = {"progress": lambda what: stage(f"emit: {what}")} if long else {}
-        manifest = write_model(lin, root / name, **extra)
+        manifest = (write_spring_model if spring else write_model)(lin, root / name, **extra)
         stage.done()
         t2 = time.perf_counter()
         ops = sum(f["operations"] for f in manifest["functions"].values())

@@ -225,9 +225,6 @@ def linearize(m: FlexibleJointModel, symbolic_brackets: Optional[bool] = None,
     """
     if m.coupling is not None:
         return complete_plant(m)
-    if m.springs is not None:  # nonlinear springs: explicit derivation (derive.spring)
-        from .spring import linearize_spring
-        return linearize_spring(m)
     n = m.n
     q, dq, qm, dqm = (sp.Matrix(b) for b in (m.q, m.dq, m.qm, m.dqm))
     Kd, Jd, Bd = _diag(m.K), _diag(m.Jm), _diag(m.Bm)

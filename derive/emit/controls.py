@@ -243,7 +243,7 @@ def build_core(model, functions: Dict[str, ca.Function], body=None) -> ca.Functi
                        ["x", "p_hat"], ["y_hat", "alpha", "beta"])
 
 
-def _law_pair(model, kind: str, core: ca.Function, n_meas: int, first: str, idx) -> Dict[str, ca.Function]:
+def law_pair(model, kind: str, core: ca.Function, n_meas: int, first: str, idx) -> Dict[str, ca.Function]:
     """``control_<kind>`` (MX, calling ``core`` once) and, when stateful, ``control_<kind>_zdot`` (SX).
 
     ``first`` names the first argument (``x``, 4n, or ``m``, 5n); ``kind`` may be a torque
@@ -309,11 +309,11 @@ def build_controls(model, functions: Dict[str, ca.Function],
     core = build_core(model, functions, core_body) if core is None else core
     out: Dict[str, ca.Function] = {"control_core": core}
     for kind, _ in KINDS:
-        out.update(_law_pair(model, kind, core, 4 * n, "x", idx))
+        out.update(law_pair(model, kind, core, 4 * n, "x", idx))
     if torque is not None:
         out["control_core_tau"] = torque["control_core_tau"]
         for kind, _ in TORQUE_KINDS:
-            out.update(_law_pair(model, kind, torque["control_core_tau"], 5 * n, "m", idx))
+            out.update(law_pair(model, kind, torque["control_core_tau"], 5 * n, "m", idx))
         out["control_pdg"] = torque["control_pdg"]
     return out
 

@@ -31,11 +31,11 @@ import sympy as sp
 
 from ..linearize import Linearization
 from ..spring import NEWTON_STEPS, newton_inverse, spring_functions
-from .controls import KINDS, TORQUE_KINDS, _law_pair, build_core, manifest_entry
+from .controls import KINDS, TORQUE_KINDS, law_pair, build_core, manifest_entry
 from .functions import QUANTITIES, operation_count
 from .sx import SympyToSX
 from .torque import TORQUE_QUANTITIES
-from .writer import HEADER, _comment_block, _generate_c, _layout_lines, argument_layout, tool_versions
+from .writer import HEADER, argument_layout, argument_lines, comment_block, generate_c, tool_versions
 
 __all__ = ["EMITTED_KINDS", "build_spring_functions", "write_spring_model"]
 
@@ -130,7 +130,7 @@ def build_spring_laws(lin: Linearization, fns: Dict[str, ca.Function]) -> Dict[s
     out = {"control_core": core, "control_core_tau": core_tau}
     for kind in EMITTED_KINDS:
         tau = kind.endswith("_tau")
-        out.update(_law_pair(m, kind, core_tau if tau else core, (5 if tau else 4) * n, "m" if tau else "x", None))
+        out.update(law_pair(m, kind, core_tau if tau else core, (5 if tau else 4) * n, "m" if tau else "x", None))
     return out
 
 
@@ -179,18 +179,18 @@ def write_spring_model(lin: Linearization, outdir: Path,
     progress(".casadi files")
     for name, fn in everything.items():
         lines = [HEADER, f"model: {m.name}; function: {fn.name()} -- {_meaning(name) if name not in dict(SPRING_QUANTITIES) else dict(SPRING_QUANTITIES)[name]}",
-                 f"tools: casadi {versions['casadi']}, sympy {versions['sympy']}", *_layout_lines(lin)]
+                 f"tools: casadi {versions['casadi']}, sympy {versions['sympy']}", *argument_lines(lin)]
         if name.startswith("control_"):
             lines += _law_lines()
-        text = _comment_block(lines + [f"operations: {ops[name]}"], "# ") + fn.serialize() + "\n"
+        text = comment_block(lines + [f"operations: {ops[name]}"], "# ") + fn.serialize() + "\n"
         (outdir / f"{name}.casadi").write_text(text)
         sizes[name] = len(text.encode())
     progress("C sources")
     with tempfile.TemporaryDirectory() as tmp:
-        sources = _generate_c(m.name, everything, Path(tmp))
-    c_header = _comment_block(
+        sources = generate_c(m.name, everything, Path(tmp))
+    c_header = comment_block(
         [HEADER, f"model: {m.name} -- {m.description}", f"tools: casadi {versions['casadi']}, sympy {versions['sympy']}",
-         *_layout_lines(lin), *_law_lines(),
+         *argument_lines(lin), *_law_lines(),
          "operations: " + ", ".join(f"{m.name}_{k} {v}" for k, v in ops.items())], " * ")
     for fname, body in sources.items():
         (outdir / fname).write_text("/* " + c_header[3:] + " */\n" + body)
@@ -199,19 +199,7 @@ def write_spring_model(lin: Linearization, outdir: Path,
         return {"casadi_file": f"{name}.casadi", "c_name": f"{m.name}_{name}", "meaning": _meaning(name),
                 "inputs": inputs, **extra, "operations": ops[name], "casadi_bytes": sizes[name]}
 
-    controls = {}
-    for kind in EMITTED_KINDS:
-        first = "m" if kind.endswith("_tau") else "x"
-        e = entry(f"control_{kind}", [first, "z", "r", "p", "gains"], outputs=["u", "s", "z_dot", "u_cmd", "y_hat"])
-        if f"control_{kind}_zdot" in laws:
-            z = f"control_{kind}_zdot"
-            e["zdot"] = {"casadi_file": f"{z}.casadi", "c_name": f"{m.name}_{z}",
-                         "inputs": [first, "z", "r", "p", "gains", "u_cmd", "u"], "operations": ops[z]}
-        e.update(manifest_entry(kind, m.n))
-        if kind.endswith("_tau"):
-            e["measurement"]["meaning"] = ("first argument is the torque measurement m (5n), not the state x; "
-                                           "tau_J = psi(q_m - q), dtau_J its rate, both measured")
-        controls[kind] = e
+    controls = _control_entries(m, laws, ops, entry)
     spring = m.springs[0]
     manifest = {
         "header": HEADER, "model": m.name, "description": m.description, "n": m.n, "nx": 4 * m.n,
@@ -246,6 +234,24 @@ def write_spring_model(lin: Linearization, outdir: Path,
     lines = json.dumps(manifest, indent=2).split("\n")
     (outdir / "manifest.json").write_text("\n".join(["{" + lines[1].strip()] + lines[2:]) + "\n")
     return manifest
+
+
+def _control_entries(m, laws, ops, entry) -> Dict[str, dict]:
+    """The manifest's ``controls``: one entry per emitted law (its zdot Function when stateful)."""
+    controls = {}
+    for kind in EMITTED_KINDS:
+        first = "m" if kind.endswith("_tau") else "x"
+        e = entry(f"control_{kind}", [first, "z", "r", "p", "gains"], outputs=["u", "s", "z_dot", "u_cmd", "y_hat"])
+        if f"control_{kind}_zdot" in laws:
+            z = f"control_{kind}_zdot"
+            e["zdot"] = {"casadi_file": f"{z}.casadi", "c_name": f"{m.name}_{z}",
+                         "inputs": [first, "z", "r", "p", "gains", "u_cmd", "u"], "operations": ops[z]}
+        e.update(manifest_entry(kind, m.n))
+        if kind.endswith("_tau"):
+            e["measurement"]["meaning"] = ("first argument is the torque measurement m (5n), not the state x; "
+                                           "tau_J = psi(q_m - q), dtau_J its rate, both measured")
+        controls[kind] = e
+    return controls
 
 
 def _report(lin: Linearization, ops: Dict[str, int]) -> str:

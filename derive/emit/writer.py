@@ -56,11 +56,11 @@ def argument_layout(lin: Linearization) -> Dict[str, List[str]]:
     }
 
 
-def _comment_block(lines: List[str], prefix: str) -> str:
+def comment_block(lines: List[str], prefix: str) -> str:
     return "".join(f"{prefix}{line}".rstrip() + "\n" for line in lines)
 
 
-def _layout_lines(lin: Linearization) -> List[str]:
+def argument_lines(lin: Linearization) -> List[str]:
     lay = argument_layout(lin)
     return [
         "arguments: x = [q; dq; q_m; dq_m] (4n), p in param_names order",
@@ -82,7 +82,7 @@ def _silence_unused(src: str) -> str:
     return _MEM.sub(r"\1\n  (void)mem;", _BODY.sub(r"\1\n  (void)arg; (void)iw; (void)w; (void)mem;", src))
 
 
-def _generate_c(model: str, functions: Dict[str, ca.Function], workdir: Path) -> Dict[str, str]:
+def generate_c(model: str, functions: Dict[str, ca.Function], workdir: Path) -> Dict[str, str]:
     cg = ca.CodeGenerator(f"{model}.c", {"with_header": True})
     for name in functions:  # model quantities, then the control laws, in file order
         cg.add(functions[name])
@@ -116,7 +116,7 @@ def _write_casadi_files(lin: Linearization, outdir: Path, functions, controls, o
 
     def write_casadi(name: str, fn: ca.Function, meaning: str, layout, n_ops) -> None:
         """``<name>.casadi``: the header comment block, then the serialized Function."""
-        text = _comment_block(
+        text = comment_block(
             [HEADER, f"model: {m.name}; function: {fn.name()} -- {meaning}",
              f"tools: casadi {versions['casadi']}, sympy {versions['sympy']}",
              *layout, f"operations: {n_ops}"], "# ",
@@ -125,9 +125,9 @@ def _write_casadi_files(lin: Linearization, outdir: Path, functions, controls, o
         sizes[name] = len(text.encode())
 
     for name, meaning in quantities:
-        write_casadi(name, functions[name], meaning, _layout_lines(lin), ops[name])
+        write_casadi(name, functions[name], meaning, argument_lines(lin), ops[name])
     for name, fn in controls.items():
-        write_casadi(name, fn, control_meaning[name], _layout_lines(lin) + layout_lines(m.n),
+        write_casadi(name, fn, control_meaning[name], argument_lines(lin) + layout_lines(m.n),
                      control_ops[name])
     return sizes
 
@@ -198,11 +198,11 @@ def _write_c_sources(lin: Linearization, outdir: Path, c_fns, ops, control_ops,
     """``<model>.c`` and ``<model>.h`` (from :func:`c_functions`) with the header comment; returns their names."""
     m = lin.model
     with tempfile.TemporaryDirectory() as tmp:
-        sources = _generate_c(m.name, c_fns, Path(tmp))
-    c_header = _comment_block(
+        sources = generate_c(m.name, c_fns, Path(tmp))
+    c_header = comment_block(
         [HEADER, f"model: {m.name} -- {m.description}",
          f"tools: casadi {versions['casadi']}, sympy {versions['sympy']}",
-         *_layout_lines(lin), *layout_lines(m.n),
+         *argument_lines(lin), *layout_lines(m.n),
          "operations: " + ", ".join(f"{m.name}_{k} {v}" for k, v in {**ops, **control_ops}.items())], " * ",
     )
     for fname, body in sources.items():
@@ -269,9 +269,6 @@ def write_model(lin: Linearization, outdir: Path,
         The manifest written to ``manifest.json``.
     """
     m = lin.model
-    if m.springs is not None:  # nonlinear springs: their own emitter (same names and layout)
-        from .spring import write_spring_model
-        return write_spring_model(lin, outdir, progress)
     progress = progress or (lambda stage: None)
     outdir.mkdir(parents=True, exist_ok=True)
     complete = m.coupling is not None  # complete model: plant functions only, no static FL laws

@@ -22,7 +22,7 @@ from typing import Optional, Tuple
 
 import numpy as np
 
-from ..control.gains_spec import _is_real, check_gains_spec  # noqa: F401 - re-exported
+from ..control.gains_spec import is_real, check_gains_spec  # noqa: F401 - re-exported
 from ..validation import FjmValueError
 
 __all__ = ["DEFAULT_MAX_MEMORY_GB", "ERROR_BOUND", "MAX_SUBSTEPS", "PEAK_FACTOR", "WORKSPACE_BOUND",
@@ -47,7 +47,7 @@ def check_pole(lam, rate: float, where: str) -> float:
     ``pi / T`` (rad/s) cannot be realized by a law sampled at ``rate`` (and ``lam^4`` overflows long
     before a float does)."""
     top = math.pi * rate
-    if not (_is_real(lam) and math.isfinite(lam) and 0 < lam <= top):
+    if not (is_real(lam) and math.isfinite(lam) and 0 < lam <= top):
         raise FjmValueError(f"{where} {lam!r}: expected a pole magnitude 0 < lam <= pi x rate = {top:.4g} 1/s "
                             f"(the Nyquist frequency at {rate:g} Hz)")
     return float(lam)

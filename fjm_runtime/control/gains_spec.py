@@ -12,7 +12,7 @@ import numpy as np
 
 from ..validation import FjmValueError
 
-__all__ = ["check_gains_spec"]
+__all__ = ["check_gains_spec", "is_real"]
 
 # gains a file may set: (sign rule, unit); per-joint unless noted in _SCALAR
 _GAIN_RULES = {"lam": ("> 0", "1/s"), "k_s": (">= 0", "rad/s^4"), "delta": ("> 0", "rad/s^3"),
@@ -36,7 +36,7 @@ def _joints_of(spec: dict) -> Optional[int]:
     return None
 
 
-def _is_real(x) -> bool:
+def is_real(x) -> bool:
     return isinstance(x, (int, float)) and not isinstance(x, bool)
 
 
@@ -73,7 +73,7 @@ def check_gains_spec(spec: dict, where: str, model) -> None:
         shape = "a finite number" if key in _SCALAR else f"a finite number or a list of {n}"
         expected = f"expected {shape} {rule} ({unit})"
         vals = v if (isinstance(v, list) and key not in _SCALAR) else [v]
-        if not all(_is_real(x) for x in vals) or not vals:
+        if not all(is_real(x) for x in vals) or not vals:
             raise FjmValueError(f"{where}: gains.{key} = {v!r}; {expected}")
         if isinstance(v, list) and len(v) not in (1, n):
             raise FjmValueError(f"{where}: gains.{key} has {len(v)} entries; {expected} for {name}")
