@@ -184,6 +184,7 @@ def test_interrupt_during_swap_keeps_a_complete_tree(marked_copy, sig):
     assert not leftovers, f"left behind next to the output: {leftovers}"
 
 
+@pytest.mark.exhaustive  # ~10 s of derive subprocesses: .ci/run runs it after make test (make test stays under 5 minutes)
 def test_sigkill_between_the_renames_is_recovered(marked_copy):
     """SIGKILL cannot be deferred: killed right after the live tree was moved aside, ``generated/``
     is missing and ``generated.old`` holds the previous tree. ``recover()`` (run first by every

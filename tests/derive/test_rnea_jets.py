@@ -114,6 +114,7 @@ def test_jets_equal_finite_differences_of_pinocchio_rnea_on_the_panda():
         assert _rel(t1, first) <= 1e-7 and _rel(t2, second) <= 1e-7
 
 
+@pytest.mark.exhaustive  # ~7 s: .ci/run runs it after make test (make test stays under 5 minutes)
 def test_jets_equal_finite_differences_on_a_tree_a_payload_and_symbolic_inertials(tmp_path):
     rng = np.random.default_rng(31)
     for m in (build("baxter"), build("panda"), _chain_with_symbolic_link(tmp_path)):
@@ -126,7 +127,7 @@ def test_jets_equal_finite_differences_on_a_tree_a_payload_and_symbolic_inertial
         assert _rel(t1, first) <= 1e-7 and _rel(t2, second) <= 1e-7, m.name
 
 
-@pytest.mark.parametrize("name", ["panda", "baxter"])
+@pytest.mark.parametrize("name", ["panda", pytest.param("baxter", marks=pytest.mark.exhaustive)])  # baxter ~6 s
 def test_kernel_on_the_jets_equals_the_kernel_by_ad(name):
     m = build(name)
     jets, ad = build_kernel(m), _kernel(m, "ad")

@@ -199,6 +199,7 @@ def test_wheel_installs_and_runs_without_sympy(venv, tmp_path):
     np.testing.assert_allclose(res["f7"], fjm_runtime.load("planar7").f(np.full(28, 0.1)), rtol=1e-12, atol=1e-300)
 
 
+@pytest.mark.exhaustive  # ~7 s: .ci/run runs it after make test (make test stays under 5 minutes)
 def test_installed_derive_needs_out_and_fjm_generated(venv, tmp_path):
     """``fjm derive`` from the installed wheel: without SymPy it names the extra; with SymPy but
     without ``--out`` it is a usage error (no ``site-packages/generated``); with ``--out DIR`` and

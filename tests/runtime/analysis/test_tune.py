@@ -254,6 +254,7 @@ def test_planar2_trajectory_reaching(planar2, planar2_gain):
 
 
 # -- infeasible boxes and errors -------------------------------------------------------------------
+@pytest.mark.exhaustive  # ~11 s: .ci/run runs it after make test (make test stays under 5 minutes)
 def test_infeasible_actuator_limit(link1):
     kw = _link1_kwargs(REG, 30.0)
     res = synthesize_gains(link1, {"K": K_NOM}, u_max=5.0, **kw)
@@ -324,6 +325,7 @@ def test_cli_tune_infeasible_is_one_stderr_line(capsys):
 
 
 # -- matched disturbances --------------------------------------------------------------------------
+@pytest.mark.exhaustive  # ~9 s: .ci/run runs it after make test (make test stays under 5 minutes)
 def test_disturbance_raises_gain_by_bound_over_beta_hat(link1):
     """link1: C J g = K_nom / (J_l J_m) and G = (C J g) beta_hat, so the gain grows by exactly D / beta_hat."""
     kw = _link1_kwargs(REG, 8.0)

@@ -96,6 +96,7 @@ def _check(loop, duration, tmp_path):
 
 
 @pytest.mark.slow
+@pytest.mark.exhaustive  # ~9 s with the library build: .ci/run runs it after make test
 def test_shipped_design_holds_on_mujoco_complete_panda(loop, tmp_path):
     """1.5 s: the design's thresholds hold; the torques are the simulator's controller's to 1e-9."""
     res, fig = _check(loop, 1.5, tmp_path)
