@@ -1,19 +1,19 @@
 """``python -m bench.derive_cost``: measure ``python -m derive`` on synthetic chains, fit the cost model.
 
-For each size n it writes a synthetic URDF chain (:mod:`derive.synthetic`) or
+For each size n it writes a synthetic URDF chain (:mod:`derive.guard.synthetic`) or
 picks the built-in ``planar<n>``, runs ``python -m derive ... --out TMP --no-cost-limit``
 in a fresh process (:func:`bench.scaling.run_measured`), and records the
 wall-clock seconds, the peak resident memory and the operation count (all
 generated functions, from ``--timings``). It then fits ``value = c n^e`` by
 least squares on log-log axes per quantity and prints the measurements and
 the fitted coefficients as JSON, ready to be copied into
-:data:`derive.cost.CALIBRATION` (which states the run they come from).
+:data:`derive.guard.cost.CALIBRATION` (which states the run they come from).
 
 ``--repo DIR`` measures another checkout's derive (e.g. a clean
 ``git archive HEAD`` export), using this checkout's synthetic chains.
 ``--compare`` prints, beside each measurement, the estimate of the current
-:mod:`derive.cost` model (the accuracy of the guard). ``--keep-base`` fits over the stored
-trivial derive of :data:`derive.cost.CALIBRATION` instead of this run's (re-measuring one form
+:mod:`derive.guard.cost` model (the accuracy of the guard). ``--keep-base`` fits over the stored
+trivial derive of :data:`derive.guard.cost.CALIBRATION` instead of this run's (re-measuring one form
 while keeping the other form's stored fit, which is relative to that base).
 """
 
@@ -30,8 +30,8 @@ HERE = Path(__file__).resolve().parent
 REPO = HERE.parent
 sys.path.insert(0, str(REPO))
 
-from derive.cost import CALIBRATION, estimate, fit_power_law  # noqa: E402
-from derive.synthetic import write_synthetic_chain  # noqa: E402
+from derive.guard.cost import CALIBRATION, estimate, fit_power_law  # noqa: E402
+from derive.guard.synthetic import write_synthetic_chain  # noqa: E402
 from bench.scaling import run_measured  # noqa: E402
 
 
@@ -64,7 +64,7 @@ def main(argv: List[str] = None) -> int:
     ap.add_argument("--old-cli", action="store_true", help="the measured derive has no --no-cost-limit flag")
     ap.add_argument("--compare", action="store_true", help="print the current estimate beside each run")
     ap.add_argument("--keep-base", action="store_true",
-                    help="fit over the stored trivial derive (derive.cost.CALIBRATION) instead of this run's")
+                    help="fit over the stored trivial derive (derive.guard.cost.CALIBRATION) instead of this run's")
     args = ap.parse_args(argv)
     base = measure(1, "planar", args.repo.resolve(), args.python, not args.old_cli)
     print(json.dumps({"baseline": base}), file=sys.stderr, flush=True)

@@ -1,7 +1,7 @@
 """The scaling section of ``make bench``: derive synthetic chains of growing length, fit the growth.
 
 For each n in :data:`SIZES` the bench writes a synthetic spatial chain
-(:mod:`derive.synthetic`), runs ``python -m derive --model-file ... --no-cost-limit``
+(:mod:`derive.guard.synthetic`), runs ``python -m derive --model-file ... --no-cost-limit``
 in a fresh process and records
 
 * ``derive_seconds``: the wall clock of the whole command;
@@ -74,7 +74,7 @@ def run_measured(cmd: Sequence[str], cwd: Path, env: Dict[str, str]) -> Dict[str
 
 def measure_chain(n: int, work: Path, compile_c: bool = True) -> Dict[str, Optional[float]]:
     """Derive the synthetic ``n``-joint chain into ``work`` and measure it (see the module docstring)."""
-    from derive.synthetic import write_synthetic_chain
+    from derive.guard.synthetic import write_synthetic_chain
 
     toml, _ = write_synthetic_chain(n, work / f"model{n}")
     out = work / f"out{n}"
@@ -110,7 +110,7 @@ def _timed_compile(src: Path, obj: Path) -> float:
 
 def fit_exponents(runs: List[Dict[str, object]]) -> Dict[str, Dict[str, float]]:
     """Per quantity, ``{"c", "e"}`` of ``value = c n^e`` over the runs that have a value."""
-    from derive.cost import fit_power_law
+    from derive.guard.cost import fit_power_law
     fits = {}
     for q in QUANTITIES:
         pts = [(r["n"], r[q]) for r in runs if r.get(q)]

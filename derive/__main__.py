@@ -9,11 +9,11 @@ the default ``--out`` only in a source checkout; from an installed package
 (Ctrl-C, SIGTERM, crash) leaves the previous ``generated/`` untouched.
 
 Before any symbolic work every model's cost is estimated from its chain
-(:mod:`derive.cost`); a model over the limits (estimated peak memory 2 GB,
+(:mod:`derive.guard.cost`); a model over the limits (estimated peak memory 2 GB,
 300 s) is refused with the estimate and exit code 2, unless
 ``--no-cost-limit`` or ``--max-cost SECONDS`` is given. Long derivations print
 one line per stage on stderr. The symbolic work runs in a child process
-(:mod:`derive.guard`): SIGINT and SIGTERM end it at once, nothing written.
+(:mod:`derive.guard.guard`): SIGINT and SIGTERM end it at once, nothing written.
 
 ``--check`` regenerates every model into a temp dir and compares with
 ``generated/`` byte for byte; it exits 1 with a summary of what differs.
@@ -40,11 +40,11 @@ from typing import Callable, Dict, List, Optional
 
 from typing import TYPE_CHECKING
 
-from .cost import MAX_PEAK_BYTES, MAX_SECONDS, Estimate, check_limits, estimate
-from .guard import LONG_SECONDS, Interrupted, StageLog, prescan_model_file, run_interruptible
+from .guard.cost import MAX_PEAK_BYTES, MAX_SECONDS, Estimate, check_limits, estimate
+from .guard.guard import LONG_SECONDS, Interrupted, StageLog, prescan_model_file, run_interruptible
 
 if TYPE_CHECKING:  # SymPy and CasADi are imported only after the cost pre-scan (a refusal is fast)
-    from .model_base import FlexibleJointModel
+    from .core.model_base import FlexibleJointModel
 
 REPO = Path(__file__).resolve().parent.parent
 TIMINGS = REPO / "build" / "derive-timings.json"
@@ -117,14 +117,14 @@ def derive_into(root: Path, models: List[str], log=print,
     ``builders`` maps extra (user, e.g. model-file) names to functions that
     build them; other names come from the registry (:func:`derive.registry.build`).
     ``estimates`` (from :func:`model_estimates`): a model estimated to take
-    longer than :data:`derive.guard.LONG_SECONDS` prints its estimate and one
+    longer than :data:`derive.guard.guard.LONG_SECONDS` prints its estimate and one
     stderr line per stage (model, linearize, emit: ...); the others print one line.
     """
     from .emit.spring import write_spring_model
     from .emit.writer import write_model
-    from .linearize import linearize
+    from .core.linearize import linearize
     from .registry import build
-    from .spring import linearize_spring
+    from .core.spring import linearize_spring
 
     timings: Dict[str, Dict[str, float]] = {}
     builders, estimates = builders or {}, estimates or {}
@@ -168,7 +168,7 @@ def chain_size(spec) -> tuple:
 
 
 def model_estimates(models: List[str], specs: Dict[str, object]) -> Dict[str, Estimate]:
-    """The cost estimate (:func:`derive.cost.estimate`) of every model, from its chain only.
+    """The cost estimate (:func:`derive.guard.cost.estimate`) of every model, from its chain only.
 
     ``specs``: parsed model files by name; the other names are built-in (``link1``,
     ``planar<n>``, or a spatial arm whose model file ships in ``derive/robots``).
@@ -341,7 +341,7 @@ def _check(out: Path, models: List[str], requested: bool, builders, estimates) -
 def _write(out: Path, models: List[str], builders, timings_file: Optional[Path], estimates) -> int:
     """Derive ``models`` into a sibling staging directory, keep the others, swap it in as ``out``.
 
-    The derivation runs in a child process (:func:`derive.guard.run_interruptible`); a signal
+    The derivation runs in a child process (:func:`derive.guard.guard.run_interruptible`); a signal
     before the swap removes the staging directory and leaves ``out`` as it was.
     """
     from .emit.writer import recover, swap_in

@@ -1,10 +1,10 @@
 """Model registry: the built-in models by name (:data:`MODEL_NAMES`, :func:`build`).
 
-``link1`` and ``planar1..7`` are closed forms (:mod:`derive.planar`), ``link1_hd`` its cubic-spring
-variant (:mod:`derive.spring`); the
+``link1`` and ``planar1..7`` are closed forms (:mod:`derive.planar.planar`), ``link1_hd`` its cubic-spring
+variant (:mod:`derive.core.spring`); the
 spatial arms ``elbow3`` and ``panda`` are URDF model files shipped in
 ``derive/robots/<name>/<name>.toml`` (read by :mod:`derive.model_file`, built
-by :mod:`derive.spatial`). This module sits on top of both: nothing in
+by :mod:`derive.spatial.spatial`). This module sits on top of both: nothing in
 ``derive`` below it imports it.
 """
 
@@ -13,9 +13,9 @@ from __future__ import annotations
 import re
 from pathlib import Path
 
-from .model_base import COMPLETE_NAMES, MODEL_NAMES, SPATIAL_NAMES, FlexibleJointModel
-from .planar import make_link1, make_link1_complete, make_planar
-from .rotors import Rotors
+from .core.model_base import COMPLETE_NAMES, MODEL_NAMES, SPATIAL_NAMES, FlexibleJointModel
+from .planar.planar import make_link1, make_link1_complete, make_planar
+from .core.rotors import Rotors
 
 __all__ = ["MODEL_NAMES", "SPATIAL_NAMES", "COMPLETE_NAMES", "ROBOTS", "build", "PLANAR2_COMPLETE_ROTORS"]
 
@@ -41,7 +41,7 @@ def build(name: str) -> FlexibleJointModel:
     if match:
         return make_planar(int(match.group(1)))
     if name == "link1_hd":
-        from .spring import make_link1_hd
+        from .core.spring import make_link1_hd
         return make_link1_hd()
     if name == "link1_complete":
         return make_link1_complete()

@@ -22,7 +22,7 @@ centre of mass (URDF component order). A VALUE is a float, or
 ``{"poly": [[coefficient, [parameter names]], ...]}`` -- a sum of monomials
 in the runtime parameters (``param_names``), e.g. ``-l1`` or
 ``J_l - M L L``; nothing is evaluated from text. Rotations are the snapped
-matrices of :mod:`derive.chain` (the same numbers the derivation baked).
+matrices of :mod:`derive.spatial.chain` (the same numbers the derivation baked).
 
 Models: URDF arms (their ``source`` URDF, re-read and checked against its
 sha256; payload ``m_load, x_load, y_load, z_load`` as a point-mass body on the
@@ -44,9 +44,9 @@ import math
 from pathlib import Path
 from typing import Dict, List, Optional, Sequence
 
-from ..chain import ChainDescription, Inertial, mm, mv, rpy_matrix
-from ..model_base import FlexibleJointModel, planar_param_names
-from ..spatial_params import INERTIAL_FIELDS, PAYLOAD
+from ..spatial.chain import ChainDescription, Inertial, mm, mv, rpy_matrix
+from ..core.model_base import FlexibleJointModel, planar_param_names
+from ..spatial.spatial_params import INERTIAL_FIELDS, PAYLOAD
 
 __all__ = ["chain_document", "write_chain_json", "CHAIN_FILE"]
 
@@ -138,7 +138,7 @@ def _urdf_bodies(desc: ChainDescription, symbolic: Sequence[str]) -> List[dict]:
 
 
 def _urdf(m: FlexibleJointModel) -> Optional[dict]:
-    from ..urdf import load_urdf  # build time only; the formula models do not need the URDF reader
+    from ..spatial.urdf import load_urdf  # build time only; the formula models do not need the URDF reader
     src = m.source
     path = _REPO / str(src["urdf"])
     if not path.is_file() or hashlib.sha256(path.read_bytes()).hexdigest() != src.get("sha256"):

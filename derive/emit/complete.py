@@ -13,7 +13,7 @@ from typing import Dict, Tuple
 
 import casadi as ca
 
-from ..linearize import Linearization
+from ..core.linearize import Linearization
 from .sx import SympyToSX, ldl_factor, ldl_solve, spd_inverse
 
 #: Quantities emitted for a complete model, in file order, with their meaning.
@@ -32,7 +32,7 @@ def build_complete_functions(lin: Linearization, cse: bool = True) -> Dict[str, 
     Parameters
     ----------
     lin : Linearization
-        From :func:`derive.linearize.complete_plant`.
+        From :func:`derive.core.linearize.complete_plant`.
     cse : bool
         CasADi common-subexpression elimination on each output.
 

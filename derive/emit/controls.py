@@ -280,7 +280,7 @@ def build_controls(model, functions: Dict[str, ca.Function],
 
     Parameters
     ----------
-    model : derive.model_base.FlexibleJointModel
+    model : derive.core.model_base.FlexibleJointModel
     functions : dict str -> casadi.Function
         The model's SX Functions (``T``, ``alpha``, ``beta`` are used, inlined into the core).
     torque : dict str -> casadi.Function, optional

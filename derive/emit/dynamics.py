@@ -109,7 +109,7 @@ def time_derivatives(model) -> Tuple[ca.Function, ca.Function]:
 
 
 def _body_numbers(model, conv: SympyToSX) -> list:
-    """The model's :class:`derive.model_base.RigidBody` records with numbers as floats, parameters as SX."""
+    """The model's :class:`derive.core.model_base.RigidBody` records with numbers as floats, parameters as SX."""
     def scalar(e):
         return float(e) if getattr(e, "is_Number", False) else conv(e)
     return [(b.R0, b.p, scalar(b.mass), [scalar(v) for v in b.first_moment],
@@ -127,7 +127,7 @@ def build_kernel(model) -> ca.Function:
       (:func:`time_derivatives`; also the tests' reference for the first route);
     * neither (the closed-form planar chains, whose SymPy programme has cheap derivative rules for
       the cosines of angle differences and measured fewer operations that way): the SymPy time
-      derivatives of ``D y3 + h`` (:func:`derive.torque.inverse_dynamics_derivatives`), converted.
+      derivatives of ``D y3 + h`` (:func:`derive.core.torque.inverse_dynamics_derivatives`), converted.
     """
     return _kernel(model, "jets" if model.bodies is not None else
                    "ad" if model.inverse_dynamics is not None else "symbolic")
@@ -139,8 +139,8 @@ def _kernel(model, route: str) -> ca.Function:
     q, dq, s, ds = (ca.SX.sym(nm, n) for nm in ("q", "dq", "s", "ds"))
     p = ca.SX.sym("p", len(model.params))
     if route == "symbolic":  # first, so that the converter knows their programme symbols
-        from ..torque import inverse_dynamics_derivatives
-        # the names of derive.linearize (the programme caches its derivatives along "t" by them)
+        from ..core.torque import inverse_dynamics_derivatives
+        # the names of derive.core.linearize (the programme caches its derivatives along "t" by them)
         Y3 = tuple(sp.Symbol(f"y3_{i + 1}", real=True) for i in range(n))
         Y4 = tuple(sp.Symbol(f"y4_{i + 1}", real=True) for i in range(n))
         R1, W = inverse_dynamics_derivatives(model, Y3, Y4)

@@ -20,7 +20,7 @@ from typing import Dict, Tuple
 
 import casadi as ca
 
-from ..linearize import Linearization
+from ..core.linearize import Linearization
 from .brackets import closed_form_brackets
 from .dynamics import build_kernel, state_bodies, sx_function
 from .sx import SympyToSX, ldl_factor, ldl_solve

@@ -17,7 +17,7 @@ import casadi as ca
 import numpy as np
 import sympy as sp
 
-from ..linearize import Linearization
+from ..core.linearize import Linearization
 
 #: The paper's printed link1 expressions (section 2), with the erratum each one carries.
 PAPER_LINK1 = [

@@ -1,15 +1,15 @@
-"""Emit a model with nonlinear joint springs (:mod:`derive.spring`): CasADi Functions, C, manifest, report.
+"""Emit a model with nonlinear joint springs (:mod:`derive.core.spring`): CasADi Functions, C, manifest, report.
 
 The same file names, Function names and signatures as a linear model (:mod:`derive.emit.writer`),
 so ``fjm_runtime.load("link1_hd")`` gives the usual :class:`Model`:
 
 * ``f, g, ad, T, alpha, beta, energy, inertia`` of ``(x, p)``: the explicit SymPy results of
-  :func:`derive.spring.linearize_spring` converted to SX (the spring law substituted: ``psi``,
+  :func:`derive.core.spring.linearize_spring` converted to SX (the spring law substituted: ``psi``,
   ``psi'``, ``psi''`` of ``phi = q_m - q`` appear as polynomials in ``phi``), CSE'd;
 * ``T_tau, alpha_tau, beta_tau`` of ``(m, p)``, ``m = [q; dq; tau_J; dtau_J; dq_m]``: ``tau_J`` and
   ``dtau_J`` read directly, ``psi'`` and ``psi''`` at the implied deflection
-  ``phi_J = psi^-1(tau_J)``, :data:`derive.spring.NEWTON_STEPS` Newton steps unrolled
-  (:func:`derive.spring.newton_inverse`);
+  ``phi_J = psi^-1(tau_J)``, :data:`derive.core.spring.NEWTON_STEPS` Newton steps unrolled
+  (:func:`derive.core.spring.newton_inverse`);
 * the laws ``control_{smc,ismc,fl}`` and ``control_{smc,ismc,fl}_tau`` (:mod:`derive.emit.controls`,
   the same arithmetic around this model's cores). Not emitted: ``adaptive`` (it estimates a linear
   ``K``) and ``pdg`` (its motor set-point needs ``psi^-1(G(q_d))``);
@@ -29,8 +29,8 @@ from typing import Callable, Dict, List, Optional
 import casadi as ca
 import sympy as sp
 
-from ..linearize import Linearization
-from ..spring import NEWTON_STEPS, newton_inverse, spring_functions
+from ..core.linearize import Linearization
+from ..core.spring import NEWTON_STEPS, newton_inverse, spring_functions
 from .controls import KINDS, TORQUE_KINDS, law_pair, build_core, manifest_entry
 from .functions import QUANTITIES, operation_count
 from .sx import SympyToSX
@@ -73,7 +73,7 @@ def _spring_sx(model, phi: ca.SX, p: ca.SX, order: int) -> List[ca.SX]:
 
 
 def _newton_sx(model, tau: ca.SX, p: ca.SX) -> ca.SX:
-    """``phi_J = psi^-1(tau)`` by :func:`derive.spring.newton_inverse` in SX."""
+    """``phi_J = psi^-1(tau)`` by :func:`derive.core.spring.newton_inverse` in SX."""
     k1 = p[list(model.param_names).index(str(model.springs[0].k1))]
     return newton_inverse(lambda v: _spring_sx(model, v, p, 0)[0], lambda v: _spring_sx(model, v, p, 1)[1],
                           tau, k1, NEWTON_STEPS)

@@ -21,7 +21,7 @@ class SympyToSX:
     bindings : mapping sympy.Symbol -> casadi.SX (scalar)
         Arguments (state and parameter symbols).
     definitions : mapping sympy.Symbol -> sympy.Expr, optional
-        Intermediate symbols of a :class:`derive.program.Program`, converted
+        Intermediate symbols of a :class:`derive.core.program.Program`, converted
         on first use.
     implicit : mapping sympy.Symbol -> callable () -> casadi.SX, optional
         Symbols bound to numeric linear algebra (e.g. ``y3 = D^-1 r3``),

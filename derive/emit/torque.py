@@ -1,6 +1,6 @@
 """CasADi SX Functions of the torque-sensed derivation, and the motor PD + gravity law.
 
-For a model (the equations of :mod:`derive.torque`)::
+For a model (the equations of :mod:`derive.core.torque`)::
 
     <model>_T_tau(m, p)      -> [q; dq; y3; y4]  (4n)     y3 = D^-1 (tau_J - h), y4 = D^-1 (dtau_J - R1)
     <model>_alpha_tau(m, p)  -> alpha_tau        (n)
@@ -11,7 +11,7 @@ For a model (the equations of :mod:`derive.torque`)::
 with ``m = [q; dq; tau_J; dtau_J; dq_m]`` (5n). ``T_tau`` and ``alpha_tau`` call the model's
 kernel (:mod:`derive.emit.dynamics`, shared with the state laws: ``y3``, ``y4`` and
 ``w = D'' y3 + 2 D' y4 + h''`` by CasADi AD of the inverse dynamics, one LDL^T of D(q)).
-The SymPy route of :func:`derive.torque.torque_linearize` is kept for cross-checks
+The SymPy route of :func:`derive.core.torque.torque_linearize` is kept for cross-checks
 (:func:`build_torque_functions_symbolic`).
 
 And the regulation law ``<model>_control_pdg(x, z, r, p, gains) -> (u, s, z_dot, u_cmd, y_hat)``
@@ -24,8 +24,8 @@ from typing import Dict, List, Tuple
 
 import casadi as ca
 
-from ..linearize import Linearization
-from ..torque import TorqueLinearization
+from ..core.linearize import Linearization
+from ..core.torque import TorqueLinearization
 from .dynamics import mx_function, sx_function, torque_bodies
 from .sx import SympyToSX, ldl_factor, ldl_solve
 
@@ -53,7 +53,7 @@ def pdg_gains_layout(n: int) -> List[Tuple[str, int, str]]:
 
 
 def _converter(tl: TorqueLinearization, m_sym: ca.SX, p: ca.SX) -> SympyToSX:
-    """The symbolic route (:func:`derive.torque.torque_linearize`), for cross-checks."""
+    """The symbolic route (:func:`derive.core.torque.torque_linearize`), for cross-checks."""
     model = tl.lin.model
     n = model.n
     bindings = {s: m_sym[i] for i, s in enumerate(tl.measurement)}
@@ -76,7 +76,7 @@ def _converter(tl: TorqueLinearization, m_sym: ca.SX, p: ca.SX) -> SympyToSX:
 
 
 def build_torque_functions_symbolic(tl: TorqueLinearization) -> Dict[str, ca.Function]:
-    """``T_tau``, ``alpha_tau``, ``beta_tau`` from the SymPy route (:func:`derive.torque.torque_linearize`).
+    """``T_tau``, ``alpha_tau``, ``beta_tau`` from the SymPy route (:func:`derive.core.torque.torque_linearize`).
 
     Not emitted: the tests compare :func:`build_torque_functions` with it.
     """

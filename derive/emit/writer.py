@@ -30,7 +30,7 @@ from typing import Callable, Dict, List, Optional
 import casadi as ca
 import sympy as sp
 
-from ..linearize import Linearization
+from ..core.linearize import Linearization
 from .chain_json import write_chain_json
 from .controls import ALL_KINDS, build_controls, layout_lines, manifest_entry
 from .complete import COMPLETE_QUANTITIES, build_complete_functions

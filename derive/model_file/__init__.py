@@ -24,7 +24,7 @@ spellings accepted, e.g. ``"kg m^2"``, ``"kg*m^2"``, ``"kg·m²"``).
 A second form describes a spatial arm by a URDF file (``[model] urdf = "arm.urdf"``, relative
 to the model file, with ``base`` and ``tip`` link names) and per-joint elastic parameters
 (``[joints.default]`` and ``[joints.<URDF joint name>]`` with ``K``, ``Jm``, ``Bm``; optional
-``[parameters] g0`` and ``[notes]``); it is built by :func:`derive.spatial.make_spatial`. See
+``[parameters] g0`` and ``[notes]``); it is built by :func:`derive.spatial.spatial.make_spatial`. See
 docs/spatial.md, examples/elbow_arm.toml and :mod:`derive.model_file.urdf_form`.
 
 The file is parsed with :mod:`tomllib` (Python >= 3.11) or ``tomli`` and then

@@ -1,6 +1,6 @@
 """The planar-chain form of a model file: ``[model] name, links`` and ``[parameters]``.
 
-The chain is :func:`derive.planar.make_planar` with the file's name,
+The chain is :func:`derive.planar.planar.make_planar` with the file's name,
 description and parameter defaults (see :mod:`derive.model_file` for the
 format). Every value is checked: type, finite, physical sign, fjm's SI unit,
 and ``r_i <= l_i`` (the centre of mass lies on the link).
@@ -12,8 +12,8 @@ import re
 from dataclasses import dataclass, field
 from typing import Dict, Optional, Tuple
 
-from ..model_base import PLANAR_GROUPS, FlexibleJointModel, param_group, planar_param_names
-from ..planar import make_planar
+from ..core.model_base import PLANAR_GROUPS, FlexibleJointModel, param_group, planar_param_names
+from ..planar.planar import make_planar
 from .schema import Checker, ModelFileError, check_description, check_name, got, number, show, suggest
 from .toml_keys import KeyPath
 
@@ -44,7 +44,7 @@ PARAM_TABLE_KEYS = ("default", "unit")
 
 @dataclass(frozen=True)
 class ModelSpec:
-    """A validated model file: everything :func:`derive.planar.make_planar` needs."""
+    """A validated model file: everything :func:`derive.planar.planar.make_planar` needs."""
 
     name: str
     links: int

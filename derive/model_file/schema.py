@@ -14,7 +14,7 @@ import math
 import re
 from typing import Optional
 
-from ..model_base import MODEL_NAMES
+from ..core.model_base import MODEL_NAMES
 from .toml_keys import BARE_KEY, KeyPath, locate_keys
 
 __all__ = ["ModelFileError", "Checker", "got", "show", "suggest", "check_name", "check_description",

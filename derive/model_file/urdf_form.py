@@ -33,8 +33,8 @@ the model, in q order depth-first in the order of ``tips`` (joints shared with
 an earlier tip's path first, once). A tree takes no ``[payload]`` and no
 ``[rotors]``.
 
-The URDF is read by :mod:`derive.urdf`; :meth:`UrdfModelSpec.build` builds
-the model with :func:`derive.spatial.make_spatial`.
+The URDF is read by :mod:`derive.spatial.urdf`; :meth:`UrdfModelSpec.build` builds
+the model with :func:`derive.spatial.spatial.make_spatial`.
 """
 
 from __future__ import annotations
@@ -44,12 +44,12 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Dict, List, Optional, Tuple
 
-from ..chain import chain_numerics
-from ..model_base import FlexibleJointModel
-from ..rotors import Rotors, gear_params
-from ..spatial import make_spatial
-from ..spatial_params import elastic_params, inertial_params, payload_params
-from ..urdf import UrdfChain, UrdfError, load_urdf
+from ..spatial.chain import chain_numerics
+from ..core.model_base import FlexibleJointModel
+from ..core.rotors import Rotors, gear_params
+from ..spatial.spatial import make_spatial
+from ..spatial.spatial_params import elastic_params, inertial_params, payload_params
+from ..spatial.urdf import UrdfChain, UrdfError, load_urdf
 from .schema import Checker, check_description, check_name, got, number, show, suggest
 from .toml_keys import KeyPath
 
@@ -110,7 +110,7 @@ class UrdfModelSpec:
     tips: Tuple[str, ...] = ()  # several tips: a tree (``tip`` is then one of them or empty)
 
     def build(self) -> FlexibleJointModel:
-        """The symbolic model (:func:`derive.spatial.make_spatial` of the URDF chain or tree)."""
+        """The symbolic model (:func:`derive.spatial.spatial.make_spatial` of the URDF chain or tree)."""
         ends = self.tips or self.tip
         chain = load_urdf(self.urdf, self.base, ends, source=_repo_relative(self.urdf))
         n = len(chain.joints)

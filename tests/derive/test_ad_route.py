@@ -3,7 +3,7 @@ independent routes: the SymPy implicit derivation, and Pinocchio's RNEA for the 
 
 * ``T``, ``alpha`` (state laws) and ``T_tau``, ``alpha_tau`` (torque-sensed) of the emitted route
   (:mod:`derive.emit.dynamics`) equal those of the SymPy route (``linearize(..., symbolic=True)``,
-  :func:`derive.torque.torque_linearize`) at random states, to 1e-12 relative;
+  :func:`derive.core.torque.torque_linearize`) at random states, to 1e-12 relative;
 * the RNEA with the acceleration as an input (``model.inverse_dynamics``) equals Pinocchio's
   ``rnea(q, dq, ddq)`` on the same URDF;
 * the C file's MX twins equal the ``.casadi`` SX Functions.
@@ -17,9 +17,9 @@ import pytest
 from derive.emit.dynamics import inverse_dynamics
 from derive.emit.functions import build_model_functions, build_functions
 from derive.emit.torque import build_torque_functions, build_torque_functions_symbolic
-from derive.linearize import linearize
+from derive.core.linearize import linearize
 from derive.registry import build
-from derive.torque import torque_linearize
+from derive.core.torque import torque_linearize
 
 RTOL = 1e-12
 

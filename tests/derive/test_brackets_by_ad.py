@@ -10,7 +10,7 @@ import pytest
 
 from derive.emit.functions import build_functions
 from derive.emit.sx import SympyToSX, ldl_factor, ldl_solve, spd_inverse
-from derive.linearize import linearize
+from derive.core.linearize import linearize
 from derive.registry import build
 
 

@@ -16,7 +16,7 @@ from derive.emit.brackets import bracket_twin, coriolis_difference_along
 from derive.emit.dynamics import programme
 from derive.emit.functions import ad_by_ad, build_functions
 from derive.emit.sx import SympyToSX, ldl_factor, ldl_solve
-from derive.linearize import linearize
+from derive.core.linearize import linearize
 from derive.registry import build
 
 MODELS = ["link1", "planar3", "elbow3", "panda", "baxter"]

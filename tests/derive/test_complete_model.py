@@ -23,11 +23,11 @@ import pytest
 import fjm_runtime
 from derive.emit.complete import build_complete_functions
 from derive.emit.report import complete_brackets, static_fl_verdict
-from derive.linearize import linearize
+from derive.core.linearize import linearize
 from derive.model_file import load_model_file
-from derive.planar import make_planar
+from derive.planar.planar import make_planar
 from derive.registry import ROBOTS
-from derive.rotors import Rotors
+from derive.core.rotors import Rotors
 from fjm_runtime.validation import FjmValueError
 
 from support.numerics import random_state

@@ -7,7 +7,7 @@ import sympy as sp
 
 from derive.emit.functions import QUANTITIES, build_functions
 from derive.emit.sx import SympyToSX, ldl_factor, ldl_solve, skew_congruence, spd_inverse, symmetric_inverse
-from derive.linearize import linearize
+from derive.core.linearize import linearize
 from derive.registry import build
 
 
@@ -72,7 +72,7 @@ def test_skew_congruence_is_W_M_W_and_costs_less_than_the_dense_products():
 
 def test_derivative_shortcuts_equal_plain_differentiation():
     """Program rules (d cos(a) = -sin(a) da ...) == differentiating the definitions."""
-    from derive.program import Program
+    from derive.core.program import Program
     fast = build_functions(linearize(build("planar3")))
     Program.use_rules = False
     try:

@@ -30,11 +30,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from derive import cost
+from derive.guard import cost
 from derive.__main__ import main as derive_main, model_estimates
-from derive.guard import StageLog, prescan_model_file
-from derive.synthetic import write_synthetic_chain
-from derive.urdf import load_urdf
+from derive.guard.guard import StageLog, prescan_model_file
+from derive.guard.synthetic import write_synthetic_chain
+from derive.spatial.urdf import load_urdf
 from support.paths import REPO
 
 

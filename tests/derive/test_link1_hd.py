@@ -1,4 +1,4 @@
-"""link1_hd: the single link with a cubic spring psi(phi) = k1 phi + k3 phi^3 (derive/spring.py).
+"""link1_hd: the single link with a cubic spring psi(phi) = k1 phi + k3 phi^3 (derive/core/spring.py).
 
 Checks from first principles, on the in-memory Functions of one derivation (no files):
 Lie identities by central differences (y_{k+1} = L_f y_k, L_g y_k = 0, L_g L_f^3 h = 1/beta,
@@ -22,8 +22,8 @@ import sympy as sp
 
 import fjm_runtime
 from derive.emit.spring import build_spring_functions
-from derive.lie import lie_derivative
-from derive.spring import (LINK1_HD_RANGE, CubicSpring, SpringError, check_spring, linearize_spring,
+from derive.core.lie import lie_derivative
+from derive.core.spring import (LINK1_HD_RANGE, CubicSpring, SpringError, check_spring, linearize_spring,
                            make_link1_hd, spring_functions)
 
 REPO = Path(__file__).resolve().parents[2]

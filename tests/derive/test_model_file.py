@@ -16,7 +16,7 @@ import pytest
 from derive.__main__ import derive_into, main as derive_main  # noqa: E402
 from derive.model_file import (ModelFileError, load_model_file, locate_keys,  # noqa: E402
                                parse_model_text)
-from derive.planar import make_planar  # noqa: E402
+from derive.planar.planar import make_planar  # noqa: E402
 from fjm_runtime.model import Model, load  # noqa: E402
 
 from support.paths import REPO  # noqa: E402

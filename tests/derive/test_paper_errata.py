@@ -5,7 +5,7 @@ import pytest
 import sympy as sp
 
 import fjm_runtime
-from derive.lie import ad_iterates, lie_derivative
+from derive.core.lie import ad_iterates, lie_derivative
 from support.numerics import directional
 
 # A parameter set where J_l != J_m and J_m != 1, so every typo shows.

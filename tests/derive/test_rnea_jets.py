@@ -19,7 +19,7 @@ from derive.emit.dynamics import _body_numbers, _converter, _kernel, build_kerne
 from derive.emit.rnea_jets import rnea_jets
 from derive.model_file import load_model_file
 from derive.registry import build
-from derive.synthetic import write_synthetic_chain
+from derive.guard.synthetic import write_synthetic_chain
 
 
 def _jets_function(m) -> ca.Function:

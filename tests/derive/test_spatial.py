@@ -1,4 +1,4 @@
-"""The spatial chain builder (derive/spatial.py): equal to the planar formulas where they
+"""The spatial chain builder (derive/spatial/spatial.py): equal to the planar formulas where they
 apply, right for general axes and rotations, energy-conserving, deterministic."""
 
 from __future__ import annotations
@@ -14,12 +14,12 @@ import pytest
 
 import fjm_runtime
 from derive.emit.functions import QUANTITIES, build_functions
-from derive.linearize import linearize
-from derive.chain import planar_description, rpy_matrix
-from derive.planar import make_planar
-from derive.spatial import make_spatial
-from derive.spatial_params import elastic_params
-from derive.urdf import load_urdf
+from derive.core.linearize import linearize
+from derive.spatial.chain import planar_description, rpy_matrix
+from derive.planar.planar import make_planar
+from derive.spatial.spatial import make_spatial
+from derive.spatial.spatial_params import elastic_params
+from derive.spatial.urdf import load_urdf
 from support.numerics import random_params, random_state, rk4
 
 from support.paths import REPO  # noqa: E402
@@ -169,7 +169,7 @@ def test_jacobian_form_equals_crba_rnea_form():
     comparison) give the same D, h and potential on elbow3."""
     import casadi as ca
     from derive.emit.sx import SympyToSX
-    from derive.spatial_jacobian import make_spatial_jacobian
+    from derive.spatial.spatial_jacobian import make_spatial_jacobian
     desc = load_urdf(REPO / "derive/robots/elbow3/elbow3.urdf", "base_link", "tool0").description
     P = elastic_params(3, [500.0] * 3, [0.2] * 3, [0.0] * 3, 9.81)
     x = ca.SX.sym("x", 12)

@@ -10,12 +10,12 @@ import textwrap
 
 import pytest
 
-from derive.chain import chain_numerics
+from derive.spatial.chain import chain_numerics
 from derive.model_file import ModelFileError, load_model_file
-from derive.rotors import Rotors
-from derive.spatial import make_spatial
-from derive.spatial_params import elastic_params
-from derive.urdf import UrdfError, load_urdf
+from derive.core.rotors import Rotors
+from derive.spatial.spatial import make_spatial
+from derive.spatial.spatial_params import elastic_params
+from derive.spatial.urdf import UrdfError, load_urdf
 from support.paths import REPO
 
 BAXTER = REPO / "derive" / "robots" / "baxter"

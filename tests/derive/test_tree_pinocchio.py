@@ -7,7 +7,7 @@
   ``aba(q, dq, K (q_m - q))``, each to a relative 1e-12.
 * a synthetic Y (joint 1 carries two branches, joints 2 and 3, one of them on
   an oblique axis, plus a massive link fixed to the trunk), built with
-  :func:`derive.spatial.make_spatial` and converted to CasADi without the
+  :func:`derive.spatial.spatial.make_spatial` and converted to CasADi without the
   full derivation: D, h and the forward dynamics against Pinocchio, and the
   CRBA's tree sparsity (D_23 is exactly zero: neither joint is an ancestor of
   the other).
@@ -24,9 +24,9 @@ import pinocchio as pin
 
 import fjm_runtime
 from derive.emit.sx import SympyToSX
-from derive.spatial import make_spatial
-from derive.spatial_params import elastic_params
-from derive.urdf import load_urdf
+from derive.spatial.spatial import make_spatial
+from derive.spatial.spatial_params import elastic_params
+from derive.spatial.urdf import load_urdf
 from support.paths import REPO
 
 RTOL = 1e-12

@@ -1,4 +1,4 @@
-"""URDF import (derive/urdf.py) and the URDF form of model files: one test per bad case.
+"""URDF import (derive/spatial/urdf.py) and the URDF form of model files: one test per bad case.
 
 Every error must name the file, the line, the element and what was expected.
 """
@@ -16,7 +16,7 @@ from support.paths import REPO  # noqa: E402
 sys.path.insert(0, str(REPO))
 
 from derive.model_file import ModelFileError, load_model_file  # noqa: E402
-from derive.urdf import UrdfError, load_urdf  # noqa: E402
+from derive.spatial.urdf import UrdfError, load_urdf  # noqa: E402
 
 INERTIAL = """<inertial><origin xyz="0 0 0.1"/><mass value="{mass}"/>
       <inertia ixx="{ixx}" ixy="0" ixz="0" iyy="0.01" iyz="0" izz="0.01"/></inertial>"""
@@ -207,7 +207,7 @@ def test_massless_branch_is_ignored_and_named(tmp_path):
 def test_fixed_branch_is_merged(tmp_path):
     """A fixed side mass changes D exactly as Pinocchio's merge does."""
     import pinocchio as pin
-    from derive.chain import chain_numerics
+    from derive.spatial.chain import chain_numerics
     extra = f"""  <link name="side">{INERTIAL.format(mass=0.5, ixx=0.02)}</link>
   <joint name="side_joint" type="fixed">
     <origin xyz="0.1 0.2 0" rpy="0.3 0.2 0.1"/>
@@ -318,7 +318,7 @@ def test_symbolic_inertials_equal_a_urdf_with_those_numbers(tmp_path):
     (URDF values as defaults); at other values the model equals the baked model of a URDF
     carrying those values."""
     from derive.emit.functions import build_functions
-    from derive.linearize import linearize
+    from derive.core.linearize import linearize
     tool = '<inertial><origin xyz="0.01 0 0.02" rpy="0.3 0.1 0"/><mass value="0.2"/>' \
            '<inertia ixx="0.001" ixy="0" ixz="0" iyy="0.002" iyz="0" izz="0.0015"/></inertial>'
     base_text = arm().replace('<link name="tool"/>', f'<link name="tool">{tool}</link>')

@@ -1,4 +1,4 @@
-"""URDF ``<limit>`` as data (derive/urdf.py): per moving joint in q order, as written, checked.
+"""URDF ``<limit>`` as data (derive/spatial/urdf.py): per moving joint in q order, as written, checked.
 
 The limits do not enter the dynamics; they are read so that the manifest (and the runtime's
 ``Model.effort_limits``) carry what the URDF states. Bad limits are refused with file, line and
@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import pytest
 
-from derive.urdf import JointLimit, UrdfError, parse_urdf  # noqa: E402
+from derive.spatial.urdf import JointLimit, UrdfError, parse_urdf  # noqa: E402
 
 LINK = """<link name="{name}"><inertial><origin xyz="0 0 0.1"/><mass value="1.0"/>
     <inertia ixx="0.01" ixy="0" ixz="0" iyy="0.01" iyz="0" izz="0.01"/></inertial></link>"""

@@ -16,7 +16,7 @@ pytestmark = pytest.mark.slow  # derives in a subprocess
 # SIGTERM takes the same handler path as SIGINT: it runs in the exhaustive pass (.ci/run)
 @pytest.mark.parametrize("signum", [pytest.param(signal.SIGTERM, marks=pytest.mark.exhaustive), signal.SIGINT])
 def test_fjm_derive_ends_on_a_signal_and_writes_nothing(tmp_path, signum):
-    from derive.synthetic import write_synthetic_chain
+    from derive.guard.synthetic import write_synthetic_chain
     # a 21-joint chain: several seconds of derivation on a fast idle machine (the Panda, under a
     # second there, could end before the signal)
     toml, _ = write_synthetic_chain(21, tmp_path / "model")

@@ -2,7 +2,7 @@
 
 * :func:`prescan_model_file` reads only what the cost estimate needs from a
   model file (the number of joints and the form) with the standard library's
-  TOML parser and :mod:`derive.urdf` (no SymPy, no CasADi), so a runaway
+  TOML parser and :mod:`derive.spatial.urdf` (no SymPy, no CasADi), so a runaway
   input is refused before the heavy imports. Anything it cannot read is left
   to the full parser (:mod:`derive.model_file`), which reports it.
 * :class:`StageLog` prints one line per stage per model on stderr
@@ -63,7 +63,7 @@ def prescan_model_file(path: Path) -> Optional[Tuple[str, int, str]]:
         if "urdf" not in model:
             links = model["links"]
             return (name, links, "planar") if isinstance(links, int) and links >= 1 else None
-        from .urdf import load_urdf
+        from ..spatial.urdf import load_urdf
         chain = load_urdf(path.parent / model["urdf"], model["base"], model["tip"])
         return name, len(chain.joints), "spatial"
     except Exception:  # noqa: BLE001 - any problem is reported by the full parser

@@ -5,7 +5,7 @@ suffix sums of a serial chain (``P_i = P_{i+1} + t_i``) turns into O(n)
 terms per entry and O(n^2) overall, and every derivative pays for that
 again. A :class:`Program` keeps such quantities as *defined symbols*
 (``P_3 := P_4 + t_3``) in creation order. Derivatives of defined symbols
-are themselves defined symbols (see :class:`derive.lie.DirectionalDerivative`),
+are themselves defined symbols (see :class:`derive.core.lie.DirectionalDerivative`),
 so differentiation stays linear in the program size, and the emitter binds
 the symbols one by one (creation order is a topological order).
 

@@ -9,7 +9,7 @@ link-side joint torque ``tau_J = K (q_m - q)`` and its rate. The link equation
     E2 = D A + W - ddtau_J = 0,                  W  = d/dt R1 + D' Y4 = D'' Y3 + 2 D' Y4 + h''
 
 (time derivatives along ``q -> dq``, ``dq -> Y3``, ``Y3 -> Y4``; ``Y3, Y4`` are the
-implicit symbols of :mod:`derive.linearize`, bound to numeric solves with D in the
+implicit symbols of :mod:`derive.core.linearize`, bound to numeric solves with D in the
 generated code, so D is never inverted symbolically). The motor equation
 ``J_m ddq_m + B_m dq_m + tau_J = u`` gives ``ddtau_J = K (J_m^-1 (u - tau_J - B_m dq_m) - y3)``,
 so ``A = nu`` for::
@@ -91,7 +91,7 @@ def torque_linearize(lin: Linearization) -> TorqueLinearization:
     Parameters
     ----------
     lin : Linearization
-        From :func:`derive.linearize.linearize` of the same model (its program and
+        From :func:`derive.core.linearize.linearize` of the same model (its program and
         implicit symbols are shared).
 
     Returns

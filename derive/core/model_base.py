@@ -7,8 +7,8 @@ Every model is the flexible-joint system of docs/design.md ("The model")::
 
 with state ``x = [q; dq; q_m; dq_m]`` (four blocks of ``n``). A model supplies
 the symbolic pieces (D, h, the diagonals of K, J_m, B_m) and a parameter table.
-The builders live in :mod:`derive.planar` (``link1``, ``planar<n>``) and
-:mod:`derive.spatial` (URDF arms); :mod:`derive.registry` maps names to them.
+The builders live in :mod:`derive.planar.planar` (``link1``, ``planar<n>``) and
+:mod:`derive.spatial.spatial` (URDF arms); :mod:`derive.registry` maps names to them.
 This module is pure data and math: no I/O, no printing.
 """
 
@@ -32,7 +32,7 @@ SPATIAL_NAMES: Tuple[str, ...] = ("elbow3", "panda", "baxter")
 #: Built-in complete models (rotor gyroscopics, docs/complete-model.md) and their reduced models.
 COMPLETE_NAMES: Tuple[str, ...] = ("link1_complete", "planar2_complete", "panda_complete")
 
-#: Built-in models with nonlinear joint springs (:mod:`derive.spring`).
+#: Built-in models with nonlinear joint springs (:mod:`derive.core.spring`).
 SPRING_NAMES: Tuple[str, ...] = ("link1_hd",)
 
 MODEL_NAMES: Tuple[str, ...] = (("link1",) + tuple(f"planar{n}" for n in range(1, 8)) + SPATIAL_NAMES
@@ -60,7 +60,7 @@ class RigidBody:
     """One moving body of a spatial chain or tree, as the emitter's time-derivative recursion needs it.
 
     Body ``i`` turns about the z axis of its frame ``B_i``; its rotation to the parent frame is
-    ``R0 Rz(q_i)`` and its origin in the parent frame is ``p`` (:mod:`derive.spatial`).
+    ``R0 Rz(q_i)`` and its origin in the parent frame is ``p`` (:mod:`derive.spatial.spatial`).
 
     Attributes
     ----------
@@ -128,7 +128,7 @@ class FlexibleJointModel:
         Complete model only: the velocity terms ``(dS/dt)^T dq`` of the motor equations.
     reduced_model : str or None
         Complete model only: the name of the reduced model with the same state layout.
-    rotors : derive.rotors.Rotors or None
+    rotors : derive.core.rotors.Rotors or None
         Complete model only: the rotor data (gear-ratio defaults, masses, transverse inertias).
     inverse_dynamics : (tuple of sympy.Symbol, sympy.Matrix) or None
         ``(ddq, tau)``: the joint-acceleration symbols (length n) and
@@ -137,8 +137,8 @@ class FlexibleJointModel:
     bodies : tuple of RigidBody or None
         Reduced spatial models: the chain's (or tree's) bodies in q order, for the emitter's
         Taylor recursion of the RNEA (:mod:`derive.emit.rnea_jets`). None for the planar closed
-        forms and the complete models.    springs : tuple of derive.spring.CubicSpring or None
-        Nonlinear joint springs ``tau_J = psi(q_m - q)`` (:mod:`derive.spring`), one per joint;
+        forms and the complete models.    springs : tuple of derive.core.spring.CubicSpring or None
+        Nonlinear joint springs ``tau_J = psi(q_m - q)`` (:mod:`derive.core.spring`), one per joint;
         ``K`` then holds each ``psi'(0)``. None: the linear springs ``K (q_m - q)``.
     """
 
@@ -161,10 +161,10 @@ class FlexibleJointModel:
     coupling: Optional[sp.Matrix] = None
     motor_bias: Optional[sp.Matrix] = None
     reduced_model: Optional[str] = None
-    rotors: Optional[object] = None  # complete model: its derive.rotors.Rotors (for chain.json)
+    rotors: Optional[object] = None  # complete model: its derive.core.rotors.Rotors (for chain.json)
     inverse_dynamics: Optional[Tuple[Tuple[sp.Symbol, ...], sp.Matrix]] = None
     bodies: Optional[Tuple[RigidBody, ...]] = None
-    springs: Optional[Tuple[object, ...]] = None  # nonlinear springs: derive.spring.CubicSpring per joint
+    springs: Optional[Tuple[object, ...]] = None  # nonlinear springs: derive.core.spring.CubicSpring per joint
 
     @property
     def state(self) -> Tuple[sp.Symbol, ...]:

@@ -1,8 +1,8 @@
 """Three-vector algebra and named intermediates for the SymPy chain builders.
 
-:mod:`derive.spatial` (CRBA, RNEA) and :mod:`derive.spatial_jacobian` write their straight-line
+:mod:`derive.spatial.spatial` (CRBA, RNEA) and :mod:`derive.spatial.spatial_jacobian` write their straight-line
 programmes with these: vectors are lists of three SymPy expressions, matrices lists of three rows,
-and :class:`Namer` gives an intermediate a name in the model's :class:`derive.program.Program`
+and :class:`Namer` gives an intermediate a name in the model's :class:`derive.core.program.Program`
 unless it is a single term. Pure math: no I/O.
 """
 
@@ -12,7 +12,7 @@ from typing import Dict, List, Tuple
 
 import sympy as sp
 
-from .program import Program
+from ..core.program import Program
 
 __all__ = ["Vector", "Matrix3", "exact_number", "cross3", "dot3", "matvec3", "matTvec3", "fill_symmetric",
            "Namer", "joint_trig"]

@@ -1,6 +1,6 @@
 """Feedback linearization of a flexible-joint model, with D(q)^-1 kept implicit.
 
-For ``x = [q; dq; q_m; dq_m]`` and the model of :mod:`derive.model_base`::
+For ``x = [q; dq; q_m; dq_m]`` and the model of :mod:`derive.core.model_base`::
 
     f(x) = [dq; y3; dq_m; J_m^-1 (K (q - q_m) - B_m dq_m)],   g = [0; 0; 0; J_m^-1]
     T    = [y1; y2; y3; y4] = [q; dq; L_f y2; L_f y3]

@@ -99,7 +99,7 @@ class DirectionalDerivative:
     lazy_seeds : mapping sympy.Symbol -> callable, optional
         Seeds computed on first use (for implicit symbols whose rule is
         expensive, such as the entries of D^-1).
-    program : derive.program.Program, optional
+    program : derive.core.program.Program, optional
         Defined intermediate symbols. Their derivative is the derivative of
         their definition, itself defined in the program as a new symbol
         named after ``tag``, so repeated use costs nothing.

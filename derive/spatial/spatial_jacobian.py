@@ -1,6 +1,6 @@
 """The Jacobian (Lagrangian) form of a spatial chain's model, kept for comparison and cross-checks.
 
-:func:`derive.spatial.make_spatial` (CRBA + RNEA) is the emitted form; this one builds the same
+:func:`derive.spatial.spatial.make_spatial` (CRBA + RNEA) is the emitted form; this one builds the same
 ``D`` and ``h`` from world-frame Jacobians (docs/spatial.md compares their operation counts).
 Pure math: no I/O.
 """
@@ -14,9 +14,9 @@ import numpy as np
 import sympy as sp
 
 from .chain import ChainDescription, chain_numerics, dot, outer
-from .lie import DirectionalDerivative
-from .model_base import FlexibleJointModel, Param
-from .program import Program
+from ..core.lie import DirectionalDerivative
+from ..core.model_base import FlexibleJointModel, Param
+from ..core.program import Program
 from .spatial import make_spatial
 from .spatial_params import PAYLOAD
 from .sym3 import Namer, cross3, dot3, exact_number, fill_symmetric, joint_trig, matvec3

@@ -6,7 +6,7 @@ axis ``a_i`` with angle ``N_i q_m,i``. Its polar inertia is
 ``I_a,i = J_m,i / N_i^2``; its mass ``m_r,i`` and transverse inertia ``I_t,i``
 are baked numbers. This module holds the per-joint data (:class:`Rotors`), the
 gear-ratio parameters (:func:`gear_params`) and the pieces that
-:func:`derive.spatial.make_spatial` adds to the CRBA/RNEA programmes of a
+:func:`derive.spatial.spatial.make_spatial` adds to the CRBA/RNEA programmes of a
 spatial chain:
 
 * :func:`carry_rotors` -- the rotor's mass, transverse inertia and polar

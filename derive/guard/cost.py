@@ -37,7 +37,7 @@ FORMS = ("planar", "spatial")
 
 #: The cost model: per form, ``(factor, exponent)`` of each quantity's excess over the trivial derive
 #: (``base_bytes``, ``base_seconds``: ``python -m derive --models planar1``), fitted by
-#: :func:`fit_power_law` to ``runs``. ``spatial``: synthetic URDF chains (:mod:`derive.synthetic`) derived
+#: :func:`fit_power_law` to ``runs``. ``spatial``: synthetic URDF chains (:mod:`derive.guard.synthetic`) derived
 #: with ``--model-file``; ``planar``: the built-in ``planar<n>``. Peak memory is the process's maximum
 #: resident set size (``ru_maxrss``, the number ``/usr/bin/time -v`` prints; ``bench/peak_rss.py``), seconds the
 #: wall clock of the whole command.
@@ -136,7 +136,7 @@ def estimate(n: int, form: str) -> Estimate:
     n : int
         Number of joints (>= 1).
     form : str
-        ``"planar"`` (:mod:`derive.planar` chains and ``link1``) or ``"spatial"`` (URDF arms).
+        ``"planar"`` (:mod:`derive.planar.planar` chains and ``link1``) or ``"spatial"`` (URDF arms).
 
     Returns
     -------

@@ -4,7 +4,7 @@
 ``K1..Kn, Jm1..Jmn, Bm1..Bmn, g0`` (:func:`elastic_params`), then optionally
 the tip payload ``m_load, x_load, y_load, z_load`` (:func:`payload_params`),
 then the inertial parameters of the links kept symbolic
-(:func:`inertial_params`). :func:`derive.spatial.make_spatial` checks this
+(:func:`inertial_params`). :func:`derive.spatial.spatial.make_spatial` checks this
 order. Pure data: no I/O.
 """
 
@@ -13,7 +13,7 @@ from __future__ import annotations
 from typing import Dict, Sequence, Tuple
 
 from .chain import ChainDescription, chain_numerics
-from .model_base import Param
+from ..core.model_base import Param
 
 __all__ = ["PAYLOAD", "payload_params", "INERTIAL_FIELDS", "inertial_params", "elastic_params"]
 

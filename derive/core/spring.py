@@ -1,6 +1,6 @@
 """Nonlinear joint springs ``tau_J = psi(phi)``, ``phi = q_m - q``, and their feedback linearization.
 
-The linear model (:mod:`derive.model_base`) has ``tau_J = K (q_m - q)``. A harmonic drive stiffens
+The linear model (:mod:`derive.core.model_base`) has ``tau_J = K (q_m - q)``. A harmonic drive stiffens
 with the deflection; the usual fit is the cubic ``psi(phi) = k1 phi + k3 phi^3``. With such a spring
 the model is::
 
@@ -14,7 +14,7 @@ and the linearizing coordinates carry the spring and its stiffness::
 
 Everything is derived, not written out: the spring enters as SymPy functions ``psi_k(phi)``
 (:func:`spring_functions`, the k-th derivative of psi, each one's derivative the next one) so
-that :func:`derive.lie.lie_derivative` and :func:`derive.lie.ad_iterates` differentiate through
+that :func:`derive.core.lie.lie_derivative` and :func:`derive.core.lie.ad_iterates` differentiate through
 it by the chain rule; the spring law (:class:`CubicSpring`) is substituted at the end.
 
 Torque coordinates (the measurement ``m = [q; dq; tau_J; dtau_J; dq_m]``) read ``tau_J`` and
@@ -277,7 +277,7 @@ def linearize_spring(m: FlexibleJointModel) -> Linearization:
 def _torque_form(m: FlexibleJointModel, ys) -> Dict[str, object]:
     """``T_tau``, ``alpha_tau``, ``beta_tau`` of ``m = [q; dq; tau_J; dtau_J; dq_m]`` (abstract psi).
 
-    As :mod:`derive.torque` (``E0 = D y3 + h - tau_J``, differentiated twice along the motion), with
+    As :mod:`derive.core.torque` (``E0 = D y3 + h - tau_J``, differentiated twice along the motion), with
     ``ddtau_J`` the second time derivative of ``tau_J = psi(phi)``: ``psi''(phi) dphi^2 + psi'(phi)
     ddphi``, ``ddphi = ddq_m - ddq = J_m^-1 (u - tau_J - B_m dq_m) - y3``, ``dphi = dtau_J / psi'(phi)``
     at the implied ``phi = phi_J``. ``A = nu`` (``A = dy4/dt``) is solved for ``u = alpha_tau + beta_tau nu``.

@@ -1,9 +1,9 @@
 """Spatial serial chains of revolute joints: D(q), h(q, dq) and the potential as a Program.
 
-The chain comes as a :class:`derive.chain.ChainDescription` (URDF conventions,
-from :mod:`derive.urdf` or :func:`derive.chain.planar_description`); its
+The chain comes as a :class:`derive.spatial.chain.ChainDescription` (URDF conventions,
+from :mod:`derive.spatial.urdf` or :func:`derive.spatial.chain.planar_description`); its
 build-time numbers (body frames along the joint axes, 10 inertia numbers per
-body) are those of :func:`derive.chain.chain_numerics`.
+body) are those of :func:`derive.spatial.chain.chain_numerics`.
 
 Symbolic part (:func:`make_spatial`): a straight-line :class:`Program` with
 named intermediates --
@@ -23,9 +23,9 @@ named intermediates --
   frames, one force propagation per entry below the diagonal);
 * the potential from the world height of every body's centre of mass.
 
-The result is a :class:`derive.model_base.FlexibleJointModel`, so linearization
+The result is a :class:`derive.core.model_base.FlexibleJointModel`, so linearization
 and emission are exactly those of the planar chains. Pure math: no I/O.
-:func:`derive.spatial_jacobian.make_spatial_jacobian` is the Jacobian (Lagrangian) form of the
+:func:`derive.spatial.spatial_jacobian.make_spatial_jacobian` is the Jacobian (Lagrangian) form of the
 same model, kept for cross-checks.
 """
 
@@ -36,17 +36,17 @@ from typing import Dict, List, Optional, Sequence, Tuple
 import sympy as sp
 
 from .chain import ChainDescription, ChainNumerics, chain_numerics, mm, rpy_matrix, snap
-from .model_base import FlexibleJointModel, Param, RigidBody, elastic_param_names, state_symbols
-from .program import Program
+from ..core.model_base import FlexibleJointModel, Param, RigidBody, elastic_param_names, state_symbols
+from ..core.program import Program
 from .sym3 import Matrix3, Namer, Vector, cross3, dot3, exact_number, fill_symmetric, joint_trig, matTvec3, matvec3
-from .rotors import Rotors, carry_rotors, coupling_matrix, motor_bias, spin_moments
+from ..core.rotors import Rotors, carry_rotors, coupling_matrix, motor_bias, spin_moments
 from .spatial_params import INERTIAL_FIELDS, PAYLOAD
 
 __all__ = ["make_spatial"]
 
 def _check_params(num: ChainNumerics, name: str, params: Tuple[Param, ...],
                   symbolic: Sequence[str]) -> bool:
-    """Check the parameter order (see :mod:`derive.spatial_params`); True if there is a payload."""
+    """Check the parameter order (see :mod:`derive.spatial.spatial_params`); True if there is a payload."""
     expected = elastic_param_names(len(num.bodies))
     inertial_names = [f"{f}_{link}" for link in symbolic for f, _, _ in INERTIAL_FIELDS]
     names = [p.name for p in params]
@@ -311,16 +311,16 @@ def make_spatial(desc: ChainDescription, name: str, params: Tuple[Param, ...],
     name : str
         Model name (a C identifier).
     params : tuple of Param
-        ``K1..Kn, Jm1..Jmn, Bm1..Bmn, g0`` (see :func:`derive.spatial_params.elastic_params`),
-        optionally followed by the payload (:func:`derive.spatial_params.payload_params`), then
-        by the inertial parameters of the ``symbolic`` links (:func:`derive.spatial_params.inertial_params`).
+        ``K1..Kn, Jm1..Jmn, Bm1..Bmn, g0`` (see :func:`derive.spatial.spatial_params.elastic_params`),
+        optionally followed by the payload (:func:`derive.spatial.spatial_params.payload_params`), then
+        by the inertial parameters of the ``symbolic`` links (:func:`derive.spatial.spatial_params.inertial_params`).
     description : str
         One paragraph for the report and manifest.
     symbolic : sequence of str
         Links whose inertials are runtime parameters instead of baked numbers.
     rotors : Rotors or None
         The complete model (docs/complete-model.md): rotor ``i`` on body ``i-1``;
-        ``params`` then end with the gear ratios ``N1..Nn`` (:func:`derive.rotors.gear_params`).
+        ``params`` then end with the gear ratios ``N1..Nn`` (:func:`derive.core.rotors.gear_params`).
         None: the reduced model.
     reduced_model : str or None
         Recorded in the complete model (the reduced model with the same state layout).

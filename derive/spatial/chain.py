@@ -21,9 +21,9 @@ Rotation entries within 1e-12 of 0 or +-1 are snapped to the exact integer
 (URDF files write multiples of pi/2 as decimals), which keeps the sparse
 structure of typical arms (the Panda's constant rotations are permutations).
 
-:mod:`derive.urdf` reads a URDF into a :class:`ChainDescription`,
+:mod:`derive.spatial.urdf` reads a URDF into a :class:`ChainDescription`,
 :func:`planar_description` states ``planar<n>`` as one, and
-:mod:`derive.spatial` turns one into symbolic dynamics. Pure data and
+:mod:`derive.spatial.spatial` turns one into symbolic dynamics. Pure data and
 numerics: no I/O, no SymPy.
 """
 
@@ -130,7 +130,7 @@ class ChainDescription:
     joints : tuple of Joint
         Path from the base to the tip, in order; for a tree (joints naming
         their ``parent``), every parent comes before its children, and q
-        follows this order (see :func:`derive.urdf.parse_urdf`: depth-first,
+        follows this order (see :func:`derive.spatial.urdf.parse_urdf`: depth-first,
         tips in the order listed, shared joints first).
     attached : tuple of Attached
         Links rigidly fixed to path links but not on the path.
@@ -333,7 +333,7 @@ def chain_numerics(desc: ChainDescription, symbolic: Sequence[str] = ()) -> Chai
     desc : ChainDescription
     symbolic : sequence of str
         Links whose inertial is left out of the numeric sums (it becomes
-        runtime parameters, see :func:`derive.spatial.make_spatial`); their
+        runtime parameters, see :func:`derive.spatial.spatial.make_spatial`); their
         poses are in :attr:`ChainNumerics.symbolic`.
 
     Returns

@@ -1,4 +1,4 @@
-"""URDF import (build time only): a base -> tip serial chain as a :class:`derive.chain.ChainDescription`.
+"""URDF import (build time only): a base -> tip serial chain as a :class:`derive.spatial.chain.ChainDescription`.
 
 Parsed with the standard library's XML parser (:mod:`xml.parsers.expat`, the
 parser behind :mod:`xml.etree`, maintained with CPython), which reports line

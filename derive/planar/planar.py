@@ -1,8 +1,8 @@
 """Built-in formula models: the paper's single link (``link1``) and planar chains (``planar<n>``).
 
-Both are :class:`derive.model_base.FlexibleJointModel` instances built from
+Both are :class:`derive.core.model_base.FlexibleJointModel` instances built from
 closed forms (docs/derivation.md, "Equations of motion"); the planar chain's
-intermediates are named symbols of a :class:`derive.program.Program` so that
+intermediates are named symbols of a :class:`derive.core.program.Program` so that
 D, h and their time derivatives stay O(n^2). Pure math: no I/O, no printing.
 """
 
@@ -13,9 +13,9 @@ from typing import Callable, Dict, List, Optional, Tuple
 
 import sympy as sp
 
-from .model_base import FlexibleJointModel, Param, state_symbols
-from .program import Program
-from .rotors import Rotors, gear_params, planar_carried
+from ..core.model_base import FlexibleJointModel, Param, state_symbols
+from ..core.program import Program
+from ..core.rotors import Rotors, gear_params, planar_carried
 
 __all__ = ["make_link1", "make_planar", "planar_params", "make_link1_complete"]
 

@@ -6,7 +6,7 @@ offsets, centres of mass off the link axes and non-zero products of inertia
 with ``K = 1000 N m/rad`` and ``J_m = 0.1 kg m^2``. The numbers are made up
 (plausible for a light arm); only the *size* of the derivation matters here.
 
-Used by :mod:`derive.cost` (calibration), the tests and the bench. No I/O
+Used by :mod:`derive.guard.cost` (calibration), the tests and the bench. No I/O
 except :func:`write_synthetic_chain`, which writes the two files.
 """
 
