@@ -143,14 +143,43 @@ def _build(model: str, real: str, outdir: Path) -> Build:
     return Build(model, real, ok, diag, lib, secs)
 
 
+#: Models whose -O2 build takes most of this file's cold time (Baxter: 15 joints, ~18 s of gcc): their
+#: checks run in CI's exhaustive pass (``pytest -m exhaustive`` in .ci/run), the others in ``make test``.
+EXHAUSTIVE_C = ("baxter",)
+
+
+def _params(models):
+    """``models`` (names, or ``(name, real)`` pairs) as pytest parameters, :data:`EXHAUSTIVE_C` marked exhaustive."""
+    out = []
+    for m in models:
+        values = m if isinstance(m, tuple) else (m,)
+        marks = [pytest.mark.exhaustive] if values[0] in EXHAUSTIVE_C else []
+        out.append(pytest.param(*values, marks=marks))
+    return out
+
+
+class Builds(dict):
+    """``(model, real) -> Build``; a build not made up front is made on first use (the exhaustive ones)."""
+
+    def __init__(self, outdir: Path):
+        super().__init__()
+        self.outdir = outdir
+
+    def __missing__(self, key):
+        self[key] = _build(*key, self.outdir)
+        return self[key]
+
+
 @pytest.fixture(scope="session")
-def c_builds(tmp_path_factory) -> Dict[Tuple[str, str], Build]:
-    """Compile every model (double) and FLOAT_MODELS (float) once, two jobs at a time, biggest first."""
-    outdir = tmp_path_factory.mktemp("c_builds")
-    jobs = [(m, "double") for m in reversed(MODELS)] + [(m, "float") for m in FLOAT_MODELS]
+def c_builds(tmp_path_factory) -> Builds:
+    """Compile every model of ``make test`` (double) and FLOAT_MODELS (float) up front, two jobs at a time,
+    biggest first; the models of :data:`EXHAUSTIVE_C` when a test asks for them."""
+    builds = Builds(tmp_path_factory.mktemp("c_builds"))
+    jobs = [(m, "double") for m in reversed(MODELS) if m not in EXHAUSTIVE_C] + [(m, "float") for m in FLOAT_MODELS]
     with ThreadPoolExecutor(max_workers=max(2, os.cpu_count() or 2)) as pool:
-        builds = list(pool.map(lambda job: _build(*job, outdir), jobs))
-    return {(b.model, b.real): b for b in builds}
+        for b in pool.map(lambda job: _build(*job, builds.outdir), jobs):
+            builds[(b.model, b.real)] = b
+    return builds
 
 
 class CFunction:
@@ -234,7 +263,7 @@ def test_every_generated_model_is_checked():
     assert set(CONTROL_MODELS) >= {"link1", "panda", "baxter"}
 
 
-@pytest.mark.parametrize("model,real", [(m, "double") for m in MODELS] + [(m, "float") for m in FLOAT_MODELS])
+@pytest.mark.parametrize("model,real", _params([(m, "double") for m in MODELS] + [(m, "float") for m in FLOAT_MODELS]))
 def test_strict_compile(c_builds, model, real, record_property):
     """gcc -std=c99 -Wall -Wextra -Werror -pedantic accepts the generated C without a single diagnostic."""
     b = c_builds[(model, real)]
@@ -244,7 +273,7 @@ def test_strict_compile(c_builds, model, real, record_property):
     assert b.strict_ok, f"{model}.c fails the strict {real} build:\n{b.diagnostics[:3000]}"
 
 
-@pytest.mark.parametrize("model", MODELS)
+@pytest.mark.parametrize("model", _params(MODELS))
 def test_c_equals_casadi(c_builds, model, record_property):
     m = fjm_runtime.load(model)
     lib = ctypes.CDLL(str(c_builds[(model, "double")].lib))
@@ -339,7 +368,7 @@ def random_control_inputs(model: fjm_runtime.Model, kind: str, rng: np.random.Ge
         yield x, z, r, p, gains
 
 
-@pytest.mark.parametrize("model", CONTROL_MODELS)
+@pytest.mark.parametrize("model", _params(CONTROL_MODELS))
 def test_control_laws_c_equals_casadi(c_builds, model, record_property):
     """Every emitted law (and its _zdot part) in C equals its CasADi Function."""
     m = fjm_runtime.load(model)

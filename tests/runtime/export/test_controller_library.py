@@ -203,6 +203,15 @@ def test_panda_shipped_design_equals_simulator_10s(tmp_path_factory):
     _check_equal(_panda_design(), tmp_path_factory, 10.0, float_bound=5e-2)
 
 
+@pytest.mark.slow
+@pytest.mark.exhaustive
+def test_baxter_shipped_design_equals_simulator(tmp_path_factory):
+    """The tree (15 joints, two arms on a torso): Baxter's shipped design (torque-sensed ismc, delay 1 with
+    prediction), 1 s of its task; its controller's compile takes a minute, so CI's exhaustive pass."""
+    design = design_controller(fjm_runtime.load("baxter"), designed_gains("baxter", "ismc", "torque", 1000.0, 1))
+    _check_equal(design, tmp_path_factory, 1.0, float_bound=5e-2)
+
+
 #: Gains that track on a 2 s sine with a torque limit below the run's peak (the limit is reached,
 #: but most samples are the unclipped law).
 _SOFT = {"lam": 5.0, "k_s": 10.0, "delta": 20.0}
