@@ -405,7 +405,7 @@ def sample_step_function(model, controller, L: StepLayout, outline: bool = False
     ``outline``: see :func:`casadi_sample_step`.
     """
     nominal = controller_model(controller, model)
-    nominal_fns = casadi_functions(nominal) if (L.predict and nominal is not model) else None
+    nominal_fns = casadi_functions(nominal, ("f", "g")) if (L.predict and nominal is not model) else None
     if L.predict and nominal is not model and nominal_fns is None:
         raise FjmValueError(f"predict: the controller's model {getattr(nominal, 'name', nominal)!r} has no CasADi "
                             "Functions to predict with")

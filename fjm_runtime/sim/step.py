@@ -42,10 +42,11 @@ def check_divergence(t_next, W, U, max_state: float) -> None:
             f" (last applied torque {np.round(np.asarray(U[j]), 3).tolist()} N m)")
 
 
-def casadi_functions(model):
-    """The model's CasADi Functions ``f, g, T, alpha, beta`` of ``(x, p)``, or ``None``.
+def casadi_functions(model, names=("f", "g", "T", "alpha", "beta")):
+    """The model's CasADi Functions ``names`` (default ``f, g, T, alpha, beta``) of ``(x, p)``, or ``None``.
 
-    Uses the loader's ``Model.functions`` mapping (name -> casadi.Function).
+    Uses the loader's ``Model.functions`` mapping (name -> casadi.Function). A predictor needs only
+    ``("f", "g")`` (a complete model has no ``T``, ``alpha``, ``beta``).
     """
     fns = getattr(model, "functions", None)
     if fns is None:
@@ -54,7 +55,7 @@ def casadi_functions(model):
         return None
     try:
         import casadi as ca
-        out = {k: fns[k] for k in ("f", "g", "T", "alpha", "beta")}
+        out = {k: fns[k] for k in names}
     except (KeyError, TypeError, ImportError):
         return None
     return out if all(isinstance(v, ca.Function) for v in out.values()) else None
