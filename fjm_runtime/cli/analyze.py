@@ -9,6 +9,7 @@ record, ``--out`` writes it (docs/design-command.md, "The linear analysis").
 """
 from __future__ import annotations
 
+import argparse
 import json
 import math
 import sys
@@ -33,7 +34,7 @@ def add_parser(sub) -> None:
     p.add_argument("--gains", type=Path, required=True, help="gains file (a fjm design output or {kind, gains})")
     p.add_argument("--rate", type=float, default=None, help="control rate, Hz (default: the file's, else 1000)")
     p.add_argument("--delay-samples", type=int, default=None, help="delay, samples (default: the file's, else 0)")
-    p.add_argument("--predict", action=__import__("argparse").BooleanOptionalAction, default=None,
+    p.add_argument("--predict", action=argparse.BooleanOptionalAction, default=None,
                    help="delay compensation (default: the file's)")
     p.add_argument("--sensing", choices=("state", "torque"), default=None, help="default: the file's, else torque")
     p.add_argument("--noise", default=None, metavar="PRESET|FILE",
