@@ -24,6 +24,9 @@ def add_parser(sub) -> None:
     ex.add_argument("--gains", type=Path, default=None,
                     help="controller: a design file (`fjm design` output, e.g. "
                          "fjm_runtime/control/designed/panda_ismc_tau_1000hz_d1.json)")
+    ex.add_argument("--params", type=Path, default=None, metavar="FILE",
+                    help="controller: parameter file (TOML [parameters], e.g. from `fjm identify`): the law's "
+                         "nominal values (over the design file's params.nominal)")
     ex.add_argument("--substeps", type=int, default=None,
                     help="controller: RK4 substeps of the predictor per sample (default: the substeps rule)")
     ex.add_argument("--name", default=None, help="controller: C prefix (default <model>_<kind>[_tau])")
@@ -71,7 +74,10 @@ def _run_controller(args) -> int:
     if spec.get("model") not in (None, m.name):
         raise FjmValueError(f"--gains {args.gains}: designed for model {spec['model']!r}, not {m.name!r}")
     spec.setdefault("file", str(args.gains))
-    design = design_controller(m, spec, where=f"--gains {args.gains}", substeps=args.substeps, name=args.name)
+    from .simulate import design_nominal, params_file_nominal
+    nominal = {**design_nominal(spec, m), **params_file_nominal(args.params, m)}
+    design = design_controller(m, spec, where=f"--gains {args.gains}", nominal=nominal or None,
+                               substeps=args.substeps, name=args.name)
     files = export_controller(design, args.out)
     print(f"wrote {len(files)} files to {args.out} ({design.name}: {m.name}, {design.controller.law_kind}, "
           f"{1.0 / design.layout.T:g} Hz, delay {design.layout.delay}, {design.layout.substeps} substeps); "

@@ -20,11 +20,12 @@ import importlib.util
 import sys
 from typing import List, Optional
 
-from . import analyze, derive, design, export, figures, models, simulate, sweep
+from . import analyze, derive, design, excite, export, figures, identify, models, simulate, sweep
 from ..validation import FjmValueError
 
 #: Sub-commands with an ``add_parser(sub)`` and a ``run(args)``, in ``--help`` order.
-COMMANDS = {"simulate": simulate, "design": design, "analyze": analyze, "sweep": sweep, "figures": figures, "models": models, "export": export}
+COMMANDS = {"simulate": simulate, "design": design, "analyze": analyze, "sweep": sweep, "figures": figures, "models": models,
+            "export": export, "excite": excite, "identify": identify}
 
 
 def _tune_module():
@@ -62,6 +63,8 @@ def build_parser() -> argparse.ArgumentParser:
     figures.add_parser(sub)
     models.add_parser(sub)
     export.add_parser(sub)
+    excite.add_parser(sub)
+    identify.add_parser(sub)
     tune = _tune_module()
     if tune is not None:
         tune.add_parser(sub)

@@ -96,6 +96,9 @@ def _add_sampled_data_flags(sim) -> None:
                      help="TRUE motor inertia = nominal x A (one value, or one per joint)")
     sim.add_argument("--payload", type=float, default=None,
                      help="TRUE payload mass, kg (models with an m_load parameter)")
+    sim.add_argument("--params", type=Path, default=None, metavar="FILE",
+                     help="parameter file (TOML [parameters], e.g. from `fjm identify`): the controller's NOMINAL "
+                          "values (over the gains file's; --nominal overrides them)")
     sim.add_argument("--gains", type=Path, default=None,
                      help='JSON {"kind": KIND, "gains": {lam, k_s, delta, k_lin, u_max, ...}} (docs/simulation.md)')
     sim.add_argument("--json", action="store_true",
@@ -339,7 +342,15 @@ def _reference(m, args, spec):
     return make_reference(args.reference, m.n, **ref_kw), None
 
 
-def _design_nominal(spec: dict, m) -> Dict[str, float]:
+def params_file_nominal(path, m) -> Dict[str, float]:
+    """The ``[parameters]`` of a parameter file (``--params``, docs/design-command.md), ``{}`` without one."""
+    if path is None:
+        return {}
+    from ..analysis.design_draws import load_params_file
+    return dict(load_params_file(path, m).overrides)
+
+
+def design_nominal(spec: dict, m) -> Dict[str, float]:
     """The nominal values a design was made for (its ``params.nominal``, from ``fjm design --params``).
 
     The gains hold for the controller's nominal model they were searched with; ``--nominal`` still
@@ -373,7 +384,8 @@ def run(args) -> int:
     _check_flags(args, dt)
     sensor = _sensor(args)
     spec, source = _gains_file(args, m, 1.0 / dt)
-    nominal = {**_design_nominal(spec, m), **parse_assignments(args.nominal, "--nominal")}
+    nominal = {**design_nominal(spec, m), **params_file_nominal(args.params, m),
+               **parse_assignments(args.nominal, "--nominal")}
     true = _true_params(m, args, nominal)
     kind = spec["kind"]
     ref, x0 = _reference(m, args, spec)

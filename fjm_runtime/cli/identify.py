@@ -1,0 +1,49 @@
+"""``fjm identify MODEL LOG --out params.toml``: the drives' parameters from a robot log (docs/identification.md)."""
+from __future__ import annotations
+
+from pathlib import Path
+
+from .common import check_output_file
+
+__all__ = ["add_parser", "run"]
+
+
+def add_parser(sub) -> None:
+    """Register ``fjm identify``."""
+    p = sub.add_parser("identify", help="identify joint stiffness, rotor inertia, damping, friction from a log",
+                       description="Least squares on a log (t, q_<i>, q_m_<i>, u_<i>, tau_J_<i> when sensed; "
+                                   "docs/identification.md): per joint the spring law, J_m, B_m and friction, with "
+                                   "standard errors, condition numbers and residuals; writes a parameter file that "
+                                   "fjm design --params, fjm simulate --params and fjm export controller --params "
+                                   "read.")
+    p.add_argument("model", help="the reduced model the log is of (see `fjm models`)")
+    p.add_argument("log", type=Path, help="the log: .csv (header t, q_1, q_m_1, u_1, [tau_J_1], ...) or .npz")
+    p.add_argument("--out", type=Path, required=True, help="parameter file to write (TOML)")
+    p.add_argument("--spring", choices=("linear", "cubic"), default=None,
+                   help="spring law (default: cubic for a model with k1, k3, else linear)")
+    p.add_argument("--friction", choices=("viscous", "coulomb", "stribeck"), default="coulomb",
+                   help="motor friction: B_m only, + Coulomb F_c tanh(dq_m/v_c) (default), + Stribeck F_s")
+    p.add_argument("--v-c", type=float, default=0.01, help="Coulomb regularization velocity, rad/s (default 0.01)")
+    p.add_argument("--v-s", type=float, default=0.1, help="Stribeck velocity, rad/s (default 0.1)")
+    p.add_argument("--window", type=float, default=0.04,
+                   help="zero-phase smoothing/differentiation window, s (default 0.04; shorter for fast, clean motors, longer for noisy encoders)")
+
+
+def run(args) -> int:
+    """Run ``fjm identify``; returns the exit status (0)."""
+    from .. import load
+    from ..ident.identify import identify
+    from ..ident.log import read_log
+    from ..ident.report import table_lines
+    check_output_file(args.out, "--out")
+    m = load(args.model)
+    log = read_log(args.log, m)
+    ident = identify(m, log, spring=args.spring, friction=args.friction, v_c=args.v_c, v_s=args.v_s,
+                     window=args.window)
+    s = ident.settings
+    print(f"{m.name}: {s['samples']} samples, {s['duration_s']:.3g} s at {s['rate_hz']:.4g} Hz; tau_J from the "
+          f"{s['tau_J']}; filter {s['filter']}")
+    print("\n".join(table_lines(ident)))
+    ident.to_toml(args.out, m)
+    print(f"wrote {args.out} (fjm design {m.name} --params {args.out})")
+    return 0

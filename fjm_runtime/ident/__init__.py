@@ -1,0 +1,1 @@
+"""Identification of the drives (stiffness, rotor inertia, damping, friction) from a robot log."""

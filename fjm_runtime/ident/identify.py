@@ -1,0 +1,252 @@
+"""Joint stiffness, rotor inertia, damping and friction from a log, by least squares (docs/identification.md).
+
+Per joint ``i`` (the motor equations are decoupled; a complete model's rotor coupling is not
+modelled here), with ``phi = q_m - q`` and the logged (or estimated) joint torque ``tau_J``:
+
+* spring: ``tau_J = K phi + o`` (linear) or ``k1 phi + k3 phi^3 + o`` (cubic), with ``o`` the
+  torque sensor's constant offset (identified and reported, not a model parameter);
+* motor: ``u - (tau_J - o) = J_m ddq_m + B_m dq_m + F_c c(dq_m) [+ F_s s(dq_m)]`` with the
+  regularized Coulomb term ``c = tanh(dq_m / v_c)`` and, for Stribeck, ``s = exp(-(dq_m / v_s)^2) c``
+  (then the Coulomb column is ``c - s``: ``F(v) = F_c c + (F_s - F_c) s``).
+
+Both are linear in the unknowns: ordinary least squares on column-scaled regressors, standard
+errors from the residual variance with the effective sample count of the correlated residuals
+(:func:`~fjm_runtime.ident.signals.effective_samples`). Signals are smoothed and differentiated
+offline by a zero-phase Savitzky-Golay filter (:mod:`fjm_runtime.ident.signals`).
+
+Without ``tau_J`` in the log, it is the link equation's: ``tau_J = D(q) ddq + h(q, dq)`` from the
+model's generated ``f`` and ``inertia`` at its NOMINAL link parameters (``f``'s link rows at
+``q_m = q`` are ``-D^-1 h``), so the link model's error goes into the identified spring.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Dict, List, Optional, Tuple
+
+import numpy as np
+
+from ..validation import FjmValueError
+from .linkeq import link_torque
+from .log import Log
+from .signals import effective_samples, savgol_kernels, smooth_derivatives, window_half
+
+__all__ = ["Identification", "identify", "parameter_names", "SPRINGS", "FRICTIONS"]
+
+SPRINGS = ("linear", "cubic")
+FRICTIONS = ("viscous", "coulomb", "stribeck")
+#: A parameter whose standard error exceeds this fraction of its value is reported as not excited.
+NOT_EXCITED = 0.1
+#: A stiffness whose deflection signal is more than this share noise (variance) is reported as not excited.
+MAX_NOISE_SHARE = 0.25
+
+
+@dataclass
+class JointFit:
+    """One least-squares fit: names, values, standard errors, condition number, RMS residual."""
+
+    names: List[str]
+    values: np.ndarray
+    stderr: np.ndarray
+    condition: float
+    residual: float
+
+
+@dataclass
+class Identification:
+    """What :func:`identify` found.
+
+    Attributes
+    ----------
+    values, stderr : dict
+        Parameter name -> value, standard error (model names: ``K``/``K<i>``, ``J_m``/``Jm<i>``,
+        ``B_m``/``Bm<i>``, ``k1``, ``k3``; not in the model: ``F_c<i>``, ``F_s<i>``, ``tau_J_offset<i>``).
+    condition : dict
+        ``"spring <i>"``, ``"motor <i>"`` -> condition number of the scaled regressor.
+    residual : dict
+        Same keys -> RMS residual, N m.
+    warnings : list of str
+    settings : dict
+        Method, filter, friction and spring choices, the log's source and duration.
+    """
+
+    values: Dict[str, float] = field(default_factory=dict)
+    stderr: Dict[str, float] = field(default_factory=dict)
+    condition: Dict[str, float] = field(default_factory=dict)
+    residual: Dict[str, float] = field(default_factory=dict)
+    warnings: List[str] = field(default_factory=list)
+    not_excited: List[str] = field(default_factory=list)
+    settings: dict = field(default_factory=dict)
+
+    def model_values(self, model) -> Dict[str, float]:
+        """The identified values that are parameters of ``model`` and that the log determines (excited)."""
+        names = set(model.param_names)
+        return {k: v for k, v in self.values.items() if k in names and k not in self.not_excited}
+
+    def to_toml(self, path, model) -> Path:
+        """Write a parameter file ``fjm design --params`` / ``fjm simulate --params`` read (see module doc)."""
+        from .report import params_toml
+        p = Path(path)
+        p.parent.mkdir(parents=True, exist_ok=True)
+        tmp = p.with_name(p.name + ".tmp")
+        tmp.write_text(params_toml(self, model))
+        tmp.replace(p)
+        return p
+
+
+def parameter_names(model, spring: str) -> Tuple[List[List[str]], List[str], List[str]]:
+    """``(spring names per joint, J_m names, B_m names)`` of ``model`` in fjm's naming."""
+    names, n = list(model.param_names), int(model.n)
+    if spring == "cubic":
+        if n != 1 or not {"k1", "k3"} <= set(names):
+            raise FjmValueError(f"--spring cubic: {model.name} has no cubic spring parameters k1, k3; expected a "
+                                "model with a cubic spring (e.g. link1_hd) or --spring linear")
+        return [["k1", "k3"]], ["J_m"], ["B_m"]
+    if n == 1 and "K" in names:
+        return [["K"]], ["J_m"], ["B_m"]
+    K = [f"K{i + 1}" for i in range(n)]
+    if not set(K) <= set(names):
+        raise FjmValueError(f"{model.name}: no linear stiffness parameters {K[0]}..{K[-1]} (found "
+                            f"{', '.join(names[:8])} ...); expected --spring cubic for a nonlinear spring")
+    return [[k] for k in K], [f"Jm{i + 1}" for i in range(n)], [f"Bm{i + 1}" for i in range(n)]
+
+
+def _fit(A: np.ndarray, b: np.ndarray, names: List[str], max_lag: int, noise_var=None) -> JointFit:
+    """Least squares ``A theta = b`` on scaled columns. ``noise_var`` (per column, or None): the variance
+    of the noise IN the regressor's columns, removed from ``A^T A`` (the bias-corrected, errors-in-variables
+    estimate: noisy regressors otherwise shrink their coefficients)."""
+    scale = np.linalg.norm(A, axis=0)
+    if np.any(scale == 0):
+        col = names[int(np.argmin(scale))]
+        raise FjmValueError(f"identify: the regressor column of {col} is zero (nothing in the log moves it); "
+                            "expected an exciting trajectory (fjm excite)")
+    As = A / scale
+    G = As.T @ As
+    if noise_var is not None:
+        G = G - np.diag(A.shape[0] * np.asarray(noise_var, dtype=float) / scale ** 2)
+    sol = np.linalg.solve(G, As.T @ b)
+    r = b - As @ sol
+    n_eff = effective_samples(r, max_lag)
+    dof = max(n_eff - A.shape[1], 1.0)
+    sigma2 = float(r @ r) / r.size * n_eff / dof
+    cov = np.linalg.inv(G) * sigma2 * r.size / n_eff
+    svals = np.linalg.svd(As, compute_uv=False)
+    return JointFit(names, sol / scale, np.sqrt(np.diag(cov)) / scale, float(svals[0] / svals[-1]),
+                    float(np.sqrt(np.mean(r ** 2))))
+
+
+def deflection_noise(phi_raw: np.ndarray, phi_smooth: np.ndarray, k_center: float) -> float:
+    """Variance of the white noise left in the SMOOTHED deflection, from the raw-minus-smoothed one.
+
+    For white noise ``e`` and a Savitzky-Golay smoother (a projection: ``sum k^2 = k_c``, the kernel's
+    centre weight), ``var(e - K e) = s^2 (1 - k_c)`` and ``var(K e) = s^2 k_c``.
+    """
+    d = np.asarray(phi_raw) - np.asarray(phi_smooth)
+    return float(np.var(d)) * k_center / (1.0 - k_center)
+
+
+def _friction_columns(dqm: np.ndarray, friction: str, v_c: float, v_s: float):
+    c = np.tanh(dqm / v_c)
+    if friction == "viscous":
+        return [], []
+    if friction == "coulomb":
+        return [c], ["F_c"]
+    s = np.exp(-(dqm / v_s) ** 2) * c
+    return [c - s, s], ["F_c", "F_s"]
+
+
+def identify(model, log: Log, *, spring: Optional[str] = None, friction: str = "coulomb", v_c: float = 0.01,
+             v_s: float = 0.1, window: float = 0.04, nominal=None) -> Identification:
+    """Identify the joints' spring, rotor inertia, damping and friction from ``log``.
+
+    Parameters
+    ----------
+    model : Model
+        ``fjm_runtime.load(name)``: its parameter names, and its link model when ``tau_J`` is not logged.
+    log : Log
+        :func:`~fjm_runtime.ident.log.read_log`.
+    spring : {'linear', 'cubic'}, optional
+        Default: cubic for a model with ``k1, k3``, else linear.
+    friction : {'viscous', 'coulomb', 'stribeck'}
+    v_c, v_s : float
+        Coulomb regularization and Stribeck velocities, rad/s (link side), > 0.
+    window : float
+        Savitzky-Golay window, s (the filter's cut-off is about ``1 / window`` Hz).
+    nominal : dict, optional
+        Link parameters for the link equation (default: the model's defaults).
+
+    Returns
+    -------
+    Identification
+    """
+    names = list(model.param_names)
+    if "coupling" in getattr(model, "functions", {}):
+        raise FjmValueError(f"identify: {model.name} is a complete model (rotor coupling); expected its reduced "
+                            "model (e.g. panda for panda_complete): the motor equations are identified per joint")
+    if spring is None:
+        spring = "cubic" if {"k1", "k3"} <= set(names) and "K" not in names else "linear"
+    if spring not in SPRINGS or friction not in FRICTIONS:
+        raise FjmValueError(f"identify: spring {spring!r}, friction {friction!r}; expected spring in {SPRINGS} and "
+                            f"friction in {FRICTIONS}")
+    for nm, v in (("v_c", v_c), ("v_s", v_s), ("window", window)):
+        if not (np.isfinite(v) and v > 0):
+            raise FjmValueError(f"identify: {nm} = {v!r}; expected a finite value > 0")
+    spring_names, jm, bm = parameter_names(model, spring)
+    dt, h = log.dt, window_half(log.dt, window)
+    if log.t.size < 10 * (2 * h + 1):
+        raise FjmValueError(f"{log.source}: {log.t.size} samples for a {2 * h + 1}-sample filter window; expected "
+                            "a log at least 10 windows long (a shorter --window, or a longer log)")
+    sig = np.concatenate([log.q, log.q_m, log.u] + ([log.tau_J] if log.tau_J is not None else []), axis=1)
+    S, dS, ddS = smooth_derivatives(sig, dt, h)
+    n = log.n
+    raw_phi = (log.q_m - log.q)[h:log.t.size - h]
+    k_center = float(savgol_kernels(h, 3, dt)[0][h])
+    q, qm, u = S[:, :n], S[:, n:2 * n], S[:, 2 * n:3 * n]
+    dqm, ddqm = dS[:, n:2 * n], ddS[:, n:2 * n]
+    if log.tau_J is not None:
+        tau, source = S[:, 3 * n:], "logged tau_J"
+    else:
+        p = model.params_array({**model.default_params, **(nominal or {})})
+        tau, source = link_torque(model, q, dS[:, :n], ddS[:, :n], p), "link equation at the nominal link parameters"
+    out = Identification(settings={
+        "model": model.name, "log": log.source, "duration_s": float(log.t[-1] - log.t[0]), "samples": int(log.t.size),
+        "rate_hz": 1.0 / dt, "spring": spring, "friction": friction, "v_c": v_c, "v_s": v_s, "tau_J": source,
+        "filter": f"zero-phase Savitzky-Golay, degree 3, {2 * h + 1} samples ({(2 * h + 1) * dt:.3g} s), "
+                  f"{h} samples dropped at each end"})
+    for i in range(n):
+        noise = deflection_noise(raw_phi[:, i], qm[:, i] - q[:, i], k_center)
+        _identify_joint(out, i, q[:, i], qm[:, i], dqm[:, i], ddqm[:, i], u[:, i], tau[:, i], spring_names[i],
+                        jm[i], bm[i], friction, v_c, v_s, max_lag=2 * h + 1, offset=log.tau_J is not None,
+                        phi_noise=noise)
+    return out
+
+
+def _identify_joint(out: Identification, i: int, q, qm, dqm, ddqm, u, tau, spring_names, jm, bm, friction, v_c,
+                    v_s, max_lag: int, offset: bool, phi_noise: float = 0.0) -> None:
+    phi = qm - q
+    cols = [phi] + ([phi ** 3] if len(spring_names) == 2 else [])
+    noise_var = [phi_noise] + [0.0] * (len(cols) - 1) + ([0.0] if offset else [])
+    snames = list(spring_names)
+    if offset:
+        cols.append(np.ones_like(phi))
+        snames.append(f"tau_J_offset{i + 1}")
+    fit_s = _fit(np.column_stack(cols), tau, snames, max_lag, noise_var)
+    o = fit_s.values[-1] if offset else 0.0
+    fcols, fnames = _friction_columns(dqm, friction, v_c, v_s)
+    fnames = [f"{nm}{i + 1}" for nm in fnames]
+    fit_m = _fit(np.column_stack([ddqm, dqm] + fcols), u - (tau - o), [jm, bm] + fnames, max_lag)
+    noise_share = phi_noise / max(float(np.var(phi)), 1e-300)
+    if noise_share > MAX_NOISE_SHARE:        # the correction itself is then the estimate: do not trust it
+        out.not_excited.append(spring_names[0])
+        out.warnings.append(f"{spring_names[0]}: encoder noise is {noise_share:.0%} of the deflection's variance "
+                            f"(over {MAX_NOISE_SHARE:.0%}): the joint hardly deflects in this log; the parameter file "
+                            "keeps the model's value")
+    for tag, fit in ((f"spring {i + 1}", fit_s), (f"motor {i + 1}", fit_m)):
+        out.condition[tag], out.residual[tag] = fit.condition, fit.residual
+        for nm, v, se in zip(fit.names, fit.values, fit.stderr):
+            out.values[nm], out.stderr[nm] = float(v), float(se)
+            if not nm.startswith("tau_J_offset") and nm not in out.not_excited and not se <= NOT_EXCITED * abs(v):
+                out.not_excited.append(nm)
+                out.warnings.append(f"{nm} = {v:.4g} +- {se:.2g}: not excited (standard error over "
+                                    f"{NOT_EXCITED:.0%} of the value); the log does not determine it, the parameter "
+                                    "file keeps the model's value")
