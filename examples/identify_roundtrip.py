@@ -31,7 +31,6 @@ from __future__ import annotations
 import argparse
 import importlib.util
 import json
-import re
 import subprocess
 import sys
 import tempfile
@@ -42,24 +41,20 @@ import numpy as np
 
 import fjm_runtime
 from fjm_runtime.control.designed import designed_gains
-from fjm_runtime.export.bridge import MujocoPlant
 from fjm_runtime.export.controller import design_controller
 from fjm_runtime.export.controller_step import raw_reading, rest_reading
-from fjm_runtime.export.mjcf import write_mjcf
-from fjm_runtime.ident.excite import design_excitation, nominal_motion
+from fjm_runtime.ident.excite import design_excitation
 from fjm_runtime.ident.identify import identify
-from fjm_runtime.ident.log import Log
+from fjm_runtime.ident.mujoco_robot import (B_M, FRICTION, JM_FACTOR, K_FACTOR, RATE, mujoco_log, mujoco_plant,
+                                             true_params)
+from fjm_runtime.ident.mujoco_robot import drive_names as names
 from fjm_runtime.ident.report import table_lines
 from fjm_runtime.sim.metrics import rms_second_half, time_at_limit, torque_jitter
 from fjm_runtime.sim.rest import rest_state
-from fjm_runtime.sim.sensor import SensorModel, noise_array, offset_normals
+from fjm_runtime.sim.sensor import noise_array, offset_normals
 from fjm_runtime.sim.substeps import resolve_substeps
 
 HERE = Path(__file__).resolve().parent
-RATE = 1000.0
-#: The TRUE plant relative to the model's defaults, and its motor damping and dry friction.
-K_FACTOR, JM_FACTOR, B_M, FRICTION = 1.15, 0.9, 0.3, 0.4
-PD_OMEGA = 30.0
 TOLERANCE = {"stiffness": 0.02, "rotor inertia": 0.05}
 
 
@@ -68,62 +63,6 @@ def _c_example():
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)
     return mod
-
-
-def names(model):
-    """``(K, J_m, B_m)`` parameter names per joint."""
-    n, p = model.n, list(model.param_names)
-    if n == 1 and "K" in p:
-        return ["K"], ["J_m"], ["B_m"]
-    return [f"K{i + 1}" for i in range(n)], [f"Jm{i + 1}" for i in range(n)], [f"Bm{i + 1}" for i in range(n)]
-
-
-def true_params(model) -> dict:
-    K, J, B = names(model)
-    p = dict(model.default_params)
-    for k, j, b in zip(K, J, B):
-        p[k], p[j], p[b] = K_FACTOR * p[k], JM_FACTOR * p[j], B_M
-    return p
-
-
-def with_rotor_friction(xml: str, friction: float) -> str:
-    """The MJCF with MuJoCo's dry friction ``frictionloss`` on every rotor hinge (gear ratio 1)."""
-    return re.sub(r'(<joint name="[^"]*_rotor" type="hinge")', rf'\1 frictionloss="{friction!r}"', xml)
-
-
-def mujoco_plant(model, p, work: Path, substeps: int, friction: float = FRICTION) -> MujocoPlant:
-    path = write_mjcf(model, work / f"{model.name}_true.xml", p, timestep=1.0 / RATE / substeps)
-    path.write_text(with_rotor_friction(path.read_text(), friction))
-    return MujocoPlant(model, path, p)
-
-
-def mujoco_log(model, exc_ref, duration: float, work: Path, seed: int = 0, friction: float = FRICTION) -> Log:
-    """Step 2 of the module docstring: the TRUE plant in MuJoCo under PD on q_m + feedforward, logged."""
-    p_true, n = true_params(model), model.n
-    t = np.arange(0.0, duration, 1.0 / RATE)
-    nom = nominal_motion(model, exc_ref, t, model.params_array())
-    x0 = np.concatenate([nom["q"][0], nom["dq"][0], nom["qm"][0], nom["dqm"][0]])
-    subs = resolve_substeps(None, model, x0, model.params_array(p_true), 1.0 / RATE)
-    plant = mujoco_plant(model, p_true, work, subs, friction)
-    plant.set_state(x0)
-    sensor, rng = SensorModel.franka_like(seed=seed), np.random.default_rng(seed)
-    K = np.array([p_true[k] for k in names(model)[0]])
-    Jm = np.array([model.default_params[j] for j in names(model)[1]])
-    kp, kd = Jm * PD_OMEGA ** 2, 2 * 0.7 * PD_OMEGA * Jm     # motor-side PD: 30 rad/s, damping 0.7 (nominal J_m)
-    offset = sensor.offsets(n) * rng.standard_normal(n)
-    Q, QM, TAU, U = (np.zeros((t.size, n)) for _ in range(4))
-    for k in range(t.size):
-        x = plant.state()
-        Q[k] = quantize(x[:n] + sensor.q * rng.standard_normal(n), sensor.q_quant)
-        QM[k] = quantize(x[2 * n:3 * n] + sensor.q_m * rng.standard_normal(n), sensor.q_m_quant)
-        TAU[k] = K * (x[2 * n:3 * n] - x[:n]) + sensor.tau_J * rng.standard_normal(n) + offset
-        U[k] = nom["u"][k] + kp * (nom["qm"][k] - x[2 * n:3 * n]) + kd * (nom["dqm"][k] - x[3 * n:])
-        plant.step(U[k], subs)
-    return Log(t, Q, QM, U, TAU, f"MuJoCo {model.name} (true plant), {duration:g} s")
-
-
-def quantize(v, step: float):
-    return v if step <= 0 else step * np.floor(v / step + 0.5)
 
 
 def errors(model, ident) -> dict:

@@ -1,0 +1,92 @@
+"""MuJoCo as the robot of an identification: the TRUE plant exported, driven and logged like a real arm.
+
+The true plant is the model's defaults with the stiffness x :data:`K_FACTOR`, the rotor inertia x
+:data:`JM_FACTOR`, motor damping :data:`B_M` and MuJoCo's dry friction ``frictionloss``
+(:data:`FRICTION`, a constraint-based Coulomb friction, not fjm's tanh) on every rotor, written by
+:func:`fjm_runtime.export.mjcf.write_mjcf` and run through :class:`fjm_runtime.export.bridge.MujocoPlant`
+(``mujoco`` is imported there, on first use). It follows an excitation under a PD on the motor angle
+plus the nominal feedforward (stable whatever the spring), at 1 kHz with the torque held on fjm's
+substeps, and the log holds what a torque-sensed arm records with the ``franka_like`` sensor levels:
+quantized noisy encoder angles, ``tau_J`` with noise and a constant offset, the commanded torque.
+"""
+from __future__ import annotations
+
+import re
+from pathlib import Path
+from typing import List, Tuple
+
+import numpy as np
+
+from ..sim.sensor import SensorModel
+from ..sim.substeps import resolve_substeps
+from .excite import nominal_motion
+from .log import Log
+
+__all__ = ["RATE", "K_FACTOR", "JM_FACTOR", "B_M", "FRICTION", "PD_OMEGA", "drive_names", "true_params",
+           "with_rotor_friction", "mujoco_plant", "mujoco_log"]
+
+RATE = 1000.0
+K_FACTOR, JM_FACTOR, B_M, FRICTION = 1.15, 0.9, 0.3, 0.4
+#: Motor-side PD of the logging loop: natural frequency (rad/s), damping 0.7 on the nominal J_m.
+PD_OMEGA = 30.0
+
+
+def drive_names(model) -> Tuple[List[str], List[str], List[str]]:
+    """``(K, J_m, B_m)`` parameter names per joint (link1: ``K, J_m, B_m``; chains: ``K<i>, Jm<i>, Bm<i>``)."""
+    n, p = model.n, list(model.param_names)
+    if n == 1 and "K" in p:
+        return ["K"], ["J_m"], ["B_m"]
+    return [f"K{i + 1}" for i in range(n)], [f"Jm{i + 1}" for i in range(n)], [f"Bm{i + 1}" for i in range(n)]
+
+
+def true_params(model) -> dict:
+    """The TRUE plant of the module docstring, as a parameter dict."""
+    K, J, B = drive_names(model)
+    p = dict(model.default_params)
+    for k, j, b in zip(K, J, B):
+        p[k], p[j], p[b] = K_FACTOR * p[k], JM_FACTOR * p[j], B_M
+    return p
+
+
+def with_rotor_friction(xml: str, friction: float) -> str:
+    """The MJCF with MuJoCo's dry friction ``frictionloss`` on every rotor hinge (gear ratio 1)."""
+    return re.sub(r'(<joint name="[^"]*_rotor" type="hinge")', rf'\1 frictionloss="{friction!r}"', xml)
+
+
+def mujoco_plant(model, p: dict, work: Path, substeps: int, friction: float = FRICTION):
+    """A :class:`~fjm_runtime.export.bridge.MujocoPlant` of ``model`` at ``p`` with rotor friction."""
+    from ..export.bridge import MujocoPlant
+    from ..export.mjcf import write_mjcf
+    path = write_mjcf(model, Path(work) / f"{model.name}_true.xml", p, timestep=1.0 / RATE / substeps)
+    path.write_text(with_rotor_friction(path.read_text(), friction))
+    return MujocoPlant(model, path, p)
+
+
+def _quantize(v, step: float):
+    return v if step <= 0 else step * np.floor(v / step + 0.5)
+
+
+def mujoco_log(model, exc_ref, duration: float, work: Path, seed: int = 0, friction: float = FRICTION) -> Log:
+    """The TRUE plant in MuJoCo along ``exc_ref`` (a :class:`~fjm_runtime.ident.excite.FourierReference`),
+    logged at :data:`RATE` (module docstring)."""
+    p_true, n = true_params(model), model.n
+    t = np.arange(0.0, duration, 1.0 / RATE)
+    nom = nominal_motion(model, exc_ref, t, model.params_array())
+    x0 = np.concatenate([nom["q"][0], nom["dq"][0], nom["qm"][0], nom["dqm"][0]])
+    subs = resolve_substeps(None, model, x0, model.params_array(p_true), 1.0 / RATE)
+    plant = mujoco_plant(model, p_true, work, subs, friction)
+    plant.set_state(x0)
+    sensor, rng = SensorModel.franka_like(seed=seed), np.random.default_rng(seed)
+    K = np.array([p_true[k] for k in drive_names(model)[0]])
+    Jm = np.array([model.default_params[j] for j in drive_names(model)[1]])
+    kp, kd = Jm * PD_OMEGA ** 2, 2 * 0.7 * PD_OMEGA * Jm
+    offset = sensor.offsets(n) * rng.standard_normal(n)
+    Q, QM, TAU, U = (np.zeros((t.size, n)) for _ in range(4))
+    for k in range(t.size):
+        x = plant.state()
+        Q[k] = _quantize(x[:n] + sensor.q * rng.standard_normal(n), sensor.q_quant)
+        QM[k] = _quantize(x[2 * n:3 * n] + sensor.q_m * rng.standard_normal(n), sensor.q_m_quant)
+        TAU[k] = K * (x[2 * n:3 * n] - x[:n]) + sensor.tau_J * rng.standard_normal(n) + offset
+        U[k] = nom["u"][k] + kp * (nom["qm"][k] - x[2 * n:3 * n]) + kd * (nom["dqm"][k] - x[3 * n:])
+        plant.step(U[k], subs)
+    return Log(t, Q, QM, U, TAU, f"MuJoCo {model.name} (true plant), {duration:g} s")
