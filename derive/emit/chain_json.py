@@ -8,7 +8,8 @@ tree order (parents first)::
     {"model", "kind": "urdf" | "planar" | "link1", "base",
      "gravity": {"direction": [3], "magnitude": VALUE},
      "joints": [q-order joint names],
-     "elastic": [{"joint", "K", "Jm", "Bm"} parameter names per joint, q order],
+     "elastic": [{"joint", "K", "Jm", "Bm"} parameter names per joint, q order; a nonlinear spring
+                 has "spring": {"law": "cubic", "k1", "k3"} (psi = k1 phi + k3 phi^3) in place of "K"],
      "bodies": [{"name", "parent" ("world" = the base frame), "joint" (name or null: welded),
                  "xyz": [3 VALUE], "R": [[3] x 3], "axis": [3] or null,
                  "inertial": null or {"mass": VALUE, "xyz": [3 VALUE], "R": [[3] x 3],
@@ -29,7 +30,7 @@ sha256; payload ``m_load, x_load, y_load, z_load`` as a point-mass body on the
 tip link; links with symbolic inertials name their parameters), ``planar<n>``
 (every m, l, r, I is a parameter; gravity along -y, q = 0 hangs down) and
 ``link1`` (mass M at distance L, inertia ``J_l - M L^2`` about its centre,
-gravity along -y). Other models get no chain.json. A complete model
+gravity along -y; ``link1_hd`` the same with its cubic spring). Other models get no chain.json. A complete model
 (docs/complete-model.md) adds ``"rotors": [{"joint", "gear_ratio" (parameter
 name), "mass", "transverse_inertia" (kg m^2; null: ``J_m / (2 N^2)``)}]``:
 rotor ``i`` rides on the parent of joint ``i``'s body at the joint's origin and
@@ -187,6 +188,10 @@ def chain_document(m: FlexibleJointModel) -> Optional[dict]:
         body = _planar(m)
     elif m.n == 1 and names[:7] == ["J_l", "J_m", "K", "M", "g0", "L", "B_m"]:
         body = _link1(m)
+    elif m.n == 1 and names[:8] == ["J_l", "J_m", "k1", "k3", "M", "g0", "L", "B_m"]:
+        body = _link1(m)           # link1_hd: the same link, a cubic spring
+        body["elastic"] = [{"joint": "joint1", "spring": {"law": "cubic", "k1": "k1", "k3": "k3"}, "Jm": "J_m",
+                            "Bm": "B_m"}]
     else:
         body = None
     if body is None:

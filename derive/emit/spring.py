@@ -31,6 +31,7 @@ import sympy as sp
 
 from ..core.linearize import Linearization
 from ..core.spring import NEWTON_STEPS, newton_inverse, spring_functions
+from .chain_json import write_chain_json
 from .controls import KINDS, TORQUE_KINDS, law_pair, build_core, manifest_entry
 from .functions import QUANTITIES, operation_count
 from .sx import SympyToSX
@@ -229,6 +230,7 @@ def write_spring_model(lin: Linearization, outdir: Path,
         "tools": versions,
         "derivation_seconds": "not stored here (would break byte-identity); see build/derive-timings.json",
     }
+    write_chain_json(m, outdir)  # the rigid-body tree and the spring law, for the MJCF export
     progress("report")
     (outdir / "REPORT.md").write_text(_report(lin, ops))
     lines = json.dumps(manifest, indent=2).split("\n")

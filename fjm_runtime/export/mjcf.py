@@ -289,23 +289,47 @@ def _rotors(chain: dict, p: Dict[str, float], N: np.ndarray, complete: bool,
     return carried, world
 
 
+def _spring_stiffness(e: dict, p: Dict[str, float]) -> Tuple[str, Optional[float]]:
+    """The spring tendon's ``stiffness`` attribute and the linear K (None for a nonlinear spring).
+
+    MuJoCo's polynomial tendon stiffness ``"a b c"`` is the force ``-(a x + b x^2 + c x^3)`` on the
+    tendon length ``x = q_m - q``: a cubic spring ``psi = k1 phi + k3 phi^3`` is ``"k1 0 k3"``.
+    """
+    if "spring" in e:
+        s = e["spring"]
+        if s.get("law") != "cubic":
+            raise FjmValueError(f"joint {e['joint']}: spring law {s.get('law')!r}; expected 'cubic' (the only "
+                                "nonlinear spring MuJoCo's polynomial stiffness expresses here)")
+        k1, k3 = p[s["k1"]], p[s["k3"]]
+        if not (k1 > 0 and k3 >= 0):
+            raise FjmValueError(f"{s['k1']} = {k1!r}, {s['k3']} = {k3!r}: expected k1 > 0 (N m/rad) and k3 >= 0 "
+                                "(N m/rad^3): psi' > 0 at every deflection")
+        return f"{fmt(k1)} 0.0 {fmt(k3)}", None
+    K = p[e["K"]]
+    if not K > 0:
+        raise FjmValueError(f"{e['K']} = {K!r}: expected > 0 (joint stiffness, N m/rad)")
+    return fmt(K), K
+
+
 def _tendons_actuators_sensors(chain: dict, p: Dict[str, float], N: np.ndarray) -> List[str]:
-    """Per joint: the spring and the two sensing tendons, the motor, the five sensors."""
+    """Per joint: the spring and the sensing tendons, the motor, the sensors (no ``tau_J`` tendon for a
+    nonlinear spring: MuJoCo's fixed tendons are linear; ``tau_J = psi(q_m - q)`` of the ``q_m``, ``q`` sensors)."""
     tendon, motor, sensor = [], [], []
     for k, e in enumerate(chain["elastic"]):
-        j, inv, K = e["joint"], 1.0 / float(N[k]), p[e["K"]]
-        if not K > 0:
-            raise FjmValueError(f"{e['K']} = {K!r}: expected > 0 (joint stiffness, N m/rad)")
-        for name, stiff, c_rotor, c_link in ((f"{j}_spring", K, inv, -1.0), (f"{j}_q_m", 0.0, inv, 0.0),
-                                             (f"{j}_tau_J", 0.0, K * inv, -K)):
-            tendon += [f'  <fixed name="{name}" stiffness="{fmt(stiff)}" springlength="0">',
+        j, inv = e["joint"], 1.0 / float(N[k])
+        stiff, K = _spring_stiffness(e, p)
+        tendons = [(f"{j}_spring", stiff, inv, -1.0), (f"{j}_q_m", "0.0", inv, 0.0)]
+        if K is not None:
+            tendons.append((f"{j}_tau_J", "0.0", K * inv, -K))
+        for name, stiffness, c_rotor, c_link in tendons:
+            tendon += [f'  <fixed name="{name}" stiffness="{stiffness}" springlength="0">',
                        f'   <joint joint="{j}_rotor" coef="{fmt(c_rotor)}"/>']
             tendon += [f'   <joint joint="{j}" coef="{fmt(c_link)}"/>'] if c_link else []
             tendon.append("  </fixed>")
         motor.append(f'  <motor name="{j}_motor" joint="{j}_rotor" gear="{fmt(inv)}"/>')
         sensor += [f'  <jointpos name="{j}_q" joint="{j}"/>', f'  <jointvel name="{j}_dq" joint="{j}"/>',
-                   f'  <tendonpos name="{j}_q_m" tendon="{j}_q_m"/>', f'  <tendonvel name="{j}_dq_m" tendon="{j}_q_m"/>',
-                   f'  <tendonpos name="{j}_tau_J" tendon="{j}_tau_J"/>']
+                   f'  <tendonpos name="{j}_q_m" tendon="{j}_q_m"/>', f'  <tendonvel name="{j}_dq_m" tendon="{j}_q_m"/>']
+        sensor += [f'  <tendonpos name="{j}_tau_J" tendon="{j}_tau_J"/>'] if K is not None else []
     return [" <tendon>", *tendon, " </tendon>", " <actuator>", *motor, " </actuator>",
             " <sensor>", *sensor, " </sensor>"]
 

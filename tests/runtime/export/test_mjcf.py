@@ -22,7 +22,8 @@ from fjm_runtime.export.bridge import MujocoPlant, run_closed_loop
 from fjm_runtime.export.mjcf import mjcf_text, write_mjcf
 from fjm_runtime.validation import FjmValueError
 
-REDUCED = ["link1", "planar2", "elbow3", "panda", "baxter"]  # baxter: a tree (head pan, two arms)
+REDUCED = ["link1", "planar2", "elbow3", "panda", "baxter",  # baxter: a tree (head pan, two arms)
+           "link1_hd"]  # a cubic spring: MuJoCo's polynomial tendon stiffness
 COMPLETE = ["link1_complete", "planar2_complete", "panda_complete"]
 TOL = 1e-12
 
@@ -31,7 +32,7 @@ def _random_params(m, rng, complete: bool):
     """Random K, J_m, B_m (and the payload where there is one; gear ratios up for complete models)."""
     p = dict(m.default_params)
     for name, v in m.default_params.items():
-        if name.rstrip("0123456789") in ("K", "Bm", "B_m") or name in ("K",):
+        if name.rstrip("0123456789") in ("K", "Bm", "B_m") or name in ("K", "k1", "k3"):
             p[name] = (v if v > 0 else 1.0) * rng.uniform(0.5, 1.5)
         elif name.rstrip("0123456789") in ("Jm", "J_m"):
             p[name] = v * rng.uniform(0.6, 1.0)  # below the default: the rotors' baked I_t >= I_a / 2 holds
@@ -195,3 +196,26 @@ def test_closed_loop_equals_simulate(tmp_path):
     assert np.max(np.abs(X - res.x)) < 1e-9 * max(1.0, np.max(np.abs(res.x)))
     assert np.max(np.abs(U - res.u)) < 1e-9 * max(1.0, np.max(np.abs(res.u)))
     assert np.max(np.abs(res.x[:, :m.n])) > 0.2 and np.ptp(res.u) > 1.0  # the loop moves the arm: not a trivial match
+
+
+def test_closed_loop_on_the_cubic_spring_equals_simulate(tmp_path):
+    """link1_hd, true k1 x1.2 and k3 x0.8: the law derived for the cubic spring (nominal k1, k3) at 1 kHz on
+    10 substeps, MuJoCo's polynomial tendon stiffness vs fjm's simulate; the deflection reaches the stiff
+    part of the curve (k3 phi^2 > k1 somewhere)."""
+    m = fjm_runtime.load("link1_hd")
+    dt, sub = 1e-3, 10
+    ref = fjm_runtime.make_reference("sine", 1, amplitude=1.0, omega=3.0)
+    d = m.default_params
+    true = dict(d, k1=1.2 * d["k1"], k3=0.8 * d["k3"])
+    path = write_mjcf(m, tmp_path / "hd.xml", true, timestep=dt / sub)
+
+    def ctrl():
+        return fjm_runtime.make_controller("ismc", m, None, lam=10.0, k_s=50.0, delta=0.25)
+    res = fjm_runtime.simulate(m, ctrl(), ref, duration=1.0, dt=dt, substeps=sub, true_params=true)
+    t, X, U = run_closed_loop(MujocoPlant(m, path, true), ctrl(), ref, duration=1.0, dt=dt, substeps=sub)
+    assert np.array_equal(t, res.t)
+    assert np.max(np.abs(X - res.x)) < 1e-9 * max(1.0, np.max(np.abs(res.x)))
+    assert np.max(np.abs(U - res.u)) < 1e-9 * max(1.0, np.max(np.abs(res.u)))
+    phi = res.x[:, 2] - res.x[:, 0]
+    assert np.max(true["k3"] * 3 * phi ** 2) > true["k1"], np.max(np.abs(phi))
+
