@@ -22,7 +22,7 @@ import pytest
 
 import fjm_runtime
 
-from support.paths import REPO  # noqa: E402
+from support.paths import REPO, load_example  # noqa: E402
 pytestmark = pytest.mark.slow  # builds C, a wheel or derives in a subprocess: `pytest -m 'not slow'` skips it
 
 EXAMPLES = REPO / "examples"
@@ -143,11 +143,7 @@ def test_c_example_single_precision(tmp_path):
 
 def test_mujoco_closed_loop_example(capsys):
     """examples/mujoco_closed_loop.py (short run): the loop tracks, and MuJoCo's trajectory is fjm's plant's."""
-    import importlib.util
-    spec = importlib.util.spec_from_file_location("mujoco_closed_loop", EXAMPLES / "mujoco_closed_loop.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    out = mod.main(["--duration", "0.3"])
+    out = load_example("mujoco_closed_loop").main(["--duration", "0.3"])
     assert out["gap"] < 1e-8
     assert np.all(out["rms"][:4] < 1e-2) and out["max_error"] < 0.5
     assert "RMS tracking error" in capsys.readouterr().out

@@ -180,13 +180,9 @@ def test_cli(tmp_path, capsys):
         assert err.startswith("fjm: error: ") and err.count("\n") == 1
 
 
-def test_closed_loop_equals_simulate(tmp_path):
-    """ismc on elbow3 at 1 kHz, plant on 10 substeps: MuJoCo (RK4, held ctrl) vs fjm's simulate."""
-    m = fjm_runtime.load("elbow3")
-    dt, sub = 1e-3, 10
-    ref = fjm_runtime.make_reference("sine", m.n, amplitude=0.4, omega=2.0)
-    true = dict(m.default_params, K1=m.default_params["K1"] * 1.2)
-    path = write_mjcf(m, tmp_path / "e.xml", true, timestep=dt / sub)
+def _mujoco_equals_simulate(m, ref, true, tmp_path, dt=1e-3, sub=10):
+    """ismc at ``dt`` on ``sub`` plant substeps, MuJoCo (RK4, held ctrl) vs fjm's simulate: fjm's run."""
+    path = write_mjcf(m, tmp_path / f"{m.name}.xml", true, timestep=dt / sub)
 
     def ctrl():
         return fjm_runtime.make_controller("ismc", m, None, lam=10.0, k_s=50.0, delta=0.25)
@@ -195,6 +191,14 @@ def test_closed_loop_equals_simulate(tmp_path):
     assert np.array_equal(t, res.t)
     assert np.max(np.abs(X - res.x)) < 1e-9 * max(1.0, np.max(np.abs(res.x)))
     assert np.max(np.abs(U - res.u)) < 1e-9 * max(1.0, np.max(np.abs(res.u)))
+    return res
+
+
+def test_closed_loop_equals_simulate(tmp_path):
+    """ismc on elbow3 at 1 kHz, plant on 10 substeps: MuJoCo (RK4, held ctrl) vs fjm's simulate."""
+    m = fjm_runtime.load("elbow3")
+    ref = fjm_runtime.make_reference("sine", m.n, amplitude=0.4, omega=2.0)
+    res = _mujoco_equals_simulate(m, ref, dict(m.default_params, K1=m.default_params["K1"] * 1.2), tmp_path)
     assert np.max(np.abs(res.x[:, :m.n])) > 0.2 and np.ptp(res.u) > 1.0  # the loop moves the arm: not a trivial match
 
 
@@ -203,19 +207,8 @@ def test_closed_loop_on_the_cubic_spring_equals_simulate(tmp_path):
     10 substeps, MuJoCo's polynomial tendon stiffness vs fjm's simulate; the deflection reaches the stiff
     part of the curve (k3 phi^2 > k1 somewhere)."""
     m = fjm_runtime.load("link1_hd")
-    dt, sub = 1e-3, 10
-    ref = fjm_runtime.make_reference("sine", 1, amplitude=1.0, omega=3.0)
     d = m.default_params
     true = dict(d, k1=1.2 * d["k1"], k3=0.8 * d["k3"])
-    path = write_mjcf(m, tmp_path / "hd.xml", true, timestep=dt / sub)
-
-    def ctrl():
-        return fjm_runtime.make_controller("ismc", m, None, lam=10.0, k_s=50.0, delta=0.25)
-    res = fjm_runtime.simulate(m, ctrl(), ref, duration=1.0, dt=dt, substeps=sub, true_params=true)
-    t, X, U = run_closed_loop(MujocoPlant(m, path, true), ctrl(), ref, duration=1.0, dt=dt, substeps=sub)
-    assert np.array_equal(t, res.t)
-    assert np.max(np.abs(X - res.x)) < 1e-9 * max(1.0, np.max(np.abs(res.x)))
-    assert np.max(np.abs(U - res.u)) < 1e-9 * max(1.0, np.max(np.abs(res.u)))
+    res = _mujoco_equals_simulate(m, fjm_runtime.make_reference("sine", 1, amplitude=1.0, omega=3.0), true, tmp_path)
     phi = res.x[:, 2] - res.x[:, 0]
     assert np.max(true["k3"] * 3 * phi ** 2) > true["k1"], np.max(np.abs(phi))
-

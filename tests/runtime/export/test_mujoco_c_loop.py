@@ -12,8 +12,6 @@ the law without the plant amplify rounding ~1.26x per sample (test_controller_li
 """
 from __future__ import annotations
 
-import importlib.util
-
 import casadi as ca
 import numpy as np
 import pytest
@@ -21,7 +19,7 @@ import pytest
 from fjm_runtime.ccache import compile_library
 from fjm_runtime.export.controller import amalgamation, export_controller
 from fjm_runtime.sim.sample_step import sample_step_function
-from support.paths import REPO
+from support.paths import load_example
 
 import mujoco  # noqa: E402,F401 - the dev extra, as in test_mjcf.py: no skip that would hide a missing install
 
@@ -29,10 +27,7 @@ STRICT = ("-O2", "-fPIC", "-shared", "-std=c99", "-Wall", "-Wextra", "-Werror", 
 
 
 def _example():
-    spec = importlib.util.spec_from_file_location("mujoco_c_controller", REPO / "examples" / "mujoco_c_controller.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return load_example("mujoco_c_controller")
 
 
 @pytest.fixture(scope="module")

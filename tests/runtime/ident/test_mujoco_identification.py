@@ -5,29 +5,20 @@ on the rotor) is exported with ``fjm export mjcf``, driven along a ``fjm excite`
 motor-side PD, and logged with the ``franka_like`` sensor levels (quantized noisy encoders, tau_J
 noise and offset). Only the log reaches the identification.
 """
-import importlib.util
-
 import numpy as np
 import pytest
 
 import fjm_runtime
 from fjm_runtime.ident.excite import design_excitation
 from fjm_runtime.ident.identify import identify
-from support.paths import REPO
+from support.paths import load_example
 
 import mujoco  # noqa: F401 - the dev extra: a missing install must fail, not skip
 
 
-def _example():
-    spec = importlib.util.spec_from_file_location("identify_roundtrip", REPO / "examples" / "identify_roundtrip.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
-
-
 @pytest.fixture(scope="module")
 def rt():
-    return _example()
+    return load_example("identify_roundtrip")
 
 
 def _identified(rt, duration, tmp_path):
