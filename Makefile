@@ -5,7 +5,7 @@ PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 MODELS ?=
 
-.PHONY: help venv derive check-generated test demo bench clean
+.PHONY: help venv derive check-generated test demo bench clean identify-demo
 
 help:
 	@echo "make demo             derive if needed, simulate the paper's cases, write figures to out/"
@@ -13,6 +13,7 @@ help:
 	@echo "make derive           regenerate generated/ (MODELS=\"link1 planar2\" for a subset)"
 	@echo "make check-generated  fail if generated/ is stale"
 	@echo "make bench            benchmarks -> bench/results.json"
+	@echo "make identify-demo    fjm excite -> MuJoCo log -> fjm identify -> controller on the TRUE plant (link1, Panda)"
 
 LOG    := $(VENV)/install.log
 
@@ -46,6 +47,11 @@ demo: $(STAMP)
 # python -m bench rewrites the marked numbers of README.md, docs/ and bench/README.md (bench/report.py).
 bench: $(STAMP)
 	$(PY) -m bench
+
+# issue 29's round trip (docs/identification.md): link1 in seconds, the Panda in about a minute.
+identify-demo: $(STAMP)
+	$(PY) examples/identify_roundtrip.py link1 --duration 10
+	$(PY) examples/identify_roundtrip.py panda --duration 20
 
 clean:
 	rm -rf $(VENV) out build dist *.egg-info

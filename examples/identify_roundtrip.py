@@ -5,7 +5,8 @@
 MuJoCo plays the robot (an engine nobody here wrote); nothing of the TRUE plant is known to fjm
 except through the log:
 
-1. ``fjm excite``: a Fourier-series excitation for the model (best-conditioned of 40 draws).
+1. ``fjm excite``: a rest-to-rest Fourier-series excitation for the model (best-conditioned of 20 draws
+   and 40 local-search steps, within the limits).
 2. The TRUE plant: the model's defaults with the stiffness x1.15, the rotor inertia x0.9, motor
    damping B_m and dry friction on every rotor (MuJoCo's ``frictionloss``, a constraint-based
    Coulomb friction, not fjm's tanh), exported with ``fjm export mjcf`` and run by MuJoCo at 1 kHz
