@@ -45,8 +45,8 @@ def as_vector(name: str, value, length: int) -> np.ndarray:
 
 
 # Parameter groups that must be strictly positive / non-negative (by name prefix).
-_POSITIVE = re.compile(r"^(J_l|J_m|K|M|L|m\d+|l\d+|r\d+|I\d+|K\d+|Jm\d+|m_(?!load$).+)$")
-_NON_NEGATIVE = re.compile(r"^(B_m|Bm\d+|g0|m_load)$")
+_POSITIVE = re.compile(r"^(J_l|J_m|K|M|L|m\d+|l\d+|r\d+|I\d+|K\d+|Jm\d+|m_(?!load$).+|v_s|v_c|v_s\d+|v_c\d+)$")
+_NON_NEGATIVE = re.compile(r"^(B_m|Bm\d+|g0|m_load|F_c|F_s|F_c\d+|F_s\d+)$")
 # Spatial models: inertia tensor of a link about its centre of mass (``symbolic = [...]``).
 _TENSOR = ("ixx", "ixy", "ixz", "iyy", "iyz", "izz")
 
@@ -55,7 +55,8 @@ def check_physical(names: Tuple[str, ...], values: np.ndarray, arg: str = "p") -
     """Reject non-physical parameter values.
 
     Masses, lengths, inertias, stiffnesses and motor inertias must be > 0;
-    damping and gravity >= 0; a centre of mass must lie on its link
+    damping, motor friction levels (``F_c``, ``F_s``) and gravity >= 0, the friction's
+    velocities (``v_s``, ``v_c``) > 0; a centre of mass must lie on its link
     (``r_i <= l_i``). Spatial models: a payload mass ``m_load`` >= 0 (its
     position ``x_load, y_load, z_load`` any finite value), link masses
     ``m_<link>`` > 0 and each link's tensor ``ixx_<link> .. izz_<link>``

@@ -137,9 +137,13 @@ class FlexibleJointModel:
     bodies : tuple of RigidBody or None
         Reduced spatial models: the chain's (or tree's) bodies in q order, for the emitter's
         Taylor recursion of the RNEA (:mod:`derive.emit.rnea_jets`). None for the planar closed
-        forms and the complete models.    springs : tuple of derive.core.spring.CubicSpring or None
+        forms and the complete models.
+    springs : tuple of derive.core.spring.CubicSpring or None
         Nonlinear joint springs ``tau_J = psi(q_m - q)`` (:mod:`derive.core.spring`), one per joint;
         ``K`` then holds each ``psi'(0)``. None: the linear springs ``K (q_m - q)``.
+    frictions : tuple of derive.core.friction.MotorFriction or None
+        Nonlinear-spring models only: Coulomb and Stribeck motor friction ``F(dq_m)`` per joint,
+        beside the viscous ``B_m`` (:mod:`derive.core.friction`). None: viscous damping only.
     """
 
     name: str
@@ -165,6 +169,7 @@ class FlexibleJointModel:
     inverse_dynamics: Optional[Tuple[Tuple[sp.Symbol, ...], sp.Matrix]] = None
     bodies: Optional[Tuple[RigidBody, ...]] = None
     springs: Optional[Tuple[object, ...]] = None  # nonlinear springs: derive.core.spring.CubicSpring per joint
+    frictions: Optional[Tuple[object, ...]] = None  # motor friction: derive.core.friction.MotorFriction per joint
 
     @property
     def state(self) -> Tuple[sp.Symbol, ...]:

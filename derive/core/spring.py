@@ -5,12 +5,15 @@ with the deflection; the usual fit is the cubic ``psi(phi) = k1 phi + k3 phi^3``
 the model is::
 
     D(q) ddq + h(q, dq) = psi(q_m - q)
-    J_m ddq_m + B_m dq_m + psi(q_m - q) = u
+    J_m ddq_m + B_m dq_m + F(dq_m) + psi(q_m - q) = u
 
-and the linearizing coordinates carry the spring and its stiffness::
+with the motor friction ``F`` of :mod:`derive.core.friction` (Coulomb and Stribeck, zero at the
+built-in's defaults), and the linearizing coordinates carry the spring and its stiffness::
 
     y3 = D^-1 (psi(phi) - h),   y4 = L_f y3 (contains psi'(phi) (dq_m - dq)),
     beta = L_g y4^-1 = J_m D / psi'(phi),   alpha = -beta L_f y4
+
+(``alpha`` holds ``+ F(dq_m)``: the law compensates the nominal friction as a feedforward.)
 
 Everything is derived, not written out: the spring enters as SymPy functions ``psi_k(phi)``
 (:func:`spring_functions`, the k-th derivative of psi, each one's derivative the next one) so
@@ -32,13 +35,14 @@ from typing import Dict, List, Tuple
 
 import sympy as sp
 
+from .friction import MotorFriction, check_friction, friction_functions
 from .lie import DirectionalDerivative, ad_iterates, lie_bracket, lie_derivative
 from .linearize import Linearization
 from .model_base import FlexibleJointModel, Param, state_symbols
 from .torque import inverse_dynamics_derivatives
 
 __all__ = ["CubicSpring", "SpringError", "spring_functions", "check_spring", "make_link1_hd",
-           "linearize_spring", "newton_inverse", "NEWTON_STEPS", "LINK1_HD_RANGE"]
+           "linearize_spring", "motor_friction", "newton_inverse", "NEWTON_STEPS", "LINK1_HD_RANGE"]
 
 #: Highest derivative of psi the derivation may ask for (the involutivity brackets reach psi''').
 _ORDERS = 5
@@ -169,7 +173,12 @@ def make_link1_hd() -> FlexibleJointModel:
       ``K = 150`` at ``phi = 0.1 rad`` (``3 k3 0.1^2 = 75``), where the spring carries
       ``psi(0.1) = 10 N m``, about the largest gravity torque ``M g0 L = 9.8 N m``: at full load
       the drive is as stiff as link1's spring, softer below;
-    * declared deflection range ``|phi| <= 0.25 rad`` (2.5 x that load; ``psi' <= 543.75`` there).
+    * declared deflection range ``|phi| <= 0.25 rad`` (2.5 x that load; ``psi' <= 543.75`` there);
+    * motor friction (:mod:`derive.core.friction`) ``F_c = F_s = 0`` by default (the paper's link has
+      none; a real drive's levels are runtime parameters, ``fjm identify`` fits them), Stribeck
+      velocity ``v_s = 0.1 rad/s`` and regularization ``v_c = 0.01 rad/s`` (``tanh(v / v_c)`` is
+      within 2 % of ``sign(v)`` above 0.023 rad/s, and its time constant ``J_m v_c / F_c`` is 20 ms at
+      ``F_c = 1 N m``: resolved by any substep the sampled loop uses).
 
     Everything else is link1's (paper Table 1). ``K`` of the model record is ``k1 = psi'(0)``.
     """
@@ -182,11 +191,18 @@ def make_link1_hd() -> FlexibleJointModel:
         Param("g0", 9.8, "gravitational acceleration", "m/s^2"),
         Param("L", 1.0, "distance joint -> link centre of mass", "m"),
         Param("B_m", 0.0, "motor viscous damping", "N m s/rad"),
+        Param("F_c", 0.0, "motor Coulomb friction (link side)", "N m"),
+        Param("F_s", 0.0, "motor static friction, the Stribeck level at rest (F_s = F_c: no hump)", "N m"),
+        Param("v_s", 0.1, "Stribeck velocity of the motor friction (link side)", "rad/s"),
+        Param("v_c", 0.01, "regularization velocity of the friction: tanh(v / v_c) for sign(v)", "rad/s"),
     )
     (q,), (dq,), (qm,), (dqm,) = (tuple(b) for b in state_symbols(1))
-    J_l, J_m, k1, k3, M, g0, L, B_m = (sp.Symbol(p.name, real=True) for p in params)
+    J_l, J_m, k1, k3, M, g0, L, B_m, F_c, F_s, v_s, v_c = (sp.Symbol(p.name, real=True) for p in params)
     spring = CubicSpring(1, k1, k3, LINK1_HD_RANGE)
-    check_spring("link1_hd", spring, {p.name: p.default for p in params})
+    friction = MotorFriction(1, F_c, F_s, v_s, v_c)
+    defaults = {p.name: p.default for p in params}
+    check_spring("link1_hd", spring, defaults)
+    check_friction("link1_hd", friction, defaults)
     return FlexibleJointModel(
         name="link1_hd", n=1, params=params,
         q=(q,), dq=(dq,), qm=(qm,), dqm=(dqm,),
@@ -194,10 +210,11 @@ def make_link1_hd() -> FlexibleJointModel:
         K=(k1,), Jm=(J_m,), Bm=(B_m,),
         description=(
             "Single-link flexible joint of the paper with a cubic (harmonic-drive) spring: "
-            "J_l q'' + M g0 L sin(q) = psi(q_m - q), J_m q_m'' + B_m q_m' + psi(q_m - q) = u, "
-            "psi(phi) = k1 phi + k3 phi^3 (psi' > 0 on |phi| <= 0.25 rad)."
+            "J_l q'' + M g0 L sin(q) = psi(q_m - q), J_m q_m'' + B_m q_m' + F(q_m') + psi(q_m - q) = u, "
+            "psi(phi) = k1 phi + k3 phi^3 (psi' > 0 on |phi| <= 0.25 rad), "
+            "F(v) = (F_c + (F_s - F_c) exp(-(v/v_s)^2)) tanh(v/v_c)."
         ),
-        springs=(spring,),
+        springs=(spring,), frictions=(friction,),
     )
 
 
@@ -206,8 +223,17 @@ def _abstract_spring(m: FlexibleJointModel) -> sp.Matrix:
     return sp.Matrix([spring_functions(i + 1)[0](m.qm[i] - m.q[i]) for i in range(m.n)])
 
 
+def motor_friction(m: FlexibleJointModel) -> sp.Matrix:
+    """``[F_1(dq_m1); ...]``, each joint's motor friction as the abstract function of
+    :func:`derive.core.friction.friction_functions` (zeros without ``m.frictions``), (n, 1)."""
+    out = sp.zeros(m.n, 1)
+    for fr in m.frictions or ():
+        out[fr.joint - 1, 0] = friction_functions(fr.joint)[0](m.dqm[fr.joint - 1])
+    return out
+
+
 def _substitute(m: FlexibleJointModel, e):
-    for s in m.springs:
+    for s in tuple(m.springs) + tuple(m.frictions or ()):
         e = s.substitute(e)
     return e
 
@@ -237,7 +263,7 @@ def linearize_spring(m: FlexibleJointModel) -> Linearization:
     Jinv = sp.diag(*[1 / j for j in m.Jm])
     Bd = sp.diag(*m.Bm)
     psi = _abstract_spring(m)
-    f = sp.Matrix.vstack(dq, Dinv * (psi - m.h), dqm, Jinv * (-psi - Bd * dqm))
+    f = sp.Matrix.vstack(dq, Dinv * (psi - m.h), dqm, Jinv * (-psi - Bd * dqm - motor_friction(m)))
     g = sp.Matrix.vstack(sp.zeros(3 * m.n, m.n), Jinv)
     # y1 = q; y_{k+1} = L_f y_k; relative degree 4: L_g y1..y3 = 0 (checked)
     ys = [q]
@@ -279,7 +305,7 @@ def _torque_form(m: FlexibleJointModel, ys) -> Dict[str, object]:
 
     As :mod:`derive.core.torque` (``E0 = D y3 + h - tau_J``, differentiated twice along the motion), with
     ``ddtau_J`` the second time derivative of ``tau_J = psi(phi)``: ``psi''(phi) dphi^2 + psi'(phi)
-    ddphi``, ``ddphi = ddq_m - ddq = J_m^-1 (u - tau_J - B_m dq_m) - y3``, ``dphi = dtau_J / psi'(phi)``
+    ddphi``, ``ddphi = ddq_m - ddq = J_m^-1 (u - tau_J - B_m dq_m - F(dq_m)) - y3``, ``dphi = dtau_J / psi'(phi)``
     at the implied ``phi = phi_J``. ``A = nu`` (``A = dy4/dt``) is solved for ``u = alpha_tau + beta_tau nu``.
     """
     n = m.n
@@ -296,12 +322,12 @@ def _torque_form(m: FlexibleJointModel, ys) -> Dict[str, object]:
     nu = tuple(sp.Symbol(f"nu{i + 1}", real=True) for i in range(n))
     # second time derivative of tau_J = psi(phi) along phi -> dphi -> ddphi (chain rule through psi_k)
     dphi, ddphi = (tuple(sp.Symbol(f"{p}{i + 1}", real=True) for i in range(n)) for p in ("dphi", "ddphi"))
-    ddtau = []
+    ddtau, friction = [], motor_friction(m)
     for i in range(n):
         d_t = DirectionalDerivative({phiJ[i]: dphi[i], dphi[i]: ddphi[i]})
         psi_i = spring_functions(i + 1)
         ddtau.append(d_t(d_t(psi_i[0](phiJ[i]))).subs(
-            ddphi[i], (u[i] - tau[i] - m.Bm[i] * m.dqm[i]) / m.Jm[i] - Y3[i]).subs(
+            ddphi[i], (u[i] - tau[i] - m.Bm[i] * m.dqm[i] - friction[i]) / m.Jm[i] - Y3[i]).subs(
             dphi[i], dtau[i] / psi_i[1](phiJ[i])))
     # E2 = D A + W - ddtau_J = 0 with A = nu, solved for u (linear in u)
     E2 = m.D * sp.Matrix(nu) + W - sp.Matrix(ddtau)

@@ -272,7 +272,13 @@ def _report(lin: Linearization, ops: Dict[str, int]) -> str:
               f"`{spring.describe()}`, `phi = q_m - q`, declared range `|phi| <= {r:g} rad`. At the defaults "
               f"`psi'(0) = {k['k1']:g}`, `psi'(0.1) = {k['k1'] + 3 * k['k3'] * 0.01:g}`, "
               f"`psi'({r:g}) = {k['k1'] + 3 * k['k3'] * r * r:g}` N m/rad.",
-              "", "## Derived (psi_1 = psi, psi_1_d1 = psi', psi_1_d2 = psi'' of phi)", ""]
+              ""]
+    for fr in m.frictions or ():
+        lines += ["## Motor friction", "",
+                  f"`{fr.describe()}` at the link-side motor velocity `v = dq_m`, beside `B_m dq_m`; `alpha` and "
+                  "`alpha_tau` add the nominal `F(dq_m)` (a feedforward; nominal `F_c = F_s = 0` turns it off). "
+                  "Derived with `F` abstract (`F_1 = F`, `F_1_d1 = F'`, ...), the law substituted at emission.", ""]
+    lines += ["## Derived (psi_1 = psi, psi_1_d1 = psi', psi_1_d2 = psi'' of phi; F_1 = F of dq_m)", ""]
     for name in ("f", "T", "alpha", "beta", "ad", "T_tau", "alpha_tau", "beta_tau"):
         lines += [f"- `{name}`: $" + tex(a[name]) + "$"]
     lines += ["", "## The paper's feedback-linearizability test", "",

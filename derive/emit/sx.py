@@ -82,6 +82,10 @@ class SympyToSX:
             out = ca.sin(self._convert(e.args[0]))
         elif isinstance(e, sp.cos):
             out = ca.cos(self._convert(e.args[0]))
+        elif isinstance(e, sp.tanh):  # motor friction (derive.core.friction)
+            out = ca.tanh(self._convert(e.args[0]))
+        elif isinstance(e, sp.exp):
+            out = ca.exp(self._convert(e.args[0]))
         else:
             raise ValueError(f"cannot emit SymPy node of type {type(e).__name__}: {e}")
         self._memo[e] = out

@@ -23,8 +23,10 @@ def add_parser(sub) -> None:
                    help="spring law (default: cubic for a model with k1, k3, else linear)")
     p.add_argument("--friction", choices=("viscous", "coulomb", "stribeck"), default="coulomb",
                    help="motor friction: B_m only, + Coulomb F_c tanh(dq_m/v_c) (default), + Stribeck F_s")
-    p.add_argument("--v-c", type=float, default=0.01, help="Coulomb regularization velocity, rad/s (default 0.01)")
-    p.add_argument("--v-s", type=float, default=0.1, help="Stribeck velocity, rad/s (default 0.1)")
+    p.add_argument("--v-c", type=float, default=None,
+                   help="Coulomb regularization velocity, rad/s (default: the model's v_c where it has friction, else 0.01)")
+    p.add_argument("--v-s", type=float, default=None,
+                   help="Stribeck velocity, rad/s (default: the model's v_s where it has friction, else 0.1)")
     p.add_argument("--window", type=float, default=0.04,
                    help="zero-phase smoothing/differentiation window, s (default 0.04; shorter for fast, clean motors, longer for noisy encoders)")
 

@@ -3,18 +3,23 @@
 :class:`MujocoPlant` loads a file written by :func:`fjm_runtime.export.mjcf.write_mjcf`
 and maps by name (the MJCF contract): fjm's ``x = [q; dq; q_m; dq_m]`` to
 MuJoCo's ``qpos``/``qvel`` (link joints ``<j>``, rotor joints ``<j>_rotor`` at
-``theta = N q_m``) and ``u`` to the motors ``<j>_motor``. MuJoCo is an
+``theta = N q_m``) and ``u`` to the motors ``<j>_motor``. Motor friction that the file states as
+custom numerics (:data:`fjm_runtime.export.mjcf.FRICTION_NUMERIC`) is applied by a passive-force
+callback installed around each ``mj_forward`` / ``mj_step`` of the plant (and removed after it:
+MuJoCo's callbacks are global). MuJoCo is an
 optional dependency of fjm (the ``dev`` extra); nothing in the runtime imports
 this module.
 """
 
 from __future__ import annotations
 
+from contextlib import contextmanager
 from pathlib import Path
+
 import numpy as np
 
 from ..validation import FjmValueError, as_vector
-from .mjcf import gear_ratios, load_chain, resolve_params
+from .mjcf import FRICTION_NUMERIC, gear_ratios, load_chain, resolve_params
 
 __all__ = ["MujocoPlant"]
 
@@ -63,6 +68,32 @@ class MujocoPlant:
         self.qvel = np.array([self.mj.joint(j).dofadr[0] for j in names])
         self.ctrl = np.array([self.mj.actuator(f"{j}_motor").id for j in joints])
         self.scale = np.concatenate([np.ones(model.n), self.N])
+        # (rotor dof, F_c, F_s, v_s, v_c, N) per rotor whose friction the file states
+        self.friction = []
+        for i in range(self.mj.nnumeric):
+            num = self.mj.numeric(i)
+            if num.name.startswith(FRICTION_NUMERIC):
+                dof = self.mj.joint(num.name[len(FRICTION_NUMERIC):]).dofadr[0]
+                self.friction.append((int(dof), *(float(v) for v in num.data)))
+
+    def _passive(self, m, d) -> None:
+        """MuJoCo's passive-force callback: ``qfrc_passive -= F(v) / N`` on each rotor, ``v = qvel / N``."""
+        for dof, F_c, F_s, v_s, v_c, N in self.friction:
+            v = d.qvel[dof] / N
+            d.qfrc_passive[dof] -= (F_c + (F_s - F_c) * np.exp(-(v / v_s) ** 2)) * np.tanh(v / v_c) / N
+
+    @contextmanager
+    def _callbacks(self):
+        """The friction callback installed for the duration (nothing without friction)."""
+        if not self.friction:
+            yield
+            return
+        mujoco = _mujoco()
+        mujoco.set_mjcb_passive(self._passive)
+        try:
+            yield
+        finally:
+            mujoco.set_mjcb_passive(None)
 
     def set_state(self, x) -> None:
         """Set MuJoCo's ``qpos``, ``qvel`` from fjm's ``x`` (shape (4n,))."""
@@ -84,7 +115,8 @@ class MujocoPlant:
         n = self.model.n
         self.set_state(x)
         self.data.ctrl[self.ctrl] = as_vector("u", u, n)
-        mujoco.mj_forward(self.mj, self.data)
+        with self._callbacks():
+            mujoco.mj_forward(self.mj, self.data)
         acc = self.data.qacc[self.qvel] / self.scale
         xv = as_vector("x", x, 4 * n)
         return np.concatenate([xv[n:2 * n], acc[:n], xv[3 * n:], acc[n:]])
@@ -93,8 +125,9 @@ class MujocoPlant:
         """Hold ``ctrl = u`` over ``steps`` MuJoCo steps (``mj_step``); returns the new fjm state (4n,)."""
         mujoco = _mujoco()
         self.data.ctrl[self.ctrl] = as_vector("u", u, self.model.n)
-        for _ in range(int(steps)):
-            mujoco.mj_step(self.mj, self.data)
+        with self._callbacks():
+            for _ in range(int(steps)):
+                mujoco.mj_step(self.mj, self.data)
         return self.state()
 
     def sensors(self) -> dict:

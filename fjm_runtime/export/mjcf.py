@@ -29,6 +29,13 @@ planar chains), with gear ratio ``N``:
   ``<j>_q_m``), and ``<j>_tau_J`` = ``K (q_m - q)`` (the zero-stiffness tendon
   ``<j>_tau_J`` with coefficients ``K / N`` and ``-K``).
 
+Motor friction (``link1_hd``: ``F(v) = (F_c + (F_s - F_c) exp(-(v/v_s)^2)) tanh(v/v_c)`` at the link-side
+motor velocity ``v``, derive/core/friction.py) is no MuJoCo element: ``frictionloss`` is a constraint
+with a different law. Where a level is non-zero the file states it as a custom numeric
+``fjm_motor_friction:<j>_rotor`` = ``[F_c, F_s, v_s, v_c, N]`` (link-side values, gear ratio) and a
+passive-force callback (``mjcb_passive``) must subtract ``F(v) / N`` from the rotor's ``qfrc_passive``
+at every evaluation: :class:`fjm_runtime.export.bridge.MujocoPlant` installs it around its own calls.
+
 Gravity: along -z of the base with magnitude ``g0`` for URDF arms, along -y
 for ``link1`` and ``planar<n>`` (q = 0 hangs down). MuJoCo's ``qpos`` is
 ``[q, theta]`` in joint order (links first, then rotors), ``ctrl`` is ``u``.
@@ -45,7 +52,7 @@ import numpy as np
 
 from ..validation import FjmValueError
 
-__all__ = ["ROTOR_INERTIA", "ROTOR_MASS", "CHAIN_FILE", "load_chain", "resolve_params", "gear_ratios",
+__all__ = ["ROTOR_INERTIA", "ROTOR_MASS", "CHAIN_FILE", "FRICTION_NUMERIC", "load_chain", "resolve_params", "gear_ratios",
            "mjcf_text", "write_mjcf", "is_complete", "value"]
 
 #: Body inertia (kg m^2) of a reduced-model rotor, taken off its armature.
@@ -311,6 +318,32 @@ def _spring_stiffness(e: dict, p: Dict[str, float]) -> Tuple[str, Optional[float
     return fmt(K), K
 
 
+#: Prefix of the custom numerics that carry the motor friction (module docstring).
+FRICTION_NUMERIC = "fjm_motor_friction:"
+
+
+def _motor_friction(chain: dict, p: Dict[str, float], N: np.ndarray) -> List[str]:
+    """``<custom>`` numerics ``[F_c, F_s, v_s, v_c, N]`` per rotor with friction (none where every level is 0)."""
+    rows = []
+    for k, e in enumerate(chain["elastic"]):
+        fr = e.get("friction")
+        if not fr:
+            continue
+        vals = [p[fr[role]] for role in ("F_c", "F_s", "v_s", "v_c")]
+        if not (vals[0] >= 0 and vals[1] >= 0 and vals[2] > 0 and vals[3] > 0):
+            raise FjmValueError(f"{', '.join(fr[r] for r in ('F_c', 'F_s', 'v_s', 'v_c'))} = {vals}: expected "
+                                "F_c, F_s >= 0 (N m) and v_s, v_c > 0 (rad/s)")
+        if vals[0] == 0 and vals[1] == 0:
+            continue
+        data = " ".join(fmt(v) for v in vals + [float(N[k])])
+        rows.append(f'  <numeric name="{FRICTION_NUMERIC}{e["joint"]}_rotor" data="{data}"/>')
+    if not rows:
+        return []
+    return [" <!-- motor friction F(v) = (F_c + (F_s - F_c) exp(-(v/v_s)^2)) tanh(v/v_c), v the link-side motor "
+            "velocity: data = F_c F_s v_s v_c N; a passive-force callback (mjcb_passive) subtracts F(v)/N from the "
+            "rotor's qfrc_passive (docs/mujoco.md) -->", " <custom>", *rows, " </custom>"]
+
+
 def _tendons_actuators_sensors(chain: dict, p: Dict[str, float], N: np.ndarray) -> List[str]:
     """Per joint: the spring and the sensing tendons, the motor, the sensors (no ``tau_J`` tendon for a
     nonlinear spring: MuJoCo's fixed tendons are linear; ``tau_J = psi(q_m - q)`` of the ``q_m``, ``q`` sensors)."""
@@ -391,7 +424,7 @@ def mjcf_text(model, params=None, *, complete: Optional[bool] = None, gear_ratio
             f' <option timestep="{fmt(timestep)}" integrator="RK4" gravity="{_vec(gravity)}">',
             '  <flag contact="disable"/>', " </option>", " <worldbody>"]
     return "\n".join(head + bodies + [f"  {line}" for line in world] + [" </worldbody>"]
-                     + _tendons_actuators_sensors(chain, p, N) + ["</mujoco>"]) + "\n"
+                     + _tendons_actuators_sensors(chain, p, N) + _motor_friction(chain, p, N) + ["</mujoco>"]) + "\n"
 
 
 def write_mjcf(model, out, params=None, **kwargs) -> Path:

@@ -7,7 +7,9 @@ modelled here), with ``phi = q_m - q`` and the logged (or estimated) joint torqu
   torque sensor's constant offset (identified and reported, not a model parameter);
 * motor: ``u - (tau_J - o) = J_m ddq_m + B_m dq_m + F_c c(dq_m) [+ F_s s(dq_m)]`` with the
   regularized Coulomb term ``c = tanh(dq_m / v_c)`` and, for Stribeck, ``s = exp(-(dq_m / v_s)^2) c``
-  (then the Coulomb column is ``c - s``: ``F(v) = F_c c + (F_s - F_c) s``).
+  (then the Coulomb column is ``c - s``: ``F(v) = F_c c + (F_s - F_c) s``). That is the friction law
+  of the models that carry one (``link1_hd``: ``F_c, F_s, v_s, v_c``): their names are used, their
+  ``v_c, v_s`` are the default velocities, and a Coulomb-only fit sets ``F_s = F_c`` (no hump).
 
 Both are linear in the unknowns: ordinary least squares on column-scaled regressors, standard
 errors from the residual variance with the effective sample count of the correlated residuals
@@ -35,6 +37,8 @@ __all__ = ["Identification", "identify", "parameter_names", "SPRINGS", "FRICTION
 
 SPRINGS = ("linear", "cubic")
 FRICTIONS = ("viscous", "coulomb", "stribeck")
+#: Friction velocities (rad/s) for a model without its own ``v_c``, ``v_s``.
+DEFAULT_V_C, DEFAULT_V_S = 0.01, 0.1
 #: A parameter whose standard error exceeds this fraction of its value is reported as not excited.
 NOT_EXCITED = 0.1
 #: A stiffness whose deflection signal is more than this share noise (variance) is reported as not excited.
@@ -60,7 +64,8 @@ class Identification:
     ----------
     values, stderr : dict
         Parameter name -> value, standard error (model names: ``K``/``K<i>``, ``J_m``/``Jm<i>``,
-        ``B_m``/``Bm<i>``, ``k1``, ``k3``; not in the model: ``F_c<i>``, ``F_s<i>``, ``tau_J_offset<i>``).
+        ``B_m``/``Bm<i>``, ``k1``, ``k3``, and ``F_c``, ``F_s`` where the model has motor friction; else
+        ``F_c<i>``, ``F_s<i>``, not parameters of the model; ``tau_J_offset<i>``, never one).
     condition : dict
         ``"spring <i>"``, ``"motor <i>"`` -> condition number of the scaled regressor.
     residual : dict
@@ -68,6 +73,9 @@ class Identification:
     warnings : list of str
     settings : dict
         Method, filter, friction and spring choices, the log's source and duration.
+    fixed : dict
+        Parameters of the model the fit held at a value instead of identifying (the friction's
+        ``v_c``, ``v_s``; ``F_s = F_c`` of a Coulomb-only fit): written to the parameter file with them.
     """
 
     values: Dict[str, float] = field(default_factory=dict)
@@ -77,6 +85,7 @@ class Identification:
     warnings: List[str] = field(default_factory=list)
     not_excited: List[str] = field(default_factory=list)
     settings: dict = field(default_factory=dict)
+    fixed: Dict[str, float] = field(default_factory=dict)
 
     def model_values(self, model) -> Dict[str, float]:
         """The identified values that are parameters of ``model`` and that the log determines (excited)."""
@@ -155,8 +164,9 @@ def _friction_columns(dqm: np.ndarray, friction: str, v_c: float, v_s: float):
     return [c - s, s], ["F_c", "F_s"]
 
 
-def identify(model, log: Log, *, spring: Optional[str] = None, friction: str = "coulomb", v_c: float = 0.01,
-             v_s: float = 0.1, window: float = 0.04, nominal=None) -> Identification:
+def identify(model, log: Log, *, spring: Optional[str] = None, friction: str = "coulomb",
+             v_c: Optional[float] = None, v_s: Optional[float] = None, window: float = 0.04,
+             nominal=None) -> Identification:
     """Identify the joints' spring, rotor inertia, damping and friction from ``log``.
 
     Parameters
@@ -168,8 +178,9 @@ def identify(model, log: Log, *, spring: Optional[str] = None, friction: str = "
     spring : {'linear', 'cubic'}, optional
         Default: cubic for a model with ``k1, k3``, else linear.
     friction : {'viscous', 'coulomb', 'stribeck'}
-    v_c, v_s : float
-        Coulomb regularization and Stribeck velocities, rad/s (link side), > 0.
+    v_c, v_s : float, optional
+        Coulomb regularization and Stribeck velocities, rad/s (link side), > 0. Default: the model's
+        ``v_c``, ``v_s`` where it has motor friction, else 0.01 and 0.1.
     window : float
         Savitzky-Golay window, s (the filter's cut-off is about ``1 / window`` Hz).
     nominal : dict, optional
@@ -188,6 +199,8 @@ def identify(model, log: Log, *, spring: Optional[str] = None, friction: str = "
     if spring not in SPRINGS or friction not in FRICTIONS:
         raise FjmValueError(f"identify: spring {spring!r}, friction {friction!r}; expected spring in {SPRINGS} and "
                             f"friction in {FRICTIONS}")
+    v_c = float(model.default_params.get("v_c", DEFAULT_V_C)) if v_c is None else v_c
+    v_s = float(model.default_params.get("v_s", DEFAULT_V_S)) if v_s is None else v_s
     for nm, v in (("v_c", v_c), ("v_s", v_s), ("window", window)):
         if not (np.isfinite(v) and v > 0):
             raise FjmValueError(f"identify: {nm} = {v!r}; expected a finite value > 0")
@@ -214,15 +227,30 @@ def identify(model, log: Log, *, spring: Optional[str] = None, friction: str = "
         "filter": f"zero-phase Savitzky-Golay, degree 3, {2 * h + 1} samples ({(2 * h + 1) * dt:.3g} s), "
                   f"{h} samples dropped at each end"})
     for i in range(n):
+        fnames = friction_names(model, i)
         noise = deflection_noise(raw_phi[:, i], qm[:, i] - q[:, i], k_center)
         _identify_joint(out, i, q[:, i], qm[:, i], dqm[:, i], ddqm[:, i], u[:, i], tau[:, i], spring_names[i],
                         jm[i], bm[i], friction, v_c, v_s, max_lag=2 * h + 1, offset=log.tau_J is not None,
-                        phi_noise=noise)
+                        phi_noise=noise, friction_names=fnames)
+        if friction != "viscous" and fnames[0] in model.param_names:  # the model's friction law, these velocities
+            out.fixed.update({nm: v for nm, v in (("v_c", v_c), ("v_s", v_s)) if nm in model.param_names})
+            if friction == "coulomb" and fnames[1] in model.param_names and fnames[0] in out.values:
+                out.fixed[fnames[1]] = out.values[fnames[0]]  # Coulomb only: the static level is the same
     return out
 
 
+def friction_names(model, i: int) -> Tuple[str, str]:
+    """The Coulomb and static friction names of joint ``i`` (0-based): the model's (``F_c``, ``F_s`` of a
+    one-joint model, ``F_c<i>``, ``F_s<i>``) where it has them, else ``F_c<i>``, ``F_s<i>``."""
+    names = set(model.param_names)
+    if model.n == 1 and {"F_c", "F_s"} <= names:
+        return "F_c", "F_s"
+    return f"F_c{i + 1}", f"F_s{i + 1}"
+
+
 def _identify_joint(out: Identification, i: int, q, qm, dqm, ddqm, u, tau, spring_names, jm, bm, friction, v_c,
-                    v_s, max_lag: int, offset: bool, phi_noise: float = 0.0) -> None:
+                    v_s, max_lag: int, offset: bool, phi_noise: float = 0.0,
+                    friction_names: Tuple[str, str] = ("F_c", "F_s")) -> None:
     phi = qm - q
     cols = [phi] + ([phi ** 3] if len(spring_names) == 2 else [])
     noise_var = [phi_noise] + [0.0] * (len(cols) - 1) + ([0.0] if offset else [])
@@ -233,7 +261,7 @@ def _identify_joint(out: Identification, i: int, q, qm, dqm, ddqm, u, tau, sprin
     fit_s = _fit(np.column_stack(cols), tau, snames, max_lag, noise_var)
     o = fit_s.values[-1] if offset else 0.0
     fcols, fnames = _friction_columns(dqm, friction, v_c, v_s)
-    fnames = [f"{nm}{i + 1}" for nm in fnames]
+    fnames = list(friction_names[:len(fnames)])
     fit_m = _fit(np.column_stack([ddqm, dqm] + fcols), u - (tau - o), [jm, bm] + fnames, max_lag)
     noise_share = phi_noise / max(float(np.var(phi)), 1e-300)
     if noise_share > MAX_NOISE_SHARE:        # the correction itself is then the estimate: do not trust it

@@ -50,6 +50,8 @@ def params_toml(ident, model) -> str:
     lines += [f"# warning: {w}" for w in ident.warnings]
     lines += ["", "[parameters]"]
     lines += [f"{k} = {v!r}  # +- {ident.stderr[k]:.3g}" for k, v in mine.items()]
+    lines += [f"{k} = {v!r}  # held by the fit, not identified" for k, v in ident.fixed.items()
+              if k in names and k not in mine]
     lines += ["", f"[spread]  # relative half-width of the design's draws: {SPREAD_SIGMAS:g} standard errors, "
               f"at least {MIN_SPREAD:g}"]
     lines += [f"{k} = {_spread(v, ident.stderr[k])!r}" for k, v in mine.items()]

@@ -36,7 +36,17 @@ def test_unbound_symbol_is_refused_with_its_name():
 def test_unsupported_node_is_refused():
     conv = SympyToSX({sp.Symbol("a"): ca.SX.sym("a")})
     with pytest.raises(ValueError, match="cannot emit"):
-        conv(sp.exp(sp.Symbol("a")))
+        conv(sp.log(sp.Symbol("a")))
+
+
+def test_friction_nodes_evaluate_as_sympy_does():
+    """tanh and exp (the motor friction of derive/core/friction.py) convert to the same numbers."""
+    a = sp.Symbol("a")
+    x = ca.SX.sym("x")
+    e = (0.8 + 0.4 * sp.exp(-(a / 0.3) ** 2)) * sp.tanh(a / 0.05)
+    fn = ca.Function("e", [x], [SympyToSX({a: x})(e)])
+    for v in (-1.3, -0.01, 0.0, 0.02, 2.5):
+        assert abs(float(fn(v)) - float(e.subs(a, v))) < 1e-15
 
 
 def test_ldl_solve_and_inverse_match_numpy():

@@ -6,6 +6,8 @@ alpha = -beta L_f^4 h), dT/dx against differences, the brackets' definition, the
 the torque-coordinate laws at the measurement a state implies, the inverse spring map, the
 k3 = 0 limit against the generated link1, the paper's rank/involutivity result, the spring
 validation, and a byte-identical derive (two hash seeds, and the committed generated/link1_hd).
+The motor friction F(dq_m) (Coulomb + Stribeck, tanh-regularized: derive/core/friction.py) is on in
+every random draw, with velocity scales wide enough that its curvature shows in the differences.
 """
 
 from __future__ import annotations
@@ -23,11 +25,14 @@ import sympy as sp
 import fjm_runtime
 from derive.emit.spring import build_spring_functions
 from derive.core.lie import lie_derivative
+from derive.core.friction import FrictionError, MotorFriction, check_friction
 from derive.core.spring import (LINK1_HD_RANGE, CubicSpring, SpringError, check_spring, linearize_spring,
-                           make_link1_hd, spring_functions)
+                                make_link1_hd, spring_functions)
 
 REPO = Path(__file__).resolve().parents[2]
-NAMES = ("J_l", "J_m", "k1", "k3", "M", "g0", "L", "B_m")
+NAMES = ("J_l", "J_m", "k1", "k3", "M", "g0", "L", "B_m", "F_c", "F_s", "v_s", "v_c")
+NP = len(NAMES)
+NO_FRICTION = [0.0, 0.0, 0.1, 0.01]  # F_c, F_s, v_s, v_c: the defaults (no friction)
 H = 1e-6  # central-difference step
 
 
@@ -51,15 +56,23 @@ def _s(v) -> float:
     return float(np.asarray(v).reshape(-1)[0])
 
 
+def friction(v, p):
+    """The motor friction written out here (not the derivation's): (F_c + (F_s - F_c) e^{-(v/v_s)^2}) tanh(v/v_c)."""
+    F_c, F_s, v_s, v_c = p[8:12]
+    return (F_c + (F_s - F_c) * np.exp(-(v / v_s) ** 2)) * np.tanh(v / v_c)
+
+
 def _points(rng, count=6, damping=True):
-    """States with the deflection inside the declared range, parameters defaults x U(0.7, 1.3)."""
+    """States with the deflection inside the declared range, parameters defaults x U(0.7, 1.3), and
+    friction F_c in [0, 1.5], F_s in [0, 2] N m, v_s, v_c in [0.3, 1.5] rad/s (curved over |dq_m| <= 3)."""
     base = np.array([1.0, 2.0, 75.0, 2500.0, 1.0, 9.8, 1.0, 0.0])
     for _ in range(count):
         q, dq, dqm = rng.uniform(-np.pi, np.pi), rng.uniform(-3, 3), rng.uniform(-3, 3)
         phi = rng.uniform(-LINK1_HD_RANGE, LINK1_HD_RANGE)
         p = base * rng.uniform(0.7, 1.3, 8)
         p[7] = rng.uniform(0.0, 0.5) if damping else 0.0
-        yield np.array([q, dq, q + phi, dqm]), p
+        fr = [rng.uniform(0.0, 1.5), rng.uniform(0.0, 2.0), rng.uniform(0.3, 1.5), rng.uniform(0.3, 1.5)]
+        yield np.array([q, dq, q + phi, dqm]), np.concatenate([p, fr])
 
 
 def _along(fn, x, v, p):
@@ -88,7 +101,7 @@ def test_lie_identities_by_differences(derived):
 
 def test_jacobian_of_T_matches_differences(derived):
     _, F, fns = derived
-    xs, ps = ca.SX.sym("x", 4), ca.SX.sym("p", 8)
+    xs, ps = ca.SX.sym("x", 4), ca.SX.sym("p", NP)
     jac = ca.Function("dT", [xs, ps], [ca.jacobian(fns["T"](xs, ps), xs)])
     rng = np.random.default_rng(2)
     for x, p in _points(rng, 4):
@@ -110,14 +123,15 @@ def test_brackets_are_the_papers_definition(derived):
 
 
 def test_energy_balance(derived):
-    """dE/dt = -B_m dq_m^2 + u dq_m: L_f E = -B_m dq_m^2 and L_g E = dq_m (the spring potential is psi's integral)."""
+    """dE/dt = -(B_m dq_m + F(dq_m)) dq_m + u dq_m: L_f E = -(B_m dq_m + F(dq_m)) dq_m and L_g E = dq_m
+    (the spring potential is psi's integral; friction only dissipates)."""
     _, F, _ = derived
     rng = np.random.default_rng(4)
     for x, p in _points(rng, 4):
         LfE = _s(_along(F["energy"], x, F["f"](x, p).ravel(), p))
         LgE = _s(_along(F["energy"], x, F["g"](x, p).ravel(), p))
         scale = 1 + abs(_s(F["energy"](x, p)))
-        assert abs(LfE + p[7] * x[3] ** 2) < 1e-7 * scale
+        assert abs(LfE + (p[7] * x[3] + friction(x[3], p)) * x[3]) < 1e-7 * scale
         assert abs(LgE - x[3]) < 1e-7 * scale
 
 
@@ -136,7 +150,7 @@ def test_torque_coordinates_equal_the_state_law(derived):
 def test_spring_inverse(derived, k3):
     """psi^-1(psi(phi)) = phi over the declared range (twice it when hardening or linear), psi by differences."""
     _, F, _ = derived
-    p = np.array([1.0, 2.0, 75.0, k3, 1.0, 9.8, 1.0, 0.0])
+    p = np.array([1.0, 2.0, 75.0, k3, 1.0, 9.8, 1.0, 0.0, *NO_FRICTION])
     reach = 2 * LINK1_HD_RANGE if k3 >= 0 else LINK1_HD_RANGE
     for phi in np.linspace(-reach, reach, 41):
         tau = _s(F["spring"](phi, p)[0])
@@ -148,14 +162,14 @@ def test_spring_inverse(derived, k3):
 
 
 def test_linear_limit_is_link1(derived):
-    """k3 = 0, k1 = K: every function equals the generated link1's to 1e-12 (random states, any deflection)."""
+    """k3 = 0, k1 = K, no friction: every function equals the generated link1's to 1e-12 (random states)."""
     _, F, _ = derived
     link1 = fjm_runtime.load("link1")
     rng = np.random.default_rng(6)
     for _ in range(8):
         x = rng.uniform(-2, 2, 4)
         J_l, J_m, K, M, g0, L, B_m = rng.uniform(0.5, 2, 7) * [1, 2, 150, 1, 9.8, 1, 0.3]
-        p_hd = np.array([J_l, J_m, K, 0.0, M, g0, L, B_m])
+        p_hd = np.array([J_l, J_m, K, 0.0, M, g0, L, B_m, *NO_FRICTION])
         p_l1 = np.array([J_l, J_m, K, M, g0, L, B_m])
         for name in ("f", "g", "T", "alpha", "beta", "ad", "energy"):
             assert _close(F[name](x, p_hd), link1.functions[name](x, p_l1).full(), 1e-12), name
@@ -180,14 +194,15 @@ def test_papers_test_holds_while_stiffness_positive(derived):
 
 
 def test_abstract_derivation_equals_explicit_polynomial():
-    """Deriving with psi abstract and substituting the cubic = deriving with the cubic written in."""
+    """Deriving with psi and F abstract and substituting the laws = deriving with them written in."""
     model = make_link1_hd()
     lin = linearize_spring(model)
     q, dq, qm, dqm = model.state
-    J_l, J_m, k1, k3, M, g0, L, B_m = model.param_symbols
+    J_l, J_m, k1, k3, M, g0, L, B_m, F_c, F_s, v_s, v_c = model.param_symbols
     phi = qm - q
     psi = k1 * phi + k3 * phi ** 3
-    f = sp.Matrix([dq, (psi - M * g0 * L * sp.sin(q)) / J_l, dqm, (-psi - B_m * dqm) / J_m])
+    fric = (F_c + (F_s - F_c) * sp.exp(-(dqm / v_s) ** 2)) * sp.tanh(dqm / v_c)
+    f = sp.Matrix([dq, (psi - M * g0 * L * sp.sin(q)) / J_l, dqm, (-psi - B_m * dqm - fric) / J_m])
     g = sp.Matrix([0, 0, 0, 1 / J_m])
     y = [sp.Matrix([q])]
     for _ in range(4):
@@ -233,3 +248,37 @@ def test_derive_is_byte_identical(tmp_path):
     for name in names:
         ref = (trees[0] / name).read_bytes()
         assert ref == (trees[1] / name).read_bytes() == (committed / name).read_bytes(), name
+
+
+def test_friction_validation_is_one_line_naming_joint_value_and_unit():
+    F_c, F_s, v_s, v_c = sp.symbols("F_c F_s v_s v_c")
+    fr = MotorFriction(1, F_c, F_s, v_s, v_c)
+    good = {"F_c": 0.5, "F_s": 0.8, "v_s": 0.1, "v_c": 0.01}
+    check_friction("m", fr, good)
+    for name, bad, unit, expected in (("F_c", -0.1, "N m", ">= 0"), ("F_s", float("inf"), "N m", ">= 0"),
+                                      ("v_s", 0.0, "rad/s", "> 0"), ("v_c", float("nan"), "rad/s", "> 0")):
+        with pytest.raises(FrictionError) as info:
+            check_friction("link1_hd", fr, {**good, name: bad})
+        msg = str(info.value)
+        assert "\n" not in msg and f"link1_hd joint 1: motor friction {name} = {bad!r} {unit}" in msg, msg
+        assert f"expected a finite number {expected}" in msg
+
+
+def test_friction_is_odd_dissipative_and_the_laws_feed_it_forward(derived):
+    """The emitted f's motor row carries -F(dq_m)/J_m with F as written here (odd, F v >= 0, F -> F_s near
+    rest and F_c far away), and alpha changes by exactly +F(dq_m) when friction is switched on."""
+    _, F, _ = derived
+    rng = np.random.default_rng(8)
+    for x, p in _points(rng, 4):
+        p0 = np.concatenate([p[:8], NO_FRICTION])
+        drop = (_s(F["f"](x, p0)[3]) - _s(F["f"](x, p)[3])) * p[1]
+        assert abs(drop - friction(x[3], p)) < 1e-12 * max(1.0, abs(drop))
+        assert abs(_s(F["alpha"](x, p)) - _s(F["alpha"](x, p0)) - friction(x[3], p)) < 1e-9 * (
+            1 + abs(_s(F["alpha"](x, p))))
+        for v in (0.7, 2.0, 5.0):
+            assert friction(v, p) > 0 and abs(friction(-v, p) + friction(v, p)) < 1e-15
+    p = np.concatenate([np.ones(8), [1.0, 1.6, 0.05, 1e-4]])
+    x = np.array([0.0, 0.0, 0.0, 0.0])
+    for v, level in ((0.005, 1.6), (2.0, 1.0)):  # near rest the static level, far away the Coulomb one
+        x[3] = v
+        assert abs((_s(F["f"](x, np.concatenate([p[:8], NO_FRICTION]))[3]) - _s(F["f"](x, p)[3])) - level) < 2e-2

@@ -24,13 +24,23 @@ def model():
 
 def test_contract(model):
     assert model.n == 1 and model.nx == 4
-    assert model.param_names == ("J_l", "J_m", "k1", "k3", "M", "g0", "L", "B_m")
+    assert model.param_names == ("J_l", "J_m", "k1", "k3", "M", "g0", "L", "B_m", "F_c", "F_s", "v_s", "v_c")
     assert model.default_params["k1"] == 75.0 and model.default_params["k3"] == 2500.0
+    assert model.default_params["F_c"] == model.default_params["F_s"] == 0.0  # the paper's link: no friction
     x = np.array([0.3, -0.2, 0.4, 0.5])  # phi = 0.1: psi' = 75 + 3 * 2500 * 0.01 = 150
     assert model.f(x).shape == (4,) and model.T(x).shape == (4,) and model.alpha(x).shape == (1,)
     assert model.beta(x)[0, 0] == pytest.approx(1.0 * 2.0 / 150.0, rel=1e-14)  # J_l J_m / psi'(0.1)
     assert model.f(x)[1] == pytest.approx(75 * 0.1 + 2500 * 0.1 ** 3 - 9.8 * np.sin(0.3), rel=1e-14)
     assert set(model.manifest["controls"]) == {"smc", "ismc", "fl", "smc_tau", "ismc_tau", "fl_tau"}
+
+
+@pytest.mark.parametrize("name, value, expected", [("F_c", -0.5, ">= 0"), ("F_s", float("nan"), "finite"),
+                                                   ("v_c", 0.0, "> 0"), ("v_s", -1.0, "> 0")])
+def test_non_physical_friction_is_a_one_line_error(model, name, value, expected):
+    with pytest.raises(fjm_runtime.FjmValueError) as info:
+        model.f(np.zeros(4), {name: value})
+    msg = str(info.value)
+    assert "\n" not in msg and repr(name) in msg and expected in msg, msg
 
 
 def test_torque_law_equals_state_law_at_the_implied_measurement(model):

@@ -40,6 +40,9 @@ def _random_params(m, rng, complete: bool):
             p[name] = v * rng.uniform(1.0, 3.0)
     if "m_load" in p:
         p.update(m_load=1.7, x_load=0.01, y_load=-0.02, z_load=0.12)
+    if "F_c" in p:  # link1_hd's motor friction: the file's custom numerics and the bridge's passive callback
+        p.update(F_c=rng.uniform(0.5, 1.5), F_s=rng.uniform(0.5, 2.0), v_s=rng.uniform(0.2, 1.0),
+                 v_c=rng.uniform(0.2, 1.0))
     return p
 
 
@@ -67,6 +70,23 @@ def test_qacc_equals_fjm(name, tmp_path):
         path = write_mjcf(m, tmp_path / f"{name}.xml", params)
         plant = MujocoPlant(m, path, params)
         assert _worst(m, plant, params, rng) < TOL
+
+
+def test_motor_friction_through_the_passive_callback(tmp_path):
+    """link1_hd with friction, gear ratio 3: MuJoCo's qacc equals fjm's to 1e-12 with the callback the file
+    asks for, and misses by the friction itself without it (the callback is what carries it)."""
+    m = fjm_runtime.load("link1_hd")
+    p = dict(m.default_params, F_c=0.9, F_s=1.4, v_s=0.3, v_c=0.4, B_m=0.1)
+    path = write_mjcf(m, tmp_path / "hd.xml", p, gear_ratio=3.0)
+    assert 'numeric name="fjm_motor_friction:joint1_rotor" data="0.9 1.4 0.3 0.4 3.0"' in path.read_text()
+    plant = MujocoPlant(m, path, p, gear_ratio=3.0)
+    assert _worst(m, plant, p, np.random.default_rng(9)) < TOL
+    x, u = np.array([0.1, -0.3, 0.15, 0.6]), np.array([2.0])
+    plant.friction = []  # the same file without the callback: the motor row misses F(dq_m) / J_m
+    miss = (m.f(x, p) + m.g(x, p) @ u - plant.xdot(x, u))[3] * p["J_m"]
+    v = x[3]
+    assert abs(miss + (0.9 + 0.5 * np.exp(-(v / 0.3) ** 2)) * np.tanh(v / 0.4)) < 1e-12
+    assert "fjm_motor_friction" not in mjcf_text(m, None)  # no friction at the defaults: no numeric
 
 
 @pytest.mark.parametrize("name", ["elbow3", "planar2"])
@@ -203,12 +223,12 @@ def test_closed_loop_equals_simulate(tmp_path):
 
 
 def test_closed_loop_on_the_cubic_spring_equals_simulate(tmp_path):
-    """link1_hd, true k1 x1.2 and k3 x0.8: the law derived for the cubic spring (nominal k1, k3) at 1 kHz on
+    """link1_hd, true k1 x1.2 and k3 x0.8 and Coulomb/Stribeck motor friction: the law derived for the cubic spring (nominal k1, k3) at 1 kHz on
     10 substeps, MuJoCo's polynomial tendon stiffness vs fjm's simulate; the deflection reaches the stiff
     part of the curve (k3 phi^2 > k1 somewhere)."""
     m = fjm_runtime.load("link1_hd")
     d = m.default_params
-    true = dict(d, k1=1.2 * d["k1"], k3=0.8 * d["k3"])
+    true = dict(d, k1=1.2 * d["k1"], k3=0.8 * d["k3"], F_c=0.8, F_s=1.2, v_s=0.1, v_c=0.02)  # and motor friction
     res = _mujoco_equals_simulate(m, fjm_runtime.make_reference("sine", 1, amplitude=1.0, omega=3.0), true, tmp_path)
     phi = res.x[:, 2] - res.x[:, 0]
     assert np.max(true["k3"] * 3 * phi ** 2) > true["k1"], np.max(np.abs(phi))

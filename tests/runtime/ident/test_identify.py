@@ -1,8 +1,8 @@
 """Identification from logs whose truth is known (fjm_runtime.ident.identify).
 
 The logs come from fjm's own sampled loop with TRUE parameters away from the model's defaults (the
-identification never sees them), or from a small plant integrated here with Coulomb friction (no
-generated model has it). MuJoCo logs: test_mujoco_identification.py.
+identification never sees them), or from a small plant integrated here with Coulomb friction
+(link1_hd's generated plant carries Coulomb + Stribeck friction too). MuJoCo logs: test_mujoco_identification.py.
 """
 import numpy as np
 import pytest
@@ -147,3 +147,27 @@ def test_unexcited_parameter_keeps_the_models_value(link1, tmp_path):
     assert "B_m" in ident.not_excited and any(w.startswith("B_m") for w in ident.warnings)
     spread = load_params_file(ident.to_toml(tmp_path / "p.toml", m), m)
     assert "B_m" not in spread.overrides and "K" in spread.overrides
+
+
+def test_link1_hd_friction_by_the_models_own_law_and_names(tmp_path):
+    """link1_hd's plant carries Coulomb + Stribeck motor friction (the generated f): identified under the
+    model's names within 10 %, with the model's v_c, v_s held and written to the parameter file."""
+    m = fjm_runtime.load("link1_hd")
+    d = m.default_params
+    true = {**d, "k1": 1.1 * d["k1"], "F_c": 0.8, "F_s": 1.2}
+    log = _sim_log(m, true, 6.0)
+    ident = identify(m, log, friction="stribeck")
+    v = ident.values
+    for k in ("F_c", "F_s"):
+        assert abs(v[k] / true[k] - 1) < 0.1, (k, v[k], true[k])
+    assert abs(v["k1"] / true["k1"] - 1) < 0.03 and abs(v["J_m"] / true["J_m"] - 1) < 0.05, v
+    assert ident.fixed == {"v_c": d["v_c"], "v_s": d["v_s"]}
+    try:
+        import tomllib
+    except ImportError:  # Python < 3.11
+        import tomli as tomllib
+    written = tomllib.loads(ident.to_toml(tmp_path / "p.toml", m).read_text())["parameters"]
+    assert written["F_c"] == v["F_c"] and written["F_s"] == v["F_s"] and written["v_c"] == d["v_c"]
+    m.params_array({**d, **written})  # physical: the runtime accepts the file's values
+    coulomb = identify(m, log, friction="coulomb")  # one level: the static level set to it (no hump)
+    assert coulomb.fixed["F_s"] == coulomb.values["F_c"] and "F_s" not in coulomb.values
