@@ -30,29 +30,17 @@ from typing import Dict, Tuple
 
 import sympy as sp
 
+from .abstract import derivative_chain
+
 __all__ = ["MotorFriction", "FrictionError", "check_friction", "friction_functions"]
 
 #: Highest derivative of F the derivation may ask for (the brackets differentiate F up to third order).
 _ORDERS = 5
 
 
-def _make_friction(k: int, joint: int):
-    def fdiff(self, argindex=1):
-        if k + 1 >= _ORDERS:
-            raise ValueError(f"friction derivative of order {k + 1} requested; only {_ORDERS - 1} are defined")
-        return friction_functions(joint)[k + 1](self.args[0])
-    name = f"F{joint}" if k == 0 else f"F{joint}_d{k}"
-    return type(name, (sp.Function,), {"nargs": 1, "fdiff": fdiff, "order": k, "joint": joint})
-
-
-_CLASSES: Dict[int, Tuple[type, ...]] = {}
-
-
 def friction_functions(joint: int) -> Tuple[type, ...]:
     """``(F, F', F'', ...)`` of joint ``joint``'s motor friction as SymPy function classes (cached)."""
-    if joint not in _CLASSES:
-        _CLASSES[joint] = tuple(_make_friction(k, joint) for k in range(_ORDERS))
-    return _CLASSES[joint]
+    return derivative_chain("F", joint, _ORDERS, "friction")
 
 
 class FrictionError(ValueError):

@@ -35,6 +35,7 @@ from typing import Dict, List, Tuple
 
 import sympy as sp
 
+from .abstract import derivative_chain
 from .friction import MotorFriction, check_friction, friction_functions
 from .lie import DirectionalDerivative, ad_iterates, lie_bracket, lie_derivative
 from .linearize import Linearization
@@ -58,27 +59,13 @@ class SpringError(ValueError):
     """A spring law that is not a spring on its declared range (one line, names joint and deflection)."""
 
 
-def _make_psi(k: int, joint: int):
-    def fdiff(self, argindex=1):
-        if k + 1 >= _ORDERS:
-            raise ValueError(f"spring derivative of order {k + 1} requested; only {_ORDERS - 1} are defined")
-        return spring_functions(joint)[k + 1](self.args[0])
-    name = f"psi{joint}" if k == 0 else f"psi{joint}_d{k}"
-    return type(name, (sp.Function,), {"nargs": 1, "fdiff": fdiff, "order": k, "joint": joint})
-
-
-_CLASSES: Dict[int, Tuple[type, ...]] = {}
-
-
 def spring_functions(joint: int) -> Tuple[type, ...]:
     """``(psi, psi', psi'', ...)`` of joint ``joint`` as SymPy function classes (cached).
 
     ``psi_k(a).diff(a) = psi_{k+1}(a)``, so SymPy's chain rule carries them through any
     Jacobian; :meth:`CubicSpring.substitute` replaces them by the law.
     """
-    if joint not in _CLASSES:
-        _CLASSES[joint] = tuple(_make_psi(k, joint) for k in range(_ORDERS))
-    return _CLASSES[joint]
+    return derivative_chain("psi", joint, _ORDERS, "spring")
 
 
 @dataclass(frozen=True)
