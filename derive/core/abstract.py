@@ -12,7 +12,7 @@ from typing import Dict, Tuple
 
 import sympy as sp
 
-__all__ = ["derivative_chain"]
+__all__ = ["derivative_chain", "law_derivative", "substitute_chain"]
 
 _CHAINS: Dict[Tuple[str, int], Tuple[type, ...]] = {}
 
@@ -43,3 +43,18 @@ def derivative_chain(stem: str, joint: int, orders: int, what: str) -> Tuple[typ
             return type(name, (sp.Function,), {"nargs": 1, "fdiff": fdiff, "order": k, "joint": joint})
         _CHAINS[key] = tuple(make(k) for k in range(orders))
     return _CHAINS[key]
+
+
+def law_derivative(law, k: int, x: sp.Expr) -> sp.Expr:
+    """``law^(k)(x)``: the k-th derivative of the scalar law ``law(a)`` (a callable), at ``x``."""
+    if not k:
+        return law(x)
+    a = sp.Dummy("a", real=True)
+    return sp.diff(law(a), a, k).subs(a, x)
+
+
+def substitute_chain(e, chain: Tuple[type, ...], derivative):
+    """``e`` with every ``chain[k](x)`` replaced by ``derivative(k, x)`` (the law for the abstract function)."""
+    for k, cls in enumerate(chain):
+        e = e.replace(cls, lambda x, k=k: derivative(k, x))
+    return e

@@ -30,7 +30,7 @@ from typing import Dict, Tuple
 
 import sympy as sp
 
-from .abstract import derivative_chain
+from .abstract import derivative_chain, law_derivative, substitute_chain
 
 __all__ = ["MotorFriction", "FrictionError", "check_friction", "friction_functions"]
 
@@ -72,14 +72,11 @@ class MotorFriction:
 
     def derivative(self, k: int, v: sp.Expr) -> sp.Expr:
         """``F^(k)(v)``, the k-th derivative of the law."""
-        a = sp.Dummy("a", real=True)
-        return sp.diff(self.law(a), a, k).subs(a, v) if k else self.law(v)
+        return law_derivative(self.law, k, v)
 
     def substitute(self, e):
         """``e`` with every abstract ``F_k(.)`` of this joint replaced by the law's k-th derivative."""
-        for k, cls in enumerate(friction_functions(self.joint)):
-            e = e.replace(cls, lambda a, k=k: self.derivative(k, a))
-        return e
+        return substitute_chain(e, friction_functions(self.joint), self.derivative)
 
     def describe(self) -> str:
         return (f"F(v) = ({self.F_c} + ({self.F_s} - {self.F_c}) exp(-(v/{self.v_s})^2)) tanh(v/{self.v_c})")

@@ -35,7 +35,7 @@ from typing import Dict, List, Tuple
 
 import sympy as sp
 
-from .abstract import derivative_chain
+from .abstract import derivative_chain, law_derivative, substitute_chain
 from .friction import MotorFriction, check_friction, friction_functions
 from .lie import DirectionalDerivative, ad_iterates, lie_bracket, lie_derivative
 from .linearize import Linearization
@@ -93,8 +93,7 @@ class CubicSpring:
 
     def derivative(self, k: int, phi: sp.Expr) -> sp.Expr:
         """``psi^(k)(phi)``, the k-th derivative of the law."""
-        a = sp.Dummy("a", real=True)
-        return sp.diff(self.law(a), a, k).subs(a, phi) if k else self.law(phi)
+        return law_derivative(self.law, k, phi)
 
     def potential(self, phi: sp.Expr) -> sp.Expr:
         """``integral_0^phi psi = k1 phi^2 / 2 + k3 phi^4 / 4`` (spring energy)."""
@@ -103,9 +102,7 @@ class CubicSpring:
 
     def substitute(self, e):
         """``e`` with every ``psi_k(.)`` of this joint replaced by the law's k-th derivative."""
-        for k, cls in enumerate(spring_functions(self.joint)):
-            e = e.replace(cls, lambda a, k=k: self.derivative(k, a))
-        return e
+        return substitute_chain(e, spring_functions(self.joint), self.derivative)
 
     def describe(self) -> str:
         return f"psi(phi) = {self.k1} phi + {self.k3} phi^3"

@@ -329,10 +329,7 @@ def _motor_friction(chain: dict, p: Dict[str, float], N: np.ndarray) -> List[str
         fr = e.get("friction")
         if not fr:
             continue
-        vals = [p[fr[role]] for role in ("F_c", "F_s", "v_s", "v_c")]
-        if not (vals[0] >= 0 and vals[1] >= 0 and vals[2] > 0 and vals[3] > 0):
-            raise FjmValueError(f"{', '.join(fr[r] for r in ('F_c', 'F_s', 'v_s', 'v_c'))} = {vals}: expected "
-                                "F_c, F_s >= 0 (N m) and v_s, v_c > 0 (rad/s)")
+        vals = [p[fr[role]] for role in ("F_c", "F_s", "v_s", "v_c")]  # physical: resolve_params checked them
         if vals[0] == 0 and vals[1] == 0:
             continue
         data = " ".join(fmt(v) for v in vals + [float(N[k])])
