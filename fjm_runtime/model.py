@@ -186,6 +186,17 @@ class Model:
             self._torque = {name: _read_function(self.directory / e["casadi_file"]) for name, e in entries.items()}
         return self._torque
 
+    @property
+    def spring_functions(self) -> Optional[Dict[str, ca.Function]]:
+        """A nonlinear-spring model's ``"spring"`` ``(phi, p) -> (psi, dpsi, ddpsi)`` and ``"spring_inverse"``
+        ``(tau_J, p) -> phi_J`` (``manifest["springs"]``); None for a linear spring ``K (q_m - q)``."""
+        entries = (self.manifest.get("springs") or {}).get("functions")
+        if not entries:
+            return None
+        if getattr(self, "_springs", None) is None:
+            self._springs = {name: _read_function(self.directory / e["casadi_file"]) for name, e in entries.items()}
+        return self._springs
+
     # -- joint limits stated by the URDF ----------------------------------------
     def _urdf_limit(self, key: str) -> Optional[np.ndarray]:
         """``manifest["source"]["limits"][key]`` as floats (n,), None where the model states none."""

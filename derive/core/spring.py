@@ -18,35 +18,37 @@ built-in's defaults), and the linearizing coordinates carry the spring and its s
 Everything is derived, not written out: the spring enters as SymPy functions ``psi_k(phi)``
 (:func:`spring_functions`, the k-th derivative of psi, each one's derivative the next one) so
 that :func:`derive.core.lie.lie_derivative` and :func:`derive.core.lie.ad_iterates` differentiate through
-it by the chain rule; the spring law (:class:`CubicSpring`) is substituted at the end.
+it by the chain rule; the spring law (:mod:`derive.core.spring_laws`: linear, cubic, the three-segment
+datasheet curve) is substituted at the end.
 
 Torque coordinates (the measurement ``m = [q; dq; tau_J; dtau_J; dq_m]``) read ``tau_J`` and
 ``dtau_J`` directly; where ``psi'`` and ``psi''`` are needed they are evaluated at the deflection
 the measurement implies, ``phi_J = psi^-1(tau_J)`` (:func:`newton_inverse`, bound numerically at
 emission), and ``dphi = dtau_J / psi'(phi_J)``.
 
-Only one-joint models (``link1_hd``) for now: ``D`` is inverted in closed form. Pure math: no I/O.
+Only one-joint models for now (``link1_hd``, one-link model files with a ``[spring]`` or ``[friction]``
+table): ``D`` is inverted in closed form. Pure math: no I/O.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import replace
 from typing import Dict, List, Tuple
 
 import sympy as sp
 
-from .abstract import derivative_chain, law_derivative, substitute_chain
 from .friction import MotorFriction, check_friction, friction_functions
 from .lie import DirectionalDerivative, ad_iterates, lie_bracket, lie_derivative
 from .linearize import Linearization
 from .model_base import FlexibleJointModel, Param, state_symbols
+from .program import Program
+from .spring_laws import CubicSpring, LinearSpring, SpringError, ThreeSegmentSpring, spring_functions
 from .torque import inverse_dynamics_derivatives
 
-__all__ = ["CubicSpring", "SpringError", "spring_functions", "check_spring", "make_link1_hd",
+__all__ = ["CubicSpring", "LinearSpring", "ThreeSegmentSpring", "SpringError", "spring_functions", "check_spring",
+           "make_link1_hd",
+           "with_drive", "SPRING_PARAMETERS",
            "linearize_spring", "motor_friction", "newton_inverse", "NEWTON_STEPS", "LINK1_HD_RANGE"]
-
-#: Highest derivative of psi the derivation may ask for (the involutivity brackets reach psi''').
-_ORDERS = 5
 
 #: Newton steps of the emitted inverse ``phi = psi^-1(tau_J)`` (unrolled; see :func:`newton_inverse`).
 NEWTON_STEPS = 12
@@ -55,80 +57,10 @@ NEWTON_STEPS = 12
 LINK1_HD_RANGE = 0.25
 
 
-class SpringError(ValueError):
-    """A spring law that is not a spring on its declared range (one line, names joint and deflection)."""
-
-
-def spring_functions(joint: int) -> Tuple[type, ...]:
-    """``(psi, psi', psi'', ...)`` of joint ``joint`` as SymPy function classes (cached).
-
-    ``psi_k(a).diff(a) = psi_{k+1}(a)``, so SymPy's chain rule carries them through any
-    Jacobian; :meth:`CubicSpring.substitute` replaces them by the law.
-    """
-    return derivative_chain("psi", joint, _ORDERS, "spring")
-
-
-@dataclass(frozen=True)
-class CubicSpring:
-    """``psi(phi) = k1 phi + k3 phi^3`` (N m), ``phi`` in rad, of one joint.
-
-    Attributes
-    ----------
-    joint : int
-        Joint number, 1-based (names the ``psi`` functions and the errors).
-    k1, k3 : sympy.Symbol
-        The coefficients (runtime parameters, N m/rad and N m/rad^3).
-    deflection_range : float
-        Declared range ``|phi| <= deflection_range`` (rad) on which ``psi' > 0`` must hold.
-    """
-
-    joint: int
-    k1: sp.Symbol
-    k3: sp.Symbol
-    deflection_range: float
-
-    def law(self, phi: sp.Expr) -> sp.Expr:
-        """``psi(phi)``."""
-        return self.k1 * phi + self.k3 * phi ** 3
-
-    def derivative(self, k: int, phi: sp.Expr) -> sp.Expr:
-        """``psi^(k)(phi)``, the k-th derivative of the law."""
-        return law_derivative(self.law, k, phi)
-
-    def potential(self, phi: sp.Expr) -> sp.Expr:
-        """``integral_0^phi psi = k1 phi^2 / 2 + k3 phi^4 / 4`` (spring energy)."""
-        a = sp.Dummy("a", real=True)
-        return sp.integrate(self.law(a), (a, 0, phi))
-
-    def substitute(self, e):
-        """``e`` with every ``psi_k(.)`` of this joint replaced by the law's k-th derivative."""
-        return substitute_chain(e, spring_functions(self.joint), self.derivative)
-
-    def describe(self) -> str:
-        return f"psi(phi) = {self.k1} phi + {self.k3} phi^3"
-
-
-def check_spring(model: str, spring: CubicSpring, values: Dict[str, float]) -> None:
-    """Raise :class:`SpringError` unless the coefficients are finite and ``psi' > 0`` on the range.
-
-    ``psi'(phi) = k1 + 3 k3 phi^2`` is even and monotone in ``|phi|``, so its minimum over
-    ``|phi| <= r`` is at ``phi = 0`` or ``|phi| = r``: both are checked (exact, no sampling).
-    """
-    import math
-    j = spring.joint
-    k1, k3 = (float(values[str(s)]) for s in (spring.k1, spring.k3))
-    for name, v in ((str(spring.k1), k1), (str(spring.k3), k3)):
-        if not math.isfinite(v):
-            raise SpringError(f"{model} joint {j}: spring coefficient {name} = {v!r}; expected a finite number")
-    r = float(spring.deflection_range)
-    if not (math.isfinite(r) and r > 0):
-        raise SpringError(f"{model} joint {j}: deflection range {r!r} rad; expected a finite number > 0")
-    for phi in (0.0, r):
-        stiffness = k1 + 3.0 * k3 * phi * phi
-        if not stiffness > 0:
-            raise SpringError(f"{model} joint {j}: spring stiffness psi'(phi) = {stiffness:g} N m/rad <= 0 at "
-                              f"deflection phi = {phi:g} rad (declared range |phi| <= {r:g} rad); "
-                              "expected psi' > 0 over the range")
+def check_spring(model: str, spring, values: Dict[str, float]) -> None:
+    """Raise :class:`SpringError` unless ``spring``'s coefficients are finite and ``psi' > 0`` on its range
+    (each law's ``check``, :mod:`derive.core.spring_laws`)."""
+    spring.check(model, values)
 
 
 def newton_inverse(psi, dpsi, tau, k1, steps: int = NEWTON_STEPS):
@@ -138,7 +70,8 @@ def newton_inverse(psi, dpsi, tau, k1, steps: int = NEWTON_STEPS):
     iterates are monotone: ``psi`` is convex on ``phi > 0`` when ``k3 >= 0`` (then ``tau / k1``
     lies beyond the root and Newton descends to it) and concave when ``k3 < 0`` (then it lies
     short of it and Newton climbs to it); odd symmetry gives ``tau < 0``. ``k3 = 0`` is exact
-    after one step.
+    after one step. The three-segment curve (``K_1 <= K_2 <= K_3``, checked) is convex on ``phi > 0``
+    too, so ``k1 = K_1`` starts beyond the root and the iterates descend to it.
     """
     phi = tau / k1
     for _ in range(steps):
@@ -200,6 +133,82 @@ def make_link1_hd() -> FlexibleJointModel:
         ),
         springs=(spring,), frictions=(friction,),
     )
+
+
+#: Meaning and unit of every spring law's coefficients (runtime parameter names).
+SPRING_PARAMETERS = {
+    "k1": ("spring: linear coefficient psi'(0)", "N m/rad"), "k3": ("spring: cubic coefficient", "N m/rad^3"),
+    "K_1": ("spring: stiffness of the first segment, psi'(0)", "N m/rad"),
+    "K_2": ("spring: stiffness of the second segment", "N m/rad"),
+    "K_3": ("spring: stiffness of the third segment", "N m/rad"),
+    "T_1": ("spring: torque at the end of the first segment", "N m"),
+    "T_2": ("spring: torque at the end of the second segment", "N m"),
+    "w_blend": ("spring: blend width around each breakpoint", "rad"),
+}
+
+_FRICTION_PARAMETERS = (
+    ("F_c", "motor Coulomb friction (link side)", "N m"),
+    ("F_s", "motor static friction, the Stribeck level at rest (F_s = F_c: no hump)", "N m"),
+    ("v_s", "Stribeck velocity of the motor friction (link side)", "rad/s"),
+    ("v_c", "regularization velocity of the friction: tanh(v / v_c) for sign(v)", "rad/s"),
+)
+
+
+def with_drive(base: FlexibleJointModel, kind: str, coefficients: Dict[str, float], deflection_range: float,
+               friction: Dict[str, float] = None, description: str = None) -> FlexibleJointModel:
+    """``base`` (one joint, linear spring ``K``) with the spring law ``kind`` and, optionally, motor friction.
+
+    Parameters
+    ----------
+    base : FlexibleJointModel
+        A one-joint model with the linear spring of parameter ``base.K[0]`` (e.g. ``planar1``).
+    kind : {'linear', 'cubic', 'three_segment'}
+        The spring law (:mod:`derive.core.spring_laws`); its coefficients replace ``K`` in the
+        parameter list (``linear`` keeps ``K``).
+    coefficients : dict
+        Defaults of the law's coefficients (``k1, k3`` or ``K_1, K_2, K_3, T_1, T_2, w_blend``).
+    deflection_range : float
+        Declared range, rad.
+    friction : dict, optional
+        Defaults of ``F_c, F_s, v_s, v_c`` (appended to the parameters); None: viscous damping only.
+
+    Raises
+    ------
+    SpringError, FrictionError
+        On the defaults (one line, names the joint).
+    """
+    if base.n != 1:
+        raise ValueError(f"{base.name}: nonlinear springs and motor friction are derived for one joint (n = {base.n})")
+    K_name = str(base.K[0])
+    params = []
+    for p in base.params:
+        if p.name == K_name and kind != "linear":
+            params += [Param(c, float(coefficients[c]), *SPRING_PARAMETERS[c]) for c in coefficients]
+        else:
+            params.append(p)
+    if friction is not None:
+        params += [Param(name, float(friction[name]), meaning, unit) for name, meaning, unit in _FRICTION_PARAMETERS]
+    sym = {p.name: sp.Symbol(p.name, real=True) for p in params}
+    if kind == "linear":
+        spring = LinearSpring(1, sym[K_name], float(deflection_range))
+    elif kind == "cubic":
+        spring = CubicSpring(1, sym["k1"], sym["k3"], float(deflection_range))
+    elif kind == "three_segment":
+        spring = ThreeSegmentSpring(1, *(sym[c] for c in ("K_1", "K_2", "K_3", "T_1", "T_2", "w_blend")),
+                                    float(deflection_range))
+    else:
+        raise ValueError(f"spring law {kind!r}; expected 'linear', 'cubic' or 'three_segment'")
+    defaults = {p.name: p.default for p in params}
+    check_spring(base.name, spring, defaults)
+    frictions = None
+    if friction is not None:
+        frictions = (MotorFriction(1, *(sym[c] for c in ("F_c", "F_s", "v_s", "v_c"))),)
+        check_friction(base.name, frictions[0], defaults)
+    # the closed forms' intermediate symbols (a1_1, ...) inlined: the Lie derivatives must see every q
+    inline = base.program.inline
+    return replace(base, params=tuple(params), K=(spring.start_stiffness,), springs=(spring,), frictions=frictions,
+                   D=inline(base.D), h=inline(base.h), potential=inline(base.potential), program=Program(),
+                   description=description or base.description)
 
 
 def _abstract_spring(m: FlexibleJointModel) -> sp.Matrix:

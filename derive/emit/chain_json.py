@@ -184,21 +184,27 @@ def chain_document(m: FlexibleJointModel) -> Optional[dict]:
     -------
     dict or None
     """
-    names = list(m.param_names)
+    # a nonlinear spring's coefficients stand where K stood (link1_hd, the one-link drive model files)
+    spring_names = {str(c) for s in (m.springs or ()) if s.kind != "linear" for c in s.parameters}
+    names = [x for x in m.param_names if x not in spring_names]
+    K_slot = ["K"] if m.springs is None or m.springs[0].kind == "linear" else []
     if m.source is not None and "urdf" in m.source:
         body = _urdf(m)
-    elif names[:len(planar_param_names(m.n))] == planar_param_names(m.n):
+    elif names[:len(planar_param_names(m.n))] == planar_param_names(m.n) or (
+            m.n == 1 and not K_slot and names[:7] == [x for x in planar_param_names(1) if x != "K1"]):
         body = _planar(m)
-    elif m.n == 1 and names[:7] == ["J_l", "J_m", "K", "M", "g0", "L", "B_m"]:
+    elif m.n == 1 and names[:7 - 1 + len(K_slot)] == ["J_l", "J_m", *K_slot, "M", "g0", "L", "B_m"]:
         body = _link1(m)
-    elif m.n == 1 and names[:8] == ["J_l", "J_m", "k1", "k3", "M", "g0", "L", "B_m"]:
-        body = _link1(m)           # link1_hd: the same link, a cubic spring
-        body["elastic"] = [{"joint": "joint1", "spring": {"law": "cubic", "k1": "k1", "k3": "k3"}, "Jm": "J_m",
-                            "Bm": "B_m"}]
     else:
         body = None
     if body is None:
         return None
+    for s in m.springs or ():
+        if s.kind != "linear":
+            e = body["elastic"][s.joint - 1]
+            law = {"law": s.kind, **{role: str(sym) for role, sym in s.roles().items()}}
+            body["elastic"][s.joint - 1] = {"joint": e["joint"], "spring": law,
+                                            **{k: v for k, v in e.items() if k not in ("joint", "K")}}
     for fr in getattr(m, "frictions", None) or ():
         body["elastic"][fr.joint - 1]["friction"] = {"law": "coulomb_stribeck_tanh", **{
             role: str(getattr(fr, role)) for role in ("F_c", "F_s", "v_s", "v_c")}}

@@ -70,12 +70,14 @@ def _spring_sx(model, phi: ca.SX, p: ca.SX, order: int) -> List[ca.SX]:
     s = model.springs[0]
     a = sp.Symbol("phi_arg", real=True)
     conv = SympyToSX({**{sym: p[j] for j, sym in enumerate(model.param_symbols)}, a: phi})
-    return [conv(sp.expand(s.derivative(k, a))) for k in range(order + 1)]
+    # polynomials expanded (the cubic: short, exact); a piecewise law kept as derived: expanding the blend
+    # polynomial in phi would cancel large terms (1e-10 relative error inside the windows)
+    return [conv(e if e.has(sp.Piecewise) else sp.expand(e)) for e in (s.derivative(k, a) for k in range(order + 1))]
 
 
 def _newton_sx(model, tau: ca.SX, p: ca.SX) -> ca.SX:
     """``phi_J = psi^-1(tau)`` by :func:`derive.core.spring.newton_inverse` in SX."""
-    k1 = p[list(model.param_names).index(str(model.springs[0].k1))]
+    k1 = p[list(model.param_names).index(str(model.springs[0].start_stiffness))]
     return newton_inverse(lambda v: _spring_sx(model, v, p, 0)[0], lambda v: _spring_sx(model, v, p, 1)[1],
                           tau, k1, NEWTON_STEPS)
 
@@ -147,7 +149,7 @@ def _meaning(name: str) -> str:
     if name == "spring":
         return "the spring law: psi(phi), psi'(phi), psi''(phi) per joint (N m, N m/rad, N m/rad^2)"
     if name == "spring_inverse":
-        return f"the implied deflection phi_J = psi^-1(tau_J) per joint ({NEWTON_STEPS} Newton steps from tau_J / k1)"
+        return f"the implied deflection phi_J = psi^-1(tau_J) per joint ({NEWTON_STEPS} Newton steps from tau_J / psi'(0))"
     if name in _TORQUE_MEANING:
         return _TORQUE_MEANING[name]
     if name.endswith("_zdot"):
@@ -219,10 +221,10 @@ def write_spring_model(lin: Linearization, outdir: Path,
         "measurement": {"m": "[q; dq; tau_J; dtau_J; dq_m] (5n): link position and rate, link-side joint torque "
                              "tau_J = psi(q_m - q) and its rate (measured), motor rate", "size": 5 * m.n},
         "springs": {
-            "joints": [{"joint": spring.joint, "law": "cubic", "psi": f"{spring.k1} phi + {spring.k3} phi^3",
-                        "phi": "q_m - q", "parameters": [str(spring.k1), str(spring.k3)],
+            "joints": [{"joint": spring.joint, "law": spring.kind, "psi": _psi_text(spring),
+                        "phi": "q_m - q", "parameters": [str(s) for s in spring.parameters],
                         "deflection_range": [-spring.deflection_range, spring.deflection_range]}],
-            "inverse": {"method": "newton", "steps": NEWTON_STEPS, "start": "tau_J / k1"},
+            "inverse": {"method": "newton", "steps": NEWTON_STEPS, "start": f"tau_J / {spring.start_stiffness}"},
             "functions": {name: entry(name, inputs) for name, inputs in
                           (("spring", ["phi", "p"]), ("spring_inverse", ["tau_J", "p"]))},
         },
@@ -236,6 +238,13 @@ def write_spring_model(lin: Linearization, outdir: Path,
     lines = json.dumps(manifest, indent=2).split("\n")
     (outdir / "manifest.json").write_text("\n".join(["{" + lines[1].strip()] + lines[2:]) + "\n")
     return manifest
+
+
+def _psi_text(spring) -> str:
+    """The manifest's one-line statement of a spring law."""
+    if spring.kind == "cubic":
+        return f"{spring.k1} phi + {spring.k3} phi^3"
+    return spring.describe().split("= ", 1)[-1]
 
 
 def _control_entries(m, laws, ops, entry) -> Dict[str, dict]:
@@ -268,11 +277,15 @@ def _report(lin: Linearization, ops: Dict[str, int]) -> str:
     lines += [f"| `{p.name}` | {p.default:g} | {p.unit} | {p.meaning} |" for p in m.params]
     r = spring.deflection_range
     k = {p.name: p.default for p in m.params}
-    lines += ["", "## Spring", "",
-              f"`{spring.describe()}`, `phi = q_m - q`, declared range `|phi| <= {r:g} rad`. At the defaults "
-              f"`psi'(0) = {k['k1']:g}`, `psi'(0.1) = {k['k1'] + 3 * k['k3'] * 0.01:g}`, "
-              f"`psi'({r:g}) = {k['k1'] + 3 * k['k3'] * r * r:g}` N m/rad.",
-              ""]
+    lo, hi = spring.stiffness_bounds(k)
+    lines += ["", "## Spring", ""]
+    if spring.kind == "cubic":
+        lines += [f"`{spring.describe()}`, `phi = q_m - q`, declared range `|phi| <= {r:g} rad`. At the defaults "
+                  f"`psi'(0) = {k['k1']:g}`, `psi'(0.1) = {k['k1'] + 3 * k['k3'] * 0.01:g}`, "
+                  f"`psi'({r:g}) = {k['k1'] + 3 * k['k3'] * r * r:g}` N m/rad.", ""]
+    else:
+        lines += [f"`{spring.describe()}`, `phi = q_m - q`, declared range `|phi| <= {r:g} rad`. At the defaults "
+                  f"`psi'` runs over [{lo:g}, {hi:g}] N m/rad on the range.", ""]
     for fr in m.frictions or ():
         lines += ["## Motor friction", "",
                   f"`{fr.describe()}` at the link-side motor velocity `v = dq_m`, beside `B_m dq_m`; `alpha` and "

@@ -13,6 +13,10 @@ import casadi as ca
 import sympy as sp
 
 
+#: The comparisons of a Piecewise's conditions (SymPy may flip ``<`` into ``>``).
+_COMPARE = {"<": lambda a, b: a < b, "<=": lambda a, b: a <= b, ">": lambda a, b: a > b, ">=": lambda a, b: a >= b}
+
+
 class SympyToSX:
     """Convert SymPy expressions to SX given a binding of every free symbol.
 
@@ -86,9 +90,23 @@ class SympyToSX:
             out = ca.tanh(self._convert(e.args[0]))
         elif isinstance(e, sp.exp):
             out = ca.exp(self._convert(e.args[0]))
+        elif isinstance(e, sp.Piecewise):  # the three-segment spring's blends (derive.core.spring_laws)
+            out = self._piecewise(e.args)
+        elif isinstance(e, sp.core.relational.Relational) and e.rel_op in _COMPARE:
+            out = _COMPARE[e.rel_op](self._convert(e.lhs), self._convert(e.rhs))
         else:
             raise ValueError(f"cannot emit SymPy node of type {type(e).__name__}: {e}")
         self._memo[e] = out
+        return out
+
+    def _piecewise(self, pieces) -> ca.SX:
+        """``Piecewise((e1, c1), ..., (en, True))`` as nested ``if_else`` (the last condition must be True)."""
+        expr, cond = pieces[-1]
+        if cond is not sp.true:
+            raise ValueError(f"cannot emit a Piecewise without a final (expr, True) piece: {pieces}")
+        out = self._convert(expr)
+        for expr, cond in reversed(pieces[:-1]):
+            out = ca.if_else(self._convert(cond), self._convert(expr), out)
         return out
 
     def _mul(self, e: sp.Mul) -> ca.SX:

@@ -14,6 +14,7 @@ from typing import Dict, Optional, Tuple
 
 from ..core.model_base import PLANAR_GROUPS, FlexibleJointModel, param_group, planar_param_names
 from ..planar.planar import make_planar
+from .drive_tables import DRIVE_TABLES, SpringSpec, parse_friction_table, parse_spring_table, spring_error
 from .schema import Checker, ModelFileError, check_description, check_name, got, number, show, suggest
 from .toml_keys import KeyPath
 
@@ -52,11 +53,27 @@ class ModelSpec:
     defaults: Dict[str, float] = field(default_factory=dict)
     units: Dict[str, str] = field(default_factory=dict)  # parameter name -> SI unit (all params)
     source: str = "<model file>"
+    spring: Optional[SpringSpec] = None  # [spring] (one link only; derive.model_file.drive_tables)
+    friction: Optional[Dict[str, float]] = None  # [friction]: F_c, F_s, v_s, v_c
 
     def build(self) -> FlexibleJointModel:
-        """The symbolic model (a planar chain with this name, defaults and description)."""
-        return make_planar(self.links, name=self.name, defaults=dict(self.defaults),
-                           description=self.description)
+        """The symbolic model (a planar chain with this name, defaults and description; its drive when
+        the file has a ``[spring]`` or ``[friction]`` table: :func:`derive.core.spring.with_drive`)."""
+        chain = make_planar(self.links, name=self.name, defaults=dict(self.defaults),
+                            description=self.description)
+        if self.spring is None and self.friction is None:
+            return chain
+        from ..core.spring import with_drive
+        spring = self.spring or SpringSpec("linear", {}, 3.141592653589793)
+        return with_drive(chain, spring.kind, spring.coefficients, spring.deflection_range, self.friction,
+                          description=self.description or _drive_description(self.links, spring, self.friction))
+
+
+def _drive_description(links: int, spring: SpringSpec, friction) -> str:
+    law = {"linear": "linear spring K1", "cubic": "cubic spring k1 phi + k3 phi^3",
+           "three_segment": "three-segment (datasheet) spring"}[spring.kind]
+    return (f"{links}-link planar chain from a model file with a {law}"
+            + (" and Coulomb/Stribeck motor friction" if friction is not None else "") + ".")
 
 
 def _normalize_unit(unit: str) -> str:
@@ -76,12 +93,12 @@ def _describe_names(n: int) -> str:
 def _model_table(data: dict, chk: Checker, builtin: bool) -> Tuple[str, int, Optional[str]]:
     """The top level and ``[model]``: name, number of links, description."""
     for key in data:
-        if key not in ("model", "parameters"):
+        if key not in ("model", "parameters") + DRIVE_TABLES:
             hint = (f" (did you mean `{key} = ...` under [model]?)" if key in MODEL_KEYS
                     else " (parameters go under [parameters])" if param_group(key) in SI_UNITS
-                    else suggest(key, ("model", "parameters")))
-            raise chk.fail((key,), f"unknown key; a model file has the tables [model] and "
-                                   f"[parameters] only{hint}")
+                    else suggest(key, ("model", "parameters") + DRIVE_TABLES))
+            raise chk.fail((key,), f"unknown key; a model file has the tables [model], [parameters] and, "
+                                   f"for one link, [spring] and [friction] only{hint}")
     if "model" not in data:
         raise ModelFileError("missing required table [model] (with name = \"...\" and links = 1..7)",
                              chk.source, 1, "model")
@@ -196,5 +213,21 @@ def parse_chain_form(data: dict, chk: Checker, builtin: bool) -> ModelSpec:
     _check_com_on_links(chk, links, defaults, value_path)
     names = planar_param_names(links)
     units = {n_: SI_UNITS[param_group(n_)] for n_ in names}
-    return ModelSpec(name=name, links=links, description=description,
-                     defaults={k: defaults[k] for k in names if k in defaults}, units=units, source=chk.source)
+    spring = parse_spring_table(data, chk, links)
+    friction = parse_friction_table(data, chk, links)
+    if spring is not None and spring.kind != "linear" and "K1" in defaults:
+        raise chk.fail(value_path["K1"], f"the [spring] law {spring.kind!r} replaces the linear stiffness K1; "
+                                         f"give its coefficients ({', '.join(spring.coefficients)}) under [spring]")
+    spec = ModelSpec(name=name, links=links, description=description,
+                     defaults={k: defaults[k] for k in names if k in defaults}, units=units, source=chk.source,
+                     spring=spring, friction=friction)
+    if spring is not None or friction is not None:
+        from ..core.friction import FrictionError
+        from ..core.spring_laws import SpringError
+        try:
+            spec.build()  # the law's own checks on the file's values (psi' > 0 on the range, order)
+        except SpringError as err:
+            raise spring_error(chk, err) from None
+        except FrictionError as err:
+            raise chk.fail(("friction",), str(err).split(": ", 1)[-1]) from None
+    return spec

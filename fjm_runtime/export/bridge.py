@@ -3,9 +3,9 @@
 :class:`MujocoPlant` loads a file written by :func:`fjm_runtime.export.mjcf.write_mjcf`
 and maps by name (the MJCF contract): fjm's ``x = [q; dq; q_m; dq_m]`` to
 MuJoCo's ``qpos``/``qvel`` (link joints ``<j>``, rotor joints ``<j>_rotor`` at
-``theta = N q_m``) and ``u`` to the motors ``<j>_motor``. Motor friction that the file states as
-custom numerics (:data:`fjm_runtime.export.mjcf.FRICTION_NUMERIC`) is applied by a passive-force
-callback installed around each ``mj_forward`` / ``mj_step`` of the plant (and removed after it:
+``theta = N q_m``) and ``u`` to the motors ``<j>_motor``. Motor friction and three-segment springs
+that the file states as custom numerics (:data:`fjm_runtime.export.mjcf.FRICTION_NUMERIC`,
+:data:`~fjm_runtime.export.mjcf.SPRING_NUMERIC`) are applied by a passive-force callback installed around each ``mj_forward`` / ``mj_step`` of the plant (and removed after it:
 MuJoCo's callbacks are global). MuJoCo is an
 optional dependency of fjm (the ``dev`` extra); nothing in the runtime imports
 this module.
@@ -13,15 +13,37 @@ this module.
 
 from __future__ import annotations
 
+import math
 from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
 
 from ..validation import FjmValueError, as_vector
-from .mjcf import FRICTION_NUMERIC, gear_ratios, load_chain, resolve_params
+from .mjcf import FRICTION_NUMERIC, SPRING_NUMERIC, gear_ratios, load_chain, resolve_params
 
-__all__ = ["MujocoPlant"]
+__all__ = ["MujocoPlant", "three_segment_torque"]
+
+
+def three_segment_torque(phi: float, K_1: float, K_2: float, K_3: float, T_1: float, T_2: float, w: float) -> float:
+    """The datasheet spring at deflection ``phi`` (rad), written here from the datasheet (not derived).
+
+    ``sign(phi) g(|phi|)``: ``g`` is the piecewise-linear curve through ``(phi_1, T_1)``, ``(phi_2, T_2)``
+    with slopes ``K_1, K_2, K_3``, each kink replaced on ``|a - phi_i| < w / 2`` by the integral of the
+    quintic smoothstep between the neighbouring slopes (docs/real-drives.md).
+    """
+    a = abs(phi)
+    phi_1 = T_1 / K_1
+    phi_2 = phi_1 + (T_2 - T_1) / K_2
+    g = K_1 * a
+    for step, at in ((K_2 - K_1, phi_1), (K_3 - K_2, phi_2)):
+        x = a - at
+        if x >= w / 2:
+            g += step * x
+        elif x > -w / 2:
+            t = (x + w / 2) / w
+            g += step * w * (t ** 6 - 3 * t ** 5 + 2.5 * t ** 4)
+    return math.copysign(g, phi)
 
 
 def _mujoco():
@@ -75,17 +97,33 @@ class MujocoPlant:
             if num.name.startswith(FRICTION_NUMERIC):
                 dof = self.mj.joint(num.name[len(FRICTION_NUMERIC):]).dofadr[0]
                 self.friction.append((int(dof), *(float(v) for v in num.data)))
+        # (spring tendon, link dof, rotor dof, N, K_1, K_2, K_3, T_1, T_2, w) per three-segment spring
+        self.springs = []
+        for i in range(self.mj.nnumeric):
+            num = self.mj.numeric(i)
+            if num.name.startswith(SPRING_NUMERIC):
+                tendon = num.name[len(SPRING_NUMERIC):]
+                j = tendon[:-len("_spring")]
+                k = joints.index(j)
+                self.springs.append((self.mj.tendon(tendon).id, int(self.mj.joint(j).dofadr[0]),
+                                     int(self.mj.joint(f"{j}_rotor").dofadr[0]), float(self.N[k]),
+                                     *(float(v) for v in num.data)))
 
     def _passive(self, m, d) -> None:
-        """MuJoCo's passive-force callback: ``qfrc_passive -= F(v) / N`` on each rotor, ``v = qvel / N``."""
+        """MuJoCo's passive-force callback: ``qfrc_passive -= F(v) / N`` on each rotor, ``v = qvel / N``;
+        the three-segment springs' tendon force ``-psi(phi)`` at MuJoCo's tendon length ``phi``."""
         for dof, F_c, F_s, v_s, v_c, N in self.friction:
             v = d.qvel[dof] / N
             d.qfrc_passive[dof] -= (F_c + (F_s - F_c) * np.exp(-(v / v_s) ** 2)) * np.tanh(v / v_c) / N
+        for tendon, link, rotor, N, *curve in self.springs:
+            tau = three_segment_torque(float(d.ten_length[tendon]), *curve)
+            d.qfrc_passive[link] += tau       # tendon coefficient -1 on q
+            d.qfrc_passive[rotor] -= tau / N  # tendon coefficient 1/N on theta
 
     @contextmanager
     def _callbacks(self):
-        """The friction callback installed for the duration (nothing without friction)."""
-        if not self.friction:
+        """The passive-force callback installed for the duration (nothing without friction or such springs)."""
+        if not (self.friction or self.springs):
             yield
             return
         mujoco = _mujoco()

@@ -100,8 +100,8 @@ def rest_reading(model, L: StepLayout, x0, p_true) -> np.ndarray:
     """
     ops = ss._NumpyOps(model)
     x0 = np.asarray(x0, dtype=float)
-    K = ops.take(np.asarray(p_true, dtype=float), L.idx_K) if L.sensing == "torque" else None
-    m = np.array(ss._measure(ops, L, x0, K), dtype=float)
+    p_true = np.asarray(p_true, dtype=float)
+    m = np.array(ss._measure(ops, L, x0, ss._plant_K(ops, L, p_true), p_true), dtype=float)
     if L.differentiated and L.sensing == "torque":
         m[4 * L.n:] = x0[2 * L.n:3 * L.n]
     return m

@@ -36,6 +36,14 @@ with a different law. Where a level is non-zero the file states it as a custom n
 passive-force callback (``mjcb_passive``) must subtract ``F(v) / N`` from the rotor's ``qfrc_passive``
 at every evaluation: :class:`fjm_runtime.export.bridge.MujocoPlant` installs it around its own calls.
 
+Nonlinear springs: a cubic ``psi = k1 phi + k3 phi^3`` (``link1_hd``) is MuJoCo's polynomial tendon
+stiffness ``"k1 0 k3"``. The three-segment datasheet curve (``arm1_hd``, derive/core/spring_laws.py) is
+no polynomial: its ``<j>_spring`` tendon has stiffness 0, the file states the curve as a custom numeric
+``fjm_spring_three_segment:<j>_spring`` = ``[K_1, K_2, K_3, T_1, T_2, w]``, and the same callback adds
+the tendon force ``-psi(phi)`` at the tendon length ``phi = q_m - q`` (``+psi`` on the link,
+``-psi / N`` on the rotor). No ``<j>_tau_J`` sensor tendon for a nonlinear spring (fixed tendons are
+linear): ``tau_J = psi(q_m - q)`` of the ``q_m``, ``q`` sensors.
+
 Gravity: along -z of the base with magnitude ``g0`` for URDF arms, along -y
 for ``link1`` and ``planar<n>`` (q = 0 hangs down). MuJoCo's ``qpos`` is
 ``[q, theta]`` in joint order (links first, then rotors), ``ctrl`` is ``u``.
@@ -52,7 +60,7 @@ import numpy as np
 
 from ..validation import FjmValueError
 
-__all__ = ["ROTOR_INERTIA", "ROTOR_MASS", "CHAIN_FILE", "FRICTION_NUMERIC", "load_chain", "resolve_params", "gear_ratios",
+__all__ = ["ROTOR_INERTIA", "ROTOR_MASS", "CHAIN_FILE", "FRICTION_NUMERIC", "SPRING_NUMERIC", "load_chain", "resolve_params", "gear_ratios",
            "mjcf_text", "write_mjcf", "is_complete", "value"]
 
 #: Body inertia (kg m^2) of a reduced-model rotor, taken off its armature.
@@ -296,17 +304,28 @@ def _rotors(chain: dict, p: Dict[str, float], N: np.ndarray, complete: bool,
     return carried, world
 
 
+#: Prefix of the custom numerics that carry a three-segment spring (module docstring).
+SPRING_NUMERIC = "fjm_spring_three_segment:"
+
+#: The three-segment law's coefficients in the numeric's order (chain.json roles).
+THREE_SEGMENT_ROLES = ("K_1", "K_2", "K_3", "T_1", "T_2", "width")
+
+
 def _spring_stiffness(e: dict, p: Dict[str, float]) -> Tuple[str, Optional[float]]:
     """The spring tendon's ``stiffness`` attribute and the linear K (None for a nonlinear spring).
 
     MuJoCo's polynomial tendon stiffness ``"a b c"`` is the force ``-(a x + b x^2 + c x^3)`` on the
-    tendon length ``x = q_m - q``: a cubic spring ``psi = k1 phi + k3 phi^3`` is ``"k1 0 k3"``.
+    tendon length ``x = q_m - q``: a cubic spring ``psi = k1 phi + k3 phi^3`` is ``"k1 0 k3"``. A
+    three-segment spring is no polynomial: its tendon has stiffness 0 and the law travels as a custom
+    numeric (:func:`_spring_numerics`) that the passive-force callback applies.
     """
     if "spring" in e:
         s = e["spring"]
+        if s.get("law") == "three_segment":
+            return "0.0", None
         if s.get("law") != "cubic":
-            raise FjmValueError(f"joint {e['joint']}: spring law {s.get('law')!r}; expected 'cubic' (the only "
-                                "nonlinear spring MuJoCo's polynomial stiffness expresses here)")
+            raise FjmValueError(f"joint {e['joint']}: spring law {s.get('law')!r}; expected 'cubic' or "
+                                "'three_segment'")
         k1, k3 = p[s["k1"]], p[s["k3"]]
         if not (k1 > 0 and k3 >= 0):
             raise FjmValueError(f"{s['k1']} = {k1!r}, {s['k3']} = {k3!r}: expected k1 > 0 (N m/rad) and k3 >= 0 "
@@ -318,12 +337,23 @@ def _spring_stiffness(e: dict, p: Dict[str, float]) -> Tuple[str, Optional[float
     return fmt(K), K
 
 
+def _spring_numerics(chain: dict, p: Dict[str, float]) -> List[str]:
+    """``<numeric>`` rows ``[K_1, K_2, K_3, T_1, T_2, w]`` per three-segment spring tendon."""
+    rows = []
+    for e in chain["elastic"]:
+        s = e.get("spring") or {}
+        if s.get("law") == "three_segment":
+            data = " ".join(fmt(p[s[role]]) for role in THREE_SEGMENT_ROLES)
+            rows.append(f'  <numeric name="{SPRING_NUMERIC}{e["joint"]}_spring" data="{data}"/>')
+    return rows
+
+
 #: Prefix of the custom numerics that carry the motor friction (module docstring).
 FRICTION_NUMERIC = "fjm_motor_friction:"
 
 
 def _motor_friction(chain: dict, p: Dict[str, float], N: np.ndarray) -> List[str]:
-    """``<custom>`` numerics ``[F_c, F_s, v_s, v_c, N]`` per rotor with friction (none where every level is 0)."""
+    """``<numeric>`` rows ``[F_c, F_s, v_s, v_c, N]`` per rotor with friction (none where every level is 0)."""
     rows = []
     for k, e in enumerate(chain["elastic"]):
         fr = e.get("friction")
@@ -334,11 +364,24 @@ def _motor_friction(chain: dict, p: Dict[str, float], N: np.ndarray) -> List[str
             continue
         data = " ".join(fmt(v) for v in vals + [float(N[k])])
         rows.append(f'  <numeric name="{FRICTION_NUMERIC}{e["joint"]}_rotor" data="{data}"/>')
-    if not rows:
+    return rows
+
+
+def _custom(chain: dict, p: Dict[str, float], N: np.ndarray) -> List[str]:
+    """The ``<custom>`` section: the laws MuJoCo has no element for, applied by ``mjcb_passive``."""
+    friction, springs = _motor_friction(chain, p, N), _spring_numerics(chain, p)
+    if not (friction or springs):
         return []
-    return [" <!-- motor friction F(v) = (F_c + (F_s - F_c) exp(-(v/v_s)^2)) tanh(v/v_c), v the link-side motor "
-            "velocity: data = F_c F_s v_s v_c N; a passive-force callback (mjcb_passive) subtracts F(v)/N from the "
-            "rotor's qfrc_passive (docs/mujoco.md) -->", " <custom>", *rows, " </custom>"]
+    notes = []
+    if friction:
+        notes.append(" <!-- motor friction F(v) = (F_c + (F_s - F_c) exp(-(v/v_s)^2)) tanh(v/v_c), v the link-side "
+                     "motor velocity: data = F_c F_s v_s v_c N; a passive-force callback (mjcb_passive) subtracts "
+                     "F(v)/N from the rotor's qfrc_passive (docs/mujoco.md) -->")
+    if springs:
+        notes.append(" <!-- three-segment spring psi(phi) on the tendon <j>_spring (length phi = q_m - q, stiffness 0 "
+                     "here): data = K_1 K_2 K_3 T_1 T_2 w; a passive-force callback (mjcb_passive) applies the "
+                     "tendon force -psi(phi) (docs/mujoco.md) -->")
+    return [*notes, " <custom>", *friction, *springs, " </custom>"]
 
 
 def _tendons_actuators_sensors(chain: dict, p: Dict[str, float], N: np.ndarray) -> List[str]:
@@ -421,7 +464,7 @@ def mjcf_text(model, params=None, *, complete: Optional[bool] = None, gear_ratio
             f' <option timestep="{fmt(timestep)}" integrator="RK4" gravity="{_vec(gravity)}">',
             '  <flag contact="disable"/>', " </option>", " <worldbody>"]
     return "\n".join(head + bodies + [f"  {line}" for line in world] + [" </worldbody>"]
-                     + _tendons_actuators_sensors(chain, p, N) + _motor_friction(chain, p, N) + ["</mujoco>"]) + "\n"
+                     + _tendons_actuators_sensors(chain, p, N) + _custom(chain, p, N) + ["</mujoco>"]) + "\n"
 
 
 def write_mjcf(model, out, params=None, **kwargs) -> Path:

@@ -63,6 +63,16 @@ class _NumpyOps:
 
     const = staticmethod(lambda a: np.asarray(a, dtype=float))
 
+    def spring(self, phi, p):
+        """``(psi(phi), psi'(phi))`` of the model's nonlinear spring, each shape (n,)."""
+        out = self.model.spring_functions["spring"](np.asarray(phi, dtype=float), np.asarray(p, dtype=float))
+        return tuple(np.asarray(v, dtype=float).reshape(-1) for v in out[:2])
+
+    def spring_inverse(self, tau, p):
+        """``phi_J = psi^-1(tau)``, shape (n,)."""
+        fn = self.model.spring_functions["spring_inverse"]
+        return np.asarray(fn(np.asarray(tau, dtype=float), np.asarray(p, dtype=float)), dtype=float).reshape(-1)
+
 
 class _CasadiOps:
     def __init__(self, fns, nx, n, outline_h=None):
@@ -107,14 +117,33 @@ class _CasadiOps:
     def const(self, a):
         return self.ca.DM(np.asarray(a, dtype=float))
 
+    def spring(self, phi, p):
+        out = self.fns["spring"](phi, p)
+        return out[0], out[1]
 
-def _measure(ops, L: StepLayout, x, K):
-    """The true measurement of ``x`` (state: x; torque: [q; dq; K(q_m - q); K(dq_m - dq); dq_m])."""
+    def spring_inverse(self, tau, p):
+        return self.fns["spring_inverse"](tau, p)
+
+
+def _measure(ops, L: StepLayout, x, K, p=None):
+    """The measurement of ``x`` (state: x; torque: [q; dq; K(q_m - q); K(dq_m - dq); dq_m]).
+
+    ``K`` None (torque sensing): the nonlinear spring of ``ops``'s model at parameters ``p``,
+    ``[q; dq; psi(q_m - q); psi'(q_m - q) (dq_m - dq); dq_m]``.
+    """
     if L.sensing == "state":
         return x
     n = L.n
     q, dq, qm, dqm = x[0:n], x[n:2 * n], x[2 * n:3 * n], x[3 * n:4 * n]
+    if K is None:
+        psi, dpsi = ops.spring(qm - q, p)
+        return ops.cat([q, dq, psi, dpsi * (dqm - dq), dqm])
     return ops.cat([q, dq, K * (qm - q), K * (dqm - dq), dqm])
+
+
+def _plant_K(ops, L: StepLayout, p):
+    """The plant's ``K`` for :func:`_measure` (None: a nonlinear spring, or state sensing)."""
+    return ops.take(p, L.idx_K) if L.sensing == "torque" and not L.nonlinear_spring else None
 
 
 def _quantize(ops, v, step: float):
@@ -136,8 +165,7 @@ def _reading(ops, L: StepLayout, w, noise, p):
     """
     n = L.n
     x = w[0:L.nx]
-    K = ops.take(p, L.idx_K) if L.sensing == "torque" else None
-    m = _measure(ops, L, x, K) + noise
+    m = _measure(ops, L, x, _plant_K(ops, L, p), p) + noise
     parts = [m[b * n:(b + 1) * n] for b in range(L.nm // n)]
     parts[0] = _quantize(ops, parts[0], L.q_quant)
     if L.sensing == "state":
@@ -204,12 +232,16 @@ def _predict(nom_ops, L: StepLayout, m_old, u_buf, p_nom, K_nom=None):
     if L.sensing == "state":
         x = m_old
     else:
-        K = nom_ops.const(L.K_nom) if K_nom is None else K_nom
         q, dq, tau, dqm = m_old[0:n], m_old[n:2 * n], m_old[2 * n:3 * n], m_old[4 * n:5 * n]
-        x = nom_ops.cat([q, dq, q + tau / K, dqm])
+        if L.nominal_spring:
+            phi = nom_ops.spring_inverse(tau, p_nom)
+        else:
+            K = nom_ops.const(L.K_nom) if K_nom is None else K_nom
+            phi = tau / K
+        x = nom_ops.cat([q, dq, q + phi, dqm])
     for j in range(L.delay):
         x = _plant(nom_ops, L, x, u_buf[j * n:(j + 1) * n], p_nom)
-    return _measure(nom_ops, L, x, K)
+    return _measure(nom_ops, L, x, K, p_nom)
 
 
 def _delayed(ops, nom_ops, L: StepLayout, m_k, buf, u_buf, p_nom, K_nom=None):
@@ -336,9 +368,12 @@ def casadi_sample_step(fns, controller, L: StepLayout, n_par: int, nominal_fns=N
 
 
 def _expanded(fns):
-    """``f`` and ``g`` as SX Functions (MX ones expanded) so that each substep is one call."""
+    """``f`` and ``g`` (and a nonlinear spring's ``spring``, ``spring_inverse``) as SX Functions (MX ones
+    expanded) so that each substep is one call."""
     out = {}
-    for k in ("f", "g"):
+    for k in ("f", "g", "spring", "spring_inverse"):
+        if k not in fns:
+            continue
         fn = fns[k]
         try:
             out[k] = fn.expand() if fn.is_a("MXFunction") else fn
@@ -361,8 +396,7 @@ def initial_step_state(model, L: StepLayout, x0, z0, p_true, seed: int = 0, sens
     ops = _NumpyOps(model)
     n = L.n
     x0 = np.asarray(x0, dtype=float)
-    K = ops.take(p_true, L.idx_K) if L.sensing == "torque" else None
-    m0 = np.asarray(_measure(ops, L, x0, K), dtype=float)
+    m0 = np.asarray(_measure(ops, L, x0, _plant_K(ops, L, p_true), p_true), dtype=float)
     parts = [x0, z0]
     spring = _spring_torque(model, x0, p_true)
     if L.delay:
@@ -381,8 +415,11 @@ def initial_step_state(model, L: StepLayout, x0, z0, p_true, seed: int = 0, sens
 
 
 def _spring_torque(model, x, p) -> np.ndarray:
-    """``K (q_m - q)`` of the plant at ``x``, shape (n,) (zero for a model without the K parameters)."""
+    """``K (q_m - q)`` (or ``psi(q_m - q)``) of the plant at ``x``, shape (n,) (zero for a model without
+    the K parameters and without a nonlinear spring)."""
     n = int(model.n)
+    if getattr(model, "spring_functions", None) is not None:
+        return _NumpyOps(model).spring(x[2 * n:3 * n] - x[0:n], p)[0]
     try:
         idx = stiffness_indices(model)[0]
     except FjmValueError:
@@ -393,8 +430,7 @@ def _spring_torque(model, x, p) -> np.ndarray:
 def initial_measurement(model, L: StepLayout, x0, p_true) -> np.ndarray:
     """The noise-free measurement of ``x0`` (what the controller's ``initial_state`` is given)."""
     ops = _NumpyOps(model)
-    K = ops.take(p_true, L.idx_K) if L.sensing == "torque" else None
-    return np.asarray(_measure(ops, L, np.asarray(x0, dtype=float), K), dtype=float)
+    return np.asarray(_measure(ops, L, np.asarray(x0, dtype=float), _plant_K(ops, L, p_true), p_true), dtype=float)
 
 
 def sample_step_function(model, controller, L: StepLayout, outline: bool = False):
@@ -409,8 +445,10 @@ def sample_step_function(model, controller, L: StepLayout, outline: bool = False
     if L.predict and nominal is not model and nominal_fns is None:
         raise FjmValueError(f"predict: the controller's model {getattr(nominal, 'name', nominal)!r} has no CasADi "
                             "Functions to predict with")
-    return casadi_sample_step(casadi_functions(model), controller, L, len(model.param_names), nominal_fns,
-                              outline=outline)
+    if nominal_fns is not None:
+        nominal_fns.update(getattr(nominal, "spring_functions", None) or {})
+    fns = dict(casadi_functions(model), **(getattr(model, "spring_functions", None) or {}))
+    return casadi_sample_step(fns, controller, L, len(model.param_names), nominal_fns, outline=outline)
 
 
 def check_loop_settings(sensor, delay_samples, predict):

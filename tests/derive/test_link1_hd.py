@@ -223,7 +223,7 @@ def test_validation_names_joint_and_deflection():
     assert "\n" not in msg and "link1_hd joint 1" in msg and "phi = 0.25 rad" in msg and "-18.75" in msg
     with pytest.raises(SpringError, match=r"joint 1: spring stiffness psi'\(phi\) = -1 N m/rad <= 0 at deflection phi = 0 rad"):
         check_spring("link1_hd", spring, {"k1": -1.0, "k3": 0.0})
-    with pytest.raises(SpringError, match="k3 = nan; expected a finite number"):
+    with pytest.raises(SpringError, match="k3 = nan N m/rad\\^3; expected a finite number"):
         check_spring("link1_hd", spring, {"k1": 75.0, "k3": float("nan")})
 
 

@@ -23,7 +23,8 @@ from fjm_runtime.export.mjcf import mjcf_text, write_mjcf
 from fjm_runtime.validation import FjmValueError
 
 REDUCED = ["link1", "planar2", "elbow3", "panda", "baxter",  # baxter: a tree (head pan, two arms)
-           "link1_hd"]  # a cubic spring: MuJoCo's polynomial tendon stiffness
+           "link1_hd",  # a cubic spring: MuJoCo's polynomial tendon stiffness
+           "arm1_hd"]  # the datasheet curve: a custom numeric and the passive callback
 COMPLETE = ["link1_complete", "planar2_complete", "panda_complete"]
 TOL = 1e-12
 
@@ -200,14 +201,14 @@ def test_cli(tmp_path, capsys):
         assert err.startswith("fjm: error: ") and err.count("\n") == 1
 
 
-def _mujoco_equals_simulate(m, ref, true, tmp_path, dt=1e-3, sub=10):
+def _mujoco_equals_simulate(m, ref, true, tmp_path, dt=1e-3, sub=10, x0=None):
     """ismc at ``dt`` on ``sub`` plant substeps, MuJoCo (RK4, held ctrl) vs fjm's simulate: fjm's run."""
     path = write_mjcf(m, tmp_path / f"{m.name}.xml", true, timestep=dt / sub)
 
     def ctrl():
         return fjm_runtime.make_controller("ismc", m, None, lam=10.0, k_s=50.0, delta=0.25)
-    res = fjm_runtime.simulate(m, ctrl(), ref, duration=1.0, dt=dt, substeps=sub, true_params=true)
-    t, X, U = run_closed_loop(MujocoPlant(m, path, true), ctrl(), ref, duration=1.0, dt=dt, substeps=sub)
+    res = fjm_runtime.simulate(m, ctrl(), ref, duration=1.0, dt=dt, substeps=sub, true_params=true, x0=x0)
+    t, X, U = run_closed_loop(MujocoPlant(m, path, true), ctrl(), ref, duration=1.0, dt=dt, substeps=sub, x0=x0)
     assert np.array_equal(t, res.t)
     assert np.max(np.abs(X - res.x)) < 1e-9 * max(1.0, np.max(np.abs(res.x)))
     assert np.max(np.abs(U - res.u)) < 1e-9 * max(1.0, np.max(np.abs(res.u)))
@@ -232,3 +233,45 @@ def test_closed_loop_on_the_cubic_spring_equals_simulate(tmp_path):
     res = _mujoco_equals_simulate(m, fjm_runtime.make_reference("sine", 1, amplitude=1.0, omega=3.0), true, tmp_path)
     phi = res.x[:, 2] - res.x[:, 0]
     assert np.max(true["k3"] * 3 * phi ** 2) > true["k1"], np.max(np.abs(phi))
+
+
+def test_three_segment_spring_through_the_passive_callback(tmp_path):
+    """arm1_hd (the datasheet curve is no polynomial): the file states it as a custom numeric, the spring
+    tendon has stiffness 0, and the callback applies psi; qacc equals fjm's to 1e-12 at gear ratio 5
+    (deflections over both breakpoints), and without the callback the link row misses psi / D."""
+    m = fjm_runtime.load("arm1_hd")
+    p = dict(m.default_params, K_2=1.8e4, T_2=40.0, F_c=0.5, F_s=0.9)
+    path = write_mjcf(m, tmp_path / "arm.xml", p, gear_ratio=5.0)
+    text = path.read_text()
+    assert 'numeric name="fjm_spring_three_segment:joint1_spring" data="13000.0 18000.0 20000.0 14.0 40.0 0.0002"' \
+        in text and '<fixed name="joint1_spring" stiffness="0.0"' in text
+    plant = MujocoPlant(m, path, p, gear_ratio=5.0)
+    rng = np.random.default_rng(12)
+    worst = 0.0
+    for phi in np.concatenate([rng.uniform(-0.006, 0.006, 30), [1.077e-3, 1.1e-3, -2.9e-3]]):
+        x = np.array([rng.uniform(-2, 2), rng.uniform(-2, 2), 0.0, rng.uniform(-2, 2)])
+        x[2] = x[0] + phi
+        u = rng.uniform(-30, 30, 1)
+        ours, theirs = m.f(x, p) + m.g(x, p) @ u, plant.xdot(x, u)
+        worst = max(worst, *(abs(theirs[i] - ours[i]) / abs(ours[i]) for i in (1, 3)))
+    assert worst < TOL, worst
+    x, u = np.array([0.3, 0.1, 0.3 + 2e-3, -0.4]), np.array([5.0])
+    plant.springs = []  # the same file without the spring in the callback: the link row misses psi / D
+    miss = (m.f(x, p) + m.g(x, p) @ u - plant.xdot(x, u))[1]
+    J = p["I1"] + p["m1"] * p["r1"] ** 2
+    assert abs(miss * J - float(m.spring_functions["spring"](2e-3, m.params_array(p))[0])) < 1e-9
+
+
+def test_closed_loop_on_the_datasheet_spring_equals_simulate(tmp_path):
+    """arm1_hd, true stiffnesses x1.15 and friction: the law derived for the curve (nominal values) at 1 kHz on
+    10 substeps, MuJoCo with the passive callback vs fjm's simulate; the deflection crosses phi_1."""
+    m = fjm_runtime.load("arm1_hd")
+    d = m.default_params
+    true = dict(d, K_1=1.15 * d["K_1"], K_2=1.15 * d["K_2"], K_3=1.15 * d["K_3"], F_c=1.0, F_s=1.3)
+    ref = fjm_runtime.make_reference("sine", 1, amplitude=0.5, omega=5.0, offset=np.pi / 2)
+    # at rest against gravity at horizontal: q_m = q + psi^-1(m1 g0 r1) (the true curve)
+    phi0 = float(m.spring_functions["spring_inverse"](true["m1"] * true["g0"] * true["r1"], m.params_array(true)))
+    x0 = np.array([np.pi / 2, 2.5, np.pi / 2 + phi0, 2.5])
+    res = _mujoco_equals_simulate(m, ref, true, tmp_path, x0=x0)
+    phi = res.x[:, 2] - res.x[:, 0]
+    assert np.max(np.abs(phi)) > true["T_1"] / true["K_1"], np.max(np.abs(phi))

@@ -25,36 +25,11 @@ from fjm_runtime.sim.metrics import time_at_rate_limit
 from fjm_runtime.sim.sample_step import initial_step_state, make_layout, python_sample_step
 from fjm_runtime.sim.sensor import SensorModel, noise_array, offset_normals, sensor_from_spec
 from fjm_runtime.validation import FjmValueError
-
-
-class Spy:
-    """Wraps a controller; records every measurement the law is given."""
-
-    def __init__(self, inner):
-        self.inner, self.seen = inner, []
-        for name in ("sensing", "p_nom", "n", "n_states", "model"):
-            setattr(self, name, getattr(inner, name))
-
-    def evaluate(self, t, m, z, r):
-        self.seen.append(np.array(m, dtype=float))
-        return self.inner.evaluate(t, m, z, r)
-
-    def state_derivative(self, *a):
-        return self.inner.state_derivative(*a)
-
-    def initial_state(self, *a):
-        return self.inner.initial_state(*a)
+from support.spy import Spy, rk4
 
 
 def _torque_law(m, K_nom):
     return make_controller("ismc", m, nominal_params={"K": K_nom}, lam=20, k_s=100, delta=5, sensing="torque")
-
-
-def _rk4(f, x, h, steps):
-    for _ in range(steps):
-        k1 = f(x); k2 = f(x + 0.5 * h * k1); k3 = f(x + 0.5 * h * k2); k4 = f(x + h * k3)
-        x = x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
-    return x
 
 
 def test_torque_sensor_measures_the_true_spring(link1):
@@ -88,7 +63,7 @@ def test_predictor_integrates_the_nominal_model_with_nominal_parameters(link1):
     def predicted(p, K):
         xh = np.array([q, dq, q + tau / K, dqm])
         f = lambda x: link1.f(x, p) + link1.g(x, p) @ u_prev  # noqa: E731
-        xh = _rk4(f, xh, T / subs, subs)
+        xh = rk4(f, xh, T / subs, subs)
         return np.array([xh[0], xh[1], K * (xh[2] - xh[0]), K * (xh[3] - xh[1]), xh[3]])
 
     expected = predicted(p_nom, K_nom)
