@@ -152,11 +152,17 @@ def test_mujoco_closed_loop_example(capsys):
 def test_nonlinear_spring_example_measures_what_the_docs_say(capsys):
     """examples/nonlinear_spring_laws.py (docs/real-drives.md): the law derived for the cubic spring beats both
     linear-spring laws, and on a plant with motor friction the nominal friction fed forward (30 % low)
-    beats the same law without it; every law holds (none diverges)."""
-    out = load_example("nonlinear_spring_laws").main([])
+    beats the same law without it; every law holds (none diverges). arm1_hd's section: see below."""
+    out = load_example("nonlinear_spring_laws").main(["--draws", "3"])
     cubic = out["derived for the cubic spring"]
     linear = [v for k, v in out.items() if k.startswith("linear spring")]
     assert len(linear) == 2 and cubic < min(linear)
     fed, bare = out["friction fed forward (nominal 30 % low)"], out["no friction compensation"]
     assert fed < bare and max(fed, bare) < 2e-2
     assert "diverged" not in capsys.readouterr().out
+    # arm1_hd, Franka-like loop: torque sensing holds whatever the law's spring; the friction feedforward
+    # halves the worst case; the state-sensed law derived for the curve does not hold every drive
+    curve, lin, bare = (out[f"torque: {k}"] for k in ("derived for the curve", "linear spring K_1",
+                                                      "curve, no friction feedforward"))
+    assert curve < 1e-2 and abs(curve - lin) < 0.5 * curve and bare > 1.5 * curve
+    assert out["state: derived for the curve"] > 10 * curve
