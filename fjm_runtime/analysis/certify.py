@@ -73,6 +73,7 @@ from typing import Optional
 import numpy as np
 
 from .grid import BoxAnalysis, nominal_setup, solve_gain, witness_point
+from .spring_interval import stiffness_interval
 from ..control.defaults import DEFAULT_LAYER_RATE
 
 __all__ = ["TuneResult", "InfeasibleGainError", "synthesize_gains", "certificate", "GUARANTEE"]
@@ -138,6 +139,11 @@ class TuneResult:
     margin_lipschitz : ndarray, shape (n,)
         For comparison: the Lipschitz margin ``sum_d L_d h_d / 2`` of the same grid
         (valid under weaker assumptions, much coarser on coarse grids; not used by the gain).
+    stiffness : dict or None
+        Nonlinear-spring models (:mod:`fjm_runtime.analysis.spring_interval`): the deflections the
+        box's states reach, the declared range, and ``psi'`` in ``[k_min, k_max]`` there over the
+        parameter box: the stiffness interval of the paper's Lemma 1 that the certificate covers.
+        None for a linear spring.
     """
 
     model: str
@@ -159,6 +165,7 @@ class TuneResult:
     grid: dict
     settings: dict = field(default_factory=dict)
     margin_lipschitz: Optional[np.ndarray] = None
+    stiffness: Optional[dict] = None
 
     def reaching_time_bound(self, s0) -> np.ndarray:
         """``(|s_i(0)| - delta_i)^+ / eta_i`` per joint (s), valid while the state stays in the box."""
@@ -256,13 +263,19 @@ def synthesize_gains(model, nominal_params=None, *, param_box=None, reference_bo
         reason = (f"joint {i + 1}: the gain the reaching condition needs (k_s = {k[i]:.4g}) lets the law command "
                   f"|u| up to {u_bound[i]:.4g} N m on the box, above u_max = {umax[i]:.4g} N m: no admissible "
                   "gain within the actuator limit (shrink the box or lambda, or use the adaptive law)")
+    stiffness = None
+    deflection = getattr(an.ev, "deflection", None)
+    if deflection is not None and np.all(np.isfinite(deflection)):
+        stiffness = stiffness_interval(model, box, p_nom, deflection)
+        if stiffness is not None and stiffness["outside"] and not reason:
+            reason = stiffness["outside"]
     settings = {"nominal_params": dict(zip(model.param_names, p_nom.tolist())), "param_box": box,
                 "reference_bounds": R.tolist(), "error_bounds": E.tolist(), "integral": bool(integral),
                 "beta_hat": "beta(x; p_nom)" if bh is None else bh.tolist(), "include_margin": include_margin,
                 "layer_rate": layer_rate, "disturbance_bound": D.tolist()}
     result = TuneResult(model=model.name, feasible=not reason, reason=reason, k_s=k, delta=dl, eta=eta,
                         W=W, y_box=Ybox, c=cc, u_max=umax, grid=_grid_summary(an, extra_pts),
-                        settings=settings, **out)
+                        settings=settings, stiffness=stiffness, **out)
     if reason and raise_infeasible:
         raise InfeasibleGainError(f"{model.name}: {reason}", result)
     return result

@@ -74,10 +74,16 @@ class Evaluator:
     every point is checked (``ValueError`` when it does not converge).
     """
 
+    #: Newton steps at most (a point that needs more is reported as not converged).
+    MAX_ITERATIONS = 40
+
     def __init__(self, model, fn, p_inverse=None, chunk: int = 20000, iterations: int = 4):
         self.model, self.n, self.nx = model, int(model.n), int(model.nx)
         self.inv = build_inverse(model, p_inverse)
         self.fn, self.chunk, self.maps, self.iterations = fn, chunk, {}, iterations
+        #: ``[min, max]`` of the deflection ``q_m - q`` per joint over every state evaluated, (n, 2)
+        #: (a nonlinear spring's certificate holds on the stiffness there: analysis.spring_interval)
+        self.deflection = np.tile([np.inf, -np.inf], (self.n, 1))
 
     def _map(self, fn, m):
         key = (fn.name(), m)
@@ -96,18 +102,25 @@ class Evaluator:
             Yc, Pc = Y[a:b], P[a:b]
             X = np.concatenate([Yc[:, :2 * n], Yc[:, :2 * n]], axis=1)
             inv = self._map(self.inv, m)
-            for _ in range(self.iterations):
+            scale = 1.0 + np.max(np.abs(Yc), axis=1)
+            # ``iterations`` steps always (a linear spring is exact after one); a nonlinear spring's
+            # coordinates (psi, psi' of q_m - q) take a few more: continue while any point is off
+            for k in range(self.MAX_ITERATIONS):
                 r, J = inv(X.T, Yc.T, Pc.T)
                 r = np.asarray(r).T
+                if k >= self.iterations and np.all(np.max(np.abs(r), axis=1) <= 1e-12 * scale):
+                    break
                 J = np.asarray(J).reshape(2 * n, m, 2 * n).transpose(1, 0, 2)
                 X[:, 2 * n:] -= np.linalg.solve(J, r[:, :, None])[:, :, 0]
             r = np.asarray(inv(X.T, Yc.T, Pc.T)[0]).T
-            scale = 1.0 + np.max(np.abs(Yc), axis=1)
             bad = ~(np.max(np.abs(r), axis=1) <= 1e-8 * scale)
             if np.any(bad):
                 j = int(np.flatnonzero(bad)[0])
                 raise ValueError(f"T^(-1): Newton did not converge at y = {np.round(Yc[j], 4).tolist()} "
                                  f"(residual {np.max(np.abs(r[j])):.3g}); the box may be too large for this model")
+            phi = X[:, 2 * n:3 * n] - X[:, :n]
+            self.deflection[:, 0] = np.minimum(self.deflection[:, 0], phi.min(axis=0))
+            self.deflection[:, 1] = np.maximum(self.deflection[:, 1], phi.max(axis=0))
             out.append(np.asarray(self._map(self.fn, m)(X.T, Yc.T, Pc.T)).T)
         return np.concatenate(out, axis=0)
 

@@ -19,6 +19,7 @@ from fjm_runtime.analysis.lemma1 import beta_hat_link1, lemma1_gain, paper_bound
 from fjm_runtime.analysis.link1 import link1_alpha, link1_T_inverse
 from fjm_runtime.sim.simulate import simulate
 from fjm_runtime.analysis.certify import InfeasibleGainError, certificate, synthesize_gains
+from support.reaching import state_at, trajectory_check
 
 K_NOM = 150.0
 K_BOX = {"K": (100.0, 200.0)}
@@ -146,22 +147,6 @@ def _direct_sdot(model, nominal, true_params, x, r, k_s, lam, beta_hat=None):
     return smp.s, sdot
 
 
-def _state_at(model, nominal, y_hat):
-    """x with T(x; p_nom) = y_hat (Newton on the motor half, independent of fjm_runtime.analysis.certify)."""
-    n = model.n
-    pn = model.params_array(nominal)
-    x = np.concatenate([y_hat[:2 * n], y_hat[:2 * n]])
-    for _ in range(20):
-        r = model.T(x, pn)[2 * n:] - y_hat[2 * n:]
-        J = np.empty((2 * n, 2 * n))
-        for j in range(2 * n):
-            dx = np.zeros(4 * n); dx[2 * n + j] = 1e-6
-            J[:, j] = (model.T(x + dx, pn)[2 * n:] - model.T(x - dx, pn)[2 * n:]) / 2e-6
-        x[2 * n:] -= np.linalg.solve(J, r)
-    assert np.max(np.abs(model.T(x, pn) - y_hat)) < 1e-8
-    return x
-
-
 def _check_witness(model, nominal, kw, k_low):
     """At the witness of the gain 20 % below, the direct s' has sgn(s) s' > 0 and equals the certificate."""
     low = certificate(model, k_low, nominal, **kw)
@@ -171,7 +156,7 @@ def _check_witness(model, nominal, kw, k_low):
     for i in range(n):
         wit = low["witness"][i]
         y_hat = np.asarray(wit["y_hat"], dtype=float).reshape(-1)
-        x = _state_at(model, nominal, y_hat)
+        x = state_at(model, nominal, y_hat)
         eps = 1e-9
         sign = np.full(n, 1.0); sign[i] = wit["sign_s"]
         e = np.zeros((4, n)); e[3] = eps * sign
@@ -212,21 +197,6 @@ def test_planar2_certificate_sign(planar2, planar2_gain):
 
 
 # -- simulated trajectories: sgn(s) s' <= -eta wherever the state is in the box and |s| > delta ----------
-def _trajectory_check(res, E, eta, c):
-    s = res.s
-    dt = res.t[1] - res.t[0]
-    sdot = (s[2:] - s[:-2]) / (2 * dt)
-    e = res.y_hat - res.ref[:, :4]
-    inside = np.all(np.abs(e) <= np.asarray(E)[None, :, None] * (1 + 1e-9), axis=1)      # (N+1, n)
-    ok = inside[1:-1] & inside[2:] & inside[:-2]
-    out = (np.abs(s[1:-1]) > res.delta) & (np.abs(s[2:]) > res.delta) & (np.abs(s[:-2]) > res.delta)
-    mask = ok & out
-    assert mask.sum() >= 20, f"only {mask.sum()} samples outside the layer inside the box: vacuous check"
-    worst = np.max(np.sign(s[1:-1][mask]) * sdot[mask])
-    assert worst <= -0.5 * eta, f"sgn(s) s' = {worst:.3g} > -eta/2 on the trajectory"
-    return worst
-
-
 @pytest.mark.parametrize("K_true", [100.0, 200.0])
 def test_link1_trajectory_reaching(link1, K_true):
     ref, E = REG
@@ -237,7 +207,7 @@ def test_link1_trajectory_reaching(link1, K_true):
     e0 = 0.8 * np.asarray(E)
     x0 = link1_T_inverse(ref(0.0)[:4, 0] + e0, {"K": K_NOM})
     res = simulate(link1, ctrl, ref, duration=1.5, dt=1e-4, true_params={"K": K_true}, x0=x0)
-    _trajectory_check(res, E, gain.eta[0], ctrl.c)
+    trajectory_check(res, E, gain.eta[0], ctrl.c)
 
 
 def test_planar2_trajectory_reaching(planar2, planar2_gain):
@@ -248,9 +218,9 @@ def test_planar2_trajectory_reaching(planar2, planar2_gain):
     delta = 5 * dt * planar2_gain.k_s
     ctrl = make_controller("smc", planar2, P2_NOM, lam=8.0, k_s=planar2_gain.k_s, delta=delta)
     y0 = P2_REF(0.0)[:4] + 0.8 * np.asarray(E)[:, None] * np.array([1.0, -1.0])[None, :]
-    x0 = _state_at(planar2, P2_NOM, y0.reshape(-1))
+    x0 = state_at(planar2, P2_NOM, y0.reshape(-1))
     res = simulate(planar2, ctrl, P2_REF, duration=0.02, dt=dt, true_params={"K1": 200.0, "K2": 100.0}, x0=x0)
-    _trajectory_check(res, E, planar2_gain.eta[0], ctrl.c)
+    trajectory_check(res, E, planar2_gain.eta[0], ctrl.c)
 
 
 # -- infeasible boxes and errors -------------------------------------------------------------------
@@ -358,7 +328,7 @@ def test_link1_trajectory_reaching_with_coulomb_friction(link1):
     x0 = link1_T_inverse(ref(0.0)[:4, 0] + 0.8 * np.asarray(E), {"K": K_NOM})
     plant = with_motor_disturbance(link1, coulomb=2.0)
     res = simulate(plant, ctrl, ref, duration=1.0, dt=1e-4, true_params={"K": 100.0}, x0=x0)
-    _trajectory_check(res, E, gain.eta[0], ctrl.c)
+    trajectory_check(res, E, gain.eta[0], ctrl.c)
 
 
 def test_torque_disturbance_bound_is_enforced(link1):
