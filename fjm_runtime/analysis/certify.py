@@ -263,12 +263,9 @@ def synthesize_gains(model, nominal_params=None, *, param_box=None, reference_bo
         reason = (f"joint {i + 1}: the gain the reaching condition needs (k_s = {k[i]:.4g}) lets the law command "
                   f"|u| up to {u_bound[i]:.4g} N m on the box, above u_max = {umax[i]:.4g} N m: no admissible "
                   "gain within the actuator limit (shrink the box or lambda, or use the adaptive law)")
-    stiffness = None
-    deflection = getattr(an.ev, "deflection", None)
-    if deflection is not None and np.all(np.isfinite(deflection)):
-        stiffness = stiffness_interval(model, box, p_nom, deflection)
-        if stiffness is not None and stiffness["outside"] and not reason:
-            reason = stiffness["outside"]
+    stiffness = _stiffness(model, an, box, p_nom)
+    if stiffness is not None and stiffness["outside"] and not reason:
+        reason = stiffness["outside"]
     settings = {"nominal_params": dict(zip(model.param_names, p_nom.tolist())), "param_box": box,
                 "reference_bounds": R.tolist(), "error_bounds": E.tolist(), "integral": bool(integral),
                 "beta_hat": "beta(x; p_nom)" if bh is None else bh.tolist(), "include_margin": include_margin,
@@ -293,6 +290,14 @@ def _check_vectors(n: int, eta, u_max, disturbance_bound):
     if not np.all(np.isfinite(D)) or np.any(D < 0):
         raise ValueError(f"disturbance_bound = {D.tolist()}: expected finite values >= 0 (N m)")
     return eta, umax, D
+
+
+def _stiffness(model, an: BoxAnalysis, box, p_nom) -> Optional[dict]:
+    """A nonlinear spring's interval over the deflections the certificate visited (None: linear spring)."""
+    deflection = getattr(an.ev, "deflection", None)
+    if deflection is None or not np.all(np.isfinite(deflection)):
+        return None
+    return stiffness_interval(model, box, p_nom, deflection)
 
 
 def _refined_gain(an: BoxAnalysis, eta: np.ndarray, include_margin: bool):

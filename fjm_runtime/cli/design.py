@@ -150,6 +150,11 @@ def run(args) -> int:
         raise FjmValueError(f"--screen-draws {args.screen_draws} / --screen-duration {args.screen_duration} / "
                             f"--rounds {args.rounds}: expected >= 1, a finite duration > 0 s, >= 0")
     m = load(args.model)
+    if m.spring_functions is not None:
+        law = m.manifest["springs"]["joints"][0]["law"]
+        raise FjmValueError(f"model {m.name!r} has a nonlinear spring ({law}); fjm design draws its plants around a "
+                            "linear stiffness K and does not design for it yet (docs/real-drives.md: use fjm tune, "
+                            "or fjm simulate with your gains)")
     check_samples(max(args.duration, args.screen_duration), args.rate, int(m.n), "--duration/--rate")
     sensor, thresholds, spread = _settings(args, m)
     task = demo_task(m, spread.nominal) if args.task == "auto" else {}

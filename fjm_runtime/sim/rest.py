@@ -9,7 +9,8 @@ __all__ = ["rest_state"]
 
 
 def rest_state(model, q, p) -> np.ndarray:
-    """State at rest at link angles ``q`` holding gravity: ``q_m = q + K^-1 G(q)`` (parameters ``p``).
+    """State at rest at link angles ``q`` holding gravity: ``q_m = q + K^-1 G(q)`` (parameters ``p``), or
+    ``q_m = q + psi^-1(G(q))`` for a nonlinear spring (the model's ``spring_inverse``).
 
     ``G(q) = -D(q) ddq`` with ``ddq`` the link acceleration of ``f`` at ``q_m = q``, ``dq = 0`` (for a
     complete model, the link rows of ``-M [ddq; ddq_m]`` with its coupled inertia ``M`` (2n, 2n)).
@@ -35,6 +36,11 @@ def rest_state(model, q, p) -> np.ndarray:
     # the reduced model's inertia is the links' D (n, n); a complete model's couples links and motors (2n, 2n)
     acc = f[n:2 * n] if M.shape[0] == n else np.concatenate([f[n:2 * n], f[3 * n:4 * n]])
     G = -(M @ acc)[:n]
+    springs = getattr(model, "spring_functions", None)
+    if springs is not None:  # a nonlinear spring: the deflection that carries G, psi^-1(G)
+        phi = springs["spring_inverse"](G, np.asarray(model.params_array(p), dtype=float))
+        x[2 * n:3 * n] = q + np.asarray(phi, dtype=float).ravel()
+        return x
     K = np.asarray(model.params_array(p), dtype=float)[stiffness_indices(model)[0]]
     x[2 * n:3 * n] = q + G / K
     return x

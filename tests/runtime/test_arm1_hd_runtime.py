@@ -188,3 +188,21 @@ def test_feedback_linearization_is_exact_in_the_continuous_limit(model):
     for (coarse, _), (fine, _) in zip(errors, errors[1:]):
         assert 1.9 < coarse / fine < 2.1, (coarse, fine)                            # first order in T -> 0
     assert errors[-1][0] < 1e-3 and linear > 100 * errors[1][0]
+
+
+def test_rest_state_carries_gravity_through_the_curve(model):
+    """rest_state: q_m = q + psi^-1(G(q)); the link is at rest (no acceleration) with the drive past T_1."""
+    from fjm_runtime.sim.rest import rest_state
+    p = model.default_params
+    for q in (0.3, np.pi / 2, -1.2):
+        x = rest_state(model, [q], p)
+        assert model.f(x, p)[1] == pytest.approx(0.0, abs=1e-9)
+        psi, _ = datasheet(x[2] - x[0], *_curve(p))
+        assert psi == pytest.approx(p["m1"] * p["g0"] * p["r1"] * np.sin(q), rel=1e-12)
+
+
+def test_design_refuses_a_nonlinear_spring_in_one_line(capsys):
+    from fjm_runtime.cli.main import main
+    status = main(["design", "arm1_hd", "--draws", "2", "--duration", "1"])
+    err = capsys.readouterr().err.strip()
+    assert status != 0 and "\n" not in err and "has a nonlinear spring (three_segment)" in err, (status, err)
