@@ -94,46 +94,18 @@ def friction_section(hd, ref, duration) -> dict:
     return out
 
 
-#: arm1_hd's loop: a Franka-like interface (1 kHz, torque-rate limit 1000 N m/s, tau_J offset, velocities
-#: differentiated from quantized encoders), one sample of delay with prediction, the gains of a stiff drive.
-DATASHEET_GAINS = {"lam": 60.0, "k_s": 100.0, "delta": 5.0, "u_max": 100.0}
-
 
 def datasheet_section(duration: float, draws: int) -> dict:
-    """arm1_hd (three-segment datasheet curve, motor friction): the law derived for the curve against the
-    law told a linear spring K_1, with and without friction feedforward, torque- and state-sensed, over
-    ``draws`` true drives (curve x U(0.85, 1.15), friction x U(0.5, 1.5), rotor x U(0.9, 1.1))."""
-    arm = fjm_runtime.load("arm1_hd")
-    d = arm.default_params
-    rng = np.random.default_rng(28)
-    truths = []
-    for _ in range(draws):
-        c, f, j = rng.uniform(0.85, 1.15), rng.uniform(0.5, 1.5), rng.uniform(0.9, 1.1)
-        truths.append({**d, **{k: c * d[k] for k in ("K_1", "K_2", "K_3")}, "F_c": f * d["F_c"],
-                       "F_s": f * d["F_s"], "Jm1": j * d["Jm1"]})
-    ref = make_reference("sine", 1, amplitude=0.5, omega=3.0, offset=np.pi / 2)
-    nominal = {"derived for the curve": dict(d), "linear spring K_1": {**d, "K_2": d["K_1"], "K_3": d["K_1"]},
-               "curve, no friction feedforward": {**d, "F_c": 0.0, "F_s": 0.0}}
+    """arm1_hd (three-segment datasheet curve, motor friction): the laws of
+    :data:`fjm_runtime.experiments.real_drives.LAWS` over ``draws`` true drives (the demo's section)."""
+    from fjm_runtime.experiments.real_drives import compare_datasheet_laws
     print(f"arm1_hd (datasheet curve, motor friction), 1 kHz, franka_like sensor and torque-rate limit, delay 1 "
           f"with prediction, {duration:g} s of a 0.5 rad sine about horizontal, {draws} true drives:")
     out = {}
-    for sensing in ("torque", "state"):
-        for label, nom in nominal.items():
-            rms, at_limit, phi = [], [], 0.0
-            for true in truths:
-                phi0 = float(arm.spring_functions["spring_inverse"](d["m1"] * d["g0"] * d["r1"],
-                                                                    arm.params_array(true)))
-                x0 = np.array([np.pi / 2, 0.0, np.pi / 2 + phi0, 0.0])  # at rest, horizontal: past T_1
-                ctrl = make_controller("ismc", arm, nom, sensing=sensing, **DATASHEET_GAINS)
-                r = simulate(arm, ctrl, ref, duration=duration, dt=1e-3, x0=x0, true_params=true, delay_samples=1,
-                             predict=True, sensor=SensorModel.franka_like())
-                rms.append(float(np.max(rms_second_half(r))))
-                at_limit.append(float(np.max(time_at_limit(r))))
-                phi = max(phi, float(np.max(np.abs(r.x[:, 2] - r.x[:, 0]))))
-            key = f"{sensing}: {label}"
-            out[key] = max(rms)
-            print(f"  {key:42s} worst RMS {max(rms):.3g} rad (median {np.median(rms):.3g}), "
-                  f"{100 * max(at_limit):.1f} % at the limit, deflection up to {1e3 * phi:.2f} mrad")
+    for key, row in compare_datasheet_laws(duration, draws).items():
+        out[key] = max(row["rms"])
+        print(f"  {key:42s} worst RMS {out[key]:.3g} rad (median {np.median(row['rms']):.3g}), "
+              f"{100 * max(row['at_limit']):.1f} % at the limit, deflection up to {1e3 * row['phi'][1]:.2f} mrad")
     return out
 
 if __name__ == "__main__":
