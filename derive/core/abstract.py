@@ -8,6 +8,7 @@ them abstract keeps the paper's determinants small. Pure math: no I/O.
 
 from __future__ import annotations
 
+from functools import lru_cache
 from typing import Dict, Tuple
 
 import sympy as sp
@@ -45,12 +46,20 @@ def derivative_chain(stem: str, joint: int, orders: int, what: str) -> Tuple[typ
     return _CHAINS[key]
 
 
+@lru_cache(maxsize=None)
+def _derivative_template(law, k: int) -> Tuple[sp.Dummy, sp.Expr]:
+    """``(a, law^(k)(a))`` once per law and order (a piecewise law's derivatives take a while to form)."""
+    a = sp.Dummy("a", real=True)
+    return a, sp.diff(law(a), a, k)
+
+
 def law_derivative(law, k: int, x: sp.Expr) -> sp.Expr:
-    """``law^(k)(x)``: the k-th derivative of the scalar law ``law(a)`` (a callable), at ``x``."""
+    """``law^(k)(x)``: the k-th derivative of the scalar law ``law(a)`` (a hashable callable, e.g. a
+    frozen dataclass's bound method), at ``x``."""
     if not k:
         return law(x)
-    a = sp.Dummy("a", real=True)
-    return sp.diff(law(a), a, k).subs(a, x)
+    a, expr = _derivative_template(law, k)
+    return expr.subs(a, x)
 
 
 def substitute_chain(e, chain: Tuple[type, ...], derivative):
