@@ -43,11 +43,12 @@ def _make(target: str, out: Path, dc_dir: Path, substeps, steps: int) -> dict:
     return rows[-1]
 
 
-def bench_controller_step(work: Path, steps: int, checks: list, check) -> dict:
+def bench_controller_step(work: Path, steps: int) -> dict:
     """Time ``<name>_step`` (design's and :data:`FEW_SUBSTEPS` predictor substeps); figures of each variant.
 
-    ``work / "realtime"`` is the OUT of the realtime section (its plant model object is reused);
-    ``check(checks, key, what, measured, tolerance)`` records the 100 us target.
+    ``work / "realtime"`` is the OUT of the realtime section (its plant model object is reused). The
+    100 us target on the 99.9th percentile is a row of the targets table (:mod:`bench.report`), met or
+    missed like the others: a percentile of wall-clock time on a shared machine is not a peer check.
     """
     out = work / "realtime"
     res = {"steps": int(steps), "design": "fjm_runtime/control/designed/panda_ismc_tau_1000hz_d1.json",
@@ -61,18 +62,12 @@ def bench_controller_step(work: Path, steps: int, checks: list, check) -> dict:
                       "period_ns": timed["period_ns"], "worst_rms": loop["worst_rms"],
                       "worst_jitter_1_4": loop["worst_jitter_1_4"], "worst_at_limit": loop["worst_at_limit"],
                       "holds": loop["holds"]}
-    d = res["design_substeps"]
-    check(checks, "controller_step.p999", "Panda design's controller step (C library, 11 predictor substeps): "
-          "99.9th percentile / 100 us", d["step_p999_ns"] / TARGET_P999_NS, 1.0)
     return res
 
 
 if __name__ == "__main__":   # this section alone: python -m bench.controller_step [STEPS]
     import sys
     import tempfile
-    from .checks import check as _check
-    found: list = []
     with tempfile.TemporaryDirectory(prefix="fjm-bench-ctrl-") as tmp:
-        print(json.dumps(bench_controller_step(Path(tmp), int(sys.argv[1]) if len(sys.argv) > 1 else 10 ** 5,
-                                               found, _check), indent=1))
-    print(json.dumps(found, indent=1))
+        print(json.dumps(bench_controller_step(Path(tmp), int(sys.argv[1]) if len(sys.argv) > 1 else 10 ** 5),
+                         indent=1))

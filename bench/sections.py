@@ -21,10 +21,10 @@ SECTIONS = ("derive", "alpha_beta", "spatial", "closed_loop", "batch", "realtime
             "scaling", "sampled_loop", "design")
 
 
-def controller_step_section(work: Path, steps: int, checks: list) -> dict:
+def controller_step_section(work: Path, steps: int) -> dict:
     """The exported controller library's step (:mod:`bench.controller_step`): the Panda design, timed in C."""
     from .controller_step import bench_controller_step
-    return bench_controller_step(work, steps, checks, check)
+    return bench_controller_step(work, steps)
 
 
 def sampled_batch_section(checks: list) -> dict:
@@ -65,7 +65,7 @@ def plan(work: Path, quick: bool, checks: list, results: dict) -> list:
             ("closed_loop", lambda: bench_closed_loop(work, reps, slow, checks)),
             ("batch", lambda: bench_batch(reps, slow, checks)),
             ("realtime", lambda: bench_realtime(work, 10 ** 4 if quick else 10 ** 6, checks, check)),
-            ("controller_step", lambda: controller_step_section(work, 10 ** 4 if quick else 10 ** 5, checks)),
+            ("controller_step", lambda: controller_step_section(work, 10 ** 4 if quick else 10 ** 5)),
             ("sampled_batch", lambda: sampled_batch_section(checks)),
             ("scaling", lambda: scaling_section(work, results)),
             ("sampled_loop", lambda: sampled_loop_section()),
