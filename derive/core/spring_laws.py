@@ -84,6 +84,11 @@ class _Law:
         """The law's coefficients by role (field name), e.g. ``{"k1": k1, "k3": k3}`` (chain.json, MJCF)."""
         return {f: getattr(self, f) for f in self.__dataclass_fields__ if f not in ("joint", "deflection_range")}
 
+    @property
+    def parameters(self) -> Tuple[sp.Symbol, ...]:
+        """The law's runtime parameters, in field order."""
+        return tuple(self.roles().values())
+
     def _values(self, values: Dict[str, float]) -> Tuple[float, ...]:
         return tuple(float(values[str(s)]) for s in self.parameters)
 
@@ -96,10 +101,6 @@ class LinearSpring(_Law):
     K: sp.Symbol
     deflection_range: float
     kind = "linear"
-
-    @property
-    def parameters(self) -> Tuple[sp.Symbol, ...]:
-        return (self.K,)
 
     @property
     def start_stiffness(self) -> sp.Symbol:
@@ -145,10 +146,6 @@ class CubicSpring(_Law):
     k3: sp.Symbol
     deflection_range: float
     kind = "cubic"
-
-    @property
-    def parameters(self) -> Tuple[sp.Symbol, ...]:
-        return (self.k1, self.k3)
 
     @property
     def start_stiffness(self) -> sp.Symbol:
@@ -234,10 +231,6 @@ class ThreeSegmentSpring(_Law):
     width: sp.Symbol
     deflection_range: float
     kind = "three_segment"
-
-    @property
-    def parameters(self) -> Tuple[sp.Symbol, ...]:
-        return (self.K_1, self.K_2, self.K_3, self.T_1, self.T_2, self.width)
 
     @property
     def start_stiffness(self) -> sp.Symbol:
