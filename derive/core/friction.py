@@ -32,7 +32,7 @@ import sympy as sp
 
 from .abstract import derivative_chain, law_derivative, substitute_chain
 
-__all__ = ["MotorFriction", "FrictionError", "check_friction", "friction_functions"]
+__all__ = ["MotorFriction", "FrictionError", "check_friction", "friction_functions", "FRICTION_PARAMETERS"]
 
 #: Highest derivative of F the derivation may ask for (the brackets differentiate F up to third order).
 _ORDERS = 5
@@ -81,6 +81,14 @@ class MotorFriction:
     def describe(self) -> str:
         return (f"F(v) = ({self.F_c} + ({self.F_s} - {self.F_c}) exp(-(v/{self.v_s})^2)) tanh(v/{self.v_c})")
 
+
+#: Runtime parameters of the friction, in argument order: (name, meaning, unit).
+FRICTION_PARAMETERS: Tuple[Tuple[str, str, str], ...] = (
+    ("F_c", "motor Coulomb friction (link side)", "N m"),
+    ("F_s", "motor static friction, the Stribeck level at rest (F_s = F_c: no hump)", "N m"),
+    ("v_s", "Stribeck velocity of the motor friction (link side)", "rad/s"),
+    ("v_c", "regularization velocity of the friction: tanh(v / v_c) for sign(v)", "rad/s"),
+)
 
 #: What each coefficient must be: (test, expectation, unit).
 _RULES = {"F_c": (lambda v: v >= 0, ">= 0", "N m"), "F_s": (lambda v: v >= 0, ">= 0", "N m"),

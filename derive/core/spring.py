@@ -37,17 +37,18 @@ from typing import Dict, List, Tuple
 
 import sympy as sp
 
-from .friction import MotorFriction, check_friction, friction_functions
+from .friction import FRICTION_PARAMETERS, MotorFriction, check_friction, friction_functions
 from .lie import DirectionalDerivative, ad_iterates, lie_bracket, lie_derivative
 from .linearize import Linearization
 from .model_base import FlexibleJointModel, Param, state_symbols
 from .program import Program
-from .spring_laws import CubicSpring, LinearSpring, SpringError, ThreeSegmentSpring, spring_functions
+from .spring_laws import (LAW_COEFFICIENTS, SPRING_KINDS, SPRING_PARAMETERS, CubicSpring, LinearSpring,
+                          SpringError, ThreeSegmentSpring, spring_functions)
 from .torque import inverse_dynamics_derivatives
 
 __all__ = ["CubicSpring", "LinearSpring", "ThreeSegmentSpring", "SpringError", "spring_functions", "check_spring",
            "make_link1_hd",
-           "with_drive", "SPRING_PARAMETERS",
+           "with_drive",
            "linearize_spring", "motor_friction", "newton_inverse", "NEWTON_STEPS", "LINK1_HD_RANGE"]
 
 #: Newton steps of the emitted inverse ``phi = psi^-1(tau_J)`` (unrolled; see :func:`newton_inverse`).
@@ -108,10 +109,8 @@ def make_link1_hd() -> FlexibleJointModel:
         Param("g0", 9.8, "gravitational acceleration", "m/s^2"),
         Param("L", 1.0, "distance joint -> link centre of mass", "m"),
         Param("B_m", 0.0, "motor viscous damping", "N m s/rad"),
-        Param("F_c", 0.0, "motor Coulomb friction (link side)", "N m"),
-        Param("F_s", 0.0, "motor static friction, the Stribeck level at rest (F_s = F_c: no hump)", "N m"),
-        Param("v_s", 0.1, "Stribeck velocity of the motor friction (link side)", "rad/s"),
-        Param("v_c", 0.01, "regularization velocity of the friction: tanh(v / v_c) for sign(v)", "rad/s"),
+        *(Param(name, default, meaning, unit) for (name, meaning, unit), default
+          in zip(FRICTION_PARAMETERS, (0.0, 0.0, 0.1, 0.01))),
     )
     (q,), (dq,), (qm,), (dqm,) = (tuple(b) for b in state_symbols(1))
     J_l, J_m, k1, k3, M, g0, L, B_m, F_c, F_s, v_s, v_c = (sp.Symbol(p.name, real=True) for p in params)
@@ -133,25 +132,6 @@ def make_link1_hd() -> FlexibleJointModel:
         ),
         springs=(spring,), frictions=(friction,),
     )
-
-
-#: Meaning and unit of every spring law's coefficients (runtime parameter names).
-SPRING_PARAMETERS = {
-    "k1": ("spring: linear coefficient psi'(0)", "N m/rad"), "k3": ("spring: cubic coefficient", "N m/rad^3"),
-    "K_1": ("spring: stiffness of the first segment, psi'(0)", "N m/rad"),
-    "K_2": ("spring: stiffness of the second segment", "N m/rad"),
-    "K_3": ("spring: stiffness of the third segment", "N m/rad"),
-    "T_1": ("spring: torque at the end of the first segment", "N m"),
-    "T_2": ("spring: torque at the end of the second segment", "N m"),
-    "w_blend": ("spring: blend width around each breakpoint", "rad"),
-}
-
-_FRICTION_PARAMETERS = (
-    ("F_c", "motor Coulomb friction (link side)", "N m"),
-    ("F_s", "motor static friction, the Stribeck level at rest (F_s = F_c: no hump)", "N m"),
-    ("v_s", "Stribeck velocity of the motor friction (link side)", "rad/s"),
-    ("v_c", "regularization velocity of the friction: tanh(v / v_c) for sign(v)", "rad/s"),
-)
 
 
 def with_drive(base: FlexibleJointModel, kind: str, coefficients: Dict[str, float], deflection_range: float,
@@ -181,28 +161,24 @@ def with_drive(base: FlexibleJointModel, kind: str, coefficients: Dict[str, floa
         raise ValueError(f"{base.name}: nonlinear springs and motor friction are derived for one joint (n = {base.n})")
     K_name = str(base.K[0])
     params = []
+    if kind not in SPRING_KINDS:
+        raise ValueError(f"spring law {kind!r}; expected one of {', '.join(map(repr, SPRING_KINDS))}")
+    names = LAW_COEFFICIENTS[kind] or (K_name,)
+    params = []
     for p in base.params:
         if p.name == K_name and kind != "linear":
-            params += [Param(c, float(coefficients[c]), *SPRING_PARAMETERS[c]) for c in coefficients]
+            params += [Param(c, float(coefficients[c]), *SPRING_PARAMETERS[c]) for c in names]
         else:
             params.append(p)
     if friction is not None:
-        params += [Param(name, float(friction[name]), meaning, unit) for name, meaning, unit in _FRICTION_PARAMETERS]
+        params += [Param(name, float(friction[name]), meaning, unit) for name, meaning, unit in FRICTION_PARAMETERS]
     sym = {p.name: sp.Symbol(p.name, real=True) for p in params}
-    if kind == "linear":
-        spring = LinearSpring(1, sym[K_name], float(deflection_range))
-    elif kind == "cubic":
-        spring = CubicSpring(1, sym["k1"], sym["k3"], float(deflection_range))
-    elif kind == "three_segment":
-        spring = ThreeSegmentSpring(1, *(sym[c] for c in ("K_1", "K_2", "K_3", "T_1", "T_2", "w_blend")),
-                                    float(deflection_range))
-    else:
-        raise ValueError(f"spring law {kind!r}; expected 'linear', 'cubic' or 'three_segment'")
+    spring = SPRING_KINDS[kind](1, *(sym[c] for c in names), float(deflection_range))
     defaults = {p.name: p.default for p in params}
     check_spring(base.name, spring, defaults)
     frictions = None
     if friction is not None:
-        frictions = (MotorFriction(1, *(sym[c] for c in ("F_c", "F_s", "v_s", "v_c"))),)
+        frictions = (MotorFriction(1, *(sym[name] for name, _, _ in FRICTION_PARAMETERS)),)
         check_friction(base.name, frictions[0], defaults)
     # the closed forms' intermediate symbols (a1_1, ...) inlined: the Lie derivatives must see every q
     inline = base.program.inline

@@ -32,7 +32,7 @@ import sympy as sp
 from .abstract import derivative_chain, law_derivative, substitute_chain
 
 __all__ = ["SpringError", "LinearSpring", "CubicSpring", "ThreeSegmentSpring", "spring_functions",
-           "smooth_ramp", "SPRING_KINDS"]
+           "smooth_ramp", "SPRING_KINDS", "SPRING_PARAMETERS", "LAW_COEFFICIENTS"]
 
 #: Highest derivative of psi the derivation may ask for (the involutivity brackets reach psi''').
 _ORDERS = 5
@@ -304,3 +304,19 @@ class ThreeSegmentSpring(_Law):
 
 #: Law name (as in model files and manifests) -> class.
 SPRING_KINDS = {"linear": LinearSpring, "cubic": CubicSpring, "three_segment": ThreeSegmentSpring}
+
+#: Runtime-parameter name -> (meaning, unit) of every law's coefficients (the linear law's ``K`` is the
+#: model's own stiffness parameter and keeps its entry there).
+SPRING_PARAMETERS: Dict[str, Tuple[str, str]] = {
+    "k1": ("spring: linear coefficient psi'(0)", "N m/rad"), "k3": ("spring: cubic coefficient", "N m/rad^3"),
+    "K_1": ("spring: stiffness of the first segment, psi'(0)", "N m/rad"),
+    "K_2": ("spring: stiffness of the second segment", "N m/rad"),
+    "K_3": ("spring: stiffness of the third segment", "N m/rad"),
+    "T_1": ("spring: torque at the end of the first segment", "N m"),
+    "T_2": ("spring: torque at the end of the second segment", "N m"),
+    "w_blend": ("spring: blend width around each breakpoint", "rad"),
+}
+
+#: Law name -> the runtime-parameter names of its coefficients, in the law's field order.
+LAW_COEFFICIENTS: Dict[str, Tuple[str, ...]] = {
+    "linear": (), "cubic": ("k1", "k3"), "three_segment": ("K_1", "K_2", "K_3", "T_1", "T_2", "w_blend")}

@@ -241,9 +241,7 @@ def write_spring_model(lin: Linearization, outdir: Path,
 
 
 def _psi_text(spring) -> str:
-    """The manifest's one-line statement of a spring law."""
-    if spring.kind == "cubic":
-        return f"{spring.k1} phi + {spring.k3} phi^3"
+    """The manifest's one-line statement of a spring law (its description without ``psi(phi) =``)."""
     return spring.describe().split("= ", 1)[-1]
 
 

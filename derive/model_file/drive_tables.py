@@ -28,7 +28,8 @@ from __future__ import annotations
 
 from typing import Dict, Optional, Tuple
 
-from ..core.spring_laws import SPRING_KINDS, SpringError
+from ..core.friction import FRICTION_PARAMETERS
+from ..core.spring_laws import LAW_COEFFICIENTS, SPRING_KINDS, SPRING_PARAMETERS, SpringError
 from .schema import Checker, got, number, show, suggest
 
 __all__ = ["DRIVE_TABLES", "SpringSpec", "parse_spring_table", "parse_friction_table", "SPRING_COEFFICIENTS",
@@ -36,26 +37,19 @@ __all__ = ["DRIVE_TABLES", "SpringSpec", "parse_spring_table", "parse_friction_t
 
 DRIVE_TABLES = ("spring", "friction")
 
+#: The bound each coefficient must meet in a file (``number``'s kinds; ``"any"``: none).
+_BOUNDS = {"k1": ">0", "k3": "any", "K_1": ">0", "K_2": ">0", "K_3": ">0", "T_1": ">0", "T_2": ">0", "w_blend": ">0",
+           "F_c": ">=0", "F_s": ">=0", "v_s": ">0", "v_c": ">0"}
+
 #: Coefficients of each law: key -> (unit, bound, meaning). ``linear`` takes K1 from [parameters].
 SPRING_COEFFICIENTS: Dict[str, Dict[str, Tuple[str, str, str]]] = {
-    "linear": {},
-    "cubic": {"k1": ("N m/rad", ">0", "spring: linear coefficient psi'(0)"),
-              "k3": ("N m/rad^3", "any", "spring: cubic coefficient")},
-    "three_segment": {"K_1": ("N m/rad", ">0", "spring: stiffness of the first segment, psi'(0)"),
-                      "K_2": ("N m/rad", ">0", "spring: stiffness of the second segment"),
-                      "K_3": ("N m/rad", ">0", "spring: stiffness of the third segment"),
-                      "T_1": ("N m", ">0", "spring: torque at the end of the first segment"),
-                      "T_2": ("N m", ">0", "spring: torque at the end of the second segment"),
-                      "w_blend": ("rad", ">0", "spring: blend width around each breakpoint")},
-}
+    law: {c: (SPRING_PARAMETERS[c][1], _BOUNDS[c], SPRING_PARAMETERS[c][0]) for c in names}
+    for law, names in LAW_COEFFICIENTS.items()}
 
-#: ``[friction]``: key -> (unit, bound, meaning, default or None when required).
+#: ``[friction]``: key -> (unit, bound, meaning, default or None when required; F_s defaults to F_c).
 FRICTION_COEFFICIENTS: Dict[str, Tuple[str, str, str, Optional[float]]] = {
-    "F_c": ("N m", ">=0", "motor Coulomb friction (link side)", None),
-    "F_s": ("N m", ">=0", "motor static friction, the Stribeck level at rest", None),
-    "v_s": ("rad/s", ">0", "Stribeck velocity of the motor friction", 0.1),
-    "v_c": ("rad/s", ">0", "regularization velocity of the friction: tanh(v / v_c) for sign(v)", 0.01),
-}
+    name: (unit, _BOUNDS[name], meaning, default)
+    for (name, meaning, unit), default in zip(FRICTION_PARAMETERS, (None, None, 0.1, 0.01))}
 
 
 class SpringSpec:
