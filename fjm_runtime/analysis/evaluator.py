@@ -109,10 +109,11 @@ class Evaluator:
                 r, J = inv(X.T, Yc.T, Pc.T)
                 r = np.asarray(r).T
                 if k >= self.iterations and np.all(np.max(np.abs(r), axis=1) <= 1e-12 * scale):
-                    break
+                    break  # r is the residual at the X the values are taken at
                 J = np.asarray(J).reshape(2 * n, m, 2 * n).transpose(1, 0, 2)
                 X[:, 2 * n:] -= np.linalg.solve(J, r[:, :, None])[:, :, 0]
-            r = np.asarray(inv(X.T, Yc.T, Pc.T)[0]).T
+            else:  # the last step's residual
+                r = np.asarray(inv(X.T, Yc.T, Pc.T)[0]).T
             bad = ~(np.max(np.abs(r), axis=1) <= 1e-8 * scale)
             if np.any(bad):
                 j = int(np.flatnonzero(bad)[0])
