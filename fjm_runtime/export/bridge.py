@@ -90,18 +90,15 @@ class MujocoPlant:
         self.qvel = np.array([self.mj.joint(j).dofadr[0] for j in names])
         self.ctrl = np.array([self.mj.actuator(f"{j}_motor").id for j in joints])
         self.scale = np.concatenate([np.ones(model.n), self.N])
-        # (rotor dof, F_c, F_s, v_s, v_c, N) per rotor whose friction the file states
-        self.friction = []
+        # (rotor dof, F_c, F_s, v_s, v_c, N) per rotor whose friction the file states, and
+        # (spring tendon, link dof, rotor dof, N, K_1, K_2, K_3, T_1, T_2, w) per three-segment spring
+        self.friction, self.springs = [], []
         for i in range(self.mj.nnumeric):
             num = self.mj.numeric(i)
             if num.name.startswith(FRICTION_NUMERIC):
                 dof = self.mj.joint(num.name[len(FRICTION_NUMERIC):]).dofadr[0]
                 self.friction.append((int(dof), *(float(v) for v in num.data)))
-        # (spring tendon, link dof, rotor dof, N, K_1, K_2, K_3, T_1, T_2, w) per three-segment spring
-        self.springs = []
-        for i in range(self.mj.nnumeric):
-            num = self.mj.numeric(i)
-            if num.name.startswith(SPRING_NUMERIC):
+            elif num.name.startswith(SPRING_NUMERIC):
                 tendon = num.name[len(SPRING_NUMERIC):]
                 j = tendon[:-len("_spring")]
                 k = joints.index(j)
