@@ -24,8 +24,8 @@ __all__ = ["MODEL_NAMES", "SPATIAL_NAMES", "COMPLETE_NAMES", "ROBOTS", "build", 
 #: S_12 = 0.2 kg m^2, next to link inertias ~1 kg m^2), massless, no transverse inertia (planar motion).
 PLANAR2_COMPLETE_ROTORS = Rotors(gear_ratio=(10.0, 10.0), mass=(0.0, 0.0), transverse_inertia=(0.0, 0.0))
 
-#: Built-in one-link drives whose model files (``[spring]``, ``[friction]``) ship in ``derive/robots``.
-FILE_SPRING_NAMES = ("arm1_hd",)
+#: Built-in drive models whose model files (``[spring]``, ``[friction]``) ship in ``derive/robots``.
+FILE_SPRING_NAMES = ("arm1_hd", "panda_hd")
 
 #: Where the built-in spatial arms' model files and URDFs are.
 ROBOTS = Path(__file__).resolve().parent / "robots"

@@ -33,7 +33,7 @@ SPATIAL_NAMES: Tuple[str, ...] = ("elbow3", "panda", "baxter")
 COMPLETE_NAMES: Tuple[str, ...] = ("link1_complete", "planar2_complete", "panda_complete")
 
 #: Built-in models with nonlinear joint springs (:mod:`derive.core.spring`).
-SPRING_NAMES: Tuple[str, ...] = ("link1_hd", "arm1_hd")
+SPRING_NAMES: Tuple[str, ...] = ("link1_hd", "arm1_hd", "panda_hd")
 
 MODEL_NAMES: Tuple[str, ...] = (("link1",) + tuple(f"planar{n}" for n in range(1, 8)) + SPATIAL_NAMES
                                 + COMPLETE_NAMES + SPRING_NAMES)

@@ -26,14 +26,17 @@ Torque coordinates (the measurement ``m = [q; dq; tau_J; dtau_J; dq_m]``) read `
 the measurement implies, ``phi_J = psi^-1(tau_J)`` (:func:`newton_inverse`, bound numerically at
 emission), and ``dphi = dtau_J / psi'(phi_J)``.
 
-Only one-joint models for now (``link1_hd``, one-link model files with a ``[spring]`` or ``[friction]``
-table): ``D`` is inverted in closed form. Pure math: no I/O.
+One-joint models (``link1_hd``, one-link model files with a ``[spring]`` or ``[friction]`` table) are
+derived here in SymPy, ``D`` inverted in closed form (their report prints the results). Several joints
+(``panda_hd``, URDF model files with drive tables) keep ``D^-1`` implicit: :func:`linearize_spring` returns
+no expressions and :mod:`derive.emit.spring_chain` builds the same quantities from the time derivatives of
+the inverse dynamics. Pure math: no I/O.
 """
 
 from __future__ import annotations
 
 from dataclasses import replace
-from typing import Dict, List, Tuple
+from typing import Dict, List, Optional, Sequence, Tuple
 
 import sympy as sp
 
@@ -48,14 +51,14 @@ from .torque import inverse_dynamics_derivatives
 
 __all__ = ["CubicSpring", "LinearSpring", "ThreeSegmentSpring", "SpringError", "spring_functions", "check_spring",
            "make_link1_hd",
-           "with_drive",
+           "with_drive", "with_drives", "drive_parameter",
            "linearize_spring", "motor_friction", "newton_inverse", "NEWTON_STEPS", "LINK1_HD_RANGE"]
-
-#: Newton steps of the emitted inverse ``phi = psi^-1(tau_J)`` (unrolled; see :func:`newton_inverse`).
-NEWTON_STEPS = 12
 
 #: Declared deflection range of ``link1_hd``, rad: ``|phi| <= LINK1_HD_RANGE``.
 LINK1_HD_RANGE = 0.25
+
+#: Newton steps of the cubic law's emitted inverse (each law states its own: ``newton_steps``).
+NEWTON_STEPS = 12
 
 
 def check_spring(model: str, spring, values: Dict[str, float]) -> None:
@@ -64,17 +67,18 @@ def check_spring(model: str, spring, values: Dict[str, float]) -> None:
     spring.check(model, values)
 
 
-def newton_inverse(psi, dpsi, tau, k1, steps: int = NEWTON_STEPS):
-    """``phi`` with ``psi(phi) = tau`` by ``steps`` Newton steps from ``phi_0 = tau / k1``.
+def newton_inverse(psi, dpsi, tau, start, steps: int = NEWTON_STEPS):
+    """``phi`` with ``psi(phi) = tau`` by ``steps`` Newton steps from ``phi_0 = start``.
 
-    Works on numbers, SymPy or CasADi (no branches). For the cubic with ``psi' > 0`` the
-    iterates are monotone: ``psi`` is convex on ``phi > 0`` when ``k3 >= 0`` (then ``tau / k1``
-    lies beyond the root and Newton descends to it) and concave when ``k3 < 0`` (then it lies
-    short of it and Newton climbs to it); odd symmetry gives ``tau < 0``. ``k3 = 0`` is exact
-    after one step. The three-segment curve (``K_1 <= K_2 <= K_3``, checked) is convex on ``phi > 0``
-    too, so ``k1 = K_1`` starts beyond the root and the iterates descend to it.
+    Works on numbers, SymPy or CasADi (no branches). Each law gives its start
+    (``newton_start``) and step count (``newton_steps``, :mod:`derive.core.spring_laws`). For the cubic
+    from ``tau / k1`` with ``psi' > 0`` the iterates are monotone: ``psi`` is convex on ``phi > 0`` when
+    ``k3 >= 0`` (then ``tau / k1`` lies beyond the root and Newton descends to it) and concave when
+    ``k3 < 0`` (then it lies short of it and Newton climbs to it); odd symmetry gives ``tau < 0``.
+    ``k3 = 0`` is exact after one step. The three-segment curve starts from the inverse of the
+    datasheet's piecewise line, exact outside the blends and beyond the root inside them.
     """
-    phi = tau / k1
+    phi = start
     for _ in range(steps):
         phi = phi - (psi(phi) - tau) / dpsi(phi)
     return phi
@@ -158,33 +162,95 @@ def with_drive(base: FlexibleJointModel, kind: str, coefficients: Dict[str, floa
         On the defaults (one line, names the joint).
     """
     if base.n != 1:
-        raise ValueError(f"{base.name}: nonlinear springs and motor friction are derived for one joint (n = {base.n})")
-    K_name = str(base.K[0])
-    params = []
-    if kind not in SPRING_KINDS:
-        raise ValueError(f"spring law {kind!r}; expected one of {', '.join(map(repr, SPRING_KINDS))}")
-    names = LAW_COEFFICIENTS[kind] or (K_name,)
-    params = []
+        raise ValueError(f"{base.name}: with_drive takes a one-joint model (n = {base.n}); use with_drives")
+    return with_drives(base, [(kind, coefficients, deflection_range)], None if friction is None else [friction],
+                       description)
+
+
+def drive_parameter(name: str, joint: int, n: int) -> str:
+    """The runtime parameter name of drive coefficient ``name`` of ``joint`` (1-based) in an ``n``-joint model.
+
+    One joint: the coefficient's own name (``K_1``, ``F_c``); several: suffixed by the joint number
+    (``K_1_3``, ``F_c_3``), as the linear models' ``K3``, ``Jm3``.
+    """
+    return name if n == 1 else f"{name}_{joint}"
+
+
+def with_drives(base: FlexibleJointModel, springs: Sequence[Tuple[str, Dict[str, float], float]],
+                frictions: Optional[Sequence[Optional[Dict[str, float]]]] = None,
+                description: str = None) -> FlexibleJointModel:
+    """``base`` (linear springs ``K_i``) with a spring law per joint and, optionally, motor friction per joint.
+
+    Parameters
+    ----------
+    base : FlexibleJointModel
+        A reduced model with linear springs of parameters ``base.K`` (``planar1``, a URDF arm).
+    springs : sequence of (kind, coefficients, deflection_range), length n
+        Per joint in q order: the law (:data:`derive.core.spring_laws.SPRING_KINDS`), the defaults of its
+        coefficients (unsuffixed names, ``K_1`` ...; ``linear`` keeps the joint's ``K`` and its default) and
+        the declared range (rad). Joint ``i``'s coefficients become the parameters
+        :func:`drive_parameter` names, at the place of its ``K``.
+    frictions : sequence of dict or None, length n, optional
+        Per joint the defaults of ``F_c, F_s, v_s, v_c`` (None: viscous only); appended to the parameters
+        in joint order. None: no friction anywhere.
+    description : str, optional
+
+    Raises
+    ------
+    SpringError, FrictionError
+        On the defaults (one line, names the joint).
+    ValueError
+        On an unknown law or a length other than n.
+    """
+    n = base.n
+    if len(springs) != n or (frictions is not None and len(frictions) != n):
+        raise ValueError(f"{base.name}: {len(springs)} spring laws for {n} joints; expected one per joint")
+    K_names = [str(k) for k in base.K]
+    by_K: Dict[str, List[Param]] = {}
+    laws: List[Tuple[str, Tuple[str, ...]]] = []
+    for j, (kind, coefficients, _) in enumerate(springs, 1):
+        if kind not in SPRING_KINDS:
+            raise ValueError(f"spring law {kind!r}; expected one of {', '.join(map(repr, SPRING_KINDS))}")
+        if kind == "linear":
+            laws.append((kind, (K_names[j - 1],)))
+            continue
+        names = tuple(drive_parameter(c, j, n) for c in LAW_COEFFICIENTS[kind])
+        by_K[K_names[j - 1]] = [Param(nm, float(coefficients[c]), *SPRING_PARAMETERS[c])
+                                for nm, c in zip(names, LAW_COEFFICIENTS[kind])]
+        laws.append((kind, names))
+    params: List[Param] = []
     for p in base.params:
-        if p.name == K_name and kind != "linear":
-            params += [Param(c, float(coefficients[c]), *SPRING_PARAMETERS[c]) for c in names]
-        else:
-            params.append(p)
-    if friction is not None:
-        params += [Param(name, float(friction[name]), meaning, unit) for name, meaning, unit in FRICTION_PARAMETERS]
+        params += by_K.get(p.name, [p])
+    friction_names = []
+    for j, fr in enumerate(frictions or (), 1):
+        if fr is None:
+            friction_names.append(None)
+            continue
+        names = tuple(drive_parameter(name, j, n) for name, _, _ in FRICTION_PARAMETERS)
+        params += [Param(nm, float(fr[name]), meaning, unit)
+                   for nm, (name, meaning, unit) in zip(names, FRICTION_PARAMETERS)]
+        friction_names.append(names)
     sym = {p.name: sp.Symbol(p.name, real=True) for p in params}
-    spring = SPRING_KINDS[kind](1, *(sym[c] for c in names), float(deflection_range))
     defaults = {p.name: p.default for p in params}
-    check_spring(base.name, spring, defaults)
-    frictions = None
-    if friction is not None:
-        frictions = (MotorFriction(1, *(sym[name] for name, _, _ in FRICTION_PARAMETERS)),)
-        check_friction(base.name, frictions[0], defaults)
-    # the closed forms' intermediate symbols (a1_1, ...) inlined: the Lie derivatives must see every q
-    inline = base.program.inline
-    return replace(base, params=tuple(params), K=(spring.start_stiffness,), springs=(spring,), frictions=frictions,
-                   D=inline(base.D), h=inline(base.h), potential=inline(base.potential), program=Program(),
-                   description=description or base.description)
+    laws_out = []
+    for j, ((kind, names), (_, _, rng)) in enumerate(zip(laws, springs), 1):
+        law = SPRING_KINDS[kind](j, *(sym[c] for c in names), float(rng))
+        check_spring(base.name, law, defaults)
+        laws_out.append(law)
+    fr_out = None
+    if frictions is not None:
+        fr_out = []
+        for j, names in enumerate(friction_names, 1):
+            if names is not None:
+                fr_out.append(MotorFriction(j, *(sym[c] for c in names)))
+                check_friction(base.name, fr_out[-1], defaults)
+        fr_out = tuple(fr_out)
+    extra = {}
+    if n == 1:  # the closed forms' intermediate symbols (a1_1, ...) inlined: the Lie derivatives must see every q
+        inline = base.program.inline
+        extra = dict(D=inline(base.D), h=inline(base.h), potential=inline(base.potential), program=Program())
+    return replace(base, params=tuple(params), K=tuple(s.start_stiffness for s in laws_out), springs=tuple(laws_out),
+                   frictions=fr_out, description=description or base.description, **extra)
 
 
 def _abstract_spring(m: FlexibleJointModel) -> sp.Matrix:
@@ -224,8 +290,9 @@ def linearize_spring(m: FlexibleJointModel) -> Linearization:
         implied deflection ``phi_J`` (``implied``, bound by Newton at emission); and the report's
         ``check`` (the controllability determinant and the involutivity determinants, abstract psi).
     """
-    if m.n != 1:
-        raise ValueError(f"{m.name}: nonlinear springs are derived for one-joint models only (n = {m.n})")
+    if m.n != 1:  # several joints: D^-1 stays implicit; the emitter builds everything numerically from the
+        # time derivatives of the inverse dynamics (derive/emit/spring_chain.py)
+        return Linearization(model=m, Y3=(), Y4=(), W=sp.zeros(0, 0), rhs3=None, rhs4=None, outputs={})
     x = m.state
     q, dq, qm, dqm = (sp.Matrix(b) for b in (m.q, m.dq, m.qm, m.dqm))
     Dinv = m.D.inv()

@@ -106,6 +106,13 @@ class LinearSpring(_Law):
     def start_stiffness(self) -> sp.Symbol:
         return self.K
 
+    #: Newton steps of the emitted inverse (exact after one: psi is linear).
+    newton_steps = 1
+
+    def newton_start(self, tau: sp.Expr) -> sp.Expr:
+        """Where the emitted Newton inverse ``psi^-1(tau)`` starts: ``tau / K`` (the root)."""
+        return tau / self.K
+
     def law(self, phi: sp.Expr) -> sp.Expr:
         return self.K * phi
 
@@ -150,6 +157,13 @@ class CubicSpring(_Law):
     @property
     def start_stiffness(self) -> sp.Symbol:
         return self.k1
+
+    #: Newton steps of the emitted inverse from ``tau / k1`` (monotone: derive.core.spring.newton_inverse).
+    newton_steps = 12
+
+    def newton_start(self, tau: sp.Expr) -> sp.Expr:
+        """Where the emitted Newton inverse ``psi^-1(tau)`` starts: ``tau / k1``."""
+        return tau / self.k1
 
     def law(self, phi: sp.Expr) -> sp.Expr:
         """``psi(phi)``."""
@@ -235,6 +249,24 @@ class ThreeSegmentSpring(_Law):
     @property
     def start_stiffness(self) -> sp.Symbol:
         return self.K_1
+
+    #: Newton steps of the emitted inverse from :meth:`newton_start` (3 reach 1e-17 rad on the built-ins; the
+    #: tests check 4 on a dense grid over the range).
+    newton_steps = 4
+
+    def newton_start(self, tau: sp.Expr) -> sp.Expr:
+        """Where the emitted Newton inverse ``psi^-1(tau)`` starts: the inverse of the datasheet's piecewise line.
+
+        Exact outside the blends. Inside them the blended curve lies above the line on ``phi > 0`` (the smooth
+        ramp is convex with asymptotes ``0`` and ``x``), so the start lies beyond the root of a convex function
+        and Newton descends to it monotonically (odd symmetry for ``tau < 0``).
+        """
+        phi1, phi2 = self.breakpoints()
+        return sp.Piecewise((-phi2 + (tau + self.T_2) / self.K_3, tau <= -self.T_2),
+                            (-phi1 + (tau + self.T_1) / self.K_2, tau <= -self.T_1),
+                            (tau / self.K_1, tau <= self.T_1),
+                            (phi1 + (tau - self.T_1) / self.K_2, tau <= self.T_2),
+                            (phi2 + (tau - self.T_2) / self.K_3, True))
 
     def breakpoints(self):
         """``(phi_1, phi_2)``, symbolic (rad)."""

@@ -39,9 +39,13 @@ def _fmt(v: float) -> str:
     return "< 1e-12" if abs(v) < 1e-12 else f"{v:.1e}"
 
 
-def _sample_state(rng, n: int) -> np.ndarray:
-    return np.concatenate([rng.uniform(-1.5, 1.5, n), rng.uniform(-1, 1, n),
-                           rng.uniform(-1.5, 1.5, n), rng.uniform(-1, 1, n)])
+def _sample_state(rng, n: int, deflection=None) -> np.ndarray:
+    """A random state; ``deflection`` (n,), if given: ``q_m = q + phi``, ``|phi|`` up to it (a spring law's range)."""
+    if deflection is None:
+        return np.concatenate([rng.uniform(-1.5, 1.5, n), rng.uniform(-1, 1, n),
+                               rng.uniform(-1.5, 1.5, n), rng.uniform(-1, 1, n)])
+    q, dq = rng.uniform(-1.5, 1.5, n), rng.uniform(-1, 1, n)
+    return np.concatenate([q, dq, q + rng.uniform(-1, 1, n) * np.asarray(deflection), rng.uniform(-1, 1, n)])
 
 
 def bracket_functions(x: ca.SX, A: ca.SX, n: int):
@@ -73,11 +77,13 @@ def pairwise_brackets(d_dist: ca.Function, xs: np.ndarray, cols: np.ndarray) -> 
 
 
 def controllability_check(functions: Dict[str, ca.Function], n: int, defaults: np.ndarray,
-                          samples: int = 5, seed: int = 0) -> List[Dict[str, object]]:
+                          samples: int = 5, seed: int = 0, deflection=None) -> List[Dict[str, object]]:
     """Rank and involutivity residuals at seeded random states.
 
     The brackets of pairs of distribution columns are taken numerically, by one
     forward-mode pass of the emitted ``ad`` per column (:func:`bracket_functions`).
+
+    ``deflection`` (n,), optional: sample ``q_m - q`` within it (nonlinear springs' declared ranges).
 
     Returns
     -------
@@ -91,7 +97,7 @@ def controllability_check(functions: Dict[str, ca.Function], n: int, defaults: n
     rng = np.random.default_rng(seed)
     rows = []
     for _ in range(samples):
-        xs = _sample_state(rng, n)
+        xs = _sample_state(rng, n, deflection)
         A = np.array(brackets(xs))
         s = np.linalg.svd(A, compute_uv=False)
         dist = A[:, :3 * n]

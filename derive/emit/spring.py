@@ -8,8 +8,8 @@ so ``fjm_runtime.load("link1_hd")`` gives the usual :class:`Model`:
   ``psi'``, ``psi''`` of ``phi = q_m - q`` appear as polynomials in ``phi``), CSE'd;
 * ``T_tau, alpha_tau, beta_tau`` of ``(m, p)``, ``m = [q; dq; tau_J; dtau_J; dq_m]``: ``tau_J`` and
   ``dtau_J`` read directly, ``psi'`` and ``psi''`` at the implied deflection
-  ``phi_J = psi^-1(tau_J)``, :data:`derive.core.spring.NEWTON_STEPS` Newton steps unrolled
-  (:func:`derive.core.spring.newton_inverse`);
+  ``phi_J = psi^-1(tau_J)``, the law's Newton steps unrolled from its start
+  (:func:`derive.core.spring.newton_inverse`; ``newton_start``, ``newton_steps`` of each law);
 * the laws ``control_{smc,ismc,fl}`` and ``control_{smc,ismc,fl}_tau`` (:mod:`derive.emit.controls`,
   the same arithmetic around this model's cores). Not emitted: ``adaptive`` (it estimates a linear
   ``K``) and ``pdg`` (its motor set-point needs ``psi^-1(G(q_d))``);
@@ -27,13 +27,16 @@ from pathlib import Path
 from typing import Callable, Dict, List, Optional
 
 import casadi as ca
+import numpy as np
 import sympy as sp
 
 from ..core.linearize import Linearization
-from ..core.spring import NEWTON_STEPS, newton_inverse, spring_functions
+from ..core.spring import newton_inverse, spring_functions
 from .chain_json import write_chain_json
 from .controls import KINDS, TORQUE_KINDS, law_pair, build_core, manifest_entry
 from .functions import QUANTITIES, operation_count
+from .report import controllability_check
+from .spring_chain import build_chain_functions, c_functions as chain_c_functions, cores as chain_cores
 from .sx import SympyToSX
 from .torque import TORQUE_QUANTITIES
 from .writer import HEADER, argument_layout, argument_lines, comment_block, generate_c, tool_versions
@@ -76,10 +79,12 @@ def _spring_sx(model, phi: ca.SX, p: ca.SX, order: int) -> List[ca.SX]:
 
 
 def _newton_sx(model, tau: ca.SX, p: ca.SX) -> ca.SX:
-    """``phi_J = psi^-1(tau)`` by :func:`derive.core.spring.newton_inverse` in SX."""
-    k1 = p[list(model.param_names).index(str(model.springs[0].start_stiffness))]
+    """``phi_J = psi^-1(tau)`` by :func:`derive.core.spring.newton_inverse` in SX, from the law's start."""
+    s = model.springs[0]
+    a = sp.Symbol("tau_arg", real=True)
+    start = SympyToSX({**{sym: p[j] for j, sym in enumerate(model.param_symbols)}, a: tau})(s.newton_start(a))
     return newton_inverse(lambda v: _spring_sx(model, v, p, 0)[0], lambda v: _spring_sx(model, v, p, 1)[1],
-                          tau, k1, NEWTON_STEPS)
+                          tau, start, s.newton_steps)
 
 
 def build_spring_functions(lin: Linearization) -> Dict[str, ca.Function]:
@@ -121,15 +126,23 @@ def build_spring_functions(lin: Linearization) -> Dict[str, ca.Function]:
     return out
 
 
-def build_spring_laws(lin: Linearization, fns: Dict[str, ca.Function]) -> Dict[str, ca.Function]:
-    """``control_core``, ``control_core_tau`` and the laws of :data:`EMITTED_KINDS` (with ``_zdot``)."""
+def build_spring_laws(lin: Linearization, fns: Dict[str, ca.Function],
+                      cores: Optional[Dict[str, ca.Function]] = None) -> Dict[str, ca.Function]:
+    """``control_core``, ``control_core_tau`` and the laws of :data:`EMITTED_KINDS` (with ``_zdot``).
+
+    ``cores``: the two cores, if the caller built them (several joints, :func:`derive.emit.spring_chain.cores`);
+    else each is the model's Functions inlined and CSE'd together.
+    """
     m = lin.model
     n, n_p = m.n, len(m.params)
-    core = build_core(m, fns)
-    ms, p = ca.SX.sym("m", 5 * n), ca.SX.sym("p_hat", n_p)
-    core_tau = ca.Function(f"{m.name}_control_core_tau", [ms, p],
-                           ca.cse([fns["T_tau"](ms, p), fns["alpha_tau"](ms, p), fns["beta_tau"](ms, p)]),
-                           ["m", "p_hat"], ["y_hat", "alpha", "beta"])
+    if cores is None:
+        ms, p = ca.SX.sym("m", 5 * n), ca.SX.sym("p_hat", n_p)
+        cores = {"control_core": build_core(m, fns),
+                 "control_core_tau": ca.Function(
+                     f"{m.name}_control_core_tau", [ms, p],
+                     ca.cse([fns["T_tau"](ms, p), fns["alpha_tau"](ms, p), fns["beta_tau"](ms, p)]),
+                     ["m", "p_hat"], ["y_hat", "alpha", "beta"])}
+    core, core_tau = cores["control_core"], cores["control_core_tau"]
     out = {"control_core": core, "control_core_tau": core_tau}
     for kind in EMITTED_KINDS:
         tau = kind.endswith("_tau")
@@ -149,7 +162,8 @@ def _meaning(name: str) -> str:
     if name == "spring":
         return "the spring law: psi(phi), psi'(phi), psi''(phi) per joint (N m, N m/rad, N m/rad^2)"
     if name == "spring_inverse":
-        return f"the implied deflection phi_J = psi^-1(tau_J) per joint ({NEWTON_STEPS} Newton steps from tau_J / psi'(0))"
+        return ("the implied deflection phi_J = psi^-1(tau_J) per joint (Newton steps from the law's start: "
+                "manifest springs.inverse)")
     if name in _TORQUE_MEANING:
         return _TORQUE_MEANING[name]
     if name.endswith("_zdot"):
@@ -171,10 +185,12 @@ def write_spring_model(lin: Linearization, outdir: Path,
     m = lin.model
     progress = progress or (lambda stage: None)
     outdir.mkdir(parents=True, exist_ok=True)
+    chain = m.n > 1  # several joints: built from the inverse dynamics (derive/emit/spring_chain.py)
     progress("CasADi functions")
-    fns = build_spring_functions(lin)
+    fns = build_chain_functions(m) if chain else build_spring_functions(lin)
+    parts = fns.pop("_parts", None)
     progress("control laws")
-    laws = build_spring_laws(lin, fns)
+    laws = build_spring_laws(lin, fns, chain_cores(m, parts, ca.SX) if chain else None)
     versions = tool_versions()
     everything = {**fns, **laws}
     ops = {name: _ops(fn) for name, fn in everything.items()}
@@ -189,8 +205,12 @@ def write_spring_model(lin: Linearization, outdir: Path,
         (outdir / f"{name}.casadi").write_text(text)
         sizes[name] = len(text.encode())
     progress("C sources")
+    c_fns = everything
+    if chain:  # the C file's twins call the kernel, spring and friction Functions instead of inlining them
+        c_fns = {**everything, **chain_c_functions(m, parts),
+                 **build_spring_laws(lin, fns, chain_cores(m, parts, ca.MX))}
     with tempfile.TemporaryDirectory() as tmp:
-        sources = generate_c(m.name, everything, Path(tmp))
+        sources = generate_c(m.name, c_fns, Path(tmp))
     c_header = comment_block(
         [HEADER, f"model: {m.name} -- {m.description}", f"tools: casadi {versions['casadi']}, sympy {versions['sympy']}",
          *argument_lines(lin), *_law_lines(),
@@ -203,9 +223,10 @@ def write_spring_model(lin: Linearization, outdir: Path,
                 "inputs": inputs, **extra, "operations": ops[name], "casadi_bytes": sizes[name]}
 
     controls = _control_entries(m, laws, ops, entry)
-    spring = m.springs[0]
     manifest = {
-        "header": HEADER, "model": m.name, "description": m.description, "n": m.n, "nx": 4 * m.n,
+        "header": HEADER, "model": m.name, "description": m.description,
+        **({"source": m.source} if m.source is not None else {}),  # URDF-built models only
+        "n": m.n, "nx": 4 * m.n,
         "parameters": [{"name": p.name, "default": p.default, "meaning": p.meaning, "unit": p.unit} for p in m.params],
         "arguments": argument_layout(lin),
         "functions": {name: {"casadi_file": f"{name}.casadi", "c_name": f"{m.name}_{name}", "meaning": meaning,
@@ -221,10 +242,11 @@ def write_spring_model(lin: Linearization, outdir: Path,
         "measurement": {"m": "[q; dq; tau_J; dtau_J; dq_m] (5n): link position and rate, link-side joint torque "
                              "tau_J = psi(q_m - q) and its rate (measured), motor rate", "size": 5 * m.n},
         "springs": {
-            "joints": [{"joint": spring.joint, "law": spring.kind, "psi": _psi_text(spring),
-                        "phi": "q_m - q", "parameters": [str(s) for s in spring.parameters],
-                        "deflection_range": [-spring.deflection_range, spring.deflection_range]}],
-            "inverse": {"method": "newton", "steps": NEWTON_STEPS, "start": f"tau_J / {spring.start_stiffness}"},
+            "joints": [{"joint": s.joint, "law": s.kind, "psi": _psi_text(s),
+                        "phi": "q_m - q", "parameters": [str(c) for c in s.parameters],
+                        "deflection_range": [-s.deflection_range, s.deflection_range]} for s in m.springs],
+            "inverse": {"method": "newton", "joints": [{"joint": s.joint, "steps": s.newton_steps,
+                                                        "start": _start_text(s)} for s in m.springs]},
             "functions": {name: entry(name, inputs) for name, inputs in
                           (("spring", ["phi", "p"]), ("spring_inverse", ["tau_J", "p"]))},
         },
@@ -234,10 +256,17 @@ def write_spring_model(lin: Linearization, outdir: Path,
     }
     write_chain_json(m, outdir)  # the rigid-body tree and the spring law, for the MJCF export
     progress("report")
-    (outdir / "REPORT.md").write_text(_report(lin, ops))
+    (outdir / "REPORT.md").write_text(_chain_report(m, fns, ops) if chain else _report(lin, ops))
     lines = json.dumps(manifest, indent=2).split("\n")
     (outdir / "manifest.json").write_text("\n".join(["{" + lines[1].strip()] + lines[2:]) + "\n")
     return manifest
+
+
+def _start_text(spring) -> str:
+    """Where a law's Newton inverse starts, in words (manifest)."""
+    if spring.kind == "three_segment":
+        return "the inverse of the datasheet's piecewise line (exact outside the blends)"
+    return f"tau_J / {spring.start_stiffness}"
 
 
 def _psi_text(spring) -> str:
@@ -261,6 +290,42 @@ def _control_entries(m, laws, ops, entry) -> Dict[str, dict]:
                                            "tau_J = psi(q_m - q), dtau_J its rate, both measured")
         controls[kind] = e
     return controls
+
+
+def _chain_report(m, fns: Dict[str, ca.Function], ops: Dict[str, int]) -> str:
+    """``REPORT.md`` of a several-joint drive model: parameters, springs, friction, the rank test, op counts."""
+    k = {p.name: p.default for p in m.params}
+    lines = [f"<!-- {HEADER} -->", f"# {m.name}", "", m.description, "",
+             "## Parameters", "", "| name | default | unit | meaning |", "|---|---|---|---|"]
+    lines += [f"| `{p.name}` | {p.default:g} | {p.unit} | {p.meaning} |" for p in m.params]
+    lines += ["", "## Springs (`phi = q_m - q`)", "", "| joint | law | declared range (rad) | psi' on it (N m/rad) |",
+              "|---|---|---|---|"]
+    for s in m.springs:
+        lo, hi = s.stiffness_bounds(k)
+        lines.append(f"| {s.joint} | `{s.describe()}` | {s.deflection_range:g} | [{lo:g}, {hi:g}] |")
+    if m.frictions:
+        lines += ["", "## Motor friction", "", "At the link-side motor velocity `v = dq_m`, beside `B_m dq_m`; "
+                  "`alpha` and `alpha_tau` add the nominal `F(dq_m)` (a feedforward).", ""]
+        lines += [f"- joint {fr.joint}: `{fr.describe()}`" for fr in m.frictions]
+    lines += ["", "## Derivation", "",
+              "`D^-1` stays implicit: `y3, y4` and `w = D'' y3 + 2 D' y4 + h''` come from the time derivatives "
+              "of the inverse dynamics (the model's kernel) at the spring torque `s = psi(phi)` and its rate "
+              "`psi'(phi) dphi`; `beta = J_m psi'(phi)^-1 D(q)`, "
+              "`alpha = psi + B_m dq_m + F + J_m y3 + J_m psi'^-1 (w - psi'' dphi^2)`; the torque-sensed laws read "
+              "`tau_J`, `dtau_J` and take `psi'`, `psi''` at `phi_J = psi^-1(tau_J)`.", "",
+              "## The paper's feedback-linearizability test, numerically", "",
+              f"At 5 seeded random states (deflections within the declared ranges, default parameters): rank of $[g, ad_f g, ad_f^2 g, ad_f^3 g]$ (must be "
+              f"{4 * m.n}), smallest/largest singular value, and the largest relative residual of a bracket $[v, w]$ "
+              "of two columns of $\\{g, ad_f g, ad_f^2 g\\}$ outside their span (involutivity; must be ~0).", "",
+              "| sample | rank | sigma_min / sigma_max | involutivity residual |", "|---|---|---|---|"]
+    defaults = np.array([p.default for p in m.params])
+    ranges = [s.deflection_range for s in sorted(m.springs, key=lambda s: s.joint)]
+    for i, row in enumerate(controllability_check(fns, m.n, defaults, deflection=ranges)):
+        inv = "< 1e-12" if row["involutivity"] < 1e-12 else f"{row['involutivity']:.1e}"
+        lines.append(f"| {i} | {row['rank']} | {row['sigma_ratio']:.1e} | {inv} |")
+    lines += ["", "## Operations", "", "| function | operations |", "|---|---|"]
+    lines += [f"| `{m.name}_{name}` | {n} |" for name, n in ops.items()]
+    return "\n".join(lines) + "\n"
 
 
 def _report(lin: Linearization, ops: Dict[str, int]) -> str:

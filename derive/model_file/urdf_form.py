@@ -50,6 +50,7 @@ from ..core.rotors import Rotors, gear_params
 from ..spatial.spatial import make_spatial
 from ..spatial.spatial_params import elastic_params, inertial_params, payload_params
 from ..spatial.urdf import UrdfChain, UrdfError, load_urdf
+from .drive_tables import SpringSpec, parse_joint_drive_tables
 from .schema import Checker, check_description, check_name, got, number, show, suggest
 from .toml_keys import KeyPath
 
@@ -58,7 +59,7 @@ __all__ = ["UrdfModelSpec", "parse_urdf_form", "DEFAULT_G0"]
 #: The repository root (URDF paths in manifests are relative to it).
 REPO = Path(__file__).resolve().parent.parent.parent
 URDF_MODEL_KEYS = ("name", "urdf", "base", "tip", "tips", "description", "symbolic")
-URDF_TOP = ("model", "joints", "parameters", "payload", "notes", "rotors")
+URDF_TOP = ("model", "joints", "parameters", "payload", "notes", "rotors", "spring", "friction")
 #: Keys of ``[rotors]``.
 ROTOR_KEYS = ("gear_ratio", "mass", "transverse_inertia", "reduced_model")
 #: Elastic parameters per joint: key -> (SI unit, bound kind, meaning, default or None = required).
@@ -108,13 +109,18 @@ class UrdfModelSpec:
     rotors: Optional[Rotors] = None  # the complete model's rotors ([rotors]), None: the reduced model
     reduced_model: Optional[str] = None
     tips: Tuple[str, ...] = ()  # several tips: a tree (``tip`` is then one of them or empty)
+    springs: Optional[Tuple[SpringSpec, ...]] = None  # [spring.*] per joint (derive.model_file.drive_tables)
+    frictions: Optional[Tuple[Optional[Dict[str, float]], ...]] = None  # [friction.*] per joint
 
     def build(self) -> FlexibleJointModel:
         """The symbolic model (:func:`derive.spatial.spatial.make_spatial` of the URDF chain or tree)."""
         ends = self.tips or self.tip
         chain = load_urdf(self.urdf, self.base, ends, source=_repo_relative(self.urdf))
         n = len(chain.joints)
-        params = elastic_params(n, self.K, self.Jm, self.Bm, self.g0, chain.joints,
+        # a joint with a nonlinear spring law has no K (None): its placeholder is replaced by the law's
+        # coefficients (derive.core.spring.with_drives)
+        K = tuple(1.0 if k is None else k for k in self.K)
+        params = elastic_params(n, K, self.Jm, self.Bm, self.g0, chain.joints,
                                 {k: f"; {v}" for k, v in self.notes.items()})
         if self.payload is not None:
             params = params + payload_params(self.payload[0], self.payload[1], self.tip)
@@ -134,7 +140,13 @@ class UrdfModelSpec:
                "limits": urdf_limits(chain)}
         if chain.ignored:
             src["ignored_links"] = list(chain.ignored)
-        return replace(model, source=src)
+        model = replace(model, source=src)
+        if self.springs is None and self.frictions is None:
+            return model
+        from ..core.spring import with_drives
+        springs = self.springs or tuple(SpringSpec("linear", {}, 3.141592653589793) for _ in range(n))
+        return with_drives(model, [(s.kind, s.coefficients, s.deflection_range) for s in springs],
+                           None if self.frictions is None else list(self.frictions))
 
 
 #: Units of the ``limits`` lists of a URDF model's manifest ``source``.
@@ -236,8 +248,13 @@ def _symbolic_links(chk: Checker, model: dict, chain: UrdfChain) -> Tuple[str, .
     return tuple(symbolic)
 
 
-def _joint_values(chk: Checker, data: dict, model: dict, names: Tuple[str, ...]) -> Dict[str, List[float]]:
-    """``[joints.*]``: K, Jm, Bm per chain joint in q order (joint table over default over built-in)."""
+def _joint_values(chk: Checker, data: dict, model: dict, names: Tuple[str, ...],
+                  nonlinear=frozenset()) -> Dict[str, List[float]]:
+    """``[joints.*]``: K, Jm, Bm per chain joint in q order (joint table over default over built-in).
+
+    Joints in ``nonlinear`` have a spring law of ``[spring.*]`` in place of ``K``: their table may not
+    give one, and their ``K`` is None.
+    """
     joints = data.get("joints", {})
     if not isinstance(joints, dict):
         raise chk.fail(("joints",), f"expected tables [joints.default] and [joints.<URDF joint name>], {got(joints)}")
@@ -259,7 +276,13 @@ def _joint_values(chk: Checker, data: dict, model: dict, names: Tuple[str, ...])
             values[jname][key] = number(chk, path + (key,), val, unit, kind, meaning)
     per: Dict[str, List[float]] = {k: [] for k in ELASTIC}
     for jname in names:
+        if jname in nonlinear and "K" in values.get(jname, {}):
+            raise chk.fail(("joints", jname, "K"), f"joint {jname!r} has a nonlinear spring law ([spring.*]), "
+                                                   "which replaces its stiffness K; remove K here")
         for key, (unit, _, meaning, default) in ELASTIC.items():
+            if key == "K" and jname in nonlinear:
+                per[key].append(None)
+                continue
             v = values.get(jname, {}).get(key, values.get("default", {}).get(key, default))
             if v is None:
                 raise chk.fail(("joints", jname, key),
@@ -356,7 +379,9 @@ def parse_urdf_form(data: dict, chk: Checker, base_dir: Path, builtin: bool) -> 
     urdf, chain = _load_chain(chk, model, base_dir)
     names = chain.joints
     symbolic = _symbolic_links(chk, model, chain)
-    per = _joint_values(chk, data, model, names)
+    springs, frictions = parse_joint_drive_tables(data, chk, names)
+    nonlinear = {j for j, s in zip(names, springs or ()) if s.kind != "linear"}
+    per = _joint_values(chk, data, model, names, nonlinear)
     g0, notes = _gravity_and_notes(chk, data)
     payload = _payload(chk, data)
     rotors, reduced = _rotors(chk, data, len(names))
@@ -368,4 +393,6 @@ def parse_urdf_form(data: dict, chk: Checker, base_dir: Path, builtin: bool) -> 
                          tip=model.get("tip", ""), tips=tuple(model.get("tips", ())), joints=names,
                          K=tuple(per["K"]), Jm=tuple(per["Jm"]), Bm=tuple(per["Bm"]), g0=g0,
                          description=model.get("description"), notes=notes, source=chk.source,
-                         payload=payload, symbolic=symbolic)
+                         payload=payload, symbolic=symbolic,
+                         springs=None if springs is None else tuple(springs),
+                         frictions=None if frictions is None else tuple(frictions))
