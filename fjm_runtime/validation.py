@@ -45,9 +45,10 @@ def as_vector(name: str, value, length: int) -> np.ndarray:
 
 
 # Parameter groups that must be strictly positive / non-negative (by name prefix).
+# Drive coefficients of a several-joint model carry the joint number: K_1_3, F_c_3 (derive.core.spring).
 _POSITIVE = re.compile(r"^(J_l|J_m|K|M|L|m\d+|l\d+|r\d+|I\d+|K\d+|Jm\d+|m_(?!load$).+|v_s|v_c|v_s\d+|v_c\d+|k1|"
-                       r"K_[123]|T_[12]|w_blend)$")
-_NON_NEGATIVE = re.compile(r"^(B_m|Bm\d+|g0|m_load|F_c|F_s|F_c\d+|F_s\d+)$")
+                       r"K_[123]|T_[12]|w_blend|(v_s|v_c|K_[123]|T_[12]|w_blend|k1)_\d+)$")
+_NON_NEGATIVE = re.compile(r"^(B_m|Bm\d+|g0|m_load|F_c|F_s|F_c\d+|F_s\d+|(F_c|F_s)_\d+)$")
 # Spatial models: inertia tensor of a link about its centre of mass (``symbolic = [...]``).
 _TENSOR = ("ixx", "ixy", "ixz", "iyy", "iyz", "izz")
 
@@ -55,20 +56,26 @@ _TENSOR = ("ixx", "ixy", "ixz", "iyy", "iyz", "izz")
 def _check_three_segment(lookup: Mapping[str, float], arg: str) -> None:
     """The three-segment spring's relations (derive/core/spring_laws.py): stiffening segments,
     ordered torque breakpoints, blend windows that neither reach zero nor overlap."""
-    keys = ("K_1", "K_2", "K_3", "T_1", "T_2", "w_blend")
-    if not all(k in lookup for k in keys):
-        return
-    K1, K2, K3, T1, T2, w = (float(lookup[k]) for k in keys)
+    base = ("K_1", "K_2", "K_3", "T_1", "T_2", "w_blend")
+    for suffix in [""] + sorted({k[len("w_blend"):] for k in lookup if re.fullmatch(r"w_blend_\d+", k)}):
+        keys = tuple(k + suffix for k in base)
+        if all(k in lookup for k in keys):
+            _check_one_three_segment(*(float(lookup[k]) for k in keys), arg, suffix)
+
+
+def _check_one_three_segment(K1, K2, K3, T1, T2, w, arg: str, suffix: str) -> None:
+    """One joint's three-segment relations (``suffix``: ``""``, or ``"_<joint>"`` on a several-joint model)."""
+    keys = lambda *ks: [k + suffix for k in ks]  # noqa: E731
+    joint = f"; joint {suffix[1:]}" if suffix else ""
     if not K1 <= K2 <= K3:
-        raise FjmValueError(f"{arg}['K_1', 'K_2', 'K_3'] = {[K1, K2, K3]}: expected K_1 <= K_2 <= K_3 (N m/rad; "
-                            "a harmonic drive stiffens)")
+        raise FjmValueError(f"{arg}{keys('K_1', 'K_2', 'K_3')} = {[K1, K2, K3]}: expected K_1 <= K_2 <= K_3 (N m/rad; "
+                            f"a harmonic drive stiffens{joint})")
     if not T1 < T2:
-        raise FjmValueError(f"{arg}['T_1', 'T_2'] = {[T1, T2]}: expected T_1 < T_2 (N m, torque breakpoints)")
-    phi1 = T1 / K1
-    limit = min(2 * phi1, (T2 - T1) / K2)
+        raise FjmValueError(f"{arg}{keys('T_1', 'T_2')} = {[T1, T2]}: expected T_1 < T_2 (N m, torque breakpoints{joint})")
+    limit = min(2 * T1 / K1, (T2 - T1) / K2)
     if not w <= limit:
-        raise FjmValueError(f"{arg}['w_blend'] = {w}: expected <= {limit:.6g} rad (min(2 phi_1, phi_2 - phi_1) at "
-                            f"these breakpoints: the blends must not reach phi = 0 nor overlap)")
+        raise FjmValueError(f"{arg}['w_blend{suffix}'] = {w}: expected <= {limit:.6g} rad (min(2 phi_1, phi_2 - phi_1) "
+                            f"at these breakpoints: the blends must not reach phi = 0 nor overlap{joint})")
 
 
 def check_physical(names: Tuple[str, ...], values: np.ndarray, arg: str = "p") -> None:

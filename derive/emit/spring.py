@@ -209,14 +209,7 @@ def write_spring_model(lin: Linearization, outdir: Path,
     if chain:  # the C file's twins call the kernel, spring and friction Functions instead of inlining them
         c_fns = {**everything, **chain_c_functions(m, parts),
                  **build_spring_laws(lin, fns, chain_cores(m, parts, ca.MX))}
-    with tempfile.TemporaryDirectory() as tmp:
-        sources = generate_c(m.name, c_fns, Path(tmp))
-    c_header = comment_block(
-        [HEADER, f"model: {m.name} -- {m.description}", f"tools: casadi {versions['casadi']}, sympy {versions['sympy']}",
-         *argument_lines(lin), *_law_lines(),
-         "operations: " + ", ".join(f"{m.name}_{k} {v}" for k, v in ops.items())], " * ")
-    for fname, body in sources.items():
-        (outdir / fname).write_text("/* " + c_header[3:] + " */\n" + body)
+    sources = _write_c(lin, outdir, c_fns, ops, versions)
 
     def entry(name, inputs, **extra):
         return {"casadi_file": f"{name}.casadi", "c_name": f"{m.name}_{name}", "meaning": _meaning(name),
@@ -260,6 +253,21 @@ def write_spring_model(lin: Linearization, outdir: Path,
     lines = json.dumps(manifest, indent=2).split("\n")
     (outdir / "manifest.json").write_text("\n".join(["{" + lines[1].strip()] + lines[2:]) + "\n")
     return manifest
+
+
+def _write_c(lin: Linearization, outdir: Path, c_fns: Dict[str, ca.Function], ops: Dict[str, int],
+             versions: Dict[str, str]) -> List[str]:
+    """``<model>.c`` and ``<model>.h`` of ``c_fns`` with the header comment; returns their names."""
+    m = lin.model
+    with tempfile.TemporaryDirectory() as tmp:
+        sources = generate_c(m.name, c_fns, Path(tmp))
+    c_header = comment_block(
+        [HEADER, f"model: {m.name} -- {m.description}", f"tools: casadi {versions['casadi']}, sympy {versions['sympy']}",
+         *argument_lines(lin), *_law_lines(),
+         "operations: " + ", ".join(f"{m.name}_{k} {v}" for k, v in ops.items())], " * ")
+    for fname, body in sources.items():
+        (outdir / fname).write_text("/* " + c_header[3:] + " */\n" + body)
+    return list(sources)
 
 
 def _start_text(spring) -> str:

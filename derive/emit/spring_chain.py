@@ -37,7 +37,7 @@ from typing import Callable, Dict
 import casadi as ca
 import sympy as sp
 
-from .dynamics import _converter, build_kernel, mx_function, programme, state_blocks, sx_function
+from .dynamics import build_kernel, mx_function, programme, state_blocks, sx_function
 from .functions import QUANTITIES, ad_by_ad
 from .sx import SympyToSX, ldl_factor
 from .torque import TORQUE_QUANTITIES
@@ -158,7 +158,8 @@ def _energy(model, spring_potential: Callable, inertia: ca.Function) -> ca.Funct
     x, p = ca.SX.sym("x", 4 * n), ca.SX.sym("p", n_p)
     q, dq, qm, dqm = state_blocks(x, n)
     Jm, _ = _motor_parameters(model, p)
-    V = _converter(model, q, dq, p)(model.potential)
+    V = SympyToSX({**{s: q[i] for i, s in enumerate(model.q)}, **{s: p[j] for j, s in enumerate(model.param_symbols)}},
+                  dict(model.program.definitions))(model.potential)
     E = (ca.dot(dq, ca.mtimes(inertia(x, p), dq)) + ca.dot(Jm * dqm, dqm)) / 2 + ca.sum1(spring_potential(qm - q, p)) + V
     return ca.Function(f"{model.name}_energy", [x, p], [ca.cse(E)], ["x", "p"], ["energy"])
 

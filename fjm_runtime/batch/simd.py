@@ -10,6 +10,8 @@ Results agree with the scalar code to rounding (libmvec sin/cos: < 4 ulp;
 """
 from __future__ import annotations
 
+import math
+
 from importlib import resources
 from string import Template
 from typing import Dict, List, Optional, Sequence, Tuple
@@ -131,7 +133,9 @@ class SoaProgram:
         o = step.instruction_output(k)
         if op == ca.OP_CONST:
             value = float(step.instruction_constant(k))
-            self._set_inv(o[0], lambda j: f"inv[{j}] = V0 + {value!r};")
+            text = repr(value) if math.isfinite(value) else ("NAN" if math.isnan(value) else
+                                                              ("INFINITY" if value > 0 else "-INFINITY"))
+            self._set_inv(o[0], lambda j: f"inv[{j}] = V0 + {text};")  # C spells inf and nan as macros
         elif op == ca.OP_INPUT:
             self.add_input(i, o)
         elif op == ca.OP_OUTPUT and self.io is not None:

@@ -10,7 +10,8 @@ import time
 from pathlib import Path
 from typing import Callable, List, Tuple
 
-from . import baxter, certified, chains, complete, identification, paper, plots, real_arm, real_drives
+from . import (baxter, certified, chains, complete, identification, panda_drives, paper, plots, real_arm,
+               real_drives)
 from .panda import panda_section
 from .report import log
 from .settings import DURATION, QUICK_DURATION, QUICK_SAMPLES, DemoContext
@@ -32,6 +33,7 @@ SECTIONS: Tuple[Callable[[DemoContext], Tuple[List[str], list]], ...] = (
     certified.certificates_section, certified.synthesized_loop_section, certified.disturbance_section,
     paper.monte_carlo_section, spatial_section, real_arm.real_arm_section, complete.complete_section,
     baxter.tree_section, identification.identification_section, real_drives.real_drives_section,
+    panda_drives.panda_drives_section,
 )
 
 

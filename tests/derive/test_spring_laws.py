@@ -10,6 +10,8 @@ offending key's line (a negative friction, psi' <= 0 on the range, a second link
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 import sympy as sp
@@ -178,3 +180,63 @@ def test_k1_beside_a_nonlinear_law_is_refused():
     with pytest.raises(ModelFileError, match=r"drive.toml:6: parameters.K1: the \[spring\] law 'three_segment' "
                                              r"replaces the linear stiffness K1"):
         parse_model_text(text, "drive.toml")
+
+
+# --- the URDF form: drive tables per joint (panda_hd's file) ---------------------------------------------
+
+PANDA_HD = Path(__file__).resolve().parents[2] / "derive" / "robots" / "panda_hd"
+
+
+def _panda_hd_text() -> str:
+    return (PANDA_HD / "panda_hd.toml").read_text()
+
+
+def _line(text: str, needle: str) -> int:
+    """1-based number of the first line that starts with ``needle``."""
+    return next(i for i, line in enumerate(text.splitlines(), 1) if line.startswith(needle))
+
+
+def test_urdf_drive_tables_give_every_joint_its_law_and_friction():
+    spec = parse_model_text(_panda_hd_text(), "panda_hd.toml", base_dir=PANDA_HD, builtin=True)
+    assert [s.kind for s in spec.springs] == ["three_segment"] * 7
+    assert [s.coefficients["K_1"] for s in spec.springs] == [1.3e4] * 4 + [2.9e3] * 3  # joint table over default
+    assert [s.coefficients["w_blend"] for s in spec.springs] == [2e-4] * 7  # the default's key, kept
+    assert [f["F_c"] for f in spec.frictions] == [0.8] * 4 + [0.4] * 3 and spec.frictions[0]["v_c"] == 0.01
+    assert spec.K == (None,) * 7  # no linear stiffness where a law stands
+    names = [p.name for p in spec.build().params]
+    assert names[:6] == ["K_1_1", "K_2_1", "K_3_1", "T_1_1", "T_2_1", "w_blend_1"] and "F_c_7" in names
+    assert not any(n in names for n in ("K1", "K7"))
+
+
+def test_urdf_joint_law_replaces_the_default_table():
+    text = _panda_hd_text().replace("[spring.panda_joint2]\nK_1 = 1.3e4\nK_2 = 1.7e4\nK_3 = 2.0e4\nT_1 = 14.0\n"
+                                    "T_2 = 48.0\n", "[spring.panda_joint2]\nlaw = \"cubic\"\nrange = 0.02\n"
+                                                    "k1 = 1.2e4\nk3 = 1e8\n")
+    spec = parse_model_text(text, "arm.toml", base_dir=PANDA_HD, builtin=True)
+    assert spec.springs[1].kind == "cubic" and spec.springs[1].coefficients == {"k1": 1.2e4, "k3": 1e8}
+    assert [p.name for p in spec.build().params][6:8] == ["k1_2", "k3_2"]
+
+
+@pytest.mark.parametrize("edit, anchor, message", [
+    (("[spring.panda_joint3]\nK_1 = 1.3e4\nK_2 = 1.7e4", "[spring.panda_joint3]\nK_1 = 1.3e4\nK_2 = 1.0e4"),
+     "[spring.panda_joint3]", "spring.panda_joint3.law: joint panda_joint3: "),
+    (("[friction.panda_joint2]\nF_c = 0.8", "[friction.panda_joint2]\nF_c = -0.8"), "F_c = -0.8",
+     "friction.panda_joint2.F_c: -0.8 N m is not physical"),
+    (("[spring.panda_joint4]", "[spring.panda_joint9]"), "[spring.panda_joint9]",
+     "no revolute joint 'panda_joint9' on the chain"),
+    (("[joints.panda_joint1]\nJm = 0.3", "[joints.panda_joint1]\nJm = 0.3\nK = 1e4"), "K = 1e4",
+     "has a nonlinear spring law ([spring.*]), which replaces its stiffness K"),
+    (("[friction.default]      # wrist motors, link side\nF_c = 0.4", "[friction.default]\nF_c = 0.4\nmu = 0.1"),
+     "mu = 0.1", "friction.default.mu: unknown key"),
+])
+def test_urdf_drive_table_errors_are_one_line_at_the_key(edit, anchor, message):
+    text = _panda_hd_text()
+    assert edit[0] in text
+    bad = text.replace(*edit)
+    with pytest.raises(ModelFileError) as info:
+        parse_model_text(bad, "arm.toml", base_dir=PANDA_HD, builtin=True)
+    msg = str(info.value)
+    assert "\n" not in msg and message in msg, msg
+    assert msg.startswith(f"arm.toml:{_line(bad, anchor)}: "), msg
+    if "K_1 <= K_2" in message or "joint panda_joint3" in message:
+        assert "expected K_1 <= K_2 <= K_3" in msg

@@ -49,7 +49,7 @@ from fjm_runtime.model import QUANTITIES, available_models, generated_root
 pytestmark = pytest.mark.slow  # builds C: `pytest -m "not slow"` skips it
 
 MODELS = ("link1", "planar1", "planar2", "planar3", "planar4", "planar5", "planar6", "planar7", "elbow3", "panda",
-          "baxter", "link1_complete", "planar2_complete", "panda_complete", "link1_hd", "arm1_hd")
+          "baxter", "link1_complete", "planar2_complete", "panda_complete", "link1_hd", "arm1_hd", "panda_hd")
 #: The models whose C holds the emitted control laws (the complete models ship the model quantities only).
 CONTROL_MODELS = tuple(m for m in MODELS
                        if json.loads((generated_root() / m / "manifest.json").read_text()).get("controls"))

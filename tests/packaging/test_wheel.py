@@ -39,7 +39,7 @@ from fjm_runtime.model import COMPLETE_QUANTITIES, QUANTITIES
 from support.paths import REPO  # noqa: E402
 pytestmark = pytest.mark.slow  # builds and installs a wheel: `pytest -m "not slow"` skips it
 MODELS = ("link1", "planar1", "planar2", "planar3", "planar4", "planar5", "planar6", "planar7", "elbow3", "panda",
-          "baxter", "link1_hd", "arm1_hd")
+          "baxter", "link1_hd", "arm1_hd", "panda_hd")
 #: Complete models (rotor spin coupling): plant functions only (fjm_runtime.model.COMPLETE_QUANTITIES).
 COMPLETE = ("link1_complete", "planar2_complete", "panda_complete")
 SOURCES = ("pyproject.toml", "README.md", "LICENSE", "derive", "fjm_runtime", "generated")

@@ -24,7 +24,8 @@ from fjm_runtime.validation import FjmValueError
 
 REDUCED = ["link1", "planar2", "elbow3", "panda", "baxter",  # baxter: a tree (head pan, two arms)
            "link1_hd",  # a cubic spring: MuJoCo's polynomial tendon stiffness
-           "arm1_hd"]  # the datasheet curve: a custom numeric and the passive callback
+           "arm1_hd",  # the datasheet curve: a custom numeric and the passive callback
+           "panda_hd"]  # seven datasheet curves and motor frictions through the same callback
 COMPLETE = ["link1_complete", "planar2_complete", "panda_complete"]
 TOL = 1e-12
 
@@ -275,3 +276,31 @@ def test_closed_loop_on_the_datasheet_spring_equals_simulate(tmp_path):
     res = _mujoco_equals_simulate(m, ref, true, tmp_path, x0=x0)
     phi = res.x[:, 2] - res.x[:, 0]
     assert np.max(np.abs(phi)) > true["T_1"] / true["K_1"], np.max(np.abs(phi))
+
+
+def test_closed_loop_on_the_panda_drives_equals_simulate(tmp_path):
+    """panda_hd, true curves x1.1 on every joint and the friction x1.4: the state-sensed ismc derived for the
+    curves (datasheet values, the shipped Panda design's gains) at 1 kHz on 14 substeps (the rule's), MuJoCo with the
+    passive callback (seven curves, seven motor frictions) vs fjm's simulate, 0.5 s from rest against
+    gravity; a drive's deflection passes its first breakpoint."""
+    from fjm_runtime.control.designed import designed_gains, law_gains
+    from fjm_runtime.experiments import panda as P
+    m = fjm_runtime.load("panda_hd")
+    d = m.default_params
+    true = dict(d, **{k: 1.1 * v for k, v in d.items() if k[:3] in ("K_1", "K_2", "K_3")},
+                **{k: 1.4 * v for k, v in d.items() if k[:3] in ("F_c", "F_s")})
+    ref = P.reference(m.n)
+    x0 = P.rest_state(m, ref(0.0)[0], true)
+    path = write_mjcf(m, tmp_path / "panda_hd.xml", true, timestep=1e-3 / 14)
+    spec = designed_gains("panda", "ismc", "torque", 1000, 1)
+
+    def ctrl():
+        return fjm_runtime.make_controller("ismc", m, None, u_max=spec["gains"]["u_max"], **law_gains(spec))
+    res = fjm_runtime.simulate(m, ctrl(), ref, duration=0.5, dt=1e-3, substeps=14, true_params=true, x0=x0)
+    t, X, U = run_closed_loop(MujocoPlant(m, path, true), ctrl(), ref, duration=0.5, dt=1e-3, substeps=14, x0=x0)
+    assert np.array_equal(t, res.t)
+    assert np.max(np.abs(X - res.x)) < 1e-9 * max(1.0, np.max(np.abs(res.x)))
+    assert np.max(np.abs(U - res.u)) < 1e-9 * max(1.0, np.max(np.abs(res.u)))
+    reach = np.max(np.abs(res.x[:, 2 * m.n:3 * m.n] - res.x[:, :m.n]), axis=0)
+    phi_1 = np.array([true[f"T_1_{j}"] / true[f"K_1_{j}"] for j in range(1, m.n + 1)])
+    assert np.any(reach > phi_1), (reach, phi_1)  # some drive runs past its first breakpoint
