@@ -9,13 +9,14 @@ ismc gains and the URDF effort limits) on TRUE drives drawn around the datasheet
 breakpoints x0.8..1.2, friction x0.5..1.5, rotors x0.8..1.2, payload 0..1 kg) and is judged by the
 design thresholds (worst-joint RMS <= 2e-3 rad, jitter on joints 1-4 <= 3 N m, <= 2 % at a limit):
 
-* the law derived for the curves with the nominal friction fed forward, and without it;
+* the law derived for the curves with the nominal friction fed forward (also with the gains ``fjm design``
+  found for panda_hd itself), and without the feedforward;
 * the same law told a linear spring at the first segment (K_2 = K_3 = K_1) with the feedforward;
 * the shipped design itself (built on the linear ``panda``, K = 1e4 / 3e3 N m/rad);
 * PD + gravity on ``panda`` (fjm_runtime/experiments/panda_drives.py: PDG_GAINS).
 
 It prints the table of docs/real-drives.md and writes it with every draw's figures to ``--out``
-(``panda_drives.md``, ``panda_drives.json``). About 6 minutes on 2 cores for 200 drives.
+(``panda_drives.md``, ``panda_drives.json``). About 4 minutes on 2 cores for 200 drives.
 """
 from __future__ import annotations
 

@@ -53,7 +53,7 @@ from typing import Callable, Optional
 
 import numpy as np
 
-from ..sim.sample_step import stiffness_indices
+from .sampled_linear import scaled_stiffness
 from ..sim.sensor import SensorModel
 from ..validation import FjmValueError
 from .design_draws import PlantSpread, default_spread, draw_params
@@ -236,14 +236,9 @@ def _delay_margin(prob, gains, P, duration, seed, max_extra, say) -> int:
 
 def _gain_range(prob, gains, duration, seed, say):
     """``[g_low, g_high]``: all stiffnesses x ``g``, widening from the box [0.7, 1.3] until a run fails."""
-    iK = stiffness_indices(prob.model)[0]
     p0 = np.asarray(prob.model.params_array(prob.nominal), dtype=float)
     lows, highs = [0.7, 0.6, 0.5, 0.4, 0.3, 0.2], [1.3, 1.5, 1.75, 2.0, 2.5, 3.0, 4.0]
-    rows = []
-    for g in lows + highs:
-        p = p0.copy()
-        p[iK] *= g
-        rows.append(p)
+    rows = [scaled_stiffness(prob.model, p0, g) for g in lows + highs]  # every spring torque x g
     cost, b = prob.batch([gains], np.vstack(rows), duration, seed)
     ok = (cost[0] < PENALTY) & ~b.diverged
 

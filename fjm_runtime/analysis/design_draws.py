@@ -1,7 +1,8 @@
 """The plant of a design: the controller's NOMINAL parameters and the spread of the TRUE plant draws.
 
 A :class:`PlantSpread` holds both. Without a parameter file it is today's box: every joint
-stiffness ``K x U[0.7, 1.3]``, every motor inertia ``J_m x U[0.8, 1.2]``, a payload
+stiffness ``K x U[0.7, 1.3]`` (a nonlinear spring: its whole curve, drawn by its small-deflection
+stiffness ``K_1`` or ``k1``, the other torque coefficients following), every motor inertia ``J_m x U[0.8, 1.2]``, a payload
 ``m_load ~ U[0, 1]`` kg on models that have one, the rest at the model's defaults. A parameter
 file (``fjm design --params FILE``, :func:`load_params_file`; format in docs/design-command.md)
 sets nominal values in the model-file form and the spread::
@@ -31,7 +32,7 @@ from typing import Dict, Optional, Tuple
 
 import numpy as np
 
-from ..sim.sample_step import stiffness_indices
+from ..sim.step_layout import spring_scale_groups, stiffness_scale_indices
 from ..validation import FjmValueError
 
 __all__ = ["GROUPS", "PlantSpread", "default_spread", "draw_params", "load_params_file"]
@@ -79,7 +80,7 @@ def default_spread(model, nominal: Optional[Dict[str, float]] = None) -> PlantSp
     """Today's box around ``nominal`` (default: the model's defaults)."""
     nom = dict(model.default_params)
     nom.update(nominal or {})
-    iK, iJ = stiffness_indices(model)
+    iK, iJ = stiffness_scale_indices(model)
     names = list(model.param_names)
     rel = {names[i]: DEFAULT_GROUP_SPREAD["stiffness"] for i in iK}
     rel.update({names[i]: DEFAULT_GROUP_SPREAD["motor_inertia"] for i in iJ})
@@ -106,7 +107,7 @@ def _bounds(model, spread: PlantSpread, idx):
 
 def _blocks(model, spread: PlantSpread):
     """Index blocks in draw order: stiffnesses, motor inertias, payload, every other spread parameter."""
-    iK, iJ = (list(map(int, a)) for a in stiffness_indices(model))
+    iK, iJ = (list(map(int, a)) for a in stiffness_scale_indices(model))
     names = list(model.param_names)
     iL = [names.index("m_load")] if "m_load" in spread.absolute or "m_load" in spread.relative else []
     taken = set(iK) | set(iJ) | set(iL)
@@ -155,7 +156,8 @@ def draw_params(model, count: int, seed: int, spread: Optional[PlantSpread] = No
     p0 = np.asarray(model.params_array(spread.nominal), dtype=float)
     blocks = _blocks(model, spread)
     bounds = [_bounds(model, spread, b) for b in blocks]
-    iK = list(map(int, stiffness_indices(model)[0]))
+    iK = list(map(int, stiffness_scale_indices(model)[0]))
+    groups = spring_scale_groups(model)
     kb = _bounds(model, spread, iK)
     alt = np.where(np.arange(n) % 2 == 0, kb[0], kb[1])
     k_corners = (kb[0], kb[1], alt)
@@ -175,8 +177,17 @@ def draw_params(model, count: int, seed: int, spread: Optional[PlantSpread] = No
         else:
             for b, (lo, hi, rel) in zip(blocks, bounds):
                 _apply(p, b, rng.uniform(lo, hi), rel)
-        rows.append(p)
+        rows.append(_follow(p, p0, groups))
     return np.vstack(rows)
+
+
+def _follow(p, p0, groups):
+    """``p`` with each nonlinear spring's other torque coefficients scaled as its drawn small-deflection stiffness
+    (:func:`~fjm_runtime.sim.step_layout.spring_scale_groups`): the whole curve x the factor, its shape kept."""
+    for grp in groups:
+        if len(grp) > 1:
+            p[grp[1:]] = p0[grp[1:]] * (p[grp[0]] / p0[grp[0]])
+    return p
 
 
 # -- the parameter file ------------------------------------------------------------------------------
@@ -243,7 +254,7 @@ def _nominal_entry(where, model, key, entry, units) -> float:
 
 
 def _spread_entry(where, model, key, v):
-    iK, iJ = stiffness_indices(model)
+    iK, iJ = stiffness_scale_indices(model)
     names = list(model.param_names)
     if key not in GROUPS and key not in names:
         raise FjmValueError(f"{where('spread', key)}: not a group ({', '.join(GROUPS)}) or a parameter of "
@@ -292,7 +303,7 @@ def load_params_file(path, model) -> PlantSpread:
             raise FjmValueError(f"{p}: {table} = {data[table]!r}; expected a table [{table}]")
     units = _units(model)
     overrides = {k: _nominal_entry(where, model, k, v, units) for k, v in data.get("parameters", {}).items()}
-    iK, iJ = stiffness_indices(model)
+    iK, iJ = stiffness_scale_indices(model)
     names = list(model.param_names)
     for i in list(iK) + list(iJ):
         if names[i] in overrides and overrides[names[i]] <= 0:

@@ -36,6 +36,7 @@ from typing import Optional, Sequence
 import numpy as np
 
 from ..sim.sample_step import initial_step_state, make_layout, sample_step_function, stiffness_indices
+from ..sim.step_layout import spring_scale_groups
 from ..sim.sensor import SIGNALS, noise_slots
 from ..validation import FjmValueError
 from .sampled_noise import channel_variances, stationary_covariance, torque_jitter_variance
@@ -295,17 +296,25 @@ class Conditions:
 
 
 def scaled_stiffness(model, p, g: float) -> np.ndarray:
-    """``p`` with every stiffness ``K_i`` times ``g`` (the TRUE plant)."""
+    """``p`` with every spring torque times ``g`` (the TRUE plant): each ``K_i``, or every coefficient of a
+    nonlinear law that scales its torque (:func:`~fjm_runtime.sim.step_layout.spring_scale_groups`)."""
     p = np.asarray(p, dtype=float).copy()
-    p[stiffness_indices(model)[0]] *= g
+    for grp in spring_scale_groups(model):
+        p[grp] *= g
     return p
 
 
 def respring(model, x, p_from, p_to) -> np.ndarray:
-    """``x`` with the motor angles moved so that the spring torque ``K (q_m - q)`` is the same under ``p_to``."""
+    """``x`` with the motor angles moved so that the spring torques (``K (q_m - q)`` or ``psi(q_m - q)``) are the
+    same under ``p_to`` as under ``p_from``."""
     n = int(model.n)
-    iK = stiffness_indices(model)[0]
     x = np.asarray(x, dtype=float).copy()
+    springs = getattr(model, "spring_functions", None)
+    if springs is not None:
+        tau = np.asarray(springs["spring"](x[2 * n:3 * n] - x[0:n], np.asarray(p_from, dtype=float))[0]).ravel()
+        x[2 * n:3 * n] = x[0:n] + np.asarray(springs["spring_inverse"](tau, np.asarray(p_to, dtype=float))).ravel()
+        return x
+    iK = stiffness_indices(model)[0]
     ratio = np.asarray(p_from, dtype=float)[iK] / np.asarray(p_to, dtype=float)[iK]
     x[2 * n:3 * n] = x[0:n] + (x[2 * n:3 * n] - x[0:n]) * ratio
     return x

@@ -78,7 +78,7 @@ def demo_task(m, nominal=None) -> dict:
     Panda: joint-space sines about the ready pose; Baxter: both arms on the same sines, the head still.
     Both start at rest holding gravity (``nominal`` parameters; default the model's).
     """
-    if m.name == "panda":
+    if m.name in ("panda", "panda_hd"):  # panda_hd: the same arm on harmonic drives
         from ..experiments import panda as demo  # the demo's task: cli sits on top, like experiments
         kind, offset, amplitude, omega = ("panda ready-pose sines (the demo's)", list(demo.READY),
                                           list(demo.AMPLITUDE), list(demo.OMEGA))
@@ -150,11 +150,6 @@ def run(args) -> int:
         raise FjmValueError(f"--screen-draws {args.screen_draws} / --screen-duration {args.screen_duration} / "
                             f"--rounds {args.rounds}: expected >= 1, a finite duration > 0 s, >= 0")
     m = load(args.model)
-    if m.spring_functions is not None:
-        law = m.manifest["springs"]["joints"][0]["law"]
-        raise FjmValueError(f"model {m.name!r} has a nonlinear spring ({law}); fjm design draws its plants around a "
-                            "linear stiffness K and does not design for it yet (docs/real-drives.md: use fjm tune, "
-                            "or fjm simulate with your gains)")
     check_samples(max(args.duration, args.screen_duration), args.rate, int(m.n), "--duration/--rate")
     sensor, thresholds, spread = _settings(args, m)
     task = demo_task(m, spread.nominal) if args.task == "auto" else {}

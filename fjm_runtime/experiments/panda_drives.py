@@ -12,6 +12,9 @@ design thresholds (:class:`fjm_runtime.analysis.design_thresholds.Thresholds` de
 
 * ``curve + friction FF``: ``panda_hd``'s torque-sensed ismc at the datasheet values (the law derived for
   the nonlinear springs, compensating the nominal friction);
+* ``curve + friction FF, panda_hd's own design``: the same law with the gains ``fjm design`` found for
+  ``panda_hd`` (``fjm_runtime/control/designed/panda_hd_ismc_tau_1000hz_d1.json``, params
+  ``examples/panda_hd_drives.toml``), the only row not on the Panda design's gains;
 * ``curve, no friction FF``: the same law told ``F_c = F_s = 0``;
 * ``linear K_1 + friction FF``: the same law told a linear spring at the first segment (``K_2 = K_3 = K_1``);
 * ``panda (linear K) law``: the shipped design as it is, on the linear model ``panda`` (``K`` = 1e4 / 3e3),
@@ -32,6 +35,7 @@ import numpy as np
 
 #: The compared laws: (label, model the law is built on, nominal edits of panda_hd's datasheet values, kind).
 LAWS = (("curve + friction FF", "panda_hd", {}, "ismc"),
+        ("curve + friction FF, panda_hd's own design", "panda_hd", {}, "ismc_hd"),
         ("curve, no friction FF", "panda_hd", {"F_c": 0.0, "F_s": 0.0}, "ismc"),
         ("linear K_1 + friction FF", "panda_hd", {"K_2": "K_1", "K_3": "K_1"}, "ismc"),
         ("panda (linear K) law", "panda", None, "ismc"),
@@ -87,6 +91,10 @@ def _controller(kind: str, model, nominal: dict, gains: dict, u_max):
     from ..control.factory import make_controller
     if kind == "pdg":
         return make_controller("pdg", model, nominal, u_max=u_max, **PDG_GAINS)
+    if kind == "ismc_hd":  # panda_hd's own design
+        from ..control.designed import designed_gains, law_gains
+        return make_controller("ismc", model, nominal, sensing="torque", u_max=u_max,
+                               **law_gains(designed_gains("panda_hd", "ismc", "torque", 1000.0, 1)))
     return make_controller(kind, model, nominal, sensing="torque", u_max=u_max, **gains)
 
 

@@ -151,6 +151,7 @@ def controller_functions(model, controller, L: StepLayout, name: str):
     fns = casadi_functions(model)
     if fns is None:
         raise FjmValueError(f"model {model.name!r}: no CasADi Functions f, g to predict with")
+    fns = dict(fns, **(getattr(model, "spring_functions", None) or {}))  # a nonlinear spring's psi, psi^-1
     n, n_par = L.n, len(model.param_names)
     CL = ControllerLayout(L)
     n_gains = int(np.asarray(controller.gains).size)
@@ -159,7 +160,7 @@ def controller_functions(model, controller, L: StepLayout, name: str):
     c, m_raw = ca.MX.sym("c", CL.nc), ca.MX.sym("m", L.nm)
     r, p, gains = ca.MX.sym("r", 5 * n), ca.MX.sym("p", n_par), ca.MX.sym("gains", n_gains)
     K_nom = None
-    if L.sensing == "torque":
+    if L.sensing == "torque" and not L.nominal_spring:  # a nonlinear spring predicts through psi^-1 instead
         K_nom = ops.take(p, stiffness_indices(model)[0])
     b = CL.split(c)
     m_k, filt_next, venc_next = ss._condition(ops, L, _blocks(m_raw, L), b["venc"], b["filt"])
@@ -206,6 +207,8 @@ def _reset_function(model, L: StepLayout, CL: ControllerLayout, name: str, ops):
     m_rest = ca.vertcat(*parts)
     if L.sensing == "torque":
         spring = parts[2]
+    elif getattr(model, "spring_functions", None) is not None:
+        spring = ops.spring(parts[2] - parts[0], p)[0]
     else:
         idx = stiffness_indices(model)[0]
         spring = ops.take(p, idx) * (parts[2] - parts[0])

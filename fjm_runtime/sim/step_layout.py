@@ -14,7 +14,8 @@ import numpy as np
 from ..validation import FjmValueError
 from .sensor import SensorModel
 
-__all__ = ["StepLayout", "controller_model", "make_layout", "stiffness_indices"]
+__all__ = ["StepLayout", "controller_model", "make_layout", "spring_scale_groups", "stiffness_indices",
+           "stiffness_scale_indices"]
 
 #: The rate limit's stand-in for "none" in the arithmetic (finite, so C and SIMD code see no inf).
 _NO_LIMIT = 1e300
@@ -30,6 +31,31 @@ def stiffness_indices(model):
     except ValueError:
         raise FjmValueError(f"model {getattr(model, 'name', '?')!r}: torque sensing needs the stiffness "
                             f"parameters {groups[0]} (found {names})") from None
+
+
+def spring_scale_groups(model):
+    """Per joint, the indices of the parameters that scale its spring torque together, list of n int arrays.
+
+    Multiplying a group by ``g`` multiplies that joint's ``psi`` by ``g`` exactly: a linear spring's ``K``; a
+    nonlinear law's coefficients (manifest ``springs``) but the blend width: the cubic's ``k1, k3``, the
+    three-segment curve's ``K_1, K_2, K_3, T_1, T_2`` (its breakpoints ``T / K`` stay). The first index of a
+    group is the joint's stiffness at small deflection (``K``, ``k1``, ``K_1``).
+    """
+    joints = ((getattr(model, "manifest", None) or {}).get("springs") or {}).get("joints")
+    if not joints:
+        return [np.array([i]) for i in stiffness_indices(model)[0]]
+    names = list(model.param_names)
+    return [np.array([names.index(c) for c in j["parameters"] if not c.startswith("w_blend")])
+            for j in sorted(joints, key=lambda j: j["joint"])]
+
+
+def stiffness_scale_indices(model):
+    """``(idx_K, idx_Jm)`` as :func:`stiffness_indices`, with a nonlinear spring's small-deflection stiffness
+    (the first index of each :func:`spring_scale_groups` group) standing for ``K_i``."""
+    groups = spring_scale_groups(model)
+    names, n = list(model.param_names), int(model.n)
+    jm = ["J_m"] if (n == 1 and "J_m" in names) else [f"Jm{i + 1}" for i in range(n)]
+    return np.array([int(g[0]) for g in groups], dtype=int), np.array([names.index(j) for j in jm], dtype=int)
 
 
 def controller_model(controller, plant):

@@ -199,10 +199,3 @@ def test_rest_state_carries_gravity_through_the_curve(model):
         assert model.f(x, p)[1] == pytest.approx(0.0, abs=1e-9)
         psi, _ = datasheet(x[2] - x[0], *_curve(p))
         assert psi == pytest.approx(p["m1"] * p["g0"] * p["r1"] * np.sin(q), rel=1e-12)
-
-
-def test_design_refuses_a_nonlinear_spring_in_one_line(capsys):
-    from fjm_runtime.cli.main import main
-    status = main(["design", "arm1_hd", "--draws", "2", "--duration", "1"])
-    err = capsys.readouterr().err.strip()
-    assert status != 0 and "\n" not in err and "has a nonlinear spring (three_segment)" in err, (status, err)

@@ -212,6 +212,25 @@ def test_baxter_shipped_design_equals_simulator(tmp_path_factory):
     _check_equal(design, tmp_path_factory, 1.0, float_bound=5e-2)
 
 
+@pytest.mark.slow
+@pytest.mark.exhaustive
+def test_panda_hd_shipped_design_equals_simulator(tmp_path_factory):
+    """The Panda on harmonic drives (seven datasheet curves, motor friction): its shipped design, whose
+    predictor rebuilds q_m through the curves' inverse psi^-1(tau_J); 1 s, C == simulator to 1e-12."""
+    design = design_controller(fjm_runtime.load("panda_hd"),
+                               designed_gains("panda_hd", "ismc", "torque", 1000.0, 1))
+    _check_equal(design, tmp_path_factory, 1.0, float_bound=5e-2)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("sensing, noise", [("torque", "franka_like"), ("state", "panda_white")])
+def test_datasheet_spring_equals_simulator(tmp_path_factory, sensing, noise):
+    """arm1_hd (a three-segment curve): torque sensing predicts through psi^-1, state sensing resets the
+    held torque to psi(q_m - q); 2 s, C == simulator to 1e-12."""
+    design = _design("arm1_hd", "ismc", sensing, noise, u_max=60.0, lam=30.0, k_s=100.0, delta=5.0)
+    _check_equal(design, tmp_path_factory, 2.0, _sine(design, amplitude=0.3, omega=3.0), float_bound=1e-2)
+
+
 #: Gains that track on a 2 s sine with a torque limit below the run's peak (the limit is reached,
 #: but most samples are the unclipped law).
 _SOFT = {"lam": 5.0, "k_s": 10.0, "delta": 20.0}
