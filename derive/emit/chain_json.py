@@ -184,14 +184,15 @@ def chain_document(m: FlexibleJointModel) -> Optional[dict]:
     -------
     dict or None
     """
-    # a nonlinear spring's coefficients stand where K stood (link1_hd, the one-link drive model files)
-    spring_names = {str(c) for s in (m.springs or ()) if s.kind != "linear" for c in s.parameters}
+    # a nonlinear spring's coefficients stand where its K stood (link1_hd, the drive model files)
+    nonlinear = [s for s in (m.springs or ()) if s.kind != "linear"]
+    spring_names = {str(c) for s in nonlinear for c in s.parameters}
     names = [x for x in m.param_names if x not in spring_names]
-    K_slot = ["K"] if m.springs is None or m.springs[0].kind == "linear" else []
+    K_slot = ["K"] if not nonlinear else []
+    planar = [x for x in planar_param_names(m.n) if x not in {f"K{s.joint}" for s in nonlinear}]
     if m.source is not None and "urdf" in m.source:
         body = _urdf(m)
-    elif names[:len(planar_param_names(m.n))] == planar_param_names(m.n) or (
-            m.n == 1 and not K_slot and names[:7] == [x for x in planar_param_names(1) if x != "K1"]):
+    elif names[:len(planar)] == planar:
         body = _planar(m)
     elif m.n == 1 and names[:7 - 1 + len(K_slot)] == ["J_l", "J_m", *K_slot, "M", "g0", "L", "B_m"]:
         body = _link1(m)

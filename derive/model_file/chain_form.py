@@ -14,7 +14,8 @@ from typing import Dict, Optional, Tuple
 
 from ..core.model_base import PLANAR_GROUPS, FlexibleJointModel, param_group, planar_param_names
 from ..planar.planar import make_planar
-from .drive_tables import DRIVE_TABLES, SpringSpec, parse_friction_table, parse_spring_table, spring_error
+from .drive_tables import (DRIVE_TABLES, SpringSpec, parse_friction_table, parse_joint_drive_tables, parse_spring_table,
+                           spring_error)
 from .schema import Checker, ModelFileError, check_description, check_name, got, number, show, suggest
 from .toml_keys import KeyPath
 
@@ -53,27 +54,40 @@ class ModelSpec:
     defaults: Dict[str, float] = field(default_factory=dict)
     units: Dict[str, str] = field(default_factory=dict)  # parameter name -> SI unit (all params)
     source: str = "<model file>"
-    spring: Optional[SpringSpec] = None  # [spring] (one link only; derive.model_file.drive_tables)
+    spring: Optional[SpringSpec] = None  # [spring] (one link; derive.model_file.drive_tables)
     friction: Optional[Dict[str, float]] = None  # [friction]: F_c, F_s, v_s, v_c
+    springs: Optional[Tuple[SpringSpec, ...]] = None  # [spring.*] per joint (several links)
+    frictions: Optional[Tuple[Optional[Dict[str, float]], ...]] = None  # [friction.*] per joint (several links)
+
+    def drives(self):
+        """``(springs, frictions)`` per joint (each None without such tables), one link or several."""
+        if self.links == 1:
+            return (None if self.spring is None else (self.spring,),
+                    None if self.friction is None else (self.friction,))
+        return self.springs, self.frictions
 
     def build(self) -> FlexibleJointModel:
-        """The symbolic model (a planar chain with this name, defaults and description; its drive when
-        the file has a ``[spring]`` or ``[friction]`` table: :func:`derive.core.spring.with_drive`)."""
+        """The symbolic model (a planar chain with this name, defaults and description; its drives when
+        the file has spring or friction tables: :func:`derive.core.spring.with_drives`)."""
         chain = make_planar(self.links, name=self.name, defaults=dict(self.defaults),
                             description=self.description)
-        if self.spring is None and self.friction is None:
+        springs, frictions = self.drives()
+        if springs is None and frictions is None:
             return chain
-        from ..core.spring import with_drive
-        spring = self.spring or SpringSpec("linear", {}, 3.141592653589793)
-        return with_drive(chain, spring.kind, spring.coefficients, spring.deflection_range, self.friction,
-                          description=self.description or _drive_description(self.links, spring, self.friction))
+        from ..core.spring import with_drives
+        springs = springs or (SpringSpec("linear", {}, 3.141592653589793),) * self.links
+        return with_drives(chain, [(s.kind, s.coefficients, s.deflection_range) for s in springs],
+                           None if frictions is None else list(frictions),
+                           description=self.description or _drive_description(self.links, springs, frictions))
 
 
-def _drive_description(links: int, spring: SpringSpec, friction) -> str:
-    law = {"linear": "linear spring K1", "cubic": "cubic spring k1 phi + k3 phi^3",
-           "three_segment": "three-segment (datasheet) spring"}[spring.kind]
-    return (f"{links}-link planar chain from a model file with a {law}"
-            + (" and Coulomb/Stribeck motor friction" if friction is not None else "") + ".")
+def _drive_description(links: int, springs, frictions) -> str:
+    names = {"linear": "linear spring K", "cubic": "cubic spring k1 phi + k3 phi^3",
+             "three_segment": "three-segment (datasheet) spring"}
+    kinds = sorted({s.kind for s in springs}, key=list(names).index)
+    law = " / ".join(names[k] for k in kinds) + ("s" if links > 1 else "")
+    return (f"{links}-link planar chain from a model file with {'a ' if links == 1 else ''}{law}"
+            + (" and Coulomb/Stribeck motor friction" if frictions is not None else "") + ".")
 
 
 def _normalize_unit(unit: str) -> str:
@@ -97,8 +111,8 @@ def _model_table(data: dict, chk: Checker, builtin: bool) -> Tuple[str, int, Opt
             hint = (f" (did you mean `{key} = ...` under [model]?)" if key in MODEL_KEYS
                     else " (parameters go under [parameters])" if param_group(key) in SI_UNITS
                     else suggest(key, ("model", "parameters") + DRIVE_TABLES))
-            raise chk.fail((key,), f"unknown key; a model file has the tables [model], [parameters] and, "
-                                   f"for one link, [spring] and [friction] only{hint}")
+            raise chk.fail((key,), f"unknown key; a model file has the tables [model], [parameters], [spring] and "
+                                   f"[friction] only{hint}")
     if "model" not in data:
         raise ModelFileError("missing required table [model] (with name = \"...\" and links = 1..7)",
                              chk.source, 1, "model")
@@ -213,15 +227,25 @@ def parse_chain_form(data: dict, chk: Checker, builtin: bool) -> ModelSpec:
     _check_com_on_links(chk, links, defaults, value_path)
     names = planar_param_names(links)
     units = {n_: SI_UNITS[param_group(n_)] for n_ in names}
-    spring = parse_spring_table(data, chk, links)
-    friction = parse_friction_table(data, chk, links)
-    if spring is not None and spring.kind != "linear" and "K1" in defaults:
-        raise chk.fail(value_path["K1"], f"the [spring] law {spring.kind!r} replaces the linear stiffness K1; "
-                                         f"give its coefficients ({', '.join(spring.coefficients)}) under [spring]")
+    spring = friction = springs = frictions = None
+    if links == 1:
+        spring = parse_spring_table(data, chk, links)
+        friction = parse_friction_table(data, chk, links)
+    elif any(isinstance(data.get(t), dict) and data[t] and all(isinstance(v, dict) for v in data[t].values())
+             for t in DRIVE_TABLES):
+        springs, frictions = parse_joint_drive_tables(data, chk, tuple(str(j) for j in range(1, links + 1)))
+    else:  # a flat table on several links: one-line error
+        parse_spring_table(data, chk, links), parse_friction_table(data, chk, links)
+    for j, s in enumerate((spring,) if links == 1 else (springs or ()), 1):
+        if s is not None and s.kind != "linear" and f"K{j}" in defaults:
+            where = "[spring]" if links == 1 else f"[spring.*] of joint {j}"
+            raise chk.fail(value_path[f"K{j}"], f"the {where} law {s.kind!r} replaces the linear stiffness K{j}; "
+                                                f"give its coefficients ({', '.join(s.coefficients)}) there")
     spec = ModelSpec(name=name, links=links, description=description,
                      defaults={k: defaults[k] for k in names if k in defaults}, units=units, source=chk.source,
-                     spring=spring, friction=friction)
-    if spring is not None or friction is not None:
+                     spring=spring, friction=friction, springs=None if springs is None else tuple(springs),
+                     frictions=None if frictions is None else tuple(frictions))
+    if links == 1 and (spring is not None or friction is not None):
         from ..core.friction import FrictionError
         from ..core.spring_laws import SpringError
         try:

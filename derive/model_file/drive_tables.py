@@ -21,7 +21,8 @@ A one-link planar file has one of each::
 
 A URDF file has them per joint, as its ``[joints.*]``: ``[spring.default]`` and ``[spring.<URDF joint>]``
 (keys of the joint's table over the default's), the same for ``[friction.*]``
-(:func:`parse_joint_drive_tables`). The coefficients become runtime parameters of the same names, suffixed
+(:func:`parse_joint_drive_tables`); a planar file of several links the same with joint numbers
+(``[spring.default]``, ``[spring.2]``). The coefficients become runtime parameters of the same names, suffixed
 by the joint number when the model has several joints (``K_1_3``, ``F_c_3``; defaults from the file). The
 law's own check (``psi' > 0`` on the range, breakpoints in order) is reported at the ``law`` line.
 """
@@ -74,8 +75,8 @@ def _table(data: dict, chk: Checker, name: str, links: int) -> Optional[dict]:
     if not isinstance(table, dict):
         raise chk.fail((name,), f"expected a table ([{name}] with key = value lines), {got(table)}")
     if links != 1:
-        raise chk.fail((name,), f"a [{name}] table needs a one-link chain (links = 1): nonlinear springs and "
-                                f"motor friction are derived for one joint for now; this file has links = {links}")
+        raise chk.fail((name,), f"a flat [{name}] table is for one link; this file has links = {links}: give "
+                                f"[{name}.default] and [{name}.<joint number>] tables (per joint, 1..{links})")
     return table
 
 
@@ -136,9 +137,10 @@ def _friction(table: dict, chk: Checker, where, line_path) -> Dict[str, float]:
 
 def parse_joint_drive_tables(data: dict, chk: Checker, joints: Sequence[str]
                              ) -> Tuple[Optional[List[SpringSpec]], Optional[List[Optional[Dict[str, float]]]]]:
-    """``[spring.*]`` and ``[friction.*]`` of a URDF model file: per chain joint in q order.
+    """``[spring.*]`` and ``[friction.*]`` of a URDF or several-link model file: per joint in q order.
 
-    ``[spring.default]`` applies to every joint, ``[spring.<URDF joint name>]`` overrides its keys for one
+    ``joints``: the URDF joint names, or ``"1" .. "n"`` for a planar chain. ``[spring.default]`` applies to
+    every joint, ``[spring.<joint>]`` overrides its keys for one
     (a joint table with its own ``law`` replaces the default table). Without any spring table the springs
     are the linear ``K`` of ``[joints.*]``; with friction tables only, a joint without one (and no default)
     has no friction. Returns ``(springs, frictions)``, each None when the file has no such table.
@@ -150,7 +152,8 @@ def parse_joint_drive_tables(data: dict, chk: Checker, joints: Sequence[str]
             out.append(None)
             continue
         if not isinstance(tables, dict) or not all(isinstance(t, dict) for t in tables.values()):
-            raise chk.fail((name,), f"expected tables [{name}.default] and [{name}.<URDF joint name>], {got(tables)}")
+            raise chk.fail((name,), f"expected tables [{name}.default] and [{name}.<joint>] (joints: "
+                                    f"{', '.join(joints)}), {got(tables)}")
         for jname in tables:
             if jname != "default" and jname not in joints:
                 raise chk.fail((name, jname), f"no revolute joint {jname!r} on the chain; expected 'default' or one "

@@ -153,7 +153,7 @@ def test_a_drive_model_file_builds_the_law_and_friction():
                                       "must be >= 0"),
     (("law = \"three_segment\"", "law = \"cubic\"\nk1 = 100.0\nk3 = -1e6"), 10,
      "spring.K_1: unknown key for law = \"cubic\""),
-    (("links = 1", "links = 2"), 5, "a [spring] table needs a one-link chain (links = 1)"),
+    (("links = 1", "links = 2"), 5, "a flat [spring] table is for one link; this file has links = 2"),
     (("K_2 = 1.7e4", "K_2 = 1.0e4"), 6, "expected K_1 <= K_2 <= K_3"),
     (("range = 0.01\n", ""), 5, "spring.range: missing required key"),
     (("law = \"three_segment\"", "law = \"quintic\""), 6, "expected one of 'linear', 'cubic', 'three_segment'"),
