@@ -184,7 +184,7 @@ def single_runs(duration: float, labels=("curve + friction FF", "panda (linear K
 
 
 def plot(runs: Dict[str, object], path: Path) -> Path:
-    """Spring curves of joints 2 and 6 with the nominal run's deflections marked; |e1| per joint of each law."""
+    """Spring curves of joints 4 and 6 with the nominal run's deflections marked; |e1| per joint of each law."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -196,7 +196,7 @@ def plot(runs: Dict[str, object], path: Path) -> Path:
     psi = np.array([np.asarray(hd.spring_functions["spring"](np.full(n, v), pv)[0]).ravel() for v in phi])
     first = next(iter(runs.values()))
     defl = first.x[:, 2 * n:3 * n] - first.x[:, :n]
-    for j, c in ((1, "C0"), (5, "C1")):
+    for j, c in ((3, "C0"), (5, "C1")):  # the two joints whose runs work past their first breakpoint
         ax[0].plot(1e3 * phi, psi[:, j], c, label=f"joint {j + 1} (K_1 {d[f'K_1_{j + 1}']:.3g} N m/rad)")
         ax[0].axvspan(1e3 * defl[:, j].min(), 1e3 * defl[:, j].max(), color=c, alpha=0.15)
     ax[0].set(xlabel="deflection q_m - q (mrad)", ylabel="tau_J (N m)", title="panda_hd springs (shaded: the run)")
