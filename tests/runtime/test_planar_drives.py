@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 import fjm_runtime
+import mujoco  # noqa: F401 - the dev extra, as in test_mjcf.py: a missing install must fail, not skip
 from derive.emit.spring import write_spring_model
 from derive.core.spring import linearize_spring
 from derive.model_file import parse_model_text
@@ -112,7 +113,6 @@ def test_laws_lie_identities_and_the_torque_form(models):
 
 
 def test_mujoco_accelerations_equal_fjm(models, tmp_path):
-    pytest.importorskip("mujoco")
     from fjm_runtime.export.bridge import MujocoPlant
     from fjm_runtime.export.mjcf import write_mjcf
     hd, _ = models
