@@ -98,6 +98,22 @@ def _controller(kind: str, model, nominal: dict, gains: dict, u_max):
     return make_controller(kind, model, nominal, sensing="torque", u_max=u_max, **gains)
 
 
+def _design_loop():
+    """``(panda_hd, design report, gains, u_max, reference, loop settings)`` of :data:`DESIGN`'s loop: its gains
+    and limits, the demo's ready-pose sines from rest, 1 kHz, one sample of delay with prediction, ``panda``
+    sensor (``loop``: the keywords :func:`simulate` and :func:`simulate_batch` share)."""
+    from .. import load
+    from ..control.designed import designed_gains, law_gains
+    from ..sim.sensor import SensorModel
+    from . import panda as P
+    hd = load("panda_hd")
+    spec = designed_gains(*DESIGN)
+    ref = P.reference(hd.n)
+    loop = {"dt": 1e-3, "x0": P.rest_state(hd, ref(0.0)[0], None), "delay_samples": 1, "predict": True,
+            "sensor": SensorModel.panda()}
+    return hd, spec, law_gains(spec), np.asarray(spec["gains"]["u_max"], dtype=float), ref, loop
+
+
 def compare(draws: int, duration: float = 10.0, seed: int = 28, progress=None) -> Dict[str, dict]:
     """Every law of :data:`LAWS` on the TRUE drives of :func:`true_rows`, one batch per law.
 
@@ -106,20 +122,11 @@ def compare(draws: int, duration: float = 10.0, seed: int = 28, progress=None) -
     dict
         label -> ``{"rms", "jitter", "at_limit"}`` (per draw: the worst joint; jitter over joints 1-4, N m),
         ``"diverged"`` (count), ``"passed"`` (draws meeting every threshold), ``"rms_joint"`` (worst per joint),
-        ``"phi"`` (per joint (min, max) deflection of the first draw's run, rad), and the settings under
-        ``"_settings"``.
+        ``"model"``, ``"kind"``, ``"seconds"``; and the settings under ``"_settings"``.
     """
-    from .. import load
     from ..analysis.design_thresholds import Thresholds
     from ..batch.runner import simulate_batch
-    from ..control.designed import designed_gains, law_gains
-    from ..sim.sensor import SensorModel
-    from . import panda as P
-    hd = load("panda_hd")
-    spec = designed_gains(*DESIGN)
-    gains, u_max = law_gains(spec), np.asarray(spec["gains"]["u_max"], dtype=float)
-    ref = P.reference(hd.n)
-    x0 = P.rest_state(hd, ref(0.0)[0], None)
+    hd, spec, gains, u_max, ref, loop = _design_loop()
     rows = true_rows(hd, draws, seed)
     thr = Thresholds()
     jj = thr.joints(hd.n)
@@ -131,8 +138,7 @@ def compare(draws: int, duration: float = 10.0, seed: int = 28, progress=None) -
         model, nominal = _nominal(hd, base, edits)
         ctrl = _controller(kind, model, nominal, gains, u_max)
         t0 = time.perf_counter()
-        b = simulate_batch(hd, ctrl, ref, rows, duration=duration, dt=1e-3, x0=x0, delay_samples=1, predict=True,
-                           sensor=SensorModel.panda(), seeds=seed + np.arange(draws))
+        b = simulate_batch(hd, ctrl, ref, rows, duration=duration, seeds=seed + np.arange(draws), **loop)
         jm = {k: np.asarray(v, dtype=float) for k, v in b.joint_metrics.items()}
         div = np.asarray(b.diverged, dtype=bool)
         rms, jit, lim = jm["rms_second_half"].max(axis=1), jm["torque_jitter"][:, jj].max(axis=1), \
@@ -164,22 +170,13 @@ def table(rows: Dict[str, dict]) -> List[str]:
 
 def single_runs(duration: float, labels=("curve + friction FF", "panda (linear K) law")) -> Dict[str, object]:
     """The nominal drive (datasheet values, no payload) under the named laws, with trajectories (for the figure)."""
-    from .. import load
-    from ..control.designed import designed_gains, law_gains
-    from ..sim.sensor import SensorModel
     from ..sim.simulate import simulate
-    from . import panda as P
-    hd = load("panda_hd")
-    spec = designed_gains(*DESIGN)
-    gains, u_max = law_gains(spec), np.asarray(spec["gains"]["u_max"], dtype=float)
-    ref = P.reference(hd.n)
-    x0 = P.rest_state(hd, ref(0.0)[0], None)
+    hd, _, gains, u_max, ref, loop = _design_loop()
     out = {}
     for label, base, edits, kind in LAWS:
         if label in labels:
             model, nominal = _nominal(hd, base, edits)
-            out[label] = simulate(hd, _controller(kind, model, nominal, gains, u_max), ref, duration=duration,
-                                  dt=1e-3, x0=x0, delay_samples=1, predict=True, sensor=SensorModel.panda())
+            out[label] = simulate(hd, _controller(kind, model, nominal, gains, u_max), ref, duration=duration, **loop)
     return out
 
 
