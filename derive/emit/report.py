@@ -155,17 +155,24 @@ def render_report(lin: Linearization, functions: Dict[str, ca.Function], ops: Di
     if m.name == "link1":
         lines += _link1_latex(lin)
     defaults = np.array([p.default for p in m.params])
-    rows = controllability_check(functions, n, defaults)
     lines += ["## Feedback-linearizability, checked numerically", "",
-              f"At {len(rows)} seeded random states (default parameters): rank of "
-              f"$[g, ad_f g, ad_f^2 g, ad_f^3 g]$ (must be {4 * n}), smallest/largest singular value, "
-              "and the largest relative residual of a bracket $[v, w]$ of two columns of "
-              "$\\{g, ad_f g, ad_f^2 g\\}$ outside their span (involutivity; must be ~0).", "",
-              "| sample | rank | sigma_min / sigma_max | involutivity residual |", "|---|---|---|---|"]
-    for i, r in enumerate(rows):
-        lines.append(f"| {i} | {r['rank']} | {r['sigma_ratio']:.1e} | {_fmt(r['involutivity'])} |")
-    lines.append("")
+              *controllability_lines(functions, n, defaults), ""]
     return "\n".join(lines)
+
+
+def controllability_lines(functions: Dict[str, ca.Function], n: int, defaults: np.ndarray,
+                          deflection=None) -> List[str]:
+    """The report's paragraph and table of :func:`controllability_check` (``deflection``: passed on)."""
+    rows = controllability_check(functions, n, defaults, deflection=deflection)
+    where = "deflections within the declared ranges, default parameters" if deflection is not None \
+        else "default parameters"
+    lines = [f"At {len(rows)} seeded random states ({where}): rank of "
+             f"$[g, ad_f g, ad_f^2 g, ad_f^3 g]$ (must be {4 * n}), smallest/largest singular value, "
+             "and the largest relative residual of a bracket $[v, w]$ of two columns of "
+             "$\\{g, ad_f g, ad_f^2 g\\}$ outside their span (involutivity; must be ~0).", "",
+             "| sample | rank | sigma_min / sigma_max | involutivity residual |", "|---|---|---|---|"]
+    return lines + [f"| {i} | {r['rank']} | {r['sigma_ratio']:.1e} | {_fmt(r['involutivity'])} |"
+                    for i, r in enumerate(rows)]
 
 
 #: Relative singular-value threshold of the complete model's bracket ranks.

@@ -31,12 +31,12 @@ import numpy as np
 import sympy as sp
 
 from ..core.linearize import Linearization
-from ..core.spring import newton_inverse, spring_functions
 from .chain_json import write_chain_json
 from .controls import KINDS, TORQUE_KINDS, law_pair, build_core, manifest_entry
 from .functions import QUANTITIES, operation_count
-from .report import controllability_check
-from .spring_chain import build_chain_functions, c_functions as chain_c_functions, cores as chain_cores
+from .report import controllability_lines
+from .spring_chain import (build_chain_functions, c_functions as chain_c_functions, cores as chain_cores,
+                           inverse_sx_function, spring_sx_function)
 from .sx import SympyToSX
 from .torque import TORQUE_QUANTITIES
 from .writer import HEADER, argument_layout, argument_lines, comment_block, generate_c, tool_versions
@@ -68,25 +68,6 @@ _TORQUE_MEANING = {
 }
 
 
-def _spring_sx(model, phi: ca.SX, p: ca.SX, order: int) -> List[ca.SX]:
-    """``[psi(phi), psi'(phi), ...]`` (``order + 1`` entries) per joint's law, SX of ``phi`` and ``p``."""
-    s = model.springs[0]
-    a = sp.Symbol("phi_arg", real=True)
-    conv = SympyToSX({**{sym: p[j] for j, sym in enumerate(model.param_symbols)}, a: phi})
-    # polynomials expanded (the cubic: short, exact); a piecewise law kept as derived: expanding the blend
-    # polynomial in phi would cancel large terms (1e-10 relative error inside the windows)
-    return [conv(e if e.has(sp.Piecewise) else sp.expand(e)) for e in (s.derivative(k, a) for k in range(order + 1))]
-
-
-def _newton_sx(model, tau: ca.SX, p: ca.SX) -> ca.SX:
-    """``phi_J = psi^-1(tau)`` by :func:`derive.core.spring.newton_inverse` in SX, from the law's start."""
-    s = model.springs[0]
-    a = sp.Symbol("tau_arg", real=True)
-    start = SympyToSX({**{sym: p[j] for j, sym in enumerate(model.param_symbols)}, a: tau})(s.newton_start(a))
-    return newton_inverse(lambda v: _spring_sx(model, v, p, 0)[0], lambda v: _spring_sx(model, v, p, 1)[1],
-                          tau, start, s.newton_steps)
-
-
 def build_spring_functions(lin: Linearization) -> Dict[str, ca.Function]:
     """Every SX Function of the model: quantities, torque functions, ``spring``, ``spring_inverse``.
 
@@ -109,7 +90,8 @@ def build_spring_functions(lin: Linearization) -> Dict[str, ca.Function]:
         out[name] = ca.Function(f"{m.name}_{name}", [x, p], [ca.cse(v)], ["x", "p"], [name])
 
     ms = ca.SX.sym("m", 5 * n)
-    phiJ = [_newton_sx(m, ms[2 * n + i], p) for i in range(n)]
+    inverse = inverse_sx_function(m)
+    phiJ = inverse(ms[2 * n:3 * n], p)
     tconv = SympyToSX({**{s: ms[i] for i, s in enumerate(lin.outputs["measurement"])}, **pbind,
                        **{s: phiJ[i] for i, s in enumerate(lin.outputs["implied"])}})
     for name, _ in TORQUE_QUANTITIES:
@@ -117,12 +99,7 @@ def build_spring_functions(lin: Linearization) -> Dict[str, ca.Function]:
         v = ca.vec(v) if v.shape[1] == 1 else v
         out[name] = ca.Function(f"{m.name}_{name}", [ms, p], [ca.cse(v)], ["m", "p"], [name])
 
-    phi, tau = ca.SX.sym("phi", n), ca.SX.sym("tau_J", n)
-    values = _spring_sx(m, phi, p, 2)
-    out["spring"] = ca.Function(f"{m.name}_spring", [phi, p], [ca.cse(v) for v in values],
-                                ["phi", "p"], ["psi", "dpsi", "ddpsi"])
-    out["spring_inverse"] = ca.Function(f"{m.name}_spring_inverse", [tau, p], [ca.cse(_newton_sx(m, tau, p))],
-                                        ["tau_J", "p"], ["phi_J"])
+    out["spring"], out["spring_inverse"] = spring_sx_function(m), inverse
     return out
 
 
@@ -321,16 +298,9 @@ def _chain_report(m, fns: Dict[str, ca.Function], ops: Dict[str, int]) -> str:
               "`psi'(phi) dphi`; `beta = J_m psi'(phi)^-1 D(q)`, "
               "`alpha = psi + B_m dq_m + F + J_m y3 + J_m psi'^-1 (w - psi'' dphi^2)`; the torque-sensed laws read "
               "`tau_J`, `dtau_J` and take `psi'`, `psi''` at `phi_J = psi^-1(tau_J)`.", "",
-              "## The paper's feedback-linearizability test, numerically", "",
-              f"At 5 seeded random states (deflections within the declared ranges, default parameters): rank of $[g, ad_f g, ad_f^2 g, ad_f^3 g]$ (must be "
-              f"{4 * m.n}), smallest/largest singular value, and the largest relative residual of a bracket $[v, w]$ "
-              "of two columns of $\\{g, ad_f g, ad_f^2 g\\}$ outside their span (involutivity; must be ~0).", "",
-              "| sample | rank | sigma_min / sigma_max | involutivity residual |", "|---|---|---|---|"]
-    defaults = np.array([p.default for p in m.params])
+              "## The paper's feedback-linearizability test, numerically", ""]
     ranges = [s.deflection_range for s in sorted(m.springs, key=lambda s: s.joint)]
-    for i, row in enumerate(controllability_check(fns, m.n, defaults, deflection=ranges)):
-        inv = "< 1e-12" if row["involutivity"] < 1e-12 else f"{row['involutivity']:.1e}"
-        lines.append(f"| {i} | {row['rank']} | {row['sigma_ratio']:.1e} | {inv} |")
+    lines += controllability_lines(fns, m.n, np.array([p.default for p in m.params]), deflection=ranges)
     lines += ["", "## Operations", "", "| function | operations |", "|---|---|"]
     lines += [f"| `{m.name}_{name}` | {n} |" for name, n in ops.items()]
     return "\n".join(lines) + "\n"

@@ -16,7 +16,7 @@ for ``u`` (docs/real-drives.md)::
 
 (for ``psi = K phi``, ``F = 0`` this is :func:`derive.emit.dynamics.state_bodies`' alpha). The
 torque-sensed laws read ``s = tau_J`` and ``ds = dtau_J`` from the measurement; ``psi'`` and ``psi''`` at
-the implied deflection ``phi_J = psi^-1(tau_J)`` (each law's Newton steps from its start, as
+the implied deflection ``phi_J = psi^-1(tau_J)`` (each law's Newton steps from its start,
 :func:`derive.core.spring.newton_inverse`) and
 ``dphi = dtau_J / psi'(phi_J)``::
 
@@ -37,12 +37,20 @@ from typing import Callable, Dict
 import casadi as ca
 import sympy as sp
 
-from .dynamics import build_kernel, mx_function, programme, state_blocks, sx_function
+from ..core.spring import newton_inverse
+from .dynamics import build_kernel, elastic_diagonals, mx_function, programme, state_blocks, sx_function
 from .functions import QUANTITIES, ad_by_ad
 from .sx import SympyToSX, ldl_factor
 from .torque import TORQUE_QUANTITIES
 
-__all__ = ["spring_sx_function", "friction_sx_function", "chain_bodies", "build_chain_functions", "c_functions"]
+__all__ = ["spring_sx_function", "friction_sx_function", "inverse_sx_function", "chain_bodies", "build_chain_functions",
+           "c_functions"]
+
+
+def _law_text(e: sp.Expr) -> sp.Expr:
+    """A law expression as it is converted: a polynomial expanded (short, exact); a piecewise law kept as
+    derived (expanding the blend polynomial in phi cancels large terms: 1e-10 relative inside the windows)."""
+    return e if e.has(sp.Piecewise) else sp.expand(e)
 
 
 def _law_sx(model, law_exprs, n: int, name: str, out_names, arg: str) -> ca.Function:
@@ -54,9 +62,7 @@ def _law_sx(model, law_exprs, n: int, name: str, out_names, arg: str) -> ca.Func
     for i in range(n):
         conv = SympyToSX({**pbind, a: v[i]})
         for k, e in enumerate(law_exprs(i, a)):
-            # polynomials expanded (short, exact); a piecewise law kept as derived (expanding the blend
-            # polynomial in phi cancels large terms)
-            cols[k].append(ca.SX(0.0) if e == 0 else conv(e if e.has(sp.Piecewise) else sp.expand(e)))
+            cols[k].append(ca.SX(0.0) if e == 0 else conv(_law_text(e)))
     outs = [ca.cse(ca.vertcat(*c)) for c in cols]
     return ca.Function(name, [v, p], outs, [arg, "p"], list(out_names))
 
@@ -75,41 +81,37 @@ def friction_sx_function(model) -> ca.Function:
                    f"{model.name}_friction", ("F",), "dq_m")
 
 
-def _inverse_sx_function(model, spring: ca.Function) -> ca.Function:
-    """``<model>_spring_inverse(tau_J, p) -> phi_J`` (n,): per joint its law's Newton steps from its start."""
+def inverse_sx_function(model) -> ca.Function:
+    """``<model>_spring_inverse(tau_J, p) -> phi_J`` (n,): per joint :func:`derive.core.spring.newton_inverse`
+    with its law's start and steps (``newton_start``, ``newton_steps``)."""
     n = model.n
     tau, p = ca.SX.sym("tau_J", n), ca.SX.sym("p", len(model.params))
-    a = sp.Symbol("tau_arg", real=True)
+    a = sp.Symbol("law_arg", real=True)
     pbind = {s: p[j] for j, s in enumerate(model.param_symbols)}
-    laws = sorted(model.springs, key=lambda s: s.joint)
-    phi = ca.vertcat(*[SympyToSX({**pbind, a: tau[i]})(s.newton_start(a)) for i, s in enumerate(laws)])
-    for step in range(max(s.newton_steps for s in laws)):
-        psi, dpsi = spring(phi, p)[:2]
-        done = ca.DM([float(step >= s.newton_steps) for s in laws])  # a law whose steps are spent holds
-        phi = phi - (1 - done) * (psi - tau) / dpsi
-    return ca.Function(f"{model.name}_spring_inverse", [tau, p], [ca.cse(phi)], ["tau_J", "p"], ["phi_J"])
+    phi = []
+    for i, law in enumerate(sorted(model.springs, key=lambda s: s.joint)):
+        v = ca.SX.sym("v")
+        conv = SympyToSX({**pbind, a: v})
+        psi = ca.Function("psi", [v, p], [conv(_law_text(law.derivative(k, a))) for k in (0, 1)])
+        start = SympyToSX({**pbind, a: tau[i]})(law.newton_start(a))
+        phi.append(newton_inverse(lambda x: psi(x, p)[0], lambda x: psi(x, p)[1], tau[i], start, law.newton_steps))
+    return ca.Function(f"{model.name}_spring_inverse", [tau, p], [ca.cse(ca.vertcat(*phi))], ["tau_J", "p"],
+                       ["phi_J"])
 
 
-def _motor_parameters(model, p):
-    """``J_m``, ``B_m`` (column vectors) from ``p`` (SX or MX): plain parameters or numbers."""
-    syms = list(model.param_symbols)
-    out = []
-    for exprs in (model.Jm, model.Bm):
-        out.append(ca.vertcat(*[p[syms.index(e)] if e in syms else float(e) for e in exprs]))
-    return tuple(out)
-
-
-def chain_bodies(model, kernel: ca.Function, spring: ca.Function, friction: ca.Function,
-                 inverse: ca.Function, inertia: ca.Function) -> Dict[str, Callable]:
+def chain_bodies(model, parts: Dict[str, ca.Function]) -> Dict[str, Callable]:
     """Bodies ``name -> (arg, p) -> value`` of f, T, alpha, beta (of ``x``) and the torque quantities (of ``m``).
 
-    They call the given Functions, so the same body makes an SX Function (calls inlined) or an MX one.
+    They call the shared Functions of :func:`_parts` (kernel, spring, its inverse, friction, inertia), so the
+    same body makes an SX Function (calls inlined) or an MX one.
     """
+    kernel, spring, friction = parts["kernel"], parts["spring"], parts["friction"]
+    inverse, inertia = parts["spring_inverse"], parts["inertia"]
     n = model.n
 
     def state(x, p):
         q, dq, qm, dqm = state_blocks(x, n)
-        Jm, Bm = _motor_parameters(model, p)
+        _, Jm, Bm = elastic_diagonals(model, p)
         psi, dpsi, ddpsi = spring(qm - q, p)
         dphi = dqm - dq
         y3, y4, w = kernel(q, dq, psi, dpsi * dphi, p)
@@ -120,7 +122,7 @@ def chain_bodies(model, kernel: ca.Function, spring: ca.Function, friction: ca.F
 
     def torque(m, p):
         q, dq, tau, dtau, dqm = (m[i * n:(i + 1) * n] for i in range(5))
-        Jm, Bm = _motor_parameters(model, p)
+        _, Jm, Bm = elastic_diagonals(model, p)
         _, dpsi, ddpsi = spring(inverse(tau, p), p)
         dphi = dtau / dpsi
         y3, y4, w = kernel(q, dq, tau, dtau, p)
@@ -128,7 +130,7 @@ def chain_bodies(model, kernel: ca.Function, spring: ca.Function, friction: ca.F
         return {"T_tau": ca.vertcat(q, dq, y3, y4), "alpha_tau": alpha, "dpsi": dpsi}
 
     def beta(arg, p, dpsi):
-        Jm, _ = _motor_parameters(model, p)
+        _, Jm, _ = elastic_diagonals(model, p)
         return ca.repmat(Jm / dpsi, 1, n) * inertia(ca.vertcat(arg[:n], type(arg).zeros(3 * n)), p)
 
     return {
@@ -157,7 +159,7 @@ def _energy(model, spring_potential: Callable, inertia: ca.Function) -> ca.Funct
     n, n_p = model.n, len(model.params)
     x, p = ca.SX.sym("x", 4 * n), ca.SX.sym("p", n_p)
     q, dq, qm, dqm = state_blocks(x, n)
-    Jm, _ = _motor_parameters(model, p)
+    _, Jm, _ = elastic_diagonals(model, p)
     V = SympyToSX({**{s: q[i] for i, s in enumerate(model.q)}, **{s: p[j] for j, s in enumerate(model.param_symbols)}},
                   dict(model.program.definitions))(model.potential)
     E = (ca.dot(dq, ca.mtimes(inertia(x, p), dq)) + ca.dot(Jm * dqm, dqm)) / 2 + ca.sum1(spring_potential(qm - q, p)) + V
@@ -171,7 +173,7 @@ def _parts(model) -> Dict[str, ca.Function]:
              "friction": friction_sx_function(model), "inertia": _inertia(model),
              "potential": _law_sx(model, lambda i, a: [springs[i].potential(a)], model.n,
                                   f"{model.name}_spring_potential", ("V_spring",), "phi")}
-    parts["spring_inverse"] = _inverse_sx_function(model, parts["spring"])
+    parts["spring_inverse"] = inverse_sx_function(model)
     return parts
 
 
@@ -182,14 +184,13 @@ def build_chain_functions(model) -> Dict[str, ca.Function]:
     :func:`c_functions` call."""
     n, n_p = model.n, len(model.params)
     parts = _parts(model)
-    bodies = chain_bodies(model, parts["kernel"], parts["spring"], parts["friction"], parts["spring_inverse"],
-                          parts["inertia"])
+    bodies = chain_bodies(model, parts)
     out: Dict[str, ca.Function] = {}
     for name in ("f", "T", "alpha", "beta"):
         out[name] = sx_function(f"{model.name}_{name}", bodies[name], [4 * n, n_p], ["x", "p"], [name])
     x, p = ca.SX.sym("x", 4 * n), ca.SX.sym("p", n_p)
     q, dq, qm, dqm = state_blocks(x, n)
-    Jm, Bm = _motor_parameters(model, p)
+    _, Jm, Bm = elastic_diagonals(model, p)
     g = ca.vertcat(ca.SX.zeros(3 * n, n), ca.diag(1 / Jm))
     out["g"] = ca.Function(f"{model.name}_g", [x, p], [g], ["x", "p"], ["g"])
     D = parts["inertia"](x, p)
@@ -212,8 +213,7 @@ def cores(model, parts: Dict[str, ca.Function], sym=ca.SX) -> Dict[str, ca.Funct
     """``control_core(x, p_hat)`` and ``control_core_tau(m, p_hat) -> (y_hat, alpha, beta)``: one body each
     (SX: kernel inlined and CSE'd; MX: calling the shared Functions)."""
     n, n_p = model.n, len(model.params)
-    bodies = chain_bodies(model, parts["kernel"], parts["spring"], parts["friction"], parts["spring_inverse"],
-                          parts["inertia"])
+    bodies = chain_bodies(model, parts)
     make = sx_function if sym is ca.SX else mx_function
     return {"control_core": make(f"{model.name}_control_core", bodies["core"], [4 * n, n_p], ["x", "p_hat"],
                                  ["y_hat", "alpha", "beta"]),
@@ -224,8 +224,7 @@ def cores(model, parts: Dict[str, ca.Function], sym=ca.SX) -> Dict[str, ca.Funct
 def c_functions(model, parts: Dict[str, ca.Function]) -> Dict[str, ca.Function]:
     """MX twins of f, T, alpha, beta and the torque quantities that call the shared Functions (for the C file)."""
     n, n_p = model.n, len(model.params)
-    bodies = chain_bodies(model, parts["kernel"], parts["spring"], parts["friction"], parts["spring_inverse"],
-                          parts["inertia"])
+    bodies = chain_bodies(model, parts)
     out = {}
     for name in ("f", "T", "alpha", "beta"):
         out[name] = mx_function(f"{model.name}_{name}", bodies[name], [4 * n, n_p], ["x", "p"], [name])
