@@ -472,9 +472,11 @@ def _legacy_report(m, args, res, kind, true, nominal, k_s, delta, gain, ctrl, pr
         report["K_hat_final"] = ctrl.stiffness_estimate(res.z[-1]).tolist()
     print(json.dumps(report, indent=2, allow_nan=False))
     if args.plot is not None:
-        from ..experiments.plots import plot_run
+        from ..sim.plot import pyplot
         mt = res.metrics
-        plot_run(res, f"{args.model}, {kind}, reference {args.reference}: final |e1| = "
-                      f"{mt.final_error:.3g} rad, RMS = {mt.rms_error:.3g} rad, max |u| = {mt.max_abs_u:.3g} N m",
-                 args.plot)
+        fig = res.plot(args.plot, f"{args.model}, {kind}, reference {args.reference}: final |e1| = "
+                                  f"{mt.final_error:.3g} rad, RMS = {mt.rms_error:.3g} rad, "
+                                  f"max |u| = {mt.max_abs_u:.3g} N m")
+        pyplot().close(fig)
+        print(f"  wrote {args.plot}", file=sys.stderr, flush=True)
     return 0

@@ -195,7 +195,7 @@ def plot(res, path: Path, case: str = "N = 100", mj=None) -> Path:
 
     Diverged runs are named in the legend; the reduced plant's run is dotted.
     """
-    from .plots import pyplot
+    from ..sim.plot import pyplot
     plt = pyplot()
     fig, ax = plt.subplots(figsize=(8, 3.6), layout="constrained")
     runs = [(RUNS[0], res["-"][RUNS[0]], "0.4", dict(ls=":", lw=1.8, zorder=3))]

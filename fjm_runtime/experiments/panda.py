@@ -208,7 +208,7 @@ def plot(results, path: Path) -> Path:
     joints 5-7 with their URDF effort limits drawn. Cases stopped by the integrator are listed in
     the legend as diverged.
     """
-    from .plots import pyplot
+    from ..sim.plot import pyplot
     plt = pyplot()
     kinds = list(results)
     cases = list(next(iter(results.values())))

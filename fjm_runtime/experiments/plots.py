@@ -1,4 +1,4 @@
-"""Matplotlib figures of the demo (``fjm figures``) and of ``fjm simulate --plot``.
+"""Matplotlib figures of the demo (``fjm figures``); one run's figure is :meth:`SimulationResult.plot`.
 
 Every figure is written at 110 dpi and meant to be read at 100 %: references are drawn
 dashed on top of the curves, legends sit outside the data or hold few entries, titles fit
@@ -13,6 +13,7 @@ from typing import Dict, List, Optional, Sequence
 
 import numpy as np
 
+from ..sim.plot import pyplot
 from .report import log
 from .settings import COLORS, CTRL_COLORS, CTRL_LABELS, K_BOUNDS, K_NOM, LAM, TASKS, link1_controller
 
@@ -21,16 +22,6 @@ CTRL_STYLES = {"smc": "-", "ismc": "--", "fl": ":", "sign": "-", "adaptive": "-"
 #: Drawing order: the adaptive law last (on top), plain FL first.
 CTRL_ORDER = ("fl", "smc", "ismc", "adaptive-paper", "adaptive", "sign")
 REF_STYLE = dict(color="k", ls=(0, (4, 2)), lw=1.3, zorder=10)
-
-
-def pyplot():
-    """``matplotlib.pyplot`` with the Agg backend (no display needed) and the demo's style."""
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    plt.rcParams.update({"font.size": 10, "axes.grid": True, "grid.alpha": 0.3,
-                         "legend.fontsize": 8.5, "figure.dpi": 100})
-    return plt
 
 
 #: Resolution of the written figures (dots per inch); :func:`resolution` changes it for a run.
@@ -247,46 +238,4 @@ def plot_monte_carlo(mc, design, n_samples: int, path: Path) -> Path:
                title=REACHED_DEFINITION, title_fontsize=8.5)
     fig.suptitle("Monte Carlo: K ~ U[100, 200], J_l, J_m ~ U[+-20 %]; controller: K_nom = 150, J nominal, "
                  f"beta_hat = {design.beta_hat:.4f}, delta = {design.delta:.2f}", fontsize=11)
-    return save(fig, path, tight=False)
-
-
-def plot_run(res, title: str, path: Path) -> Path:
-    """``fjm simulate --plot``: angles, error, torque, sliding variable of one run.
-
-    Panels with more than 3 joints get one legend below the panels (one entry per joint colour,
-    the line styles explained in the titles) instead of a legend per panel.
-    """
-    plt = pyplot()
-    n = res.e1.shape[1]
-    fig, ax = plt.subplots(2, 2, figsize=(12, 7.5), sharex=True, layout="constrained")
-    for i in range(n):
-        sfx = f"joint {i + 1}" if n > 1 else ""
-        line, = ax[0, 0].plot(res.t, res.x[:, i], lw=1.5, label=sfx or "link $q_l$")
-        c = line.get_color()
-        ax[0, 0].plot(res.t, res.x[:, 2 * n + i], ls=":", lw=1.0, color=c, label=None if n > 1 else "motor $q_m$")
-        ax[0, 0].plot(res.t, res.ref[:, 0, i], color=c if n > 1 else "k", ls=(0, (4, 2)), lw=1.0, zorder=10,
-                      label=None if n > 1 else "reference (dashed)")
-        ax[0, 1].plot(res.t, res.e1[:, i], color=c)
-        ax[1, 0].plot(res.t, res.u[:, i], color=c)
-        ax[1, 1].plot(res.t, res.s[:, i], color=c)
-    d = float(np.max(res.delta))
-    if np.isfinite(d):
-        ax[1, 1].axhspan(-d, d, color="0.88", zorder=0, label=rf"$|s| \leq \delta$ = {d:.3g}")
-    late = res.t > 0.05 * res.t[-1]
-    lim = max(5 * d if np.isfinite(d) else 0, 1.2 * float(np.max(np.abs(res.s[late]))))
-    ax[1, 1].set_ylim(-lim, lim)
-    ax[0, 0].set(title="Angles: link (solid), motor (dotted), reference (dashed)", ylabel="rad")
-    ax[0, 1].set(title=r"Link position error $e_1 = q_l - q_d$", ylabel="rad")
-    ax[1, 0].set(title="Control torque", ylabel="N m", xlabel="time (s)")
-    ax[1, 1].set(title="Sliding variable", ylabel=r"rad/s$^3$", xlabel="time (s)")
-    if n > 1:
-        handles, labels = ax[0, 0].get_legend_handles_labels()
-        fig.legend(handles, labels, loc="outside lower center", ncol=min(n, 8), fontsize=9, frameon=False)
-        if np.isfinite(d):
-            ax[1, 1].legend(loc="upper right", fontsize=8)
-    else:
-        ax[0, 0].legend(loc="best", fontsize=8)
-        if np.isfinite(d):
-            ax[1, 1].legend(loc="best", fontsize=8)
-    fig.suptitle(title, fontsize=11)
     return save(fig, path, tight=False)

@@ -165,7 +165,7 @@ def table(rows: Dict[str, dict]) -> List[str]:
 def plot(results: Dict[str, list], path: Path) -> Path:
     """Per controller (rows): worst-joint ``abs(e1)`` of every draw (log, divergences marked x) and the
     largest ``abs(u)`` of joints 1-4 and 5-7 with the URDF effort limits drawn."""
-    from .plots import pyplot
+    from ..sim.plot import pyplot
     plt = pyplot()
     labels = list(results)
     fig, axes = plt.subplots(len(labels), 3, figsize=(13, 2.3 * len(labels) + 1.0), squeeze=False, sharex=True,

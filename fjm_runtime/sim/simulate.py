@@ -74,6 +74,31 @@ class SimulationResult:
     u_max: Optional[np.ndarray] = None
     settings: dict = dc_field(default_factory=dict)
 
+    def plot(self, path=None, title: str = "", dpi: int = 110):
+        """Angles, error, torque and sliding variable of this run (:func:`fjm_runtime.sim.plot.plot_run`).
+
+        Parameters
+        ----------
+        path : path-like, optional
+            Where to write the figure (a PNG, PDF, ... by its suffix) at ``dpi`` dots per inch.
+        title : str
+            The figure's title.
+        dpi : int
+            Resolution of the written file.
+
+        Returns
+        -------
+        matplotlib.figure.Figure
+            The 2 x 2 figure (still open: ``matplotlib.pyplot.close(fig)`` when done).
+
+        Raises
+        ------
+        FjmValueError
+            matplotlib is not installed (it is imported here, not with the runtime).
+        """
+        from .plot import plot_run
+        return plot_run(self, title, path, dpi)
+
 
 def _true_params_array(model, true_params) -> np.ndarray:
     p = {} if true_params is None else true_params
