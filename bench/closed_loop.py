@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 import fjm_runtime
-from fjm_runtime.analysis.lemma1 import beta_bounds_link1, lemma1_gain
+from fjm_runtime.analysis.certificates.lemma1 import beta_bounds_link1, lemma1_gain
 from fjm_runtime.control.factory import DEFAULT_LAYER_RATE, default_delta, make_controller
 from fjm_runtime.control.laws import coefficients_from_pole
 from fjm_runtime.control.references import Sinusoid
@@ -60,10 +60,10 @@ class Design:
 def tracking_design():
     """The paper's link1 tracking design, computed in the run by the functions that define it.
 
-    Lemma 1 gain (:func:`fjm_runtime.analysis.lemma1.lemma1_gain`) for ``0.5 sin t`` with
+    Lemma 1 gain (:func:`fjm_runtime.analysis.certificates.lemma1.lemma1_gain`) for ``0.5 sin t`` with
     ``K`` in [100, 200], boundary layer ``k_s / LAYER_RATE``
     (:func:`fjm_runtime.control.defaults.default_delta`), ``beta_hat = (beta_min +
-    beta_max) / 2`` (:func:`fjm_runtime.analysis.lemma1.beta_bounds_link1`); triple pole at
+    beta_max) / 2`` (:func:`fjm_runtime.analysis.certificates.lemma1.beta_bounds_link1`); triple pole at
     ``-LAM``, nominal ``K_NOM``.
 
     Returns

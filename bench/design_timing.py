@@ -58,7 +58,7 @@ def bench_draws(draws: int = 16, duration: float = 10.0) -> dict:
     from fjm_runtime.cli.design import demo_task
     from fjm_runtime.control.designed import designed_gains
     from fjm_runtime.control.factory import make_controller
-    from fjm_runtime.analysis.design_draws import draw_params
+    from fjm_runtime.analysis.search.draws import draw_params
     from fjm_runtime.sim.sensor import SensorModel
     m = fjm_runtime.load("panda")
     gains = designed_gains("panda", "ismc", "torque", 1000, 1)["gains"]

@@ -82,7 +82,7 @@ def errors(model, ident) -> dict:
 def controller_spec(model, params_file: Path, design: bool, work: Path, sensing: str, noise: str) -> dict:
     """Step 4: the shipped design (if the model has one and ``design`` is False), else ``fjm design
     MODEL --params params.toml`` (``sensing``, ``noise``, delay 1); params.nominal = the identified values."""
-    from fjm_runtime.analysis.design_draws import load_params_file
+    from fjm_runtime.analysis.search.draws import load_params_file
     nominal = load_params_file(params_file, model).overrides
     spec = None if design else designed_gains(model.name, "ismc", "torque", RATE, 1)
     if spec is None:

@@ -1,4 +1,4 @@
-"""Synthesized switching gains (fjm_runtime.analysis.certify) for the generated models, as a Markdown table.
+"""Synthesized switching gains (fjm_runtime.analysis.certificates.certify) for the generated models, as a Markdown table.
 
 Controller on NOMINAL parameters, certificate over the TRUE parameter box. Run:
 ``python examples/robust_gains.py [--models link1,planar2,planar3] [--u-max 100]``.
@@ -15,8 +15,8 @@ import numpy as np
 
 import fjm_runtime as fjm
 from fjm_runtime.control.references import Sinusoid, SmoothStep
-from fjm_runtime.analysis.lemma1 import beta_hat_link1
-from fjm_runtime.analysis.certify import synthesize_gains
+from fjm_runtime.analysis.certificates.lemma1 import beta_hat_link1
+from fjm_runtime.analysis.certificates.certify import synthesize_gains
 
 
 def _fmt(a):

@@ -12,7 +12,7 @@ integer arithmetic; log/sqrt/cos from libm), so memory does not grow with ``B * 
 Gains per run. For a :class:`~fjm_runtime.control.laws.SlidingModeController` the emitted law's
 ``gains`` vector (its manifest layout) rides in the controller state as constants
 (``z = [z_law; gains]``, ``gains' = 0``, so ``gains + T * 0`` is the same number every sample):
-one compiled library serves every candidate of a gain search (:mod:`fjm_runtime.analysis.design`).
+one compiled library serves every candidate of a gain search (:mod:`fjm_runtime.analysis.search.search`).
 The law then reads ``delta`` (reaching time) and ``u_max``, ``limit`` (time at limit) from there.
 
 Torque jitter over the applied torques ``u_0 .. u_{N-1}`` with ``h = round(window / 2T)``: the

@@ -91,8 +91,8 @@ def _task(m, spec):
 
 
 def conditions_from_spec(m, spec: dict, args):
-    """The :class:`~fjm_runtime.analysis.sampled_linear.Conditions` of a gains file, flags overriding."""
-    from ..analysis.sampled_linear import Conditions
+    """The :class:`~fjm_runtime.analysis.sampled.sampled_linear.Conditions` of a gains file, flags overriding."""
+    from ..analysis.sampled.sampled_linear import Conditions
     rate = args.rate if args.rate is not None else float(spec.get("rate", 1000.0))
     delay = args.delay_samples if args.delay_samples is not None else int(spec.get("delay", 0))
     if not (math.isfinite(rate) and 0 < rate <= 1e6):
@@ -157,7 +157,7 @@ def table_lines(out: dict):
 def run(args) -> int:
     """Run ``fjm analyze``; 0 when the loop is stable at every plant and point, 1 otherwise."""
     from .. import load
-    from ..analysis.sampled_analysis import LinearAnalyzer, default_plants
+    from ..analysis.sampled.sampled_analysis import LinearAnalyzer, default_plants
     from .common import check_output_file
     if args.out is not None:
         check_output_file(args.out, "--out")

@@ -73,7 +73,7 @@ def add_parser(sub) -> None:
 
 
 def demo_task(m, nominal=None) -> dict:
-    """The demo's task for ``m`` as :func:`fjm_runtime.analysis.design.design` keywords; ``{}`` if it has none.
+    """The demo's task for ``m`` as :func:`fjm_runtime.analysis.search.search.design` keywords; ``{}`` if it has none.
 
     Panda: joint-space sines about the ready pose; Baxter: both arms on the same sines, the head still.
     Both start at rest holding gravity (``nominal`` parameters; default the model's).
@@ -112,8 +112,8 @@ def check_samples(duration: float, rate: float, n: int, flags: str) -> None:
 
 def _settings(args, m):
     """``(sensor, thresholds, spread)`` from the flags, checked before any work."""
-    from ..analysis.design_draws import default_spread, load_params_file
-    from ..analysis.design_thresholds import Thresholds, parse_joints
+    from ..analysis.search.draws import default_spread, load_params_file
+    from ..analysis.search.thresholds import Thresholds, parse_joints
     from ..sim.sensor import sensor_from_spec
     sensor = sensor_from_spec(args.noise, seed=args.seed, what="--noise")
     for flag, v in (("--max-rms", args.max_rms), ("--max-jitter", args.max_jitter),
@@ -135,8 +135,8 @@ def run(args) -> int:
     Returns 0 when the gains meet every threshold (final check and re-check), 1 otherwise.
     """
     from .. import load
-    from ..analysis.design import design
-    from ..analysis.design_report import summary_lines
+    from ..analysis.search.search import design
+    from ..analysis.search.report import summary_lines
     if args.out is not None and not args.out.parent.is_dir():
         raise FjmValueError(f"--out {args.out}: the directory {args.out.parent} does not exist")
     if args.draws < 1 or args.duration <= 0 or args.delay_samples < 0 or args.rate <= 0:

@@ -16,7 +16,7 @@ from typing import Dict, Optional
 
 import numpy as np
 
-from ..analysis.lemma1 import (FALLBACK_SWITCHING_GAIN, default_error_bounds, default_switching_gain,
+from ..analysis.certificates.lemma1 import (FALLBACK_SWITCHING_GAIN, default_error_bounds, default_switching_gain,
                                paper_beta_hat, paper_bound_applies)
 from ..control.factory import CONTROLLER_KINDS, DEFAULT_LAYER_RATE, default_delta, make_controller
 from ..control.references import REFERENCE_KINDS, make_reference
@@ -346,7 +346,7 @@ def params_file_nominal(path, m) -> Dict[str, float]:
     """The ``[parameters]`` of a parameter file (``--params``, docs/design-command.md), ``{}`` without one."""
     if path is None:
         return {}
-    from ..analysis.design_draws import load_params_file
+    from ..analysis.search.draws import load_params_file
     return dict(load_params_file(path, m).overrides)
 
 

@@ -78,7 +78,7 @@ def stiffness_range(m, k_min, k_max, k_rel):
     :data:`RELATIVE_K_RANGE`. An absolute range given for a model whose nominal stiffnesses lie
     outside :data:`ABSOLUTE_K_RANGE` must contain them (FjmValueError pointing at --k-rel).
     """
-    from ..analysis.box import stiffness_names
+    from ..analysis.certificates.box import stiffness_names
     nominal = np.array([m.default_params[name] for name in stiffness_names(m)], dtype=float)
     usual = bool(np.all((nominal >= ABSOLUTE_K_RANGE[0]) & (nominal <= ABSOLUTE_K_RANGE[1])))
     if k_rel is not None:

@@ -12,10 +12,10 @@ import json
 import sys
 from typing import Dict, List, Tuple
 
-from ..analysis.box import default_stiffness_box, param_box_from_ranges
-from ..analysis.certify import GUARANTEE, synthesize_gains
-from ..analysis.certify_tau import GUARANTEE_TAU, synthesize_torque_gains, torque_param_box
-from ..analysis.lemma1 import paper_beta_hat
+from ..analysis.certificates.box import default_stiffness_box, param_box_from_ranges
+from ..analysis.certificates.certify import GUARANTEE, synthesize_gains
+from ..analysis.certificates.certify_tau import GUARANTEE_TAU, synthesize_torque_gains, torque_param_box
+from ..analysis.certificates.lemma1 import paper_beta_hat
 from ..control.defaults import DEFAULT_LAYER_RATE
 
 DEFAULT_ERROR_BOX = {"sine": [0.05, 0.5, 0.5, 0.5], "step": [0.05, 0.1, 0.5, 1.0]}
@@ -205,7 +205,7 @@ def _run_torque(m, args, nominal, R, E, u_max):
 
 
 def run(args) -> int:
-    """``fjm tune``: print the :class:`~fjm_runtime.analysis.certify.TuneResult` as JSON.
+    """``fjm tune``: print the :class:`~fjm_runtime.analysis.certificates.certify.TuneResult` as JSON.
 
     Returns
     -------

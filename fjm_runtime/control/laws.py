@@ -138,7 +138,7 @@ class SlidingModeController:
         Switching function.
     beta_hat : array_like, shape (n, n) or scalar, optional
         Constant estimate of ``beta``; default ``beta(x; p_nom)`` at every sample.
-        For link1, :func:`fjm_runtime.analysis.lemma1.beta_hat_link1` gives the paper's
+        For link1, :func:`fjm_runtime.analysis.certificates.lemma1.beta_hat_link1` gives the paper's
         ``(beta_max + beta_min) / 2``.
     k_lin : float or array_like, shape (n,), optional
         Linear feedback on ``s`` (1/s), >= 0. Default 0 for 'sat'/'sign' and

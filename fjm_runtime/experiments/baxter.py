@@ -20,7 +20,7 @@ from typing import Callable, Dict, List, Optional, Tuple
 
 import numpy as np
 
-from ..analysis.design import EFFORTS
+from ..analysis.search.search import EFFORTS
 from ..control.designed import designed_gains, law_gains
 from ..control.factory import make_controller
 from ..control.references import Sinusoid

@@ -1,6 +1,6 @@
 """Demo sections: synthesized (certified) switching gains in closed loop (``fjm figures``).
 
-For link1 and the chains, :func:`fjm_runtime.analysis.certify.synthesize_gains` computes the
+For link1 and the chains, :func:`fjm_runtime.analysis.certificates.certify.synthesize_gains` computes the
 gain of each law on the demo's boxes within the actuator limit ``U_MAX``; where no
 admissible gain exists the summary says so and shows what happens then: the
 torque-limited law with the inadmissible gain, and the adaptive law. A matched
@@ -16,9 +16,9 @@ from typing import Dict, List, Tuple
 import numpy as np
 
 from .. import load
-from ..analysis.adaptive_gains import synthesize_adaptive_gains
-from ..analysis.certify import certificate, synthesize_gains
-from ..analysis.lemma1 import beta_hat_link1, lemma1_gain, paper_bound
+from ..analysis.certificates.adaptive_gains import synthesize_adaptive_gains
+from ..analysis.certificates.certify import certificate, synthesize_gains
+from ..analysis.certificates.lemma1 import beta_hat_link1, lemma1_gain, paper_bound
 from ..control.disturbance import with_motor_disturbance
 from ..control.factory import make_controller
 from ..control.laws import coefficients_from_pole
@@ -106,7 +106,7 @@ def certificates_section(ctx: DemoContext) -> Section:
     md = ["## Certified gains for the law that runs (`fjm tune`)", "",
           "The Lemma 1 gain above bounds the sliding variable in TRUE coordinates; the controller builds s from "
           "T(x; K_nom), where the stiffness error is a drift the input cannot cancel. "
-          "`fjm_runtime.analysis.certify.synthesize_gains` computes the gain for the law as it runs: "
+          "`fjm_runtime.analysis.certificates.certify.synthesize_gains` computes the gain for the law as it runs: "
           f"sgn(s) s' <= -eta (eta = {ETA:g}) on the box (reference derivative bounds, the error region E of the "
           f"task in nominal coordinates, true K in {list(K_RANGE)}), a numerical certificate on a grid (vertices "
           "along affine coordinates), the box assumed invariant. A gain is admissible when the law commands at "
@@ -131,7 +131,7 @@ def certificates_section(ctx: DemoContext) -> Section:
                       f"{fmt_vec(r.u_bound)} | {'yes' if r.feasible else '**no**'} | | |")
     if ctx.quick:
         md.append("| planar3 | tracking | | | skipped in quick mode | | | | | |")
-    md += ["", "The paper bound (Lemma 1 with rho, true coordinates, `analysis.lemma1.paper_bound`) is not a "
+    md += ["", "The paper bound (Lemma 1 with rho, true coordinates, `analysis.certificates.lemma1.paper_bound`) is not a "
            "guarantee for the law that runs; its certificate column evaluates the Lemma 1 gain used in the "
            "sections above on the implemented law.", ""]
     ctx.results["gains"] = gains

@@ -7,7 +7,7 @@ from __future__ import annotations
 from typing import Dict, List, Tuple
 
 from .. import load
-from ..analysis.regulation import closed_loop_eigenvalues
+from ..analysis.certificates.regulation import closed_loop_eigenvalues
 from ..control.factory import default_delta, make_controller
 from ..sim.simulate import SimulationDivergedError, SimulationResult, simulate
 from .plots import plot_controller_comparison
@@ -73,7 +73,7 @@ def chains_section(ctx: DemoContext) -> Section:
 def eigenvalue_section(ctx: DemoContext) -> Section:
     """Largest real part of the closed-loop eigenvalues at the hanging rest point."""
     md = ["Largest real part of the closed-loop eigenvalues, linearized at the hanging rest point "
-          "(continuous time, no sampling; `analysis.regulation.closed_loop_eigenvalues`), controller nominal "
+          "(continuous time, no sampling; `analysis.certificates.regulation.closed_loop_eigenvalues`), controller nominal "
           "K_i = 150:", "",
           "| model | controller | " + " | ".join(f"K_i = {k:g}" for k in (100, 140, 150, 160, 200)) + " |",
           "|---|---|---|---|---|---|---|"]

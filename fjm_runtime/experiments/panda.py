@@ -8,7 +8,7 @@ on every case with the compiled backend; :func:`panda_section` writes a figure
 (joint errors and torques) and returns the markdown table of errors and peak
 torques for ``out/summary.md``.
 
-Gains: :mod:`fjm_runtime.analysis.certify` finds no admissible gain for the Panda's +-30 %
+Gains: :mod:`fjm_runtime.analysis.certificates.certify` finds no admissible gain for the Panda's +-30 %
 box within the URDF efforts (see :data:`GAIN_NOTE`), so the gains here are
 stated, not synthesized.
 """
@@ -65,7 +65,7 @@ QUICK_DURATION = 0.05
 DT = 2e-4
 
 GAIN_NOTE = (
-    "Gains are stated, not synthesized: `fjm_runtime.analysis.certify.synthesize_gains` on this box (stiffness +-30 %, "
+    "Gains are stated, not synthesized: `fjm_runtime.analysis.certificates.certify.synthesize_gains` on this box (stiffness +-30 %, "
     "the reference's derivative bounds, error box 0.01 rad / 0.05 / 0.5 / 5, lambda = 10, integral surface, "
     "the URDF efforts as u_max) finds no admissible gain: reaching needs k_s ~1e7-1e8 rad/s^4, which "
     "commands thousands of N m on the box against 87 / 12 N m (docs/spatial.md, \"Control\"). The same "

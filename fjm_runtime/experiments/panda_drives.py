@@ -7,7 +7,7 @@ one sample of delay with prediction, the ``panda`` sensor preset, the demo's rea
 torque-sensed ismc gains and the URDF effort limits) on TRUE drives drawn around the datasheet
 (:func:`true_rows`: per joint the three stiffnesses x U(0.8, 1.2) together, the torque breakpoints x
 U(0.8, 1.2), friction x U(0.5, 1.5), rotor x U(0.8, 1.2), payload U(0, 1) kg), and is judged by the
-design thresholds (:class:`fjm_runtime.analysis.design_thresholds.Thresholds` defaults). The laws
+design thresholds (:class:`fjm_runtime.analysis.search.thresholds.Thresholds` defaults). The laws
 (:data:`LAWS`), all with the same gains and NOMINAL parameters, the plant always the TRUE ``panda_hd``:
 
 * ``curve + friction FF``: ``panda_hd``'s torque-sensed ismc at the datasheet values (the law derived for
@@ -124,7 +124,7 @@ def compare(draws: int, duration: float = 10.0, seed: int = 28, progress=None) -
         ``"diverged"`` (count), ``"passed"`` (draws meeting every threshold), ``"rms_joint"`` (worst per joint),
         ``"model"``, ``"kind"``, ``"seconds"``; and the settings under ``"_settings"``.
     """
-    from ..analysis.design_thresholds import Thresholds
+    from ..analysis.search.thresholds import Thresholds
     from ..batch.runner import simulate_batch
     hd, spec, gains, u_max, ref, loop = _design_loop()
     rows = true_rows(hd, draws, seed)

@@ -14,7 +14,7 @@ from typing import Callable, Dict, List, Tuple
 import numpy as np
 
 from .. import load
-from ..analysis.regulation import predict_regulation_offset
+from ..analysis.certificates.regulation import predict_regulation_offset
 from ..control.factory import make_controller
 from ..control.laws import coefficients_from_pole
 from ..control.references import SmoothStep
@@ -53,7 +53,7 @@ def lemma1_section(ctx: DemoContext) -> Section:
         md.append(f"| {task} | {TASKS[task][2]} | {TASKS[task][1]} | {g.W:.1f} | {g.H:.2f} | "
                   f"{g.beta_hat:.4f} | {g.rho:.3f} | **{g.k_s:.0f}** | {g.k_s_tight:.0f} | {d.delta:.2f} |")
     md += ["", "k_s = W + H / beta_hat + eta (eta = 10) on the region |y_i - y_id| <= E_i; "
-           "see `fjm_runtime/analysis/lemma1.py` for the reading of eq (16). This bounds s in TRUE coordinates; "
+           "see `fjm_runtime/analysis/certificates/lemma1.py` for the reading of eq (16). This bounds s in TRUE coordinates; "
            "the controller builds s from T(x; K_nom), so it is not a reaching guarantee for the law that runs "
            "(see \"Certified gains for the law that runs\" below).", ""]
     return md, []
@@ -86,7 +86,7 @@ def offset_section(ctx: DemoContext) -> Section:
           "With only nominal parameters the controller's y3_hat = (K_nom/K - 1) M g0 L sin(q) / J_l at rest, "
           "so the link rests at c1 e1 + c3 e3_hat = s_ss (inside the layer): "
           "e1 ~ -(3 / lambda^2)(K_nom/K - 1) M g0 L sin(q) / J_l. Predicted by "
-          "`analysis.regulation.predict_regulation_offset` vs simulated:", "",
+          "`analysis.certificates.regulation.predict_regulation_offset` vs simulated:", "",
           "| true K | predicted offset (rad) | first-order term -(c3/c1) e3 at q_d (rad) | simulated e1(end) (rad) |",
           "|---|---|---|---|"]
     d = ctx.designs["regulation"]

@@ -18,7 +18,7 @@ from typing import Callable, Dict, List, Optional, Tuple
 
 import numpy as np
 
-from ..analysis.certify_tau import gamma_tolerance
+from ..analysis.certificates.certify_tau import gamma_tolerance
 from ..control import defaults
 from ..control.designed import designed_gains, law_gains
 from ..control.factory import make_controller
@@ -205,7 +205,7 @@ def plot(results: Dict[str, list], path: Path) -> Path:
 
 def certificate_note(model) -> str:
     """Why ``fjm tune panda --sensing torque`` finds no gain for +-30 %, in numbers from
-    :func:`~fjm_runtime.analysis.certify_tau.gamma_tolerance` on this section's workspace."""
+    :func:`~fjm_runtime.analysis.certificates.certify_tau.gamma_tolerance` on this section's workspace."""
     tol = gamma_tolerance(model, AMPLITUDE, q_center=READY)
     r = np.asarray(tol["r_max"])
     bad = [i + 1 for i in range(r.size) if r[i] < 0.3]

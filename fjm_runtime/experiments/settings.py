@@ -6,7 +6,7 @@
   ``alpha_hat``) and the paper's ``beta_hat = (beta_max + beta_min) / 2`` for
   ``K in [100, 200]``;
 * sliding surface from a triple pole at ``-LAM``; ``k_s`` from the paper's Lemma 1
-  (:func:`fjm_runtime.analysis.lemma1.lemma1_gain`) on a stated error region: a bound in
+  (:func:`fjm_runtime.analysis.certificates.lemma1.lemma1_gain`) on a stated error region: a bound in
   TRUE coordinates, not a reaching guarantee for the law that runs (which builds ``s``
   from ``T(x; K_nom)``; :mod:`fjm_runtime.experiments.certified` runs the certified gains);
   boundary layer ``delta = k_s / LAYER_RATE`` (the layer's linear slope is ``LAYER_RATE``
@@ -17,7 +17,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from .. import load
-from ..analysis.lemma1 import beta_bounds_link1, lemma1_gain
+from ..analysis.certificates.lemma1 import beta_bounds_link1, lemma1_gain
 from ..control.factory import DEFAULT_LAYER_RATE, make_controller
 from ..control.laws import coefficients_from_pole
 from ..control.references import Sinusoid, SmoothStep

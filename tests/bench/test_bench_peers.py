@@ -116,7 +116,7 @@ def test_closed_loop_design_is_computed_not_pasted(monkeypatch):
     import bench.closed_loop as figures
     from bench.closed_loop import link1_case
     from fjm_runtime.control.laws import coefficients_from_pole
-    from fjm_runtime.analysis.lemma1 import beta_bounds_link1, lemma1_gain
+    from fjm_runtime.analysis.certificates.lemma1 import beta_bounds_link1, lemma1_gain
     ref, E, _ = figures.TASKS["tracking"]
     gain = lemma1_gain(coefficients_from_pole(figures.LAM), ref().derivative_bounds()[:, 0],
                        nominal={"K": figures.K_NOM}, bounds=figures.K_BOUNDS, error_bounds=E, eta=figures.ETA)

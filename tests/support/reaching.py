@@ -1,6 +1,6 @@
 """Reaching checks shared by the tune tests: a state from nominal coordinates, sgn(s) s' on a trajectory.
 
-Independent of fjm_runtime.analysis.certify: Newton with finite-difference Jacobians of the model's
+Independent of fjm_runtime.analysis.certificates.certify: Newton with finite-difference Jacobians of the model's
 ``T``; ``s'`` by central differences of the simulated ``s``.
 """
 from __future__ import annotations
@@ -9,7 +9,7 @@ import numpy as np
 
 
 def state_at(model, nominal, y_hat):
-    """x with T(x; p_nom) = y_hat (Newton on the motor half, independent of fjm_runtime.analysis.certify)."""
+    """x with T(x; p_nom) = y_hat (Newton on the motor half, independent of fjm_runtime.analysis.certificates.certify)."""
     n = model.n
     pn = model.params_array(nominal)
     x = np.concatenate([y_hat[:2 * n], y_hat[:2 * n]])

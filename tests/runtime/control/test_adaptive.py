@@ -8,7 +8,7 @@ import fjm_runtime
 from fjm_runtime.control.adaptive import AdaptiveStiffnessController
 from fjm_runtime.control.factory import make_controller
 from fjm_runtime.control.references import Constant, Sinusoid, SmoothStep
-from fjm_runtime.analysis.lemma1 import beta_hat_link1
+from fjm_runtime.analysis.certificates.lemma1 import beta_hat_link1
 from fjm_runtime.sim.simulate import simulate
 
 DESIGN = {"lam": 8.0, "k_s": 1000.0, "delta": 5.0}

@@ -6,8 +6,8 @@ import fjm_runtime
 from fjm_runtime.control.factory import make_controller
 from fjm_runtime.control.laws import SlidingModeController
 from fjm_runtime.control.references import Sinusoid, SmoothStep
-from fjm_runtime.analysis.lemma1 import beta_hat_link1
-from fjm_runtime.analysis.regulation import predict_regulation_offset
+from fjm_runtime.analysis.certificates.lemma1 import beta_hat_link1
+from fjm_runtime.analysis.certificates.regulation import predict_regulation_offset
 from fjm_runtime.sim.simulate import simulate
 
 K_BOUNDS = {"K": (100.0, 200.0)}

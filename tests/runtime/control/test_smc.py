@@ -7,7 +7,7 @@ from fjm_runtime.control.factory import make_controller
 from fjm_runtime.control.laws import SlidingModeController, coefficients_from_pole
 from fjm_runtime.control.references import Sinusoid
 from fjm_runtime.sim.rk4 import integrate
-from fjm_runtime.analysis.lemma1 import beta_hat_link1, lemma1_gain
+from fjm_runtime.analysis.certificates.lemma1 import beta_hat_link1, lemma1_gain
 from fjm_runtime.sim.simulate import simulate
 
 LAM = 8.0

@@ -2,7 +2,7 @@
 within the Panda's limits, and the CLI's files.
 
 Independent references: central differences for the derivatives; the model's own linearizing
-coordinates inverted by Newton (``analysis.evaluator.inverse_T``) and its emitted ``alpha``, ``beta``
+coordinates inverted by Newton (``analysis.certificates.evaluator.inverse_T``) and its emitted ``alpha``, ``beta``
 (``u = alpha + beta q_d''''``) for the flat-output inverse; link1's gravity torque ``M g0 L sin q`` at rest;
 the condition numbers recomputed here with ``numpy.linalg.cond``.
 """

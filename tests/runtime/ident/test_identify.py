@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import fjm_runtime
-from fjm_runtime.analysis.design_draws import load_params_file
+from fjm_runtime.analysis.search.draws import load_params_file
 from fjm_runtime.control.factory import make_controller
 from fjm_runtime.ident.excite import design_excitation
 from fjm_runtime.ident.identify import identify

@@ -1,6 +1,6 @@
 """What limits a failed design, found by Monte Carlo: the binding draw re-run with each sensor effect removed.
 
-When no screen explains a failure (:mod:`fjm_runtime.analysis.design_screen`), :func:`attribute`
+When no screen explains a failure (:mod:`fjm_runtime.analysis.search.screen`), :func:`attribute`
 re-runs the draw of the binding miss with the same gains, plant and noise seed: once per noise
 source with its levels at zero (encoder angles ``q, q_m``; measured velocities ``dq, dq_m``; the
 torque sensor ``tau_J, dtau_J``), once with every noise level at zero, and, when the sensor limits
@@ -67,7 +67,7 @@ def attribute(loops, gains: dict, row: np.ndarray, noise_seed: int, duration: fl
     duration : float
         Seconds (the stage's run length).
     miss : dict
-        A record of :func:`~fjm_runtime.analysis.design_thresholds.find_misses`.
+        A record of :func:`~fjm_runtime.analysis.search.thresholds.find_misses`.
 
     Returns
     -------

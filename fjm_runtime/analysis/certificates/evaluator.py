@@ -29,7 +29,7 @@ def build_inverse(model, p_const=None):
 def build_nominal_fn(model, p_nom: np.ndarray, c_last: np.ndarray, beta_hat):
     """CasADi Function ``(x, y, p) -> [F0; vec G; alpha_hat; vec B; vec C J g]``.
 
-    The quantities of :mod:`fjm_runtime.analysis.certify` (its module docstring): ``x`` (4n,),
+    The quantities of :mod:`fjm_runtime.analysis.certificates.certify` (its module docstring): ``x`` (4n,),
     ``y`` = ``y_hat`` (4n,), ``p`` the TRUE parameters; output shape ``(2n + 3n^2, 1)``.
     """
     import casadi as ca
@@ -82,7 +82,7 @@ class Evaluator:
         self.inv = build_inverse(model, p_inverse)
         self.fn, self.chunk, self.maps, self.iterations = fn, chunk, {}, iterations
         #: ``[min, max]`` of the deflection ``q_m - q`` per joint over every state evaluated, (n, 2)
-        #: (a nonlinear spring's certificate holds on the stiffness there: analysis.spring_interval)
+        #: (a nonlinear spring's certificate holds on the stiffness there: analysis.certificates.spring_interval)
         self.deflection = np.tile([np.inf, -np.inf], (self.n, 1))
 
     def _map(self, fn, m):

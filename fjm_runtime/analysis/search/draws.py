@@ -32,8 +32,8 @@ from typing import Dict, Optional, Tuple
 
 import numpy as np
 
-from ..sim.step_layout import spring_scale_groups, stiffness_scale_indices
-from ..validation import FjmValueError
+from ...sim.step_layout import spring_scale_groups, stiffness_scale_indices
+from ...validation import FjmValueError
 
 __all__ = ["GROUPS", "PlantSpread", "default_spread", "draw_params", "load_params_file"]
 

@@ -8,11 +8,11 @@ A screen is any object with
   e.g. ``"limited by encoder noise through k_lin on joint 2"``);
 * ``name`` — how the record names it.
 
-:func:`fjm_runtime.analysis.design.design` takes one as ``screen=``: candidates it rejects cost
+:func:`fjm_runtime.analysis.search.search.design` takes one as ``screen=``: candidates it rejects cost
 :data:`SCREENED_COST` and are not simulated. :func:`linear_screen` builds the screen of the linear
-sampled-data analysis (:mod:`fjm_runtime.analysis.design_screen_linear`: spectral radius below 1
+sampled-data analysis (:mod:`fjm_runtime.analysis.search.screen_linear`: spectral radius below 1
 with a margin at every corner of the parameter box, predicted torque jitter under the limit) when
-:mod:`fjm_runtime.analysis.sampled_linear` is installed, and returns None otherwise. It is opt-in
+:mod:`fjm_runtime.analysis.sampled.sampled_linear` is installed, and returns None otherwise. It is opt-in
 (``fjm design --screen linear``): measured on the Panda it costs about 30 s per candidate (the MC
 stage about 0.5 s), and it predicted 30.5 N m of jitter on joint 4 for the shipped d = 1 gains, whose
 Monte Carlo worst case over 200 draws is 3.07 N m, so by default it would reject gains that work.
@@ -22,7 +22,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import List, Optional, Protocol
 
-from .design_thresholds import DIVERGED_COST
+from .thresholds import DIVERGED_COST
 
 __all__ = ["SCREENED_COST", "Screen", "Verdict", "screen_costs"]
 
@@ -40,7 +40,7 @@ class Verdict:
 
 
 class Screen(Protocol):
-    """What :func:`fjm_runtime.analysis.design.design` needs of a screen (module docstring)."""
+    """What :func:`fjm_runtime.analysis.search.search.design` needs of a screen (module docstring)."""
 
     name: str
 

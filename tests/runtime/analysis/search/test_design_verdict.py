@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 
 import fjm_runtime
-from fjm_runtime.analysis.design import RECHECK_SEED_OFFSET, design
-from fjm_runtime.analysis.design_draws import default_spread, draw_params, load_params_file
-from fjm_runtime.analysis.design_thresholds import (PENALTY, Thresholds, describe_miss, find_misses, parse_joints,
+from fjm_runtime.analysis.search.search import RECHECK_SEED_OFFSET, design
+from fjm_runtime.analysis.search.draws import default_spread, draw_params, load_params_file
+from fjm_runtime.analysis.search.thresholds import (PENALTY, Thresholds, describe_miss, find_misses, parse_joints,
                                                     run_cost)
 from fjm_runtime.sim.sample_step import stiffness_indices
 from fjm_runtime.sim.sensor import SensorModel
@@ -226,7 +226,7 @@ class _LamScreen:
         self.seen = []
 
     def check(self, cands):
-        from fjm_runtime.analysis.design_screen import Verdict
+        from fjm_runtime.analysis.search.screen import Verdict
         self.seen += [c["lam"] for c in cands]
         return [Verdict(ok=c["lam"] >= 30.0, reason="lam < 30", predicted={"lam": c["lam"]}) for c in cands]
 
@@ -236,7 +236,7 @@ class _LamScreen:
 
 @pytest.mark.slow  # builds the batch step (C) on a cold cache
 def test_a_screen_keeps_rejected_candidates_out_of_the_monte_carlo(monkeypatch):
-    from fjm_runtime.analysis.design_runs import DesignLoops
+    from fjm_runtime.analysis.search.runs import DesignLoops
     m = fjm_runtime.load("link1")
     free = design(m, sensor=SensorModel.panda_white(seed=5), screen=None, **TINY)
     simulated = []
@@ -260,7 +260,7 @@ def test_a_cluster_batch_uses_the_substeps_of_the_whole_batch():
     still equal the local batch bit for bit (substeps decided once, on the client, for every row)."""
     from dataclasses import replace
     from dask.distributed import Client, LocalCluster
-    from fjm_runtime.analysis.design_runs import DesignLoops
+    from fjm_runtime.analysis.search.runs import DesignLoops
     m = fjm_runtime.load("planar2")
     wide = default_spread(m, {"K1": 1500.0, "K2": 1500.0})
     wide = replace(wide, relative={**wide.relative, "K1": 0.6, "K2": 0.6})
@@ -281,7 +281,7 @@ def test_a_cluster_batch_uses_the_substeps_of_the_whole_batch():
 
 def test_the_params_file_nominal_reaches_the_law_and_the_draws_centre(tmp_path):
     """The controller runs on the file's nominal values (not the model's defaults); the draws centre on them."""
-    from fjm_runtime.analysis.design_runs import DesignLoops
+    from fjm_runtime.analysis.search.runs import DesignLoops
     m = fjm_runtime.load("planar2")
     spread = load_params_file(_write(tmp_path, "[parameters]\nK1 = 1500.0\nJm2 = 0.5\n"), m)
     loops = DesignLoops(m, "ismc", "torque", 1000.0, 1, SensorModel.ideal(), None, None, True, nominal=spread.nominal)
@@ -313,8 +313,8 @@ def test_attribution_reruns_the_binding_draw_without_each_noise_source():
     """'as designed' reproduces the miss (same plant row, gains, noise seed); with every level at zero the
     figure no longer depends on the noise seed; the design's sensor is restored afterwards."""
     from dataclasses import replace
-    from fjm_runtime.analysis.design_attribution import attribute, variants
-    from fjm_runtime.analysis.design_runs import DesignLoops
+    from fjm_runtime.analysis.search.attribution import attribute, variants
+    from fjm_runtime.analysis.search.runs import DesignLoops
     m = fjm_runtime.load("link1")
     a = design(m, sensor=SensorModel.panda_white(seed=5), **TINY)
     miss = a["binding"]
@@ -341,8 +341,8 @@ def test_attribution_reruns_the_binding_draw_without_each_noise_source():
 def test_linear_screen_verdicts_follow_the_analysis():
     """The screen passes a candidate only when every corner is stable with the decay margin and the predicted
     jitter is within 1.25 x the limit; its reasons and explanation quote the analysis."""
-    from fjm_runtime.analysis.design_runs import DesignLoops
-    from fjm_runtime.analysis.design_screen_linear import JITTER_SLACK, LinearScreen
+    from fjm_runtime.analysis.search.runs import DesignLoops
+    from fjm_runtime.analysis.search.screen_linear import JITTER_SLACK, LinearScreen
     m = fjm_runtime.load("planar2")
     unstable = {"lam": 20.0, "k_lin": [100.0] * 2, "k_s": [200.0] * 2, "delta": [1.0] * 2}
     stable = {"lam": 10.0, "k_lin": [100.0] * 2, "k_s": [50.0] * 2, "delta": [1.0, 0.5]}

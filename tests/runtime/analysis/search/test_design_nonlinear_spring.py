@@ -15,8 +15,8 @@ import numpy as np
 import pytest
 
 import fjm_runtime
-from fjm_runtime.analysis.design_draws import default_spread, draw_params
-from fjm_runtime.analysis.sampled_linear import respring, scaled_stiffness
+from fjm_runtime.analysis.search.draws import default_spread, draw_params
+from fjm_runtime.analysis.sampled.sampled_linear import respring, scaled_stiffness
 from fjm_runtime.cli.main import main
 
 N = 7

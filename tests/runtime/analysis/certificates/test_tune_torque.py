@@ -1,4 +1,4 @@
-"""Reaching certificate of the torque-sensed law (fjm_runtime.analysis.certify_tau, ``fjm tune --sensing torque``).
+"""Reaching certificate of the torque-sensed law (fjm_runtime.analysis.certificates.certify_tau, ``fjm tune --sensing torque``).
 
 Controller on NOMINAL parameters (the emitted ``control_ismc_tau``), plant on TRUE ones. The
 checks are independent of the analysis: the true state is rebuilt from ``y_hat`` by solving
@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 import fjm_runtime as fjm
-from fjm_runtime.analysis.certify import certificate
-from fjm_runtime.analysis.certify_tau import (TorqueEvaluator, gamma_tolerance, synthesize_torque_gains,
+from fjm_runtime.analysis.certificates.certify import certificate
+from fjm_runtime.analysis.certificates.certify_tau import (TorqueEvaluator, gamma_tolerance, synthesize_torque_gains,
                                               torque_param_box)
 from fjm_runtime.cli.main import main
 from fjm_runtime.control.factory import make_controller

@@ -3,10 +3,10 @@
 :func:`design` searches the integral sliding-mode law's gains for a model, control rate, computation
 delay and sensor model: the surface pole ``lam`` (the quadruple pole of the integral surface, shared
 by the joints because the emitted law has one set of surface coefficients) and, PER JOINT, ``k_lin``,
-``k_s`` and ``delta``. Every candidate is simulated (:class:`~fjm_runtime.analysis.design_runs.DesignLoops`:
+``k_s`` and ``delta``. Every candidate is simulated (:class:`~fjm_runtime.analysis.search.runs.DesignLoops`:
 one compiled library for all candidates, the gains ride per run; SIMD by default; here or on a
 dask cluster, bit for bit the same) on draws of the TRUE plant
-(:mod:`fjm_runtime.analysis.design_draws`): by default
+(:mod:`fjm_runtime.analysis.search.draws`): by default
 
 * ``K x U[0.7, 1.3]`` per joint, ``J_m x U[0.8, 1.2]`` per joint, payload ``U[0, 1]`` kg (models with
   ``m_load``), a sensor-noise seed per draw;
@@ -15,7 +15,7 @@ dask cluster, bit for bit the same) on draws of the TRUE plant
 
 a parameter file (``--params``) sets the controller's nominal values and this spread.
 
-Thresholds (:class:`~fjm_runtime.analysis.design_thresholds.Thresholds`): each joint's second-half
+Thresholds (:class:`~fjm_runtime.analysis.search.thresholds.Thresholds`): each joint's second-half
 RMS error, the torque jitter on the jitter joints (1-4 by default), the time at a torque limit.
 Cost of a run: the worst joint's RMS error (rad) plus ``PENALTY`` times the excesses over the
 thresholds, each relative to its limit, summed over joints; a diverged run costs
@@ -30,7 +30,7 @@ the incumbent if it is better, otherwise ``f`` shrinks to ``sqrt(f)``. ``k_lin_j
 :data:`LIN_FLOOR` ``lam`` (measured reason at the constant). Per-joint gains matter on an
 arm: the proximal joints (large ``D``, stiff) turn encoder noise into torque jitter through
 ``beta^-1 = J_m K^-1 D`` and want a small ``k_lin``, the wrist (small ``D``) wants a large one. A
-screen (:mod:`fjm_runtime.analysis.design_screen`; the linear sampled-data analysis when installed)
+screen (:mod:`fjm_runtime.analysis.search.screen`; the linear sampled-data analysis when installed)
 rejects candidates before they are simulated. Then the best gains run on all draws at the full
 duration; then an active-set pass: the final check's worst draws join the screening set, the
 search runs two more rounds on it with runs twice as long, and the final check is repeated.
@@ -39,7 +39,7 @@ Verdict: every (threshold, joint) that some draw of the final check misses is re
 (``misses``); gains that meet every threshold are re-checked on FRESH plants and noise seeds
 (:data:`RECHECK_SEED_OFFSET`, ``draw_params(fresh=True)``) that no stage of the search used, and
 ``meets`` is true only if both pass; a failed design names its binding miss and what limits it (the
-screen's explanation, else :mod:`fjm_runtime.analysis.design_attribution`). Margins: the largest
+screen's explanation, else :mod:`fjm_runtime.analysis.search.attribution`). Margins: the largest
 tolerated delay (the best gains re-run at ``d + 1, d + 2, ...`` on the screening draws until one
 fails) and the input-gain range (every stiffness scaled by one factor ``g``, widening from the box
 until a draw fails).
@@ -53,13 +53,13 @@ from typing import Callable, Optional
 
 import numpy as np
 
-from .sampled_linear import scaled_stiffness
-from ..sim.sensor import SensorModel
-from ..validation import FjmValueError
-from .design_draws import PlantSpread, default_spread, draw_params
-from .design_runs import DesignLoops
-from .design_screen import SCREENED_COST, screen_costs
-from .design_thresholds import DIVERGED_COST, PENALTY, Thresholds, describe_miss, find_misses, run_cost
+from ..sampled.sampled_linear import scaled_stiffness
+from ...sim.sensor import SensorModel
+from ...validation import FjmValueError
+from .draws import PlantSpread, default_spread, draw_params
+from .runs import DesignLoops
+from .screen import SCREENED_COST, screen_costs
+from .thresholds import DIVERGED_COST, PENALTY, Thresholds, describe_miss, find_misses, run_cost
 
 __all__ = ["DIVERGED_COST", "LIN_FLOOR", "PENALTY", "RECHECK_SEED_OFFSET", "combine_moves", "design",
            "draw_params", "evaluate_gains", "move_gain", "run_cost"]
@@ -262,7 +262,7 @@ def _recheck(prob, gains, spread, count, duration, seed, say):
     misses = find_misses(b, prob.thresholds, range(count), "recheck")
     say(f"re-check on {count} fresh draws x {duration:g} s: worst cost {worst:.4g}, "
         f"{'meets every threshold' if not misses else f'{len(misses)} miss(es)'}")
-    from .design_report import worst_case
+    from .report import worst_case
     return {"draws": int(count), "duration": float(duration), "meets": not misses,
             "plants": f"fresh stream SeedSequence([{int(seed)}, 0x5EED]) (no corners)",
             "noise_seeds": [int(seeds[0]), int(seeds[-1])], "worst_case": worst_case(b, worst)}, misses
@@ -270,7 +270,7 @@ def _recheck(prob, gains, spread, count, duration, seed, say):
 
 def _attribution(prob, gains, miss, P_all, spread, recheck, duration, seed, say):
     """``(limited_by, figures)`` of the binding miss by Monte Carlo (:mod:`.design_attribution`)."""
-    from .design_attribution import attribute
+    from .attribution import attribute
     if miss["stage"] == "recheck":
         row = draw_params(prob.model, recheck["draws"], seed, spread, fresh=True)[miss["draw"]]
     else:
@@ -318,8 +318,8 @@ def design(model, *, kind: str = "ismc", sensing: str = "torque", rate: float = 
     draws; ``recheck_draws`` (default ``draws``; 0: none) the fresh draws of the re-check;
     ``scheduler`` (None: this process; an address or a ``dask.distributed.Client``) where the
     Monte Carlo stages run; ``screen`` (None: none; ``'linear'``: the linear sampled-data analysis,
-    :mod:`fjm_runtime.analysis.design_screen_linear`; or an object of
-    :class:`~fjm_runtime.analysis.design_screen.Screen`) rejects candidates first.
+    :mod:`fjm_runtime.analysis.search.screen_linear`; or an object of
+    :class:`~fjm_runtime.analysis.search.screen.Screen`) rejects candidates first.
 
     Returns
     -------
@@ -349,7 +349,7 @@ def design(model, *, kind: str = "ismc", sensing: str = "torque", rate: float = 
         return _design(model, kind, sensing, rate, delay, sensor, draws, duration, seed, u_max, screen_draws,
                        screen_duration, rounds, max_extra_delay, threads, simd, say, predict, reference, x0, task,
                        active_sets, thresholds, spread, recheck_draws, None, screen)
-    from ..batch.distributed import client_for
+    from ...batch.distributed import client_for
     with client_for(scheduler) as client:
         say(f"Monte Carlo stages on the dask cluster at {client.scheduler.address}")
         return _design(model, kind, sensing, rate, delay, sensor, draws, duration, seed, u_max, screen_draws,
@@ -360,8 +360,8 @@ def design(model, *, kind: str = "ismc", sensing: str = "torque", rate: float = 
 def _design(model, kind, sensing, rate, delay, sensor, draws, duration, seed, u_max, screen_draws, screen_duration,
             rounds, max_extra_delay, threads, simd, say, predict, reference, x0, task, active_sets, thresholds,
             spread, recheck_draws, client, screen) -> dict:
-    from .design_report import binding_miss, report
-    from .design_screen_linear import linear_screen
+    from .report import binding_miss, report
+    from .screen_linear import linear_screen
     t0 = time.perf_counter()
     prob = DesignLoops(model, kind, sensing, rate, delay, sensor, u_max, threads, simd, predict, reference, x0, task,
                        nominal=spread.nominal, thresholds=thresholds, client=client)
@@ -370,7 +370,7 @@ def _design(model, kind, sensing, rate, delay, sensor, draws, duration, seed, u_
             raise FjmValueError(f"design: screen = {screen!r}: expected None, 'linear' or a Screen object")
         screen = linear_screen(prob, spread)
         if screen is None:
-            raise FjmValueError("design: screen = 'linear': fjm_runtime.analysis.sampled_linear is not installed")
+            raise FjmValueError("design: screen = 'linear': fjm_runtime.analysis.sampled.sampled_linear is not installed")
     search = _Search(prob, screen)
     P_all = draw_params(model, max(draws, screen_draws), seed, spread)
     best, worst, b = _search(search, model, P_all, draws, screen_draws, screen_duration, duration, rounds,

@@ -1,6 +1,6 @@
 """The reaching condition ``Phi`` on a grid of the box: supremum, curvature margin, refinement, gain.
 
-For the formulas (``F0``, ``G``, ``W``, ``Phi_i``) see :mod:`fjm_runtime.analysis.certify`.
+For the formulas (``F0``, ``G``, ``W``, ``Phi_i``) see :mod:`fjm_runtime.analysis.certificates.certify`.
 :class:`BoxAnalysis` samples the box once for one model and setting; :func:`solve_gain`
 is the fixed point ``k_i = sup (drift + eta_i + cross coupling) / G_ii``.
 """

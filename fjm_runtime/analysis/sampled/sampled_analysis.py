@@ -1,9 +1,9 @@
 """The linear analysis of one law over plants, operating points, delays and stiffness scales.
 
-:class:`LinearAnalyzer` holds the conditions (:class:`~fjm_runtime.analysis.sampled_linear.Conditions`)
+:class:`LinearAnalyzer` holds the conditions (:class:`~fjm_runtime.analysis.sampled.sampled_linear.Conditions`)
 and the plants (nominal plus the corners of the parameter box, :func:`default_plants`); its
 :meth:`~LinearAnalyzer.analyze` takes a gains dict and returns a plain dict (JSON-able). The CasADi
-jacobian Functions are cached per layout (:func:`~fjm_runtime.analysis.sampled_linear.linear_step`),
+jacobian Functions are cached per layout (:func:`~fjm_runtime.analysis.sampled.sampled_linear.linear_step`),
 with the gains as an input, so screening many candidates builds nothing after the first.
 """
 from __future__ import annotations
@@ -13,8 +13,8 @@ from typing import Optional, Sequence
 
 import numpy as np
 
-from ..sim.rest import rest_state
-from ..sim.substeps import resolve_substeps
+from ...sim.rest import rest_state
+from ...sim.substeps import resolve_substeps
 from .sampled_linear import (Conditions, assess, channel_names, finite, linear_step, noise_levels, respring,
                              scaled_stiffness, spectral)
 
@@ -28,7 +28,7 @@ SCALE_BRACKET, SCALE_BISECTIONS = (2.0, 4.0, 8.0, 16.0), 6
 
 def default_plants(model, spread=None):
     """``[(name, p)]``: the nominal plant, then the nine corners of ``draw_params`` (the design's box)."""
-    from .design_draws import default_spread, draw_params
+    from ..search.draws import default_spread, draw_params
     spread = default_spread(model) if spread is None else spread
     p0 = np.asarray(model.params_array(spread.nominal), dtype=float)
     rows = draw_params(model, 9, 0, spread)
@@ -55,7 +55,7 @@ class LinearAnalyzer:
 
     def __init__(self, cond: Conditions, plants=None, task_times: Sequence[float] = (0.5, 1.0, 2.0),
                  catch_up: float = 0.05, substeps: Optional[int] = None):
-        from ..batch.sampled import jitter_half_width
+        from ...batch.sampled import jitter_half_width
         self.cond, m = cond, cond.model
         self.model, self.n, self.T = m, int(m.n), float(cond.dt)
         self.plants = default_plants(m) if plants is None else [(str(a), np.asarray(b, dtype=float))

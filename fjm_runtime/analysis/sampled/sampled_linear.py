@@ -20,7 +20,7 @@ start with a constant set point, solved by a chord-Newton iteration on ``w = F(w
 and layout) and task points ``t_j`` (frozen time: ``w_k`` and ``r_k`` of a noise-free run of the
 loop on the nominal plant; for another plant or delay, the run's plant state at ``t_j - catch_up``
 (the spring deflection rescaled to keep the spring torque) seeds a short noise-free run to ``t_j``).
-Figures (:mod:`fjm_runtime.analysis.sampled_noise` for the noise ones): the spectral radius of ``A``
+Figures (:mod:`fjm_runtime.analysis.sampled.sampled_noise` for the noise ones): the spectral radius of ``A``
 and the joint its eigenvector lives on; the first delay ``d' > d`` (up to ``d + 4``) at which the
 spectral radius reaches 1; the range ``[g_lo, g_hi]`` of one factor on every TRUE stiffness that
 keeps it below 1 (bisection); the stationary torque jitter (the metric of
@@ -35,10 +35,10 @@ from typing import Optional, Sequence
 
 import numpy as np
 
-from ..sim.sample_step import initial_step_state, make_layout, sample_step_function, stiffness_indices
-from ..sim.step_layout import spring_scale_groups
-from ..sim.sensor import SIGNALS, noise_slots
-from ..validation import FjmValueError
+from ...sim.sample_step import initial_step_state, make_layout, sample_step_function, stiffness_indices
+from ...sim.step_layout import spring_scale_groups
+from ...sim.sensor import SIGNALS, noise_slots
+from ...validation import FjmValueError
 from .sampled_noise import channel_variances, stationary_covariance, torque_jitter_variance
 
 __all__ = ["LinearStep", "Linearization", "linear_step", "noise_levels", "assess", "spectral"]
@@ -46,7 +46,7 @@ __all__ = ["LinearStep", "Linearization", "linear_step", "noise_levels", "assess
 
 def noise_levels(sensor, sensing: str, n: int) -> np.ndarray:
     """Std per noise slot with quantization folded in (``linear_noise_levels``, else ``levels``), shape (nm,)."""
-    from ..sim import sensor as sensor_mod
+    from ...sim import sensor as sensor_mod
     fn = getattr(sensor_mod, "linear_noise_levels", None)
     return np.asarray(fn(sensor, sensing, n) if fn is not None else sensor.levels(sensing, n), dtype=float)
 
@@ -82,7 +82,7 @@ class LinearStep:
 
     def __init__(self, model, controller, L):
         import casadi as ca
-        from ..batch.sampled import GainInput
+        from ...batch.sampled import GainInput
         gi = GainInput(controller)
         self.model, self.L, self.n, self.n_law, self.n_gains = model, L, L.n, gi.n_law, gi.n_gains
         F = sample_step_function(model, gi, L, outline=True)
@@ -174,7 +174,7 @@ def linear_step(model, controller, T, substeps, sensor, delay, predict) -> Linea
 
     ``sensor`` is the linearized one (quantization off). The gains are NOT part of the key.
     """
-    from ..batch.sampled import GainInput
+    from ...batch.sampled import GainInput
     L = make_layout(model, GainInput(controller), float(T), int(substeps), sensor, int(delay), bool(predict))
     key = (id(model), controller.law_kind, tuple(np.asarray(controller.p_nom, dtype=float).tolist()), L)
     hit = _STEPS.get(key)
@@ -275,14 +275,14 @@ class Conditions:
 
     @classmethod
     def from_loops(cls, loops) -> "Conditions":
-        """From a :class:`~fjm_runtime.analysis.design_runs.DesignLoops`."""
+        """From a :class:`~fjm_runtime.analysis.search.runs.DesignLoops`."""
         return cls(loops.model, loops.kind, loops.sensing, float(loops.dt), int(loops.delay), bool(loops.predict),
                    loops.sensor, loops.reference, np.asarray(loops.x0, dtype=float), dict(loops.nominal),
                    None if loops.u_max is None else tuple(loops.u_max))
 
     def controller(self, gains: dict):
         """The law with ``gains`` (``lam, k_lin, k_s, delta``; ``u_max`` from the conditions unless given)."""
-        from ..control.factory import make_controller
+        from ...control.factory import make_controller
         g = dict(gains)
         u_max = g.pop("u_max", self.u_max)
         try:

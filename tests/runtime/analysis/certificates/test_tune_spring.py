@@ -1,4 +1,4 @@
-"""Lemma 1 for a nonlinear spring (fjm_runtime.analysis.spring_interval): what `fjm tune` certifies.
+"""Lemma 1 for a nonlinear spring (fjm_runtime.analysis.certificates.spring_interval): what `fjm tune` certifies.
 
 The certificate evaluates the law that runs at the states of its box, so it carries over to a spring
 ``psi`` with the paper's stiffness interval replaced by ``psi' in [k_min, k_max]`` over the deflections
@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 import fjm_runtime as fjm
-from fjm_runtime.analysis.certify import synthesize_gains
+from fjm_runtime.analysis.certificates.certify import synthesize_gains
 from fjm_runtime.cli.main import main
 from fjm_runtime.control.factory import make_controller
 from fjm_runtime.control.references import Sinusoid

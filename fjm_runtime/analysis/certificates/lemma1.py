@@ -44,7 +44,7 @@ that the input cannot cancel (through ``c2 = 3 lambda^2`` and ``c3``; also the
 regulation offset analysed in :func:`predict_regulation_offset`). The gain of
 this module does NOT include it and is therefore not a reaching guarantee for
 the law that runs (on link1 it fails from lambda ~ 20):
-:func:`fjm_runtime.analysis.certify.synthesize_gains` (``fjm tune``) certifies
+:func:`fjm_runtime.analysis.certificates.certify.synthesize_gains` (``fjm tune``) certifies
 gains for the implemented law.
 
 One bound, two entry points
@@ -53,7 +53,7 @@ One bound, two entry points
 vertices along affine coordinates and local maximization, ``beta`` sampled on the same
 points); :func:`lemma1_gain` is the link1 reading on a fixed grid (the numbers of the
 figures and of ``fjm simulate``). Both take ``alpha``, ``beta`` and ``T^{-1}`` from the
-generated model (:mod:`fjm_runtime.analysis.link1`) through the same evaluator
+generated model (:mod:`fjm_runtime.analysis.certificates.link1`) through the same evaluator
 (:func:`mismatch_evaluator`) and the same formulas (:func:`surface_W`, :func:`lemma1_terms`).
 """
 from __future__ import annotations
@@ -396,7 +396,7 @@ def paper_bound_applies(model) -> bool:
     -------
     bool
     """
-    from ..model import load
+    from ...model import load
     return int(model.n) == 1 and tuple(model.param_names) == tuple(load("link1").param_names)
 
 
@@ -479,7 +479,7 @@ def default_switching_gain(model, nominal_params, lam: float, reference_bounds, 
     """
     if not paper_bound_applies(model):
         return None
-    from ..control.laws import coefficients_from_pole
+    from ...control.laws import coefficients_from_pole
     R = np.asarray(reference_bounds, dtype=float).reshape(5, -1)[:, 0]
     return lemma1_gain(coefficients_from_pole(lam), R, nominal=nominal_params,
                        bounds={"K": tuple(float(v) for v in k_bounds)}, error_bounds=error_bounds, eta=eta)

@@ -4,8 +4,8 @@ import pytest
 
 import fjm_runtime
 from fjm_runtime.control.laws import coefficients_from_pole
-from fjm_runtime.analysis.lemma1 import alpha_mismatch_bound, beta_bounds_link1, lemma1_gain
-from fjm_runtime.analysis.link1 import link1_alpha, link1_T_inverse
+from fjm_runtime.analysis.certificates.lemma1 import alpha_mismatch_bound, beta_bounds_link1, lemma1_gain
+from fjm_runtime.analysis.certificates.link1 import link1_alpha, link1_T_inverse
 
 
 @pytest.fixture(scope="module")
@@ -78,7 +78,7 @@ def test_lemma1_gain_structure():
 
 def test_closed_loop_eigenvalues_exact_parameters_give_designed_poles(link1):
     from fjm_runtime.control.factory import make_controller
-    from fjm_runtime.analysis.regulation import closed_loop_eigenvalues
+    from fjm_runtime.analysis.certificates.regulation import closed_loop_eigenvalues
     fl = make_controller("fl", link1, {}, lam=8.0)
     ev = closed_loop_eigenvalues(link1, fl, {})
     # quadruple pole at -8: a repeated root is ill-conditioned, so compare the characteristic polynomial

@@ -13,7 +13,7 @@ from typing import Dict, List, Optional, Tuple
 
 import numpy as np
 
-from ..control.laws import coefficients_from_pole
+from ...control.laws import coefficients_from_pole
 
 # ---------------------------------------------------------------------------------------------
 # inputs

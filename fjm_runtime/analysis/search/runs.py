@@ -15,9 +15,9 @@ from typing import Optional
 
 import numpy as np
 
-from ..control.factory import make_controller
-from ..control.references import make_reference
-from .design_thresholds import Thresholds, run_cost
+from ...control.factory import make_controller
+from ...control.references import make_reference
+from .thresholds import Thresholds, run_cost
 
 __all__ = ["DesignLoops"]
 
@@ -56,7 +56,7 @@ class DesignLoops:
     def __init__(self, model, kind, sensing, rate, delay, sensor, u_max, threads, simd, predict=False,
                  reference=None, x0=None, task=None, nominal=None, thresholds: Optional[Thresholds] = None,
                  client=None):
-        from ..batch.distributed import initial_state
+        from ...batch.distributed import initial_state
         self.model, self.kind, self.sensing, self.delay = model, kind, sensing, int(delay)
         self.dt, self.sensor, self.u_max, self.threads, self.simd = 1.0 / rate, sensor, u_max, threads, simd
         self.predict = bool(predict)
@@ -77,7 +77,7 @@ class DesignLoops:
 
     def substeps(self, P) -> int:
         """RK4 substeps for rows ``P``: the largest of the rule over them (memoised per row)."""
-        from ..sim.substeps import resolve_substeps
+        from ...sim.substeps import resolve_substeps
         out = 1
         for row in np.atleast_2d(P):
             key = row.tobytes()
@@ -91,7 +91,7 @@ class DesignLoops:
 
         ``seed``: an int (row ``i`` gets noise seed ``seed + i``) or one seed per row.
         """
-        from ..batch.runner import BatchResult, simulate_batch
+        from ...batch.runner import BatchResult, simulate_batch
         P = np.atleast_2d(np.asarray(P, dtype=float))
         ctrls = [self.controller(g) for g in cands]
         G = np.vstack([np.tile(c.gains, (P.shape[0], 1)) for c in ctrls])
@@ -106,7 +106,7 @@ class DesignLoops:
             return simulate_batch(self.model, ctrls[0], self.reference, rows, duration=duration, dt=self.dt,
                                   substeps=subs, sensor=self.sensor, delay_samples=d, seeds=seeds, gains=G,
                                   threads=self.threads, simd=self.simd, predict=self.predict, x0=self.x0)
-        from ..batch.distributed import LoopSpec, run_on_cluster
+        from ...batch.distributed import LoopSpec, run_on_cluster
         spec = LoopSpec(model=str(self.model.directory), model_name=self.model.name, kind=self.kind,
                         sensing=self.sensing, nominal=self.nominal, options=dict(cands[0], u_max=self.u_max),
                         reference=self.reference,

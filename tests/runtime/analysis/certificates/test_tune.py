@@ -1,4 +1,4 @@
-"""Reaching-gain synthesis (fjm_runtime.analysis.certify): certificates, the paper's bound, trajectories, CLI.
+"""Reaching-gain synthesis (fjm_runtime.analysis.certificates.certify): certificates, the paper's bound, trajectories, CLI.
 
 Robustness claims: controller on NOMINAL parameters, plant on TRUE ones. The
 checks of the certificate use independent evaluations (closed forms written
@@ -15,10 +15,10 @@ import fjm_runtime as fjm
 from fjm_runtime.cli.main import main
 from fjm_runtime.control.factory import make_controller
 from fjm_runtime.control.references import Sinusoid, SmoothStep
-from fjm_runtime.analysis.lemma1 import beta_hat_link1, lemma1_gain, paper_bound
-from fjm_runtime.analysis.link1 import link1_alpha, link1_T_inverse
+from fjm_runtime.analysis.certificates.lemma1 import beta_hat_link1, lemma1_gain, paper_bound
+from fjm_runtime.analysis.certificates.link1 import link1_alpha, link1_T_inverse
 from fjm_runtime.sim.simulate import simulate
-from fjm_runtime.analysis.certify import InfeasibleGainError, certificate, synthesize_gains
+from fjm_runtime.analysis.certificates.certify import InfeasibleGainError, certificate, synthesize_gains
 from support.reaching import state_at, trajectory_check
 
 K_NOM = 150.0
@@ -343,7 +343,7 @@ def test_torque_disturbance_bound_is_enforced(link1):
 def test_adaptive_gamma_and_frozen_gains(link1):
     """d s / d K_hat on link1 (integral surface): (c3 (y3 + g sin y1) + y4 + g cos(y1) y2) / K_hat, largest at
     the box corner y1 = Y1 (tan y1 < c3 / Y2 there) and K_hat = K_min; the gain covers every frozen estimate."""
-    from fjm_runtime.analysis.adaptive_gains import synthesize_adaptive_gains
+    from fjm_runtime.analysis.certificates.adaptive_gains import synthesize_adaptive_gains
     ref, E = REG
     R = ref.derivative_bounds()[:, 0]
     res = synthesize_adaptive_gains(link1, {"K": K_NOM}, K_bounds=(100.0, 200.0), reference_bounds=R,

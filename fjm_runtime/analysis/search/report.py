@@ -33,7 +33,7 @@ def worst_case(b, cost: float) -> dict:
 
 def report(model, prob, best, worst, b, margins, draws, seed, duration) -> dict:
     """The record's common part: settings, gains, the final check's worst case, margins."""
-    from .. import __version__
+    from ... import __version__
     gains = dict(best)
     if prob.u_max is not None:
         gains["u_max"] = [float(v) for v in np.broadcast_to(prob.u_max, (int(model.n),))]

@@ -1,7 +1,7 @@
-"""The linear sampled-data analysis as the screen of ``fjm design`` (:mod:`fjm_runtime.analysis.design_screen`).
+"""The linear sampled-data analysis as the screen of ``fjm design`` (:mod:`fjm_runtime.analysis.search.screen`).
 
 :class:`LinearScreen` analyses each candidate with
-:class:`~fjm_runtime.analysis.sampled_analysis.LinearAnalyzer` on the nominal plant and the nine
+:class:`~fjm_runtime.analysis.sampled.sampled_analysis.LinearAnalyzer` on the nominal plant and the nine
 corners of the design's parameter box, at rest and at task points, without margins (cheap: the
 jacobian Functions are built once, the gains ride as inputs). A candidate passes when
 
@@ -23,7 +23,7 @@ from typing import List, Optional
 
 import numpy as np
 
-from .design_screen import Screen, Verdict
+from .screen import Screen, Verdict
 
 __all__ = ["JITTER_SLACK", "MIN_DECAY", "LinearScreen", "linear_screen"]
 
@@ -36,7 +36,7 @@ TASK_TIMES = (1.0,)
 
 
 class LinearScreen:
-    """A :class:`~fjm_runtime.analysis.design_screen.Screen` from the linear analysis.
+    """A :class:`~fjm_runtime.analysis.search.screen.Screen` from the linear analysis.
 
     Parameters
     ----------
@@ -49,8 +49,8 @@ class LinearScreen:
     name = "linear sampled-data analysis"
 
     def __init__(self, loops, spread, margin: Optional[float] = None):
-        from .sampled_analysis import LinearAnalyzer, default_plants
-        from .sampled_linear import Conditions
+        from ..sampled.sampled_analysis import LinearAnalyzer, default_plants
+        from ..sampled.sampled_linear import Conditions
         self.loops = loops
         self.analyzer = LinearAnalyzer(Conditions.from_loops(loops), plants=default_plants(loops.model, spread),
                                        task_times=TASK_TIMES)
@@ -118,7 +118,7 @@ class LinearScreen:
 
 
 def linear_screen(loops, spread, margin: Optional[float] = None) -> Screen:
-    """The linear analysis (:mod:`fjm_runtime.analysis.sampled_linear`) as a screen.
+    """The linear analysis (:mod:`fjm_runtime.analysis.sampled.sampled_linear`) as a screen.
 
     Parameters
     ----------

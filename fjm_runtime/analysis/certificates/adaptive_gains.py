@@ -1,7 +1,7 @@
 """Gains for the adaptive-stiffness law: frozen-estimate synthesis plus the ``K_hat'`` term.
 
 See :func:`synthesize_adaptive_gains`; the synthesis for each frozen estimate is
-:func:`fjm_runtime.analysis.certify.synthesize_gains`.
+:func:`fjm_runtime.analysis.certificates.certify.synthesize_gains`.
 """
 from __future__ import annotations
 
@@ -14,7 +14,7 @@ import numpy as np
 from .box import per_joint, stiffness_names, surface_coefficients
 from .certify import synthesize_gains
 from .evaluator import Evaluator
-from ..control.defaults import DEFAULT_LAYER_RATE
+from ...control.defaults import DEFAULT_LAYER_RATE
 
 __all__ = ["AdaptiveTuneResult", "synthesize_adaptive_gains"]
 

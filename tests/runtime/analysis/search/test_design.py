@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 import fjm_runtime
-from fjm_runtime.analysis.design import DIVERGED_COST, PENALTY, design, draw_params, run_cost
+from fjm_runtime.analysis.search.search import DIVERGED_COST, PENALTY, design, draw_params, run_cost
 from fjm_runtime.sim.sample_step import stiffness_indices
 
 
@@ -84,7 +84,7 @@ def test_cost_sums_the_excess_over_joints():
 
 
 def test_moves_are_per_joint_and_keep_the_k_lin_floor():
-    from fjm_runtime.analysis.design import LIN_FLOOR, combine_moves, move_gain
+    from fjm_runtime.analysis.search.search import LIN_FLOOR, combine_moves, move_gain
     g = {"lam": 80.0, "k_lin": [400.0, 200.0], "k_s": [1e3, 2e3], "delta": [5.0, 10.0]}
     h = move_gain(g, ("k_s", 1), 2.0)
     assert h["k_s"] == [1e3, 4e3] and g["k_s"] == [1e3, 2e3]          # the input is not changed

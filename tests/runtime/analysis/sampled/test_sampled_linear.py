@@ -1,4 +1,4 @@
-"""The linear sampled-data analysis (fjm_runtime/analysis/sampled_linear.py, sampled_analysis.py).
+"""The linear sampled-data analysis (fjm_runtime/analysis/sampled/sampled_linear.py, sampled_analysis.py).
 
 Checked against the loop itself: (a) the CasADi jacobians against central differences of the sample
 step; (b) the predicted torque jitter and link-angle error against Monte Carlo runs of ``simulate``
@@ -15,8 +15,8 @@ import numpy as np
 import pytest
 
 import fjm_runtime
-from fjm_runtime.analysis.sampled_analysis import LinearAnalyzer
-from fjm_runtime.analysis.sampled_linear import Conditions, noise_levels, scaled_stiffness
+from fjm_runtime.analysis.sampled.sampled_analysis import LinearAnalyzer
+from fjm_runtime.analysis.sampled.sampled_linear import Conditions, noise_levels, scaled_stiffness
 from fjm_runtime.control.references import Sinusoid
 from fjm_runtime.sim.metrics import torque_jitter
 from fjm_runtime.sim.rest import rest_state
@@ -193,7 +193,7 @@ def test_jitter_formula_matches_a_long_linear_run():
 
     from scipy.signal import lfilter
 
-    from fjm_runtime.analysis.sampled_noise import stationary_covariance, torque_jitter_variance
+    from fjm_runtime.analysis.sampled.sampled_noise import stationary_covariance, torque_jitter_variance
     rng = np.random.default_rng(3)
     lam = np.array([0.995, 0.9, -0.6, 0.3])
     A = np.diag(lam)
@@ -214,7 +214,7 @@ def test_stationary_covariance_solves_the_lyapunov_equation():
     radius of 0.9995 (a slow mode: 1 kHz, 0.5 1/s); an unstable A is refused."""
     from scipy.linalg import solve_discrete_lyapunov
 
-    from fjm_runtime.analysis.sampled_noise import stationary_covariance
+    from fjm_runtime.analysis.sampled.sampled_noise import stationary_covariance
     rng = np.random.default_rng(7)
     V = rng.normal(size=(12, 12))
     M = np.diag(np.r_[0.9995, -0.9, 0.0, 0.0, np.linspace(-0.7, 0.8, 8)])

@@ -59,11 +59,11 @@ the other joints) is not analysed.
 ``predicted reaching time``: ``sgn(s_i) s_i' <= -eta_i`` on the box gives
 ``|s_i|`` down to ``delta_i`` within ``(|s_i(0)| - delta_i) / eta_i``.
 
-:func:`fjm_runtime.analysis.lemma1.paper_bound` evaluates the paper's Lemma 1 (eq 16
+:func:`fjm_runtime.analysis.certificates.lemma1.paper_bound` evaluates the paper's Lemma 1 (eq 16
 with ``rho``) in TRUE coordinates with the same machinery, for comparison (scalar models
-only). The box and its sampling live in :mod:`fjm_runtime.analysis.box`, the CasADi
-evaluation in :mod:`fjm_runtime.analysis.evaluator`, the grid of ``Phi`` in
-:mod:`fjm_runtime.analysis.grid`.
+only). The box and its sampling live in :mod:`fjm_runtime.analysis.certificates.box`, the CasADi
+evaluation in :mod:`fjm_runtime.analysis.certificates.evaluator`, the grid of ``Phi`` in
+:mod:`fjm_runtime.analysis.certificates.grid`.
 """
 from __future__ import annotations
 
@@ -74,7 +74,7 @@ import numpy as np
 
 from .grid import BoxAnalysis, nominal_setup, solve_gain, witness_point
 from .spring_interval import stiffness_interval
-from ..control.defaults import DEFAULT_LAYER_RATE
+from ...control.defaults import DEFAULT_LAYER_RATE
 
 __all__ = ["TuneResult", "InfeasibleGainError", "synthesize_gains", "certificate", "GUARANTEE"]
 
@@ -119,7 +119,7 @@ class TuneResult:
     certificate_grid_bound : ndarray, shape (n,)
         Grid supremum plus the curvature margin.
     margin : ndarray, shape (n,)
-        The curvature margin ``sum_d M_d h_d^2 / 8`` (see :meth:`fjm_runtime.analysis.grid.BoxAnalysis.margin`).
+        The curvature margin ``sum_d M_d h_d^2 / 8`` (see :meth:`fjm_runtime.analysis.certificates.grid.BoxAnalysis.margin`).
     witness : list of dict
         Per joint, where the certificate is attained: ``y_hat`` (4, n), the
         parameters that differ from nominal, the worst ``w`` and sign of ``s``.
@@ -140,7 +140,7 @@ class TuneResult:
         For comparison: the Lipschitz margin ``sum_d L_d h_d / 2`` of the same grid
         (valid under weaker assumptions, much coarser on coarse grids; not used by the gain).
     stiffness : dict or None
-        Nonlinear-spring models (:mod:`fjm_runtime.analysis.spring_interval`): the deflections the
+        Nonlinear-spring models (:mod:`fjm_runtime.analysis.certificates.spring_interval`): the deflections the
         box's states reach, the declared range, and ``psi'`` in ``[k_min, k_max]`` there over the
         parameter box: the stiffness interval of the paper's Lemma 1 that the certificate covers.
         None for a linear spring.
@@ -242,7 +242,7 @@ def synthesize_gains(model, nominal_params=None, *, param_box=None, reference_bo
         ``sum_j |(C J g)_ij| D_j`` to the drift bound.
     evaluator : callable, optional
         ``evaluator(model, p_nom, c_last, beta_hat) -> Evaluator`` of the same outputs for
-        another law (the torque-sensed one: :mod:`fjm_runtime.analysis.certify_tau`);
+        another law (the torque-sensed one: :mod:`fjm_runtime.analysis.certificates.certify_tau`);
         default the state-feedback law above.
 
     Returns

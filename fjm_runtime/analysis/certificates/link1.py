@@ -2,7 +2,7 @@
 
 Nothing here restates the model's formulas: ``alpha`` and ``T`` are the generated
 CasADi functions of ``fjm_runtime.load('link1')``, and ``T^{-1}`` is computed from
-``T`` by Newton (:func:`fjm_runtime.analysis.evaluator.inverse_T`; the motor half
+``T`` by Newton (:func:`fjm_runtime.analysis.certificates.evaluator.inverse_T`; the motor half
 of ``T`` is affine in ``(q_m, dq_m)`` for link1, so it converges in one step).
 """
 from __future__ import annotations
@@ -11,7 +11,7 @@ from typing import Dict, Tuple
 
 import numpy as np
 
-from ..model import load
+from ...model import load
 from .evaluator import inverse_T
 
 POSITIVE = ("J_l", "J_m", "K")

@@ -15,7 +15,7 @@ from typing import List, Optional, Sequence, Tuple
 
 import numpy as np
 
-from ..validation import FjmValueError
+from ...validation import FjmValueError
 
 __all__ = ["DEFAULT_JITTER_JOINTS", "DIVERGED_COST", "PENALTY", "Thresholds", "describe_miss", "find_misses",
            "parse_joints", "run_cost"]

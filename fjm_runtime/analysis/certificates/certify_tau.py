@@ -28,11 +28,11 @@ For one joint (or a diagonal ``D``) ``G = Gamma`` and the textbook sufficient co
 ``k_s >= (sup |(Gamma - 1) w + (Gamma - 1) W / D| + eta) / Gamma_min``. For a chain ``G`` is a
 similarity transform of ``Gamma``: its diagonal lies in ``[Gamma_min, Gamma_max]`` only
 approximately and its off-diagonal entries couple the joints; the condition used is the
-per-joint one of :mod:`fjm_runtime.analysis.certify` (``Phi_i = |F0_i| + sum_j |G_ij - d_ij| W_j +
+per-joint one of :mod:`fjm_runtime.analysis.certificates.certify` (``Phi_i = |F0_i| + sum_j |G_ij - d_ij| W_j +
 sum_{j != i} |G_ij| k_j - G_ii k_i <= -eta_i``), which reduces to the textbook one when ``G``
 is diagonal. The supremum over the box (nominal coordinates ``y_hat``, true ``K``, ``J_m`` and
 payload) is computed by the same grid/sampling, vertex enumeration along affine coordinates
-and local maximization (:class:`fjm_runtime.analysis.grid.BoxAnalysis`); only the evaluator
+and local maximization (:class:`fjm_runtime.analysis.certificates.grid.BoxAnalysis`); only the evaluator
 differs (:class:`TorqueEvaluator`: the true state ``x`` from ``y_hat`` and the true ``K``).
 
 What it guarantees, and what not
@@ -52,7 +52,7 @@ import numpy as np
 
 from .certify import InfeasibleGainError, TuneResult, synthesize_gains
 from .evaluator import Evaluator
-from ..control.defaults import DEFAULT_LAYER_RATE
+from ...control.defaults import DEFAULT_LAYER_RATE
 
 __all__ = ["GUARANTEE_TAU", "TorqueEvaluator", "build_torque_inverse", "build_torque_nominal_fn",
            "torque_param_box", "synthesize_torque_gains", "gamma_tolerance", "obstacle", "input_gain_summary", "state_from_y_hat"]
@@ -96,8 +96,8 @@ def build_torque_inverse(model, p_nom: np.ndarray):
 def build_torque_nominal_fn(model, p_nom: np.ndarray, c_last: np.ndarray, beta_hat=None):
     """CasADi Function ``(x, y, p) -> [F0; vec G; alpha_hat; vec B; vec C J g]`` of the torque-sensed law.
 
-    Same outputs as :func:`fjm_runtime.analysis.evaluator.build_nominal_fn` (so that
-    :class:`~fjm_runtime.analysis.grid.BoxAnalysis` works unchanged), with
+    Same outputs as :func:`fjm_runtime.analysis.certificates.evaluator.build_nominal_fn` (so that
+    :class:`~fjm_runtime.analysis.certificates.grid.BoxAnalysis` works unchanged), with
     ``Y(x; p) = T_tau(m(x; K_true); p_nom)``, ``J = dY/dx``, ``alpha_hat = alpha_tau(m; p_nom)``,
     ``B = beta_tau(m; p_nom)``; ``x`` (4n,) the TRUE state, ``p`` the TRUE parameters; output
     shape ``(2n + 3n^2, 1)``. ``beta_hat`` must be None (the law uses ``beta_tau``).
@@ -127,7 +127,7 @@ def build_torque_nominal_fn(model, p_nom: np.ndarray, c_last: np.ndarray, beta_h
 
 
 class TorqueEvaluator(Evaluator):
-    """:class:`~fjm_runtime.analysis.evaluator.Evaluator` of the torque-sensed law.
+    """:class:`~fjm_runtime.analysis.certificates.evaluator.Evaluator` of the torque-sensed law.
 
     ``x`` from ``y_hat`` and the TRUE parameters by Newton on ``Y_m(x; p) = y_m`` (``Y`` is
     affine in the motor half ``q_m``, ``dq_m`` for fixed ``q``, ``dq``: one step is exact,
@@ -331,7 +331,7 @@ def synthesize_torque_gains(model, nominal_params=None, *, param_box=None, refer
     """Per-joint switching gains of the torque-sensed law (``ismc_tau``, or ``smc_tau`` with
     ``integral=False``) with a certificate.
 
-    Parameters as :func:`fjm_runtime.analysis.certify.synthesize_gains` (``beta_tau``, no constant ``beta_hat``);
+    Parameters as :func:`fjm_runtime.analysis.certificates.certify.synthesize_gains` (``beta_tau``, no constant ``beta_hat``);
     ``param_box`` default :func:`torque_param_box`. ``result.settings['sensing']`` is ``'torque'``.
 
     Returns

@@ -1,6 +1,6 @@
 """Stationary noise response of a linear sampled loop: covariance, torque jitter, tracking error.
 
-The loop linearized about an operating point (:mod:`fjm_runtime.analysis.sampled_linear`)::
+The loop linearized about an operating point (:mod:`fjm_runtime.analysis.sampled.sampled_linear`)::
 
     w_{k+1} = A w_k + B n_k          n_k white, E[n n'] = diag(sigma^2)   (nm channels)
     u_k     = C w_k + D n_k
