@@ -10,13 +10,17 @@ Columns (CSV header or NPZ keys), one per joint ``i = 1..n``:
 ``u_<i>``    N m      commanded motor torque on the link side (what drives the motor equation)
 ===========  =======  ==================================================================
 
-Extra columns (e.g. ``dq_<i>``) are ignored. NPZ files hold ``t`` (N,) and ``q``, ``q_m``, ``u``,
+Extra columns (e.g. ``dq_<i>``) are ignored, unless they name a joint beyond the model's (a log of
+another arm). The CSV is UTF-8 text (a byte-order mark is accepted); every data row has one field per
+header column (a short last line is a truncated file). NPZ files hold ``t`` (N,) and ``q``, ``q_m``, ``u``,
 ``tau_J`` (N, n). Every problem is one :class:`~fjm_runtime.validation.FjmValueError` line naming
 the file, the data row (1-based, the header not counted) and the column.
 """
 from __future__ import annotations
 
 import csv
+import re
+import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Dict, List, Optional
@@ -79,21 +83,86 @@ def _columns(n: int, with_tau: bool) -> Dict[str, List[str]]:
     return names
 
 
-def _read_csv(path: Path, n: int) -> Log:
-    with open(path, newline="") as fh:
-        header = [h.strip() for h in next(csv.reader(fh), [])]
-    if not header:
-        raise FjmValueError(f"{path}: empty file; expected a CSV header t, q_1, q_m_1, u_1, ... (docs/identification.md)")
+#: Columns that carry a joint index (``q_3``): one beyond the model's joints means a log of another arm.
+JOINT_COLUMN = re.compile(r"^(q|q_m|u|tau_J|dq|dq_m|dtau_J|ddq)_(\d+)$")
+
+
+def _text(path: Path) -> str:
+    """The file as text (UTF-8, a byte-order mark dropped); one line for a binary or compressed file."""
+    raw = path.read_bytes()
+    if raw[:2] == b"\x1f\x8b":
+        raise FjmValueError(f"{path}: gzip-compressed; expected a plain-text CSV log (decompress it first: gunzip)")
+    if raw[:4] == b"PK\x03\x04":
+        raise FjmValueError(f"{path}: a zip archive; expected a plain-text CSV log (an .npz log needs the .npz suffix)")
+    try:
+        return raw.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        row = raw.count(b"\n", 0, exc.start)
+        where = "header" if row == 0 else f"row {row}"
+        raise FjmValueError(f"{path}: {where}: byte 0x{raw[exc.start]:02x} at offset {exc.start} is not UTF-8 text; "
+                            "expected a plain-text CSV log (a binary or compressed file?)") from None
+
+
+def _check_header(path: Path, header: List[str], n: int) -> None:
+    for k, h in enumerate(header):
+        m = JOINT_COLUMN.match(h)
+        if m and not 1 <= int(m.group(2)) <= n:
+            raise FjmValueError(f"{path}: header, column {k + 1} ({h}): joint {m.group(2)}; expected joints 1..{n} "
+                                "(a log of another arm?)")
     want = ["t"] + [c for cols in _columns(n, False).values() for c in cols]
     missing = [c for c in want if c not in header]
     if missing:
         raise FjmValueError(f"{path}: missing column(s) {', '.join(missing[:6])}{' ...' if len(missing) > 6 else ''}; "
                             f"expected t, q_<i>, q_m_<i>, u_<i> (and tau_J_<i> if sensed) for i = 1..{n}")
-    data = np.genfromtxt(path, delimiter=",", skip_header=1, dtype=float, ndmin=2, invalid_raise=False)
-    if data.size == 0:
-        raise FjmValueError(f"{path}: no data rows; expected at least {MIN_ROWS}")
-    if data.shape[1] != len(header):
-        raise FjmValueError(f"{path}: {data.shape[1]} values per row for {len(header)} header columns")
+
+
+def _rows(path: Path, lines: List[str], header: List[str]) -> List[List[str]]:
+    """The data rows, each with exactly one field per header column (trailing blank lines dropped)."""
+    rows = list(csv.reader(lines))
+    while rows and not any(c.strip() for c in rows[-1]):
+        rows.pop()
+    if not rows:
+        raise FjmValueError(f"{path}: header only, no data rows; expected at least {MIN_ROWS} rows of samples")
+    ncol = len(header)
+    for r, cells in enumerate(rows):
+        if len(cells) != ncol:
+            last = r == len(rows) - 1
+            what = f"column {header[len(cells)]} missing" if len(cells) < ncol else f"{len(cells) - ncol} extra"
+            hint = " (the last line cut short: a truncated file?)" if last and len(cells) < ncol else ""
+            raise FjmValueError(f"{path}: row {r + 1}: {len(cells)} fields for {ncol} header columns ({what}){hint}; "
+                                "expected one value per column")
+    return rows
+
+
+def _numbers(path: Path, rows: List[List[str]], header: List[str]) -> np.ndarray:
+    """``rows`` as floats, shape (N, columns); an empty cell is NaN, text is named by row and column."""
+    try:
+        return np.array(rows, dtype=float)
+    except ValueError:
+        pass
+    data = np.empty((len(rows), len(header)))
+    for r, cells in enumerate(rows):
+        for c, cell in enumerate(cells):
+            try:
+                data[r, c] = float(cell) if cell.strip() else np.nan
+            except ValueError:
+                raise FjmValueError(f"{path}: row {r + 1}, column {header[c]}: {cell[:20]!r} is not a number; "
+                                    "expected a decimal number") from None
+    return data
+
+
+def _read_csv(path: Path, n: int) -> Log:
+    text = _text(path)
+    lines = text.splitlines()
+    if len(lines) > 1 and text[-1:] not in ("\n", "\r"):
+        # a writer that stopped mid-row leaves no line end; a cut inside the last number still parses
+        raise FjmValueError(f"{path}: row {len(lines) - 1}: the last line has no line end (a truncated file?); "
+                            "expected every row to end with a line break (append one if the file is complete)")
+    header = [h.strip() for h in next(csv.reader(lines[:1]), [])]
+    if not header:
+        raise FjmValueError(f"{path}: empty file; expected a CSV header t, q_1, q_m_1, u_1, ... (docs/identification.md)")
+    _check_header(path, header, n)
+    data = _numbers(path, _rows(path, lines[1:], header), header)
     col = {h: data[:, k] for k, h in enumerate(header)}
     with_tau = all(c in col for c in _columns(n, True)["tau_J"])
     arrays = {k: np.column_stack([col[c] for c in cols]) for k, cols in _columns(n, with_tau).items()}
@@ -109,19 +178,35 @@ def _check_finite(path: Path, header: List[str], data: np.ndarray) -> None:
                             "expected every sample complete (drop or repair the row)")
 
 
+def _npz_arrays(path: Path) -> Dict[str, np.ndarray]:
+    """The arrays ``t``, ``q``, ``q_m``, ``u`` (and ``tau_J``) of an NPZ archive, as floats."""
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            if not isinstance(z, np.lib.npyio.NpzFile):
+                raise ValueError("a single array")
+            keys = set(z.files)
+            missing = [k for k in ("t", "q", "q_m", "u") if k not in keys]
+            if missing:
+                raise FjmValueError(f"{path}: missing array(s) {', '.join(missing)}; expected t (N,), q, q_m, u "
+                                    "(N, n) and tau_J (N, n) if sensed")
+            return {k: np.asarray(z[k], dtype=float) for k in ("t", "q", "q_m", "u", "tau_J") if k in keys}
+    except FjmValueError:
+        raise
+    except (ValueError, TypeError, OSError, EOFError, zipfile.BadZipFile) as exc:
+        raise FjmValueError(f"{path}: not a readable NPZ archive of numeric arrays (random bytes, "
+                            "a damaged file, or object arrays); expected numpy.savez output with t (N,), q, q_m, u (N, n)") from None
+
+
 def _read_npz(path: Path, n: int) -> Log:
-    with np.load(path) as z:
-        keys = set(z.files)
-        missing = [k for k in ("t", "q", "q_m", "u") if k not in keys]
-        if missing:
-            raise FjmValueError(f"{path}: missing array(s) {', '.join(missing)}; expected t (N,), q, q_m, u "
-                                "(N, n) and tau_J (N, n) if sensed")
-        arr = {k: np.asarray(z[k], dtype=float) for k in ("t", "q", "q_m", "u", "tau_J") if k in keys}
+    arr = _npz_arrays(path)
     N = arr["t"].reshape(-1).size
     for k in ("q", "q_m", "u", "tau_J"):
         if k in arr:
             if arr[k].shape != (N, n):
-                raise FjmValueError(f"{path}: {k} has shape {arr[k].shape}; expected ({N}, {n})")
+                more = arr[k].ndim == 2 and arr[k].shape[1] > n
+                col = f", column {k}_{n + 1}" if more else ""
+                raise FjmValueError(f"{path}{col}: {k} has shape {arr[k].shape}; expected ({N}, {n})"
+                                    f"{' (a log of another arm?)' if more else ''}")
             bad = ~np.isfinite(arr[k])
             if bad.any():
                 row, j = np.argwhere(bad)[0]
