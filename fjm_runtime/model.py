@@ -15,6 +15,7 @@ from typing import Dict, List, Optional, Tuple
 import casadi as ca
 import numpy as np
 
+from .robot_facts import JointLimits, Task, joint_limits, task_from_manifest
 from .validation import FjmValueError, as_vector, params_vector
 
 #: Quantities every generated model provides (file ``<name>.casadi``).
@@ -117,6 +118,10 @@ class Model:
         The URDF's ``<limit effort velocity>`` per joint (N m, rad/s), None for models without them.
     position_limits : numpy.ndarray (n, 2) or None
         The URDF's ``[lower, upper]`` per joint (rad).
+    limits : fjm_runtime.robot_facts.JointLimits
+        The limits a design uses: the model file's ``[limits]`` over the URDF's (``inf``: none).
+    task : fjm_runtime.robot_facts.Task or None
+        The task of the model's demo and design (its model file's ``[task]``).
 
     Every method takes ``x`` (length 4n) and ``p`` (array in ``param_names``
     order, dict with defaults for missing keys, or None for all defaults) and
@@ -238,6 +243,24 @@ class Model:
         lower = np.full(self.n, np.nan) if lower is None else lower
         upper = np.full(self.n, np.nan) if upper is None else upper
         return np.column_stack([np.where(np.isnan(lower), -np.inf, lower), np.where(np.isnan(upper), np.inf, upper)])
+
+    # -- the robot's own facts (its model file's [limits] and [task]) ------------
+    @property
+    def limits(self) -> JointLimits:
+        """Joint limits (effort N m, velocity rad/s, torque_rate N m/s: (n,); position rad: (n, 2)), ``inf``
+        where none is stated: the manifest's ``limits`` (the model file's ``[limits]`` over the URDF's), else
+        the URDF's as :attr:`effort_limits`, :attr:`velocity_limits`, :attr:`position_limits` read them."""
+        if getattr(self, "_limits", None) is None:
+            self._limits = joint_limits(self.manifest, self.n, {
+                "effort": self.effort_limits, "velocity": self.velocity_limits, "position": self.position_limits})
+        return self._limits
+
+    @property
+    def task(self) -> Optional[Task]:
+        """The task the model's files state for its demo and design (manifest ``task``); None if none."""
+        if getattr(self, "_task", None) is None:
+            self._task = task_from_manifest(self.manifest, self.n)
+        return self._task
 
     def __repr__(self) -> str:
         return f"<fjm Model {self.name}: n={self.n}, nx={self.nx}, params={len(self.param_names)}>"

@@ -144,6 +144,9 @@ class FlexibleJointModel:
     frictions : tuple of derive.core.friction.MotorFriction or None
         Nonlinear-spring models only: Coulomb and Stribeck motor friction ``F(dq_m)`` per joint,
         beside the viscous ``B_m`` (:mod:`derive.core.friction`). None: viscous damping only.
+    robot_facts : dict or None
+        The manifest entries ``limits`` and ``task`` a model file states (over its URDF's limits;
+        :mod:`derive.model_file.robot_facts`). None: the model states neither.
     """
 
     name: str
@@ -170,6 +173,7 @@ class FlexibleJointModel:
     bodies: Optional[Tuple[RigidBody, ...]] = None
     springs: Optional[Tuple[object, ...]] = None  # nonlinear springs: derive.core.spring.CubicSpring per joint
     frictions: Optional[Tuple[object, ...]] = None  # motor friction: derive.core.friction.MotorFriction per joint
+    robot_facts: Optional[Dict[str, object]] = None
 
     @property
     def state(self) -> Tuple[sp.Symbol, ...]:

@@ -196,6 +196,7 @@ def write_spring_model(lin: Linearization, outdir: Path,
     manifest = {
         "header": HEADER, "model": m.name, "description": m.description,
         **({"source": m.source} if m.source is not None else {}),  # URDF-built models only
+        **(m.robot_facts or {}),  # "limits" and "task" of the robot's files
         "n": m.n, "nx": 4 * m.n,
         "parameters": [{"name": p.name, "default": p.default, "meaning": p.meaning, "unit": p.unit} for p in m.params],
         "arguments": argument_layout(lin),

@@ -292,6 +292,7 @@ def write_model(lin: Linearization, outdir: Path,
         "model": m.name,
         "description": m.description,
         **({"source": m.source} if m.source is not None else {}),  # URDF-built models only
+        **(m.robot_facts or {}),  # "limits" and "task" of the robot's files
         **({"form": "complete", "reduced_model": m.reduced_model} if complete else {}),
         "n": m.n,
         "nx": 4 * m.n,

@@ -27,6 +27,10 @@ to the model file, with ``base`` and ``tip`` link names) and per-joint elastic p
 ``[parameters] g0`` and ``[notes]``); it is built by :func:`derive.spatial.spatial.make_spatial`. See
 docs/spatial.md, examples/elbow_arm.toml and :mod:`derive.model_file.urdf_form`.
 
+Either form may state the robot's ``[limits]`` (effort, velocity, torque rate; defaults: the URDF's) and
+``[task]`` (the sines or poses its demo and design run), carried into the manifest
+(:mod:`derive.model_file.robot_facts`).
+
 The file is parsed with :mod:`tomllib` (Python >= 3.11) or ``tomli`` and then
 checked against an explicit schema: allowed tables and keys, types, ranges and
 physical plausibility. Nothing from the file is evaluated or sympified: it

@@ -9,13 +9,14 @@ and ``r_i <= l_i`` (the centre of mass lies on the link).
 from __future__ import annotations
 
 import re
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Dict, Optional, Tuple
 
 from ..core.model_base import PLANAR_GROUPS, FlexibleJointModel, param_group, planar_param_names
 from ..planar.planar import make_planar
 from .drive_tables import (DRIVE_TABLES, SpringSpec, parse_friction_table, parse_joint_drive_tables, parse_spring_table,
                            spring_error)
+from .robot_facts import FACT_TABLES, robot_facts
 from .schema import Checker, ModelFileError, check_description, check_name, got, number, show, suggest
 from .toml_keys import KeyPath
 
@@ -58,6 +59,7 @@ class ModelSpec:
     friction: Optional[Dict[str, float]] = None  # [friction]: F_c, F_s, v_s, v_c
     springs: Optional[Tuple[SpringSpec, ...]] = None  # [spring.*] per joint (several links)
     frictions: Optional[Tuple[Optional[Dict[str, float]], ...]] = None  # [friction.*] per joint (several links)
+    facts: Optional[Dict[str, object]] = None  # manifest "limits" and "task" (derive.model_file.robot_facts)
 
     def drives(self):
         """``(springs, frictions)`` per joint (each None without such tables), one link or several."""
@@ -72,13 +74,13 @@ class ModelSpec:
         chain = make_planar(self.links, name=self.name, defaults=dict(self.defaults),
                             description=self.description)
         springs, frictions = self.drives()
-        if springs is None and frictions is None:
-            return chain
-        from ..core.spring import with_drives
-        springs = springs or (SpringSpec("linear", {}, 3.141592653589793),) * self.links
-        return with_drives(chain, [(s.kind, s.coefficients, s.deflection_range) for s in springs],
-                           None if frictions is None else list(frictions),
-                           description=self.description or _drive_description(self.links, springs, frictions))
+        if springs is not None or frictions is not None:
+            from ..core.spring import with_drives
+            springs = springs or (SpringSpec("linear", {}, 3.141592653589793),) * self.links
+            chain = with_drives(chain, [(s.kind, s.coefficients, s.deflection_range) for s in springs],
+                                None if frictions is None else list(frictions),
+                                description=self.description or _drive_description(self.links, springs, frictions))
+        return replace(chain, robot_facts=self.facts or None)
 
 
 def _drive_description(links: int, springs, frictions) -> str:
@@ -107,12 +109,12 @@ def _describe_names(n: int) -> str:
 def _model_table(data: dict, chk: Checker, builtin: bool) -> Tuple[str, int, Optional[str]]:
     """The top level and ``[model]``: name, number of links, description."""
     for key in data:
-        if key not in ("model", "parameters") + DRIVE_TABLES:
+        if key not in ("model", "parameters") + DRIVE_TABLES + FACT_TABLES:
             hint = (f" (did you mean `{key} = ...` under [model]?)" if key in MODEL_KEYS
                     else " (parameters go under [parameters])" if param_group(key) in SI_UNITS
-                    else suggest(key, ("model", "parameters") + DRIVE_TABLES))
-            raise chk.fail((key,), f"unknown key; a model file has the tables [model], [parameters], [spring] and "
-                                   f"[friction] only{hint}")
+                    else suggest(key, ("model", "parameters") + DRIVE_TABLES + FACT_TABLES))
+            raise chk.fail((key,), f"unknown key; a model file has the tables [model], [parameters], [spring], "
+                                   f"[friction], [limits] and [task] only{hint}")
     if "model" not in data:
         raise ModelFileError("missing required table [model] (with name = \"...\" and links = 1..7)",
                              chk.source, 1, "model")
@@ -244,7 +246,8 @@ def parse_chain_form(data: dict, chk: Checker, builtin: bool) -> ModelSpec:
     spec = ModelSpec(name=name, links=links, description=description,
                      defaults={k: defaults[k] for k in names if k in defaults}, units=units, source=chk.source,
                      spring=spring, friction=friction, springs=None if springs is None else tuple(springs),
-                     frictions=None if frictions is None else tuple(frictions))
+                     frictions=None if frictions is None else tuple(frictions),
+                     facts=robot_facts(data, chk, tuple(str(j) for j in range(1, links + 1))))
     if links == 1 and (spring is not None or friction is not None):
         from ..core.friction import FrictionError
         from ..core.spring_laws import SpringError

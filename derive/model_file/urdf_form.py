@@ -51,6 +51,7 @@ from ..spatial.spatial import make_spatial
 from ..spatial.spatial_params import elastic_params, inertial_params, payload_params
 from ..spatial.urdf import UrdfChain, UrdfError, load_urdf
 from .drive_tables import SpringSpec, parse_joint_drive_tables
+from .robot_facts import FACT_TABLES, robot_facts
 from .schema import Checker, check_description, check_name, got, number, show, suggest
 from .toml_keys import KeyPath
 
@@ -59,7 +60,7 @@ __all__ = ["UrdfModelSpec", "parse_urdf_form", "DEFAULT_G0"]
 #: The repository root (URDF paths in manifests are relative to it).
 REPO = Path(__file__).resolve().parent.parent.parent
 URDF_MODEL_KEYS = ("name", "urdf", "base", "tip", "tips", "description", "symbolic")
-URDF_TOP = ("model", "joints", "parameters", "payload", "notes", "rotors", "spring", "friction")
+URDF_TOP = ("model", "joints", "parameters", "payload", "notes", "rotors", "spring", "friction") + FACT_TABLES
 #: Keys of ``[rotors]``.
 ROTOR_KEYS = ("gear_ratio", "mass", "transverse_inertia", "reduced_model")
 #: Elastic parameters per joint: key -> (SI unit, bound kind, meaning, default or None = required).
@@ -111,6 +112,7 @@ class UrdfModelSpec:
     tips: Tuple[str, ...] = ()  # several tips: a tree (``tip`` is then one of them or empty)
     springs: Optional[Tuple[SpringSpec, ...]] = None  # [spring.*] per joint (derive.model_file.drive_tables)
     frictions: Optional[Tuple[Optional[Dict[str, float]], ...]] = None  # [friction.*] per joint
+    facts: Optional[Dict[str, object]] = None  # manifest "limits" and "task" (derive.model_file.robot_facts)
 
     def build(self) -> FlexibleJointModel:
         """The symbolic model (:func:`derive.spatial.spatial.make_spatial` of the URDF chain or tree)."""
@@ -141,12 +143,12 @@ class UrdfModelSpec:
         if chain.ignored:
             src["ignored_links"] = list(chain.ignored)
         model = replace(model, source=src)
-        if self.springs is None and self.frictions is None:
-            return model
-        from ..core.spring import with_drives
-        springs = self.springs or tuple(SpringSpec("linear", {}, 3.141592653589793) for _ in range(n))
-        return with_drives(model, [(s.kind, s.coefficients, s.deflection_range) for s in springs],
-                           None if self.frictions is None else list(self.frictions))
+        if self.springs is not None or self.frictions is not None:
+            from ..core.spring import with_drives
+            springs = self.springs or tuple(SpringSpec("linear", {}, 3.141592653589793) for _ in range(n))
+            model = with_drives(model, [(s.kind, s.coefficients, s.deflection_range) for s in springs],
+                                None if self.frictions is None else list(self.frictions))
+        return replace(model, robot_facts=self.facts or None)
 
 
 #: Units of the ``limits`` lists of a URDF model's manifest ``source``.
@@ -395,4 +397,5 @@ def parse_urdf_form(data: dict, chk: Checker, base_dir: Path, builtin: bool) -> 
                          description=model.get("description"), notes=notes, source=chk.source,
                          payload=payload, symbolic=symbolic,
                          springs=None if springs is None else tuple(springs),
-                         frictions=None if frictions is None else tuple(frictions))
+                         frictions=None if frictions is None else tuple(frictions),
+                         facts=robot_facts(data, chk, names, urdf_limits(chain)))

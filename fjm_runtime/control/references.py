@@ -195,6 +195,47 @@ class Sinusoid(Reference):
         return b
 
 
+class PoseSequence(Reference):
+    """Smooth steps through poses: ``poses[k] -> poses[k+1]`` over ``durations[k]``, then the last pose held.
+
+    Each move is a :class:`SmoothStep` (derivatives 1..4 zero at both ends), the next starting where the
+    previous ends; the reference starts at rest at ``poses[0]``.
+
+    Parameters
+    ----------
+    poses : array_like, shape (k, n)
+        Link angles, rad.
+    durations : array_like, shape (k - 1,)
+        Move times, s, each > 0.
+    """
+
+    def __init__(self, poses, durations):
+        poses = np.asarray(poses, dtype=float)
+        durations = np.asarray(durations, dtype=float).ravel()
+        if poses.ndim != 2 or poses.shape[0] < 1 or durations.shape != (poses.shape[0] - 1,):
+            raise ValueError(f"poses with shape {poses.shape}, durations with shape {durations.shape}: expected "
+                             "(k, n) poses and k - 1 durations")
+        self.n = poses.shape[1]
+        self.poses = poses
+        starts = np.concatenate([[0.0], np.cumsum(durations)])
+        self.moves = [SmoothStep(poses[k + 1], self.n, q0=poses[k], rise_time=d, t0=starts[k])
+                      for k, d in enumerate(durations)]
+
+    def _move(self, t: float):
+        for move in self.moves:
+            if t < move.t0 + move.rise_time:
+                return move
+        return self.moves[-1] if self.moves else Constant(self.poses[0], self.n)
+
+    def __call__(self, t):
+        return self._move(float(t))(float(t))
+
+    def derivative_bounds(self):
+        if not self.moves:
+            return Constant(self.poses[0], self.n).derivative_bounds()
+        return np.max([m.derivative_bounds() for m in self.moves], axis=0)
+
+
 def make_reference(kind: str, n: int = 1, **kwargs) -> Reference:
     """Build a reference by name.
 
