@@ -56,12 +56,12 @@ def bench_draws(draws: int = 16, duration: float = 10.0) -> dict:
     from fjm_runtime.batch.distributed import LoopSpec, batch_substeps, client_for, run_on_cluster
     from fjm_runtime.batch.runner import BatchResult, simulate_batch
     from fjm_runtime.cli.design import demo_task
-    from fjm_runtime.control.designed import designed_gains
+    from fjm_runtime.control.design import Design
     from fjm_runtime.control.factory import make_controller
     from fjm_runtime.analysis.search.draws import draw_params
     from fjm_runtime.sim.sensor import SensorModel
     m = fjm_runtime.load("panda")
-    gains = designed_gains("panda", "ismc", "torque", 1000, 1)["gains"]
+    gains = Design.shipped("panda", "ismc", "torque", 1000, 1).gains
     ctrl = make_controller("ismc", m, {}, sensing="torque", **gains)
     task = demo_task(m)
     P = draw_params(m, draws, 0)

@@ -16,7 +16,7 @@ import numpy as np
 
 import fjm_runtime
 from fjm_runtime.batch.runner import simulate_batch
-from fjm_runtime.control.designed import designed_gains
+from fjm_runtime.control.design import Design
 from fjm_runtime.control.factory import make_controller
 from fjm_runtime.experiments import panda as task
 from fjm_runtime.sim.sample_step import stiffness_indices
@@ -68,12 +68,12 @@ def summary(b) -> dict:
 
 def main() -> None:
     m = fjm_runtime.load("panda")
-    spec = designed_gains("panda", "ismc", "torque", 1000, 1)
-    g = {k: v for k, v in spec["gains"].items()}
+    design = Design.shipped("panda", "ismc", "torque", 1000, 1)
+    g = dict(design.gains)
     ref = task.reference()
     x0 = task.rest_state(m, ref(0.0)[0], m.default_params)
     P = plants(m)
-    out = {"runs": int(P.shape[0]), "gains": g, "gains_file": spec["file"], "targets": TARGETS}
+    out = {"runs": int(P.shape[0]), "gains": g, "gains_file": design.file, "targets": TARGETS}
     for label, sensing, predict in (("torque, predict", "torque", True), ("torque", "torque", False),
                                     ("state, predict", "state", True), ("state", "state", False)):
         c = make_controller("ismc", m, {}, sensing=sensing, **g)

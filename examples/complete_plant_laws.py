@@ -25,13 +25,12 @@ limit and the torque jitter of joints 1-4 (the metrics and thresholds of ``fjm d
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 
 import numpy as np
 
 import fjm_runtime
-from fjm_runtime.cli.simulate import design_task
+from fjm_runtime.control.design import Design
 from fjm_runtime.control.coupling import CouplingCompensatedController, complete_plant
 from fjm_runtime.sim.step import SimulationDivergedError
 from fjm_runtime.experiments import panda as P
@@ -67,16 +66,16 @@ def main(argv=None) -> dict:
     args = ap.parse_args(argv)
     reduced, complete = fjm_runtime.load("panda"), fjm_runtime.load("panda_complete")
     plant = complete_plant(complete, reduced)
-    spec = json.loads(DESIGN.read_text())
-    design = design_controller(reduced, spec, where=str(DESIGN))
+    gains = Design.load(DESIGN, where=str(DESIGN))
+    design = design_controller(reduced, gains)
     sensor = design.sensor if args.noise is None else sensor_from_spec(args.noise)
-    ref, x0 = design_task(reduced, spec["reference"])
+    ref, x0 = gains.reference(reduced), gains.start_state(reduced)
     comp = CouplingCompensatedController(P.controller("ismc", reduced), complete, None, dt=design.layout.T)
     comp5k = CouplingCompensatedController(P.controller("ismc", reduced), complete, None, dt=2e-4)
     rows = {
         "torque-sensed reduced (shipped design)": _run(plant, design.controller, ref, x0, args.duration, sensor,
                                                        design.layout.T),
-        f"state-sensed compensated ({spec.get('noise', sensor.name) if args.noise is None else args.noise})": _run(plant, comp, ref, x0, args.duration, sensor,
+        f"state-sensed compensated ({gains.noise or sensor.name if args.noise is None else args.noise})": _run(plant, comp, ref, x0, args.duration, sensor,
                                                          design.layout.T),
         "state-sensed compensated (no noise)": _run(plant, comp, ref, x0, args.duration, None, design.layout.T),
         "state-sensed compensated (no noise, no delay)": _run(plant, comp, ref, x0, args.duration, None,

@@ -31,7 +31,7 @@ from __future__ import annotations
 
 import argparse
 import importlib.util
-import json
+import dataclasses
 import subprocess
 import sys
 import tempfile
@@ -41,7 +41,7 @@ from types import SimpleNamespace
 import numpy as np
 
 import fjm_runtime
-from fjm_runtime.control.designed import designed_gains
+from fjm_runtime.control.design import Design
 from fjm_runtime.export.controller import design_controller
 from fjm_runtime.export.controller_step import raw_reading, rest_reading
 from fjm_runtime.ident.excite import design_excitation
@@ -79,42 +79,37 @@ def errors(model, ident) -> dict:
     return out
 
 
-def controller_spec(model, params_file: Path, design: bool, work: Path, sensing: str, noise: str) -> dict:
+def controller_spec(model, params_file: Path, design: bool, work: Path, sensing: str, noise: str) -> Design:
     """Step 4: the shipped design (if the model has one and ``design`` is False), else ``fjm design
     MODEL --params params.toml`` (``sensing``, ``noise``, delay 1); params.nominal = the identified values."""
     from fjm_runtime.analysis.search.draws import load_params_file
     nominal = load_params_file(params_file, model).overrides
-    spec = None if design else designed_gains(model.name, "ismc", "torque", RATE, 1)
+    spec = None if design else Design.shipped(model.name, "ismc", "torque", RATE, 1)
     if spec is None:
         out = work / "design.json"
         cmd = [sys.executable, "-m", "fjm_runtime.cli", "design", model.name, "--params", str(params_file),
                "--sensing", sensing, "--noise", noise, "--predict", "--out", str(out)]
         print("4. " + " ".join(["fjm"] + cmd[3:]))
         subprocess.run(cmd, check=False, stdout=subprocess.DEVNULL)
-        spec = json.loads(out.read_text())
-        print(f"   design {'meets' if spec.get('meets') else 'MISSES'} its thresholds on fjm's draws; gains "
-              f"{spec['gains']}")
+        spec = Design.load(out, where=str(out))
+        print(f"   design {'meets' if spec.meets else 'MISSES'} its thresholds on fjm's draws; gains "
+              f"{spec.gains}")
     else:
-        print(f"4. the shipped design of {model.name} (gains {sorted(spec['gains'])}) on the identified values")
-    spec = dict(spec)
-    spec["params"] = {**spec.get("params", {}), "nominal": nominal}
-    return spec
+        print(f"4. the shipped design of {model.name} (gains {sorted(spec.gains)}) on the identified values")
+    return dataclasses.replace(spec, params={**(spec.params or {}), "nominal": nominal}, source="round trip")
 
 
-def closed_loop(model, spec: dict, duration: float, work: Path, friction: float = FRICTION):
+def closed_loop(model, spec: Design, duration: float, work: Path, friction: float = FRICTION):
     """Step 5: the design's C library on the TRUE MuJoCo plant, the design's noise, delay and task."""
-    from fjm_runtime.cli.simulate import design_nominal, design_task
     cex = _c_example()
-    design = design_controller(model, spec, where="round trip", nominal=design_nominal(spec, model))
+    design = design_controller(model, spec)
     lib = cex.CController(cex.build_library(design, work / "lib"), design)
     L, sensor = design.layout, design.sensor
-    task = design_task(model, spec["reference"])
-    if task is None:                      # a generic design's task: sines from rest (fjm design --task sine)
+    ref = spec.reference(model)
+    if ref is None:                       # a generic design's task: sines from rest (fjm design --task sine)
         from fjm_runtime.control.references import make_reference
-        r = spec.get("reference") or {}
+        r = spec.task or {}
         ref = make_reference("sine", model.n, amplitude=r.get("amplitude", 0.5), omega=r.get("omega", 1.0))
-    else:
-        ref = task[0]
     p_true = true_params(model)
     p = model.params_array(p_true)
     x0 = rest_state(model, ref(0.0)[0], p_true)

@@ -36,7 +36,7 @@ from __future__ import annotations
 
 import argparse
 import ctypes
-import json
+import dataclasses
 import subprocess
 import sys
 import tempfile
@@ -46,7 +46,7 @@ from types import SimpleNamespace
 import numpy as np
 
 import fjm_runtime
-from fjm_runtime.cli.simulate import design_task
+from fjm_runtime.control.design import Design
 from fjm_runtime.control.coupling import complete_plant
 from fjm_runtime.export.controller import design_controller, export_controller
 from fjm_runtime.export.controller_step import raw_reading, rest_reading
@@ -61,12 +61,11 @@ OK, SATURATED, NOT_FINITE, BAD = 0, 1, 2, 3                                     
 
 def load_design(noise=None, path=DESIGN):
     """The Panda design of ``path`` (``ControllerDesign``); ``noise``: another sensor preset for its gains."""
-    spec = json.loads(Path(path).read_text())
-    spec["file"] = str(path)
+    gains = Design.load(path, where=str(path))
+    gains = dataclasses.replace(gains, file=str(path))
     if noise is not None:
-        spec.pop("sensor", None)
-        spec["noise"] = noise
-    return design_controller(fjm_runtime.load("panda"), spec, where=str(path))
+        gains = dataclasses.replace(gains, sensor=None, noise=noise)
+    return design_controller(fjm_runtime.load("panda"), gains)
 
 
 def build_library(design, out_dir) -> Path:
@@ -145,7 +144,7 @@ def run(design, ctrl, duration, work_dir, record=False):
         library's state before each step, and ``offset`` (n) the run's tau_J offset.
     """
     model, L, sensor = design.model, design.layout, design.sensor
-    ref, x0 = design_task(model, design.spec["reference"])
+    ref, x0 = design.design.reference(model), design.design.start_state(model)
     plant, subs, p_plant = mujoco_plant(work_dir, design, x0)
     p = model.params_array({k: p_plant[k] for k in model.param_names})   # the plant's K, for tau_J
     n, steps = L.n, int(round(duration / L.T))
@@ -172,7 +171,7 @@ def run(design, ctrl, duration, work_dir, record=False):
     e1 = X[:, :n] - R[:, :n]
     return SimpleNamespace(t=t, x=X, u=U, e1=e1, status=S, m=M, r=R, noise=noise, substeps=subs, c=C,
                            u_last=U_last, offset=offset, p=p,
-                           u_max=np.asarray(design.spec["gains"]["u_max"], dtype=float))
+                           u_max=np.asarray(design.design.gains["u_max"], dtype=float))
 
 
 def figures(res) -> dict:

@@ -17,7 +17,7 @@ Needs ``fjm_runtime`` (run it with the Python fjm is installed in; the Makefile'
 from __future__ import annotations
 
 import argparse
-import json
+import dataclasses
 import math
 import sys
 from pathlib import Path
@@ -27,6 +27,7 @@ try:
 
     import fjm_runtime
     from fjm_runtime.cli.main import main as fjm_main
+    from fjm_runtime.control.design import Design
     from fjm_runtime.export.controller import design_controller
     from fjm_runtime.sim.sensor import noise_slots
 except ImportError as exc:  # the Makefile's FJM_PYTHON is not the Python fjm is installed in
@@ -45,13 +46,13 @@ def _arr(values) -> str:
 
 
 def header(design, k_true: float, plant_substeps: int) -> str:
-    spec, L, sensor, model = design.spec, design.layout, design.sensor, design.model
+    gains, L, sensor, model = design.design, design.layout, design.sensor, design.model
     n, name = L.n, design.name
-    task = spec.get("reference") or {}
-    if not all(k in task for k in ("offset", "amplitude", "omega")):
-        raise SystemExit(f"{spec.get('file')}: the design records no sine task (reference offset/amplitude/omega)")
-    if "u_max" not in spec["gains"]:
-        raise SystemExit(f"{spec.get('file')}: the design has no torque limit u_max")
+    task = gains.task or {}
+    if gains.reference(model) is None:
+        raise SystemExit(f"{gains.file}: the design records no sine task (reference offset/amplitude/omega)")
+    if "u_max" not in gains.gains:
+        raise SystemExit(f"{gains.file}: the design has no torque limit u_max")
     _, levels = noise_slots(sensor, L.sensing, n)
     p_nom = np.asarray(design.controller.p_nom, dtype=float)
     k_idx = [i for i, s in enumerate(model.param_names) if s.startswith("K") and s[1:].isdigit()]
@@ -61,16 +62,16 @@ def header(design, k_true: float, plant_substeps: int) -> str:
                                             ("CTRL_RESET", "reset"), ("CTRL_STEP", "step"))}
     alias.update({f"CTRL_{s}": f"{name.upper()}_{s}" for s in ("OK", "SATURATED", "INPUT_NOT_FINITE", "NM", "N",
                                                               "PERIOD")})
-    lines = [f"/* design.h: written by export_design.py from {spec.get('file')} - do not edit */",
+    lines = [f"/* design.h: written by export_design.py from {gains.file} - do not edit */",
              f'#include "{name}_controller.h"']
     lines += [f"#define {a} {v}" for a, v in alias.items()]
     lines += [f'#define DESIGN_NAME "{name}"', f"#define SENSING_TORQUE {int(L.sensing == 'torque')}",
-              f"#define RATE_HZ {_num(1.0 / L.T)}", f"#define DURATION {_num(spec.get('duration', 10.0))}",
-              f"#define N_RUN {int(round(float(spec.get('duration', 10.0)) / L.T))}L   /* samples of the task */",
+              f"#define RATE_HZ {_num(1.0 / L.T)}", f"#define DURATION {_num(gains.report.get('duration', 10.0))}",
+              f"#define N_RUN {int(round(float(gains.report.get('duration', 10.0)) / L.T))}L   /* samples of the task */",
               f"#define REF_CENTER {_arr(task['offset'])}", f"#define REF_AMPL {_arr(task['amplitude'])}",
               f"#define REF_OMEGA {_arr(task['omega'])}", f"#define REF_PHASE {_num(task.get('phase', 0.0))}",
               f"#define PLANT_SUBSTEPS {int(plant_substeps)}   /* RK4 steps per period: the design's */",
-              f"#define U_MAX {_arr(np.broadcast_to(np.asarray(spec['gains']['u_max'], dtype=float), (n,)))}",
+              f"#define U_MAX {_arr(np.broadcast_to(np.asarray(gains.gains['u_max'], dtype=float), (n,)))}",
               f"#define P_TRUE {_arr(p_true)}", f"#define K_TRUE_SCALE {_num(k_true)}",
               f"#define K_TRUE_VALUES {_arr(p_true[k_idx])}",
               f"#define NOISE_LEVELS {_arr(levels)}   /* std of every reading slot */",
@@ -94,14 +95,14 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     if not (math.isfinite(args.k_true) and args.k_true > 0):
         raise SystemExit(f"--k-true {args.k_true}: expected a finite scale > 0")
-    spec = json.loads(args.design.read_text())
-    spec.setdefault("file", str(args.design))
-    model = spec.get("model")
+    gains = Design.load(args.design, where=str(args.design))
+    gains = dataclasses.replace(gains, file=gains.file or str(args.design))
+    model = gains.model
     cli = ["export", "controller", str(model), "--gains", str(args.design), "--out", str(args.out / "lib")]
     cli += ["--name", args.name] if args.name else []
     if fjm_main(cli + (["--substeps", str(args.substeps)] if args.substeps else [])) != 0:
         return 1
-    design = design_controller(fjm_runtime.load(model), spec, where=str(args.design), name=args.name)
+    design = design_controller(fjm_runtime.load(model), gains, name=args.name)
     (args.out / "design.h").write_text(header(design, args.k_true, design.layout.substeps))
     return 0
 

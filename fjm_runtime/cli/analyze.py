@@ -19,7 +19,7 @@ import numpy as np
 
 from ..validation import FjmValueError
 
-__all__ = ["add_parser", "run", "conditions_from_spec"]
+__all__ = ["add_parser", "run", "conditions_from_design"]
 
 
 def add_parser(sub) -> None:
@@ -48,41 +48,25 @@ def add_parser(sub) -> None:
     p.add_argument("--out", type=Path, default=None, help="also write the JSON record to this file")
 
 
-def _read_spec(path: Path, m) -> dict:
-    from ..control.factory import CONTROLLER_KINDS
-    from ..control.gains_spec import check_gains_spec
-    try:
-        spec = json.loads(Path(path).read_text())
-    except (OSError, ValueError) as exc:
-        raise FjmValueError(f"--gains {path}: cannot read a JSON object ({exc})") from None
-    if not isinstance(spec, dict) or not isinstance(spec.get("gains"), dict) or spec.get("kind") not in CONTROLLER_KINDS:
-        raise FjmValueError(f"--gains {path}: expected {{\"kind\": one of {', '.join(CONTROLLER_KINDS)}, "
-                            "\"gains\": {...}}")
-    check_gains_spec(spec, f"--gains {path}", m)
-    return spec
-
-
-def _sensor(args, spec):
+def _sensor(args, design):
     from ..sim.sensor import SensorModel, sensor_from_spec
     if args.noise is not None:
         return sensor_from_spec(args.noise, what="--noise")
-    if isinstance(spec.get("sensor"), dict):
-        fields = {k: v for k, v in spec["sensor"].items() if k in SensorModel.__dataclass_fields__}
-        fields.setdefault("name", str(spec.get("noise") or "design file"))
+    if isinstance(design.sensor, dict):
+        fields = {k: v for k, v in design.sensor.items() if k in SensorModel.__dataclass_fields__}
+        fields.setdefault("name", str(design.noise or "design file"))
         return SensorModel.from_dict(fields, where=f"--gains {args.gains}: sensor")
-    return sensor_from_spec(spec.get("noise", "ideal"), what=f"--gains {args.gains}: noise")
+    return sensor_from_spec(design.noise or "ideal", what=f"--gains {args.gains}: noise")
 
 
-def _task(m, spec):
+def _task(m, design):
     """``(reference, x0)``: the file's task, the demo's, or 0.5 rad sines at 1 rad/s from rest."""
     from ..batch.distributed import initial_state
     from ..control.references import make_reference
     from .design import demo_task
-    from .simulate import design_task
-    task = design_task(m, spec.get("reference"))
-    if task is not None:
-        ref, x0 = task
-        return ref, initial_state(m, ref, x0)
+    ref = design.reference(m)
+    if ref is not None:
+        return ref, initial_state(m, ref, design.start_state(m))
     demo = demo_task(m)
     if demo:
         return demo["reference"], demo["x0"]
@@ -90,20 +74,20 @@ def _task(m, spec):
     return ref, initial_state(m, ref, None)
 
 
-def conditions_from_spec(m, spec: dict, args):
-    """The :class:`~fjm_runtime.analysis.sampled.sampled_linear.Conditions` of a gains file, flags overriding."""
+def conditions_from_design(m, design, args):
+    """The :class:`~fjm_runtime.analysis.sampled.sampled_linear.Conditions` of a design, flags overriding."""
     from ..analysis.sampled.sampled_linear import Conditions
-    rate = args.rate if args.rate is not None else float(spec.get("rate", 1000.0))
-    delay = args.delay_samples if args.delay_samples is not None else int(spec.get("delay", 0))
+    rate = args.rate if args.rate is not None else float(1000.0 if design.rate is None else design.rate)
+    delay = args.delay_samples if args.delay_samples is not None else int(design.delay or 0)
     if not (math.isfinite(rate) and 0 < rate <= 1e6):
         raise FjmValueError(f"--rate {rate}: expected a finite control rate in (0, 1e6] Hz")
     if delay < 0 or delay > 100:
         raise FjmValueError(f"--delay-samples {delay}: expected an integer in [0, 100]")
-    predict = bool(spec.get("predict", False)) if args.predict is None else bool(args.predict)
-    sensing = args.sensing or spec.get("sensing", "torque")
-    ref, x0 = _task(m, spec)
-    u_max = spec["gains"].get("u_max")
-    return Conditions(m, spec["kind"], sensing, 1.0 / rate, int(delay), predict, _sensor(args, spec), ref,
+    predict = bool(design.predict) if args.predict is None else bool(args.predict)
+    sensing = args.sensing or design.sensing or "torque"
+    ref, x0 = _task(m, design)
+    u_max = design.gains.get("u_max")
+    return Conditions(m, design.kind, sensing, 1.0 / rate, int(delay), predict, _sensor(args, design), ref,
                       np.asarray(x0, dtype=float), {}, None if u_max is None else tuple(np.broadcast_to(
                           np.asarray(u_max, dtype=float), (int(m.n),)).tolist()))
 
@@ -162,14 +146,14 @@ def run(args) -> int:
     if args.out is not None:
         check_output_file(args.out, "--out")
     m = load(args.model)
-    spec = _read_spec(args.gains, m)
-    cond = conditions_from_spec(m, spec, args)
+    from ..control.design import Design
+    design = Design.load(args.gains).check(m)
+    cond = conditions_from_design(m, design, args)
     times = _times(args.task_times)
     plants = default_plants(m)
     analyzer = LinearAnalyzer(cond, plants=plants if args.plants == "corners" else plants[:1], task_times=times)
-    from ..control.designed import law_gains
-    out = analyzer.analyze(dict(law_gains(spec), u_max=cond.u_max), margins=not args.no_margins)
-    out.update({"model": m.name, "kind": spec["kind"], "gains_file": str(args.gains)})
+    out = analyzer.analyze(dict(design.law_gains(), u_max=cond.u_max), margins=not args.no_margins)
+    out.update({"model": m.name, "kind": design.kind, "gains_file": str(args.gains)})
     text = json.dumps(out, indent=2, allow_nan=False, default=lambda v: None)
     if args.out is not None:
         args.out.write_text(text + "\n")

@@ -89,11 +89,12 @@ def demo_task(m, nominal=None) -> dict:
                                           [1.0] + list(demo.ARM_OMEGA) * 2)
     else:
         return {}
-    from ..sim.rest import rest_state
+    from ..control.design import task_start
     ref = demo.reference()
-    return {"reference": ref, "x0": rest_state(m, ref(0.0)[0], m.default_params if nominal is None else nominal),
+    start = "at rest holding gravity (nominal parameters)"
+    return {"reference": ref, "x0": task_start(m, ref, start, nominal),
             "task": {"kind": kind, "offset": offset, "amplitude": amplitude, "omega": omega,
-                     "phase": -0.5 * math.pi, "start": "at rest holding gravity (nominal parameters)"}}
+                     "phase": -0.5 * math.pi, "start": start}}
 
 
 #: Largest reference table (samples x 5n doubles) a batch may hold, bytes.

@@ -59,25 +59,20 @@ def _model(args):
 
 def _run_controller(args) -> int:
     """``fjm export controller MODEL --gains FILE --out DIR``."""
-    import json
+    import dataclasses
     from .. import load
+    from ..control.design import Design
     from ..export.controller import design_controller, export_controller
     if args.gains is None:
         raise FjmValueError("export controller: --gains FILE is required (a design file from `fjm design`)")
-    try:
-        spec = json.loads(Path(args.gains).read_text())
-    except (OSError, ValueError) as exc:
-        raise FjmValueError(f"--gains {args.gains}: cannot read a JSON object ({exc})") from None
-    if not isinstance(spec, dict):
-        raise FjmValueError(f"--gains {args.gains}: expected a JSON object (a design report)")
+    gains = Design.load(args.gains)
     m = load(args.model)
-    if spec.get("model") not in (None, m.name):
-        raise FjmValueError(f"--gains {args.gains}: designed for model {spec['model']!r}, not {m.name!r}")
-    spec.setdefault("file", str(args.gains))
-    from .simulate import design_nominal, params_file_nominal
-    nominal = {**design_nominal(spec, m), **params_file_nominal(args.params, m)}
-    design = design_controller(m, spec, where=f"--gains {args.gains}", nominal=nominal or None,
-                               substeps=args.substeps, name=args.name)
+    if gains.model not in (None, m.name):
+        raise FjmValueError(f"--gains {args.gains}: designed for model {gains.model!r}, not {m.name!r}")
+    gains = dataclasses.replace(gains, file=gains.file or str(args.gains))
+    from .simulate import params_file_nominal
+    nominal = {**gains.nominal(m), **params_file_nominal(args.params, m)}
+    design = design_controller(m, gains, nominal=nominal or None, substeps=args.substeps, name=args.name)
     files = export_controller(design, args.out)
     print(f"wrote {len(files)} files to {args.out} ({design.name}: {m.name}, {design.controller.law_kind}, "
           f"{1.0 / design.layout.T:g} Hz, delay {design.layout.delay}, {design.layout.substeps} substeps); "

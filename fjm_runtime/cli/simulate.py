@@ -25,7 +25,8 @@ from ..sim.sensor import PRESETS, SensorModel, sensor_from_spec
 from ..sim.simulate import SimulationDivergedError, simulate, stderr_progress
 from ..validation import FjmValueError
 from .common import check_output_file, finite_or_note, parse_assignments
-from .simulate_checks import (DEFAULT_MAX_MEMORY_GB, check_gains_spec, check_pole, check_run_size, check_substeps,
+from ..control.design import Design
+from .simulate_checks import (DEFAULT_MAX_MEMORY_GB, check_pole, check_run_size, check_substeps,
                               gains_provenance, workspace_exit)
 
 #: ``--lam`` when neither the flag nor a gains file gives it (1/s).
@@ -168,32 +169,22 @@ def _sensor(args) -> SensorModel:
 
 
 def _gains_file(args, m, rate: float):
-    """``(spec, source)``: ``--gains FILE`` (``{"kind": ..., "gains": {...}}``, the kind checked against
+    """``(design, source)``: ``--gains FILE`` (``{"kind": ..., "gains": {...}}``, the kind checked against
     --controller), else the shipped design for this model, rate, delay and sensing (any kind unless
-    --controller names one) when no gain flag is given, else the flags (``spec["designed"]`` False).
-    Every spec is checked against the model before any work (:func:`check_gains_spec`)."""
+    --controller names one) when no gain flag is given, else the flags (design None). Every design is
+    checked against the model before any work (:meth:`Design.check`)."""
     if args.gains is None:
-        from ..control.designed import find_design
         flags_given = args.lam is not None or args.k_s is not None or args.delta is not None
-        shipped = None if flags_given else find_design(m.name, args.controller, args.sensing, rate,
-                                                       args.delay_samples)
+        shipped = None if flags_given else Design.shipped(m.name, args.controller, args.sensing, rate,
+                                                          args.delay_samples)
         if shipped is None:
-            return {"kind": args.controller or "smc", "gains": {}, "designed": False}, "command line"
-        check_gains_spec(shipped, f"shipped design {shipped['file']}", m)
-        return shipped, f"shipped design {shipped['file']}"
-    try:
-        spec = json.loads(Path(args.gains).read_text())
-    except (OSError, ValueError) as exc:
-        raise FjmValueError(f"--gains {args.gains}: cannot read a JSON object ({exc})") from None
-    if not isinstance(spec, dict) or not isinstance(spec.get("gains"), dict) or \
-            spec.get("kind") not in CONTROLLER_KINDS:
-        raise FjmValueError(f"--gains {args.gains}: expected {{\"kind\": one of {', '.join(CONTROLLER_KINDS)}, "
-                            "\"gains\": {...}}")
-    if args.controller is not None and args.controller != spec["kind"]:
-        raise FjmValueError(f"--gains {args.gains}: holds gains for {spec['kind']!r}, not --controller "
+            return None, "command line"
+        return shipped.check(m), shipped.source
+    design = Design.load(args.gains)
+    if args.controller is not None and args.controller != design.kind:
+        raise FjmValueError(f"--gains {args.gains}: holds gains for {design.kind!r}, not --controller "
                             f"{args.controller!r}")
-    check_gains_spec(spec, f"--gains {args.gains}", m)
-    return spec, f"--gains {args.gains}"
+    return design.check(m), f"--gains {args.gains}"
 
 
 def _period(args) -> float:
@@ -302,33 +293,12 @@ def _script_report(res, settings: dict, diverged: Optional[SimulationDivergedErr
     return out
 
 
-def design_task(m, task: dict):
-    """``(reference, x0)`` of a design file's ``reference`` entry (joint-space sines), or ``None``.
-
-    The gains of ``fjm design`` hold for the task they were searched on: per-joint sines
-    ``offset + amplitude sin(omega t + phase)``; ``start`` "at rest holding gravity" means the
-    motors at ``q + K^-1 G(q)`` for the NOMINAL parameters at ``t = 0``.
-    """
-    from ..control.references import Sinusoid
-    from ..sim.rest import rest_state
-    if not isinstance(task, dict) or not all(k in task for k in ("offset", "amplitude", "omega")):
-        return None
-    ref = Sinusoid(list(task["amplitude"]), list(task["omega"]), n=int(m.n), offset=list(task["offset"]),
-                   phase=float(task.get("phase", 0.0)))
-    x0 = None
-    if "holding gravity" in str(task.get("start", "")):
-        try:
-            x0 = rest_state(m, ref(0.0)[0], m.default_params)
-        except ValueError as exc:  # e.g. a complete model (sim/rest.py assumes the reduced one's K)
-            raise FjmValueError(f"--reference task: the design's start ({task.get('start')}) cannot be computed "
-                                f"for {m.name} ({str(exc).splitlines()[0][:80]}); expected a reduced model or "
-                                "--reference sine/step/constant") from None
-    return ref, x0
-
-
-def _reference(m, args, spec):
+def _reference(m, args, design: Optional[Design]):
     """``(reference, x0)``: ``--reference`` (None: the gains file's task if it records one, else sine)."""
-    task = design_task(m, spec.get("reference")) if args.reference in (None, "task") else None
+    task = None
+    if design is not None and args.reference in (None, "task"):
+        ref = design.reference(m)
+        task = None if ref is None else (ref, design.start_state(m))
     if args.reference == "task" and task is None:
         raise FjmValueError("--reference task: the gains (file or shipped design) record no task; expected "
                             f"one of {', '.join(REFERENCE_KINDS)}")
@@ -350,30 +320,6 @@ def params_file_nominal(path, m) -> Dict[str, float]:
     return dict(load_params_file(path, m).overrides)
 
 
-def design_nominal(spec: dict, m) -> Dict[str, float]:
-    """The nominal values a design was made for (its ``params.nominal``, from ``fjm design --params``).
-
-    The gains hold for the controller's nominal model they were searched with; ``--nominal`` still
-    overrides them one by one. Unknown names or non-finite values are refused in one line.
-    """
-    nominal = (spec.get("params") or {}).get("nominal") if isinstance(spec.get("params"), dict) else None
-    if not nominal:
-        return {}
-    out = {}
-    for k, v in dict(nominal).items():
-        if k not in m.param_names:
-            raise FjmValueError(f"gains file params.nominal.{k}: not a parameter of {m.name}; expected one of "
-                                f"{', '.join(m.param_names)}")
-        try:
-            val = float(v)
-        except (TypeError, ValueError):
-            val = float("nan")
-        if not math.isfinite(val):
-            raise FjmValueError(f"gains file params.nominal.{k} = {v!r}: expected a finite number")
-        out[k] = val
-    return out
-
-
 def run(args) -> int:
     """Run ``fjm simulate``; returns the exit status (3: the run diverged or left the workspace)."""
     from .. import load
@@ -383,18 +329,18 @@ def run(args) -> int:
     dt = _period(args)
     _check_flags(args, dt)
     sensor = _sensor(args)
-    spec, source = _gains_file(args, m, 1.0 / dt)
-    nominal = {**design_nominal(spec, m), **params_file_nominal(args.params, m),
+    design, source = _gains_file(args, m, 1.0 / dt)
+    nominal = {**(design.nominal(m) if design else {}), **params_file_nominal(args.params, m),
                **parse_assignments(args.nominal, "--nominal")}
     true = _true_params(m, args, nominal)
-    kind = spec["kind"]
-    ref, x0 = _reference(m, args, spec)
-    ctrl, gain, k_s, delta = _build_controller(m, args, nominal, ref, kind, spec["gains"])
-    args.predict = bool(args.predict or spec.get("predict", False))  # gains designed with prediction keep it
+    kind = design.kind if design else (args.controller or "smc")
+    ref, x0 = _reference(m, args, design)
+    ctrl, gain, k_s, delta = _build_controller(m, args, nominal, ref, kind, design.gains if design else {})
+    args.predict = bool(args.predict or (design and design.predict))  # gains designed with prediction keep it
     _check_size(m, args, ctrl, ref, x0, true, sensor, dt)
     conditions = {"model": m.name, "kind": kind, "sensing": args.sensing, "rate": 1.0 / dt,
                   "delay": args.delay_samples, "predict": bool(args.predict), "sensor": sensor}
-    provenance = gains_provenance(source, None if spec.get("designed") is False else spec, conditions,
+    provenance = gains_provenance(source, design, conditions,
                                   None if gain is None else f"K in [{args.k_min:g}, {args.k_max:g}]")
     if not provenance["designed_for_these_conditions"]:
         print(f"fjm: warning: the gains ({source}) were not designed for {m.name} under these conditions: "
@@ -407,7 +353,7 @@ def run(args) -> int:
                 "seed": args.seed, "noise": args.noise, "duration": args.duration,
                 "true_params": dict(zip(m.param_names, m.params_array(true).tolist())),
                 "nominal_params": dict(zip(m.param_names, m.params_array(nominal).tolist())),
-                "gains": str(args.gains) if args.gains is not None else spec.get("file")}
+                "gains": str(args.gains) if args.gains is not None else (design.file if design else None)}
     try:
         res = simulate(m, ctrl, ref, duration=args.duration, dt=dt, true_params=true, progress=progress, x0=x0,
                        substeps=args.substeps, sensor=sensor, delay_samples=args.delay_samples,

@@ -3,9 +3,6 @@ came from, and whether the run left the workspace.
 
 Before any work (one-line :class:`~fjm_runtime.validation.FjmValueError`, exit 2):
 
-* :func:`check_gains_spec`: a gains file (or a shipped design) for THIS model: its ``model`` and
-  the lengths of its per-joint gains match, every gain is a finite number of the right sign, the
-  keys the kind needs are there.
 * :func:`check_pole`: ``0 < lam <= pi x rate`` (the Nyquist frequency, rad/s).
 * :func:`check_run_size`: the memory the run will hold and the RK4 substeps per sample, against
   :data:`DEFAULT_MAX_MEMORY_GB` (``--max-memory``) and :data:`MAX_SUBSTEPS`.
@@ -22,12 +19,11 @@ from typing import Optional, Tuple
 
 import numpy as np
 
-from ..control.gains_spec import is_real, check_gains_spec  # noqa: F401 - re-exported
+from ..control.design import is_real
 from ..validation import FjmValueError
 
 __all__ = ["DEFAULT_MAX_MEMORY_GB", "ERROR_BOUND", "MAX_SUBSTEPS", "PEAK_FACTOR", "WORKSPACE_BOUND",
-           "check_gains_spec", "check_pole", "check_run_size", "check_substeps", "gains_provenance", "same_sensor",
-           "workspace_exit"]
+           "check_pole", "check_run_size", "check_substeps", "gains_provenance", "workspace_exit"]
 
 #: Default of ``--max-memory``: the largest estimated peak memory of one run, GB.
 DEFAULT_MAX_MEMORY_GB = 4.0
@@ -129,45 +125,19 @@ def check_run_size(layout_nw: int, n: int, nm: int, duration: float, dt: float, 
     return {"samples": samples, "columns": columns, "stored_bytes": stored, "peak_bytes": peak}
 
 
-def same_sensor(spec: dict, sensor) -> Tuple[bool, str]:
-    """Whether ``sensor`` (a SensorModel) is the one a design report records, and the design's name.
-
-    The report's ``sensor`` fields are compared (seed and name aside); a report without them is
-    compared by its ``noise`` preset name (former names resolved).
-    """
-    from ..sim.sensor import SensorModel, sensor_from_spec
-    recorded = spec.get("sensor")
-    label = str(spec.get("noise", "?"))
-    try:
-        if isinstance(recorded, dict):
-            design = SensorModel.from_dict(recorded, where="design sensor")
-        elif "noise" in spec:
-            design = sensor_from_spec(spec["noise"])
-        else:
-            return False, "unrecorded"
-    except FjmValueError:
-        return False, label
-    ignore = ("seed", "name")
-    a = {k: v for k, v in design.as_dict().items() if k not in ignore}
-    b = {k: v for k, v in sensor.as_dict().items() if k not in ignore}
-    name = sensor_from_spec(label).name if label in ("panda", "none", "ideal", "panda_white", "franka_like") \
-        else label
-    return a == b, name
-
-
-def gains_provenance(source: str, spec: Optional[dict], conditions: dict, lemma1: Optional[str] = None) -> dict:
+def gains_provenance(source: str, design, conditions: dict, lemma1: Optional[str] = None) -> dict:
     """Where the run's gains came from and whether they were designed for this model and conditions.
 
     Parameters
     ----------
     source : str
         ``"shipped design FILE"``, ``"--gains FILE"``, or ``"command line"``.
-    spec : dict or None
-        The design report (None: gains from the flags and their defaults).
+    design : Design or None
+        The design (None: gains from the flags and their defaults).
     conditions : dict
         ``model``, ``kind``, ``sensing``, ``rate``, ``delay``, ``predict``, ``sensor`` of the run.
     lemma1 : str, optional
-        With ``spec`` None: how the switching gain came from the Lemma 1 bound (it holds for the
+        With ``design`` None: how the switching gain came from the Lemma 1 bound (it holds for the
         continuous-time loop, not for a sampled one with delay and noise).
 
     Returns
@@ -176,15 +146,14 @@ def gains_provenance(source: str, spec: Optional[dict], conditions: dict, lemma1
         ``gains_source``, ``designed_for_these_conditions`` (bool) and, when False,
         ``not_designed_because`` (list of reasons).
     """
-    from ..control.designed import design_mismatches
-    if spec is None:
+    if design is None:
         reasons = ["the gains are the command line's or their generic defaults (--lam, --k-s, --delta); "
                    "no design exists for these conditions (`fjm design` finds one)"]
         if lemma1:
             reasons.append(f"k_s is the Lemma 1 bound ({lemma1}) for the continuous-time loop, not a design "
                            "for the sampled loop")
     else:
-        reasons = design_mismatches(spec, conditions, same_sensor)
+        reasons = design.mismatches(conditions)
     out = {"gains_source": source, "designed_for_these_conditions": not reasons}
     if reasons:
         out["not_designed_because"] = reasons

@@ -9,7 +9,7 @@ actuator provides (``sensing='torque'``, the ``_tau`` laws). The controller know
 the NOMINAL parameters (the defaults); the TRUE stiffness differs per joint. Torques are
 saturated at the URDF effort limits; the head holds its pan angle. The gains are those
 ``fjm design baxter --predict`` found for the torque-sensed law on this task when the
-package ships them (:mod:`fjm_runtime.control.designed`), else stated ones (the same on
+package ships them (:meth:`fjm_runtime.control.design.Design.shipped`), else stated ones (the same on
 every joint). :func:`baxter_section` writes a figure and returns the summary table.
 """
 from __future__ import annotations
@@ -21,7 +21,7 @@ from typing import Callable, Dict, List, Optional, Tuple
 import numpy as np
 
 from ..analysis.search.search import EFFORTS
-from ..control.designed import designed_gains, law_gains
+from ..control.design import Design
 from ..control.factory import make_controller
 from ..control.references import Sinusoid
 from ..sim.rest import rest_state
@@ -60,11 +60,11 @@ def true_stiffness(model, spread: float) -> Dict[str, float]:
 
 def ismc_gains() -> Tuple[dict, str]:
     """``(gains, source)``: the shipped design for (baxter, ismc, torque, RATE, DELAY), else :data:`STATED`."""
-    spec = designed_gains("baxter", "ismc", "torque", RATE, DELAY)
-    if spec:
-        return (law_gains(spec),
+    design = Design.shipped("baxter", "ismc", "torque", RATE, DELAY)
+    if design:
+        return (design.law_gains(),
                 f"designed gains (`fjm design baxter --predict`: torque sensing, {RATE:g} Hz, delay {DELAY}, "
-                f"{spec['draws']} draws x {spec['duration']:g} s; `{spec['file']}`)")
+                f"{design.report['draws']} draws x {design.report['duration']:g} s; `{design.file}`)")
     return dict(STATED), "stated gains (the same on every joint), NOT the result of a search"
 
 

@@ -92,26 +92,26 @@ def _controller(kind: str, model, nominal: dict, gains: dict, u_max):
     if kind == "pdg":
         return make_controller("pdg", model, nominal, u_max=u_max, **PDG_GAINS)
     if kind == "ismc_hd":  # panda_hd's own design
-        from ..control.designed import designed_gains, law_gains
+        from ..control.design import Design
         return make_controller("ismc", model, nominal, sensing="torque", u_max=u_max,
-                               **law_gains(designed_gains("panda_hd", "ismc", "torque", 1000.0, 1)))
+                               **Design.shipped("panda_hd", "ismc", "torque", 1000.0, 1).law_gains())
     return make_controller(kind, model, nominal, sensing="torque", u_max=u_max, **gains)
 
 
 def _design_loop():
-    """``(panda_hd, design report, gains, u_max, reference, loop settings)`` of :data:`DESIGN`'s loop: its gains
+    """``(panda_hd, design, gains, u_max, reference, loop settings)`` of :data:`DESIGN`'s loop: its gains
     and limits, the demo's ready-pose sines from rest, 1 kHz, one sample of delay with prediction, ``panda``
     sensor (``loop``: the keywords :func:`simulate` and :func:`simulate_batch` share)."""
     from .. import load
-    from ..control.designed import designed_gains, law_gains
+    from ..control.design import Design
     from ..sim.sensor import SensorModel
     from . import panda as P
     hd = load("panda_hd")
-    spec = designed_gains(*DESIGN)
+    design = Design.shipped(*DESIGN)
     ref = P.reference(hd.n)
     loop = {"dt": 1e-3, "x0": P.rest_state(hd, ref(0.0)[0], None), "delay_samples": 1, "predict": True,
             "sensor": SensorModel.panda()}
-    return hd, spec, law_gains(spec), np.asarray(spec["gains"]["u_max"], dtype=float), ref, loop
+    return hd, design, design.law_gains(), np.asarray(design.gains["u_max"], dtype=float), ref, loop
 
 
 def compare(draws: int, duration: float = 10.0, seed: int = 28, progress=None) -> Dict[str, dict]:
@@ -126,12 +126,12 @@ def compare(draws: int, duration: float = 10.0, seed: int = 28, progress=None) -
     """
     from ..analysis.search.thresholds import Thresholds
     from ..batch.runner import simulate_batch
-    hd, spec, gains, u_max, ref, loop = _design_loop()
+    hd, design, gains, u_max, ref, loop = _design_loop()
     rows = true_rows(hd, draws, seed)
     thr = Thresholds()
     jj = thr.joints(hd.n)
     out: Dict[str, dict] = {"_settings": {"draws": draws, "duration": duration, "seed": seed,
-                                          "design": spec["file"], "thresholds": thr.as_dict(hd.n)}}
+                                          "design": design.file, "thresholds": thr.as_dict(hd.n)}}
     for label, base, edits, kind in LAWS:
         if progress:
             progress(f"panda_hd real drives: {label}, {draws} drives")

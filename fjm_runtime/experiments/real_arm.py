@@ -20,7 +20,7 @@ import numpy as np
 
 from ..analysis.certificates.certify_tau import gamma_tolerance
 from ..control import defaults
-from ..control.designed import designed_gains, law_gains
+from ..control.design import Design
 from ..control.factory import make_controller
 from ..sim.metrics import rms_second_half, time_at_limit, torque_jitter
 from ..sim.sensor import SensorModel
@@ -50,10 +50,10 @@ PDG_GAINS = {"k_p": (1000.0,) * 4 + (300.0,) * 3, "k_d": (35.0,) * 4 + (11.0,) *
 
 def ismc_gains(rate: float = RATE, delay: int = DELAY) -> Tuple[dict, str]:
     """``(gains, source)`` of the integral SMC: the designed gains for (panda, ismc, torque, rate, delay)
-    when :mod:`fjm_runtime.control.designed` ships them, else the hand-found starting point."""
-    spec = designed_gains("panda", "ismc", "torque", rate, delay)
-    if spec:  # the limit is the arm's own PANDA_EFFORT, set in controller()
-        return law_gains(spec), f"designed gains (`fjm design`, panda, ismc, torque, {rate:g} Hz, delay {delay})"
+    when they are shipped (:meth:`Design.shipped`), else the hand-found starting point."""
+    design = Design.shipped("panda", "ismc", "torque", rate, delay)
+    if design:  # the limit is the arm's own PANDA_EFFORT, set in controller()
+        return design.law_gains(), f"designed gains (`fjm design`, panda, ismc, torque, {rate:g} Hz, delay {delay})"
     return (dict(defaults.PANDA_ISMC_TAU_START),
             "hand-found gains (quadruple pole 80 1/s, k_lin 400 1/s, k_s 2000, delta 10), NOT the result of a search")
 

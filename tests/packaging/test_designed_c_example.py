@@ -17,8 +17,7 @@ import numpy as np
 import pytest
 
 import fjm_runtime
-from fjm_runtime.cli.simulate import design_task
-from fjm_runtime.control.designed import designed_gains
+from fjm_runtime.control.design import Design
 from fjm_runtime.export.controller import design_controller
 from fjm_runtime.sim.sample_step import initial_step_state, sample_step_function
 from support.paths import REPO
@@ -51,9 +50,9 @@ def test_first_torque_equals_the_simulator(run):
     out, _, _ = run
     u = np.fromfile(out / "designed" / "u.bin", dtype=np.float64).reshape(-1, 7)
     model = fjm_runtime.load("panda")
-    design = design_controller(model, designed_gains("panda", "ismc", "torque", 1000.0, 1))
+    design = design_controller(model, Design.shipped("panda", "ismc", "torque", 1000.0, 1))
     L, p = design.layout, np.asarray(design.controller.p_nom, dtype=float)
-    ref, x0 = design_task(model, design.spec["reference"])
+    ref, x0 = design.design.reference(model), design.design.start_state(model)
     w0 = initial_step_state(model, L, x0, np.zeros(L.nz), p, sensor=design.sensor)
     r0 = np.asarray(ref.sample(np.zeros(1)), dtype=float).reshape(5 * L.n)
     _, aux = sample_step_function(model, design.controller, L)(w0, r0, np.zeros(L.nm), p)

@@ -66,13 +66,13 @@ def test_designed_gains_run_on_their_task_by_default():
     import numpy as np
 
     import fjm_runtime
-    from fjm_runtime.cli.simulate import _reference, design_task
-    from fjm_runtime.control.designed import designed_gains
+    from fjm_runtime.cli.simulate import _reference
+    from fjm_runtime.control.design import Design
     from fjm_runtime.experiments import panda as demo
     from fjm_runtime.validation import FjmValueError
     m = fjm_runtime.load("panda")
-    spec = designed_gains("panda", "ismc", "torque", 1000, 1)
-    ref, x0 = design_task(m, spec["reference"])
+    spec = Design.shipped("panda", "ismc", "torque", 1000, 1)
+    ref, x0 = spec.reference(m), spec.start_state(m)
     assert np.allclose(ref(0.0)[0], np.subtract(demo.READY, demo.AMPLITUDE))      # from rest at READY - A
     assert np.allclose(ref(0.0)[1], 0.0) and np.allclose(ref(1.3)[0], demo.reference()(1.3)[0])
     assert np.allclose(x0[7:14], 0) and np.max(np.abs(x0[14:21] - x0[:7])) > 1e-4   # motors wound up on gravity
@@ -84,7 +84,7 @@ def test_designed_gains_run_on_their_task_by_default():
     assert _reference(m, args, spec)[1] is None
     args = SimpleNamespace(reference="task", amplitude=0.5, omega=1.0, q_d=1.0, rise_time=2.0)
     with pytest.raises(FjmValueError, match="record no task"):
-        _reference(m, args, {"gains": {}})
+        _reference(m, args, Design(kind="ismc", gains={}))
 
 
 def test_the_designs_nominal_values_are_the_controllers(capsys, tmp_path):

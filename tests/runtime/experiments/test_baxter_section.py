@@ -4,8 +4,7 @@ import pytest
 
 import fjm_runtime as fjm
 from fjm_runtime.cli.design import demo_task
-from fjm_runtime.cli.simulate import design_task
-from fjm_runtime.control.designed import designed_gains
+from fjm_runtime.control.design import Design
 from fjm_runtime.experiments import baxter as bx
 
 
@@ -15,24 +14,25 @@ def baxter():
 
 
 def test_the_section_runs_the_shipped_design(baxter):
-    spec = designed_gains("baxter", "ismc", "torque", bx.RATE, bx.DELAY)
+    spec = Design.shipped("baxter", "ismc", "torque", bx.RATE, bx.DELAY)
     assert spec is not None, "fjm_runtime/control/designed/baxter_ismc_tau_1000hz_d1.json is not shipped"
     gains, source = bx.ismc_gains()
-    assert "designed" in source and spec["file"] in source
+    assert "designed" in source and spec.file in source
     assert set(gains) == {"lam", "k_lin", "k_s", "delta"}
     for k in ("k_lin", "k_s", "delta"):
         assert np.shape(gains[k]) == (baxter.n,) and np.all(np.asarray(gains[k]) > 0)
     # the design searched the demo's own task, loop and limits
-    assert spec["sensing"] == "torque" and spec["predict"] is True and spec["delay"] == bx.DELAY
-    assert spec["gains"]["u_max"] == list(bx.EFFORT)
-    assert spec["reference"]["offset"] == [0.0] + list(bx.ARM_POSE) * 2
-    assert spec["worst_case"]["diverged"] == 0
+    assert spec.sensing == "torque" and spec.predict is True and spec.delay == bx.DELAY
+    assert spec.gains["u_max"] == list(bx.EFFORT)
+    assert spec.task["offset"] == [0.0] + list(bx.ARM_POSE) * 2
+    assert spec.report["worst_case"]["diverged"] == 0
 
 
 def test_design_task_round_trips_through_the_gains_file(baxter):
     """``fjm design baxter`` records the demo's task; ``fjm simulate --gains`` rebuilds the same one."""
     task = demo_task(baxter)
-    ref, x0 = design_task(baxter, task["task"])
+    design = Design(kind="ismc", gains={}, task=task["task"])
+    ref, x0 = design.reference(baxter), design.start_state(baxter)
     for t in (0.0, 0.37, 2.5):
         np.testing.assert_allclose(ref(t)[0], bx.reference()(t)[0], rtol=0, atol=1e-15)
         np.testing.assert_allclose(ref(t)[0], task["reference"](t)[0], rtol=0, atol=1e-15)

@@ -17,7 +17,7 @@ import pytest
 
 import fjm_runtime
 from fjm_runtime.ccache import compile_library
-from fjm_runtime.control.designed import designed_gains
+from fjm_runtime.control.design import Design
 from fjm_runtime.export.controller import amalgamation, design_controller, export_controller
 from fjm_runtime.export.controller_step import raw_reading, rest_reading
 from fjm_runtime.sim.sensor import noise_array, offset_normals
@@ -71,7 +71,7 @@ _LIBS: dict = {}
 
 def _library(design, tmp_factory, real="double"):
     """The exported library of ``design`` compiled (strict flags, through the C cache) and loaded."""
-    key = (design.name, json.dumps(design.spec, sort_keys=True, default=str), real)
+    key = (design.name, json.dumps(design.design.as_dict(), sort_keys=True, default=str), real)
     if key not in _LIBS:
         out = tmp_factory.mktemp(design.name)
         export_controller(design, out)
@@ -91,12 +91,11 @@ class Run:
     """
 
     def __init__(self, design, duration, reference=None, x0=None):
-        from fjm_runtime.cli.simulate import design_task
         from fjm_runtime.sim.loops import run_casadi
         from fjm_runtime.sim.sample_step import initial_step_state
         model, L, sensor, ctrl = design.model, design.layout, design.sensor, design.controller
         if reference is None:
-            reference, x0 = design_task(model, design.spec.get("reference"))
+            reference, x0 = design.design.reference(model), design.design.start_state(model)
         p = np.asarray(ctrl.p_nom, dtype=float)
         t = L.T * np.arange(int(round(duration / L.T)) + 1)
         if x0 is None:
@@ -143,7 +142,7 @@ def _relative(U, U_ref):
 
 
 def _panda_design():
-    return design_controller(fjm_runtime.load("panda"), designed_gains("panda", "ismc", "torque", 1000.0, 1))
+    return design_controller(fjm_runtime.load("panda"), Design.shipped("panda", "ismc", "torque", 1000.0, 1))
 
 
 def _design(model, kind, sensing, noise, delay=1, u_max=None, **gains):
@@ -151,7 +150,7 @@ def _design(model, kind, sensing, noise, delay=1, u_max=None, **gains):
             "noise": noise, "gains": {"lam": 20.0, "k_s": 200.0, "delta": 5.0, **gains}}
     if u_max is not None:
         spec["gains"]["u_max"] = u_max
-    return design_controller(fjm_runtime.load(model), spec)
+    return design_controller(fjm_runtime.load(model), Design.from_dict(spec))
 
 
 def _sine(design, amplitude=0.5, omega=2.0):
@@ -208,7 +207,7 @@ def test_panda_shipped_design_equals_simulator_10s(tmp_path_factory):
 def test_baxter_shipped_design_equals_simulator(tmp_path_factory):
     """The tree (15 joints, two arms on a torso): Baxter's shipped design (torque-sensed ismc, delay 1 with
     prediction), 1 s of its task; its controller's compile takes a minute, so CI's exhaustive pass."""
-    design = design_controller(fjm_runtime.load("baxter"), designed_gains("baxter", "ismc", "torque", 1000.0, 1))
+    design = design_controller(fjm_runtime.load("baxter"), Design.shipped("baxter", "ismc", "torque", 1000.0, 1))
     _check_equal(design, tmp_path_factory, 1.0, float_bound=5e-2)
 
 
@@ -218,7 +217,7 @@ def test_panda_hd_shipped_design_equals_simulator(tmp_path_factory):
     """The Panda on harmonic drives (seven datasheet curves, motor friction): its shipped design, whose
     predictor rebuilds q_m through the curves' inverse psi^-1(tau_J); 1 s, C == simulator to 1e-12."""
     design = design_controller(fjm_runtime.load("panda_hd"),
-                               designed_gains("panda_hd", "ismc", "torque", 1000.0, 1))
+                               Design.shipped("panda_hd", "ismc", "torque", 1000.0, 1))
     _check_equal(design, tmp_path_factory, 1.0, float_bound=5e-2)
 
 

@@ -283,7 +283,7 @@ def test_closed_loop_on_the_panda_drives_equals_simulate(tmp_path):
     curves (datasheet values, the shipped Panda design's gains) at 1 kHz on 14 substeps (the rule's), MuJoCo with the
     passive callback (seven curves, seven motor frictions) vs fjm's simulate, 0.5 s from rest against
     gravity; a drive's deflection passes its first breakpoint."""
-    from fjm_runtime.control.designed import designed_gains, law_gains
+    from fjm_runtime.control.design import Design
     from fjm_runtime.experiments import panda as P
     m = fjm_runtime.load("panda_hd")
     d = m.default_params
@@ -292,10 +292,10 @@ def test_closed_loop_on_the_panda_drives_equals_simulate(tmp_path):
     ref = P.reference(m.n)
     x0 = P.rest_state(m, ref(0.0)[0], true)
     path = write_mjcf(m, tmp_path / "panda_hd.xml", true, timestep=1e-3 / 14)
-    spec = designed_gains("panda", "ismc", "torque", 1000, 1)
+    design = Design.shipped("panda", "ismc", "torque", 1000, 1)
 
     def ctrl():
-        return fjm_runtime.make_controller("ismc", m, None, u_max=spec["gains"]["u_max"], **law_gains(spec))
+        return fjm_runtime.make_controller("ismc", m, None, u_max=design.gains["u_max"], **design.law_gains())
     res = fjm_runtime.simulate(m, ctrl(), ref, duration=0.5, dt=1e-3, substeps=14, true_params=true, x0=x0)
     t, X, U = run_closed_loop(MujocoPlant(m, path, true), ctrl(), ref, duration=0.5, dt=1e-3, substeps=14, x0=x0)
     assert np.array_equal(t, res.t)

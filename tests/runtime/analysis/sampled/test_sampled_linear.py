@@ -159,17 +159,17 @@ def test_panda_shipped_gains_rest_instability_is_the_loops(panda):
     linearization's (the boundary layer bounds it: a limit cycle, not a divergence)."""
     from dataclasses import replace
 
-    from fjm_runtime.control.designed import designed_gains, law_gains
+    from fjm_runtime.control.design import Design
     from fjm_runtime.experiments import panda as demo
-    spec = designed_gains("panda", "ismc", "torque", 1000, 1)
+    spec = Design.shipped("panda", "ismc", "torque", 1000, 1)
     q0 = demo.reference()(0.0)[0]
     ref = Sinusoid(0.0, 0.0, n=7, offset=list(q0))
     p = np.asarray(panda.params_array({}), dtype=float)
     x0 = rest_state(panda, q0, p)
     quiet = replace(SensorModel.panda_white(), q=0.0, dq=0.0, q_m=0.0, dq_m=0.0, tau_J=0.0, name="quiet")
-    cond = Conditions(panda, "ismc", "torque", 1e-3, 1, True, quiet, ref, x0, {}, tuple(spec["gains"]["u_max"]))
+    cond = Conditions(panda, "ismc", "torque", 1e-3, 1, True, quiet, ref, x0, {}, tuple(spec.gains["u_max"]))
     an = LinearAnalyzer(cond, plants=[("nominal", p)], task_times=())
-    ctrl = cond.controller(law_gains(spec))
+    ctrl = cond.controller(spec.law_gains())
     g = np.asarray(ctrl.gains)
     S, w, r = an.operating_point(ctrl, g, 0, p, 1, {})
     lin = S.linearize(w, r, p, g)
