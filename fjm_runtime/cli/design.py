@@ -137,6 +137,7 @@ def run(args) -> int:
     """
     from .. import load
     from ..analysis.search.search import design
+    from ..analysis.search.settings import SearchSettings
     from ..analysis.search.report import summary_lines
     if args.out is not None and not args.out.parent.is_dir():
         raise FjmValueError(f"--out {args.out}: the directory {args.out.parent} does not exist")
@@ -155,12 +156,13 @@ def run(args) -> int:
     sensor, thresholds, spread = _settings(args, m)
     task = demo_task(m, spread.nominal) if args.task == "auto" else {}
     t0 = time.perf_counter()
-    out = design(m, kind=args.controller, sensing=args.sensing, rate=args.rate, delay=args.delay_samples,
-                 sensor=sensor, draws=args.draws, duration=args.duration, seed=args.seed, threads=args.threads,
-                 simd=args.simd, predict=args.predict, thresholds=thresholds, spread=spread,
-                 recheck_draws=args.recheck_draws, scheduler=args.scheduler, screen_draws=args.screen_draws,
-                 screen=None if args.screen == "none" else args.screen,
-                 screen_duration=args.screen_duration, rounds=args.rounds, **task)
+    settings = SearchSettings(kind=args.controller, sensing=args.sensing, rate=args.rate, delay=args.delay_samples,
+                              sensor=sensor, draws=args.draws, duration=args.duration, seed=args.seed,
+                              threads=args.threads, simd=args.simd, predict=args.predict, thresholds=thresholds,
+                              spread=spread, recheck_draws=args.recheck_draws, scheduler=args.scheduler,
+                              screen_draws=args.screen_draws, screen=None if args.screen == "none" else args.screen,
+                              screen_duration=args.screen_duration, rounds=args.rounds, **task)
+    out = design(m, settings)
     out["wall_seconds"] = time.perf_counter() - t0
     out["noise"] = args.noise
     text = json.dumps(out, indent=2, allow_nan=False)

@@ -49,6 +49,7 @@ from __future__ import annotations
 import math
 import sys
 import time
+from dataclasses import replace
 from typing import Callable, Optional
 
 import numpy as np
@@ -59,6 +60,7 @@ from ...validation import FjmValueError
 from .draws import PlantSpread, default_spread, draw_params
 from .runs import DesignLoops
 from .screen import SCREENED_COST, screen_costs
+from .settings import SearchSettings
 from .thresholds import DIVERGED_COST, PENALTY, Thresholds, describe_miss, find_misses, run_cost
 
 __all__ = ["DIVERGED_COST", "LIN_FLOOR", "PENALTY", "RECHECK_SEED_OFFSET", "combine_moves", "design",
@@ -301,25 +303,18 @@ def _search(search, model, P_all, draws, screen_draws, screen_duration, duration
                        min(duration, ACTIVE_DURATION * screen_duration), seed, active_sets, say)
 
 
-def design(model, *, kind: str = "ismc", sensing: str = "torque", rate: float = 1000.0, delay: int = 1,
-           sensor: Optional[SensorModel] = None, draws: int = 200, duration: float = 10.0, seed: int = 0,
-           u_max=None, screen_draws: int = 12, screen_duration: float = 2.0, rounds: int = 6,
-           max_extra_delay: int = 3, threads: Optional[int] = None, simd: bool = True,
-           progress: Optional[Callable[[str], None]] = None, predict: bool = False, reference=None,
-           x0=None, task: Optional[dict] = None, active_sets: int = 1, thresholds: Optional[Thresholds] = None,
-           spread: Optional[PlantSpread] = None, recheck_draws: Optional[int] = None, scheduler=None,
-           screen=None) -> dict:
+def design(model, settings: Optional[SearchSettings] = None, *,
+           progress: Optional[Callable[[str], None]] = None) -> dict:
     """Search the gains (module docstring); returns the gains-file dict (``fjm simulate --gains``).
 
-    ``predict`` runs every loop with the delay compensation of the sample step; ``reference`` and
-    ``x0`` (shared by all runs) replace the default task (a 0.5 rad sine about q = 0 from rest),
-    ``task`` describes them in the file. ``thresholds`` (default :class:`Thresholds`) are what the
-    gains must meet; ``spread`` (default :func:`default_spread`) the nominal parameters and the
-    draws; ``recheck_draws`` (default ``draws``; 0: none) the fresh draws of the re-check;
-    ``scheduler`` (None: this process; an address or a ``dask.distributed.Client``) where the
-    Monte Carlo stages run; ``screen`` (None: none; ``'linear'``: the linear sampled-data analysis,
-    :mod:`fjm_runtime.analysis.search.screen_linear`; or an object of
-    :class:`~fjm_runtime.analysis.search.screen.Screen`) rejects candidates first.
+    Parameters
+    ----------
+    model : Model
+    settings : SearchSettings, optional
+        What to search and how (default ``SearchSettings()``: ismc, torque sensing, 1 kHz, one sample
+        of delay, 200 draws of 10 s, seed 0).
+    progress : callable, optional
+        Receives one line per stage (default: stderr).
 
     Returns
     -------
@@ -330,41 +325,39 @@ def design(model, *, kind: str = "ismc", sensing: str = "torque", rate: float = 
         time_at_limit, torque_jitter, peak_torque, time_at_rate_limit), ``margins`` (delay,
         input_gain_range), ``params, screen, scheduler, evaluations, draws, seed, duration, fjm_version``.
     """
-    if kind != "ismc":
-        raise FjmValueError(f"design: controller {kind!r}: the search covers the integral law 'ismc'")
-    if draws < 1 or duration <= 0 or rate <= 0 or delay < 0 or screen_draws < 1 or screen_duration <= 0:
-        raise FjmValueError(f"design: draws = {draws}, duration = {duration}, rate = {rate}, delay = {delay}, "
-                            f"screen_draws = {screen_draws}, screen_duration = {screen_duration}: expected draws >= 1, "
-                            "durations > 0 s, rate > 0 Hz, delay >= 0, screen_draws >= 1")
-    recheck_draws = draws if recheck_draws is None else int(recheck_draws)
+    s = SearchSettings() if settings is None else settings
+    if s.kind != "ismc":
+        raise FjmValueError(f"design: controller {s.kind!r}: the search covers the integral law 'ismc'")
+    if s.draws < 1 or s.duration <= 0 or s.rate <= 0 or s.delay < 0 or s.screen_draws < 1 or s.screen_duration <= 0:
+        raise FjmValueError(f"design: draws = {s.draws}, duration = {s.duration}, rate = {s.rate}, delay = {s.delay}, "
+                            f"screen_draws = {s.screen_draws}, screen_duration = {s.screen_duration}: expected "
+                            "draws >= 1, durations > 0 s, rate > 0 Hz, delay >= 0, screen_draws >= 1")
+    recheck_draws = s.draws if s.recheck_draws is None else int(s.recheck_draws)
     if recheck_draws < 0:
         raise FjmValueError(f"design: recheck_draws = {recheck_draws}: expected >= 0 (0: no re-check)")
     say = progress or (lambda msg: print(f"fjm design: {msg}", file=sys.stderr, flush=True))
-    thresholds = thresholds or Thresholds()
+    thresholds = s.thresholds or Thresholds()
     thresholds.joints(int(model.n))                      # validates the jitter joints for this model
-    sensor = SensorModel.panda_white(seed=seed) if sensor is None else sensor
-    spread = default_spread(model) if spread is None else spread
-    u_max = default_efforts(model) if u_max is None else u_max
-    if scheduler is None:
-        return _design(model, kind, sensing, rate, delay, sensor, draws, duration, seed, u_max, screen_draws,
-                       screen_duration, rounds, max_extra_delay, threads, simd, say, predict, reference, x0, task,
-                       active_sets, thresholds, spread, recheck_draws, None, screen)
+    s = replace(s, recheck_draws=recheck_draws, thresholds=thresholds,
+                sensor=SensorModel.panda_white(seed=s.seed) if s.sensor is None else s.sensor,
+                spread=default_spread(model) if s.spread is None else s.spread,
+                u_max=default_efforts(model) if s.u_max is None else s.u_max)
+    if s.scheduler is None:
+        return _design(model, s, say, None)
     from ...batch.distributed import client_for
-    with client_for(scheduler) as client:
+    with client_for(s.scheduler) as client:
         say(f"Monte Carlo stages on the dask cluster at {client.scheduler.address}")
-        return _design(model, kind, sensing, rate, delay, sensor, draws, duration, seed, u_max, screen_draws,
-                       screen_duration, rounds, max_extra_delay, threads, simd, say, predict, reference, x0, task,
-                       active_sets, thresholds, spread, recheck_draws, client, screen)
+        return _design(model, s, say, client)
 
 
-def _design(model, kind, sensing, rate, delay, sensor, draws, duration, seed, u_max, screen_draws, screen_duration,
-            rounds, max_extra_delay, threads, simd, say, predict, reference, x0, task, active_sets, thresholds,
-            spread, recheck_draws, client, screen) -> dict:
+def _design(model, s: SearchSettings, say, client) -> dict:
+    """The search with every default resolved (``s``), its Monte Carlo stages on ``client`` (None: here)."""
     from .report import binding_miss, report
     from .screen_linear import linear_screen
     t0 = time.perf_counter()
-    prob = DesignLoops(model, kind, sensing, rate, delay, sensor, u_max, threads, simd, predict, reference, x0, task,
-                       nominal=spread.nominal, thresholds=thresholds, client=client)
+    spread, thresholds, screen, seed = s.spread, s.thresholds, s.screen, s.seed
+    prob = DesignLoops(model, s.kind, s.sensing, s.rate, s.delay, s.sensor, s.u_max, s.threads, s.simd, s.predict,
+                       s.reference, s.x0, s.task, nominal=spread.nominal, thresholds=thresholds, client=client)
     if isinstance(screen, str):
         if screen != "linear":
             raise FjmValueError(f"design: screen = {screen!r}: expected None, 'linear' or a Screen object")
@@ -372,18 +365,20 @@ def _design(model, kind, sensing, rate, delay, sensor, draws, duration, seed, u_
         if screen is None:
             raise FjmValueError("design: screen = 'linear': fjm_runtime.analysis.sampled.sampled_linear is not installed")
     search = _Search(prob, screen)
+    draws, duration, screen_draws, screen_duration = s.draws, s.duration, s.screen_draws, s.screen_duration
     P_all = draw_params(model, max(draws, screen_draws), seed, spread)
-    best, worst, b = _search(search, model, P_all, draws, screen_draws, screen_duration, duration, rounds,
-                             active_sets, seed, say)
+    best, worst, b = _search(search, model, P_all, draws, screen_draws, screen_duration, duration, s.rounds,
+                             s.active_sets, seed, say)
     seconds = {"search": time.perf_counter() - t0}
     misses = find_misses(b, thresholds, range(draws), "final")
     recheck = {"draws": 0, "skipped": "the final check missed a threshold" if misses else "recheck_draws = 0"}
-    if not misses and recheck_draws > 0:
+    if not misses and s.recheck_draws > 0:
         t1 = time.perf_counter()
-        recheck, misses = _recheck(prob, best, spread, recheck_draws, duration, seed, say)
+        recheck, misses = _recheck(prob, best, spread, s.recheck_draws, duration, seed, say)
         seconds["recheck"] = time.perf_counter() - t1
     t1 = time.perf_counter()
-    margins = {"delay": _delay_margin(prob, best, P_all[:screen_draws], screen_duration, seed, max_extra_delay, say),
+    margins = {"delay": _delay_margin(prob, best, P_all[:screen_draws], screen_duration, seed, s.max_extra_delay,
+                                      say),
                "input_gain_range": _gain_range(prob, best, screen_duration, seed, say)}
     seconds["margins"] = time.perf_counter() - t1
     for m in misses:

@@ -7,8 +7,14 @@ import numpy as np
 import pytest
 
 import fjm_runtime
+from fjm_runtime.analysis.search.settings import SearchSettings
 from fjm_runtime.analysis.search.search import DIVERGED_COST, PENALTY, design, draw_params, run_cost
 from fjm_runtime.sim.sample_step import stiffness_indices
+
+
+def _search(m, progress=None, **settings):
+    """``design`` with the settings as keywords (the progress callback apart)."""
+    return design(m, SearchSettings(**settings), progress=progress)
 
 
 def test_draws_corners_then_box():
@@ -48,7 +54,7 @@ def test_tiny_design_is_deterministic_and_simulate_reads_it(tmp_path):
     m = fjm_runtime.load("link1")
     kw = dict(draws=3, duration=0.3, screen_draws=3, screen_duration=0.2, rounds=1, max_extra_delay=1, seed=5,
               progress=lambda msg: None)
-    a, b = design(m, **kw), design(m, **kw)
+    a, b = _search(m, **kw), _search(m, **kw)
     assert a["gains"] == b["gains"] and a["worst_case"] == b["worst_case"]
     assert a["kind"] == "ismc" and a["sensing"] == "torque" and a["draws"] == 3
     path = tmp_path / "g.json"

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 import fjm_runtime
+from fjm_runtime.analysis.search.settings import SearchSettings
 from fjm_runtime.analysis.search.search import RECHECK_SEED_OFFSET, design
 from fjm_runtime.analysis.search.draws import default_spread, draw_params, load_params_file
 from fjm_runtime.analysis.search.thresholds import (PENALTY, Thresholds, describe_miss, find_misses, parse_joints,
@@ -14,6 +15,11 @@ from fjm_runtime.sim.sample_step import stiffness_indices
 from fjm_runtime.sim.sensor import SensorModel
 from fjm_runtime.validation import FjmValueError
 from types import SimpleNamespace
+
+
+def _search(m, progress=None, **settings):
+    """``design`` with the settings as keywords (the progress callback apart)."""
+    return design(m, SearchSettings(**settings), progress=progress)
 
 
 def _former_draws(model, count, seed):
@@ -171,7 +177,7 @@ TINY = dict(draws=3, duration=0.3, screen_draws=3, screen_duration=0.2, rounds=1
 def test_passing_gains_are_rechecked_on_fresh_plants_and_seeds():
     m = fjm_runtime.load("link1")
     lax = Thresholds(max_rms=1.0, max_jitter=1e4, max_at_limit=1.0)
-    a = design(m, sensor=SensorModel.panda_white(seed=5), thresholds=lax, recheck_draws=16, **TINY)
+    a = _search(m, sensor=SensorModel.panda_white(seed=5), thresholds=lax, recheck_draws=16, **TINY)
     assert a["meets"] is True and a["misses"] == []
     rc = a["recheck"]
     assert rc["draws"] == 16 and rc["meets"] is True
@@ -179,8 +185,9 @@ def test_passing_gains_are_rechecked_on_fresh_plants_and_seeds():
     final_rms, fresh_rms = a["worst_case"]["rms_second_half"][0], rc["worst_case"]["rms_second_half"][0]
     assert fresh_rms > final_rms          # measured: one fresh plant tracks worse than every searched one
     # a limit between the two: the final check passes, the re-check on fresh plants fails the design
-    b = design(m, sensor=SensorModel.panda_white(seed=5), recheck_draws=16,
-               thresholds=Thresholds(max_rms=0.5 * (final_rms + fresh_rms), max_jitter=1e4, max_at_limit=1.0), **TINY)
+    b = _search(m, sensor=SensorModel.panda_white(seed=5), recheck_draws=16,
+                                 thresholds=Thresholds(max_rms=0.5 * (final_rms + fresh_rms), max_jitter=1e4,
+                                                       max_at_limit=1.0), **TINY)
     assert b["gains"] == a["gains"] and b["meets"] is False and b["recheck"]["meets"] is False
     assert [(x["threshold"], x["joint"], x["stage"]) for x in b["misses"]] == [("rms", 1, "recheck")]
     assert b["misses"][0]["value"] == fresh_rms and b["misses"][0]["seed"] >= RECHECK_SEED_OFFSET
@@ -190,7 +197,7 @@ def test_passing_gains_are_rechecked_on_fresh_plants_and_seeds():
 @pytest.mark.slow  # builds the batch step (C) on a cold cache
 def test_a_failed_design_says_which_threshold_joint_and_draw():
     m = fjm_runtime.load("link1")
-    a = design(m, sensor=SensorModel.panda_white(seed=5), **TINY)
+    a = _search(m, sensor=SensorModel.panda_white(seed=5), **TINY)
     assert a["meets"] is False and a["recheck"]["draws"] == 0
     jit = [x for x in a["misses"] if x["threshold"] == "jitter"][0]
     assert jit["joint"] == 1 and jit["value"] == pytest.approx(max(a["worst_case"]["torque_jitter"]))
@@ -206,10 +213,10 @@ def test_design_on_a_two_worker_cluster_is_bit_identical():
     m = fjm_runtime.load("planar2")
     kw = dict(TINY, draws=4, recheck_draws=3, sensor=SensorModel.panda_white(seed=5),
               thresholds=Thresholds(max_rms=1.0, max_jitter=1e4, max_at_limit=1.0))
-    local = design(m, **kw)
+    local = _search(m, **kw)
     with LocalCluster(n_workers=2, threads_per_worker=1, processes=False, dashboard_address=None) as cluster, \
             Client(cluster) as client:
-        remote = design(m, scheduler=client, **kw)
+        remote = _search(m, scheduler=client, **kw)
     assert remote["scheduler"] != "local" and local["scheduler"] == "local"
     for key in ("gains", "worst_case", "margins", "misses", "recheck", "meets"):
         assert remote[key] == local[key], key
@@ -238,13 +245,13 @@ class _LamScreen:
 def test_a_screen_keeps_rejected_candidates_out_of_the_monte_carlo(monkeypatch):
     from fjm_runtime.analysis.search.runs import DesignLoops
     m = fjm_runtime.load("link1")
-    free = design(m, sensor=SensorModel.panda_white(seed=5), screen=None, **TINY)
+    free = _search(m, sensor=SensorModel.panda_white(seed=5), screen=None, **TINY)
     simulated = []
     run = DesignLoops.run
     monkeypatch.setattr(DesignLoops, "run", lambda self, cands, *a, **k: (simulated.extend(c["lam"] for c in cands),
                                                                          run(self, cands, *a, **k))[1])
     scr = _LamScreen()
-    a = design(m, sensor=SensorModel.panda_white(seed=5), screen=scr, **TINY)
+    a = _search(m, sensor=SensorModel.panda_white(seed=5), screen=scr, **TINY)
     rejected = sum(lam < 30.0 for lam in scr.seen)
     assert rejected > 0 and a["screen"] == {"name": "lam >= 30", "rejected": rejected,
                                             "simulated": len(scr.seen) - rejected}
@@ -300,10 +307,10 @@ def test_design_on_process_workers_is_bit_identical():
     m = fjm_runtime.load("planar2")
     kw = dict(TINY, draws=6, recheck_draws=4, sensor=SensorModel.panda_white(seed=5),
               thresholds=Thresholds(max_rms=1.0, max_jitter=1e4, max_at_limit=1.0))
-    local = design(m, **kw)
+    local = _search(m, **kw)
     with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster, \
             Client(cluster) as client:
-        remote = design(m, scheduler=client, **kw)
+        remote = _search(m, scheduler=client, **kw)
     for key in ("gains", "worst_case", "margins", "misses", "recheck", "meets"):
         assert remote[key] == local[key], key
 
@@ -316,7 +323,7 @@ def test_attribution_reruns_the_binding_draw_without_each_noise_source():
     from fjm_runtime.analysis.search.attribution import attribute, variants
     from fjm_runtime.analysis.search.runs import DesignLoops
     m = fjm_runtime.load("link1")
-    a = design(m, sensor=SensorModel.panda_white(seed=5), **TINY)
+    a = _search(m, sensor=SensorModel.panda_white(seed=5), **TINY)
     miss = a["binding"]
     assert miss["threshold"] == "jitter" and a["limited_by"] and a["attribution"]["as designed"] == miss["value"]
     loops = DesignLoops(m, "ismc", "torque", 1000.0, 1, SensorModel.panda_white(seed=5), None, None, True)
