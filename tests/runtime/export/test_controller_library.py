@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import ctypes
 import json
+import subprocess
 
 import numpy as np
 import pytest
@@ -75,10 +76,9 @@ def _library(design, tmp_factory, real="double"):
     if key not in _LIBS:
         out = tmp_factory.mktemp(design.name)
         export_controller(design, out)
-        flags = STRICT + (("-Dcasadi_real=float",) if real == "float" else ())
-        so = compile_library(amalgamation(out, design.name), f"{design.name}_controller", flags)
+        so = compile_library(amalgamation(out, design.name, real), f"{design.name}_controller_{real}", STRICT)
         _LIBS[key] = ctypes.CDLL(str(so))
-    return CController(_LIBS[key], design.name, design, real)
+    return CController(_LIBS[key], design.name + ("_float" if real == "float" else ""), design, real)
 
 
 class Run:
@@ -342,7 +342,6 @@ def test_cli_export_builds_strict_in_double_float_and_cxx(tmp_path):
     """``fjm export controller`` + ``make``: -std=c99 -Wall -Wextra -Werror -pedantic in double and float,
     and g++ -std=c++17 -Wall -Wextra -Werror, without a diagnostic; a C++ caller links the library."""
     import shutil
-    import subprocess
     from fjm_runtime.cli.main import main
     if shutil.which("make") is None or shutil.which("g++") is None:
         pytest.skip("make and g++ needed")
@@ -370,3 +369,127 @@ def test_cli_export_builds_strict_in_double_float_and_cxx(tmp_path):
                            str(out / "liblink1_ismc_tau.a"), "-lm", "-o", str(exe)], capture_output=True, text=True)
     assert proc.returncode == 0, proc.stderr[-2000:]
     assert subprocess.run([str(exe)]).returncode == 0
+
+
+_STANDIN = """// stand-in for <casadi/casadi.hpp>: the global names it declares (casadi_types.hpp, mem.h)
+typedef long long int casadi_int;
+typedef double casadi_real;
+namespace casadi { class Function; }
+"""
+
+_CXX_RUN = r"""#include "NAME_controller.hpp"
+#include <casadi/casadi.hpp>
+#if defined(casadi_real) || defined(casadi_int)
+#error "casadi_real or casadi_int leaked as a macro"
+#endif
+#include <cstdio>
+#include <cstdlib>
+#include <new>
+
+static long allocations = 0;  // every operator new of the program
+void* operator new(std::size_t size) {
+  ++allocations; void* p = std::malloc(size ? size : 1); if (!p) throw std::bad_alloc(); return p; }
+void operator delete(void* p) noexcept { std::free(p); }
+void operator delete(void* p, std::size_t) noexcept { std::free(p); }
+
+template <typename Real>
+static long run(FILE* in, FILE* out, long K) {  // class and C API side by side; returns allocations in update
+  using C = NAME::Controller<Real>;
+  C cls;
+  typename NAME::CApi<Real>::State c_api_state{}; auto* c_api = &c_api_state;
+  typename C::Reading m{}; typename C::Reference r{}; typename C::Torque u{}; typename C::Torque u_c{};
+  double v;
+  for (auto& x : m) { if (std::fread(&v, sizeof v, 1, in) != 1) std::exit(9); x = Real(v); }
+  if (cls.init() != NAME::Status::ok || NAME::CApi<Real>::init(c_api, nullptr, nullptr) != 0) std::exit(10);
+  if (cls.reset(m) != NAME::Status::ok || NAME::CApi<Real>::reset(c_api, m.data()) != 0) std::exit(11);
+  long in_update = 0;
+  for (long k = 0; k < K; ++k) {
+    for (auto& x : m) { if (std::fread(&v, sizeof v, 1, in) != 1) std::exit(12); x = Real(v); }
+    for (auto& x : r) { if (std::fread(&v, sizeof v, 1, in) != 1) std::exit(13); x = Real(v); }
+    long before = allocations;
+    int st = int(cls.update(m, r, u));
+    in_update += allocations - before;
+    int st_c = NAME::CApi<Real>::step(c_api, m.data(), r.data(), u_c.data());
+    for (std::size_t j = 0; j < C::N; ++j) { double a = u[j], b = u_c[j]; std::fwrite(&a, sizeof a, 1, out);
+                                              std::fwrite(&b, sizeof b, 1, out); }
+    double s[2] = {double(st), double(st_c)};
+    std::fwrite(s, sizeof s[0], 2, out);
+  }
+  return in_update;
+}
+
+int main(int argc, char** argv) {
+  if (argc != 4) return 7;
+  long K = std::atol(argv[1]);
+  FILE* in = std::fopen(argv[2], "rb"); FILE* out = std::fopen(argv[3], "wb");
+  if (!in || !out) return 8;
+  long a = run<double>(in, out, K);
+  std::rewind(in);
+  long b = run<float>(in, out, K);
+  std::printf("%ld %ld\n", a, b);
+  return 0;
+}
+"""
+
+
+def _defined_symbols(archive):
+    out = subprocess.run(["nm", "-g", "--defined-only", str(archive)], capture_output=True, text=True, check=True)
+    return {parts[2] for parts in (line.split() for line in out.stdout.splitlines()) if len(parts) == 3}
+
+
+@pytest.mark.slow
+def test_cxx_class_after_casadi_header_and_float_double_in_one_program(tmp_path):
+    """The C++17 class (after our header, a header declaring casadi_int/casadi_real as casadi.hpp does,
+    g++ -Wall -Wextra -Werror) gives, sample for sample, bit for bit the C API's torques and statuses in
+    double and in float, in ONE program linking both libraries (their exported symbols are disjoint), on
+    the simulator's readings of a run; update allocates nothing; the float torques stay within 1 % of
+    the double ones (per joint, of its largest torque). The real <casadi/casadi.hpp> after our header
+    compiles too where the casadi package ships it."""
+    import shutil
+    from pathlib import Path
+    import casadi
+    if shutil.which("make") is None or shutil.which("g++") is None or shutil.which("nm") is None:
+        pytest.skip("make, g++ and nm needed")
+    design = _design("planar2", "ismc", "torque", "franka_like", u_max=40.0, **_SOFT)
+    out, name = tmp_path / "lib", design.name
+    export_controller(design, out)
+    proc = subprocess.run(["make", "-C", str(out), "CC=gcc", "CXX=g++"], capture_output=True, text=True)
+    assert proc.returncode == 0 and "warning" not in proc.stderr.lower(), proc.stderr[-2000:]
+    sym_d, sym_f = _defined_symbols(out / f"lib{name}.a"), _defined_symbols(out / f"lib{name}_float.a")
+    print(f"{name}: {len(sym_d)} double and {len(sym_f)} float symbols, {len(sym_d & sym_f)} shared")
+    assert len(sym_d) == len(sym_f) > 10 and not sym_d & sym_f
+    standin = tmp_path / "standin" / "casadi"
+    standin.mkdir(parents=True)
+    (standin / "casadi.hpp").write_text(_STANDIN)
+    src, exe = tmp_path / "run.cpp", tmp_path / "run"
+    src.write_text(_CXX_RUN.replace("NAME", name))
+    proc = subprocess.run(["g++", "-std=c++17", "-O2", "-Wall", "-Wextra", "-Werror", f"-I{out}",
+                           f"-I{standin.parent}", str(src), str(out / f"lib{name}.a"), str(out / f"lib{name}_float.a"),
+                           "-lm", "-o", str(exe)], capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    run = Run(design, 0.5, _sine(design))
+    K, n = run.M.shape[0], design.layout.n
+    np.concatenate([run.m0] + [np.concatenate([run.M[k], run.R[k]]) for k in range(K)]).tofile(tmp_path / "in.bin")
+    proc = subprocess.run([str(exe), str(K), str(tmp_path / "in.bin"), str(tmp_path / "out.bin")],
+                          capture_output=True, text=True)
+    assert proc.returncode == 0, (proc.returncode, proc.stderr)
+    assert proc.stdout.split() == ["0", "0"], proc.stdout           # no allocation in update
+    rows = np.fromfile(tmp_path / "out.bin").reshape(2, K, 2 * n + 2)
+    for real, r in zip(("double", "float"), rows):
+        np.testing.assert_array_equal(r[:, 0:2 * n:2], r[:, 1:2 * n:2], err_msg=real)  # class == C API
+        np.testing.assert_array_equal(r[:, 2 * n], r[:, 2 * n + 1], err_msg=real)
+        assert np.all(np.isfinite(r[:, :2 * n])) and np.all(r[:, 2 * n] <= SATURATED), real
+    U_d, U_f = rows[0][:, 0:2 * n:2], rows[1][:, 0:2 * n:2]
+    rel = _relative(U_d, run.U)
+    rel_f = _relative(U_f, U_d)
+    print(f"{name}: C++ double vs simulator, free running {rel:.3g}; float vs double {rel_f:.3g}")
+    assert _relative(U_d[:FREE_SAMPLES], run.U[:FREE_SAMPLES]) <= 1e-12 and rel_f <= 1e-2
+    real_hpp = Path(casadi.__file__).parent / "include" / "casadi" / "casadi.hpp"
+    if real_hpp.is_file():
+        use = tmp_path / "use_casadi.cpp"
+        use.write_text(f'#include "{name}_controller.hpp"\n#include <casadi/casadi.hpp>\n'
+                       f"int main() {{ {name}::Controller<float> c; casadi::SX x = casadi::SX::sym(\"x\");\n"
+                       "  return c.init() == " f"{name}::Status::ok && x.is_symbolic() ? 0 : 1; }}\n")
+        proc = subprocess.run(["g++", "-std=c++17", "-Wall", "-Wextra", "-Werror", "-fsyntax-only", f"-I{out}",
+                               "-isystem", str(real_hpp.parent.parent), str(use)], capture_output=True, text=True)
+        assert proc.returncode == 0, proc.stderr[-3000:]
