@@ -59,9 +59,9 @@ def add_parser(sub) -> None:
     p.add_argument("--predict", action="store_true", help="loops run with delay compensation (the sample step's "
                                                            "nominal-model prediction)")
     p.add_argument("--task", default="auto", choices=("auto", "sine"),
-                   help="auto: the demo's task where the model has one (Panda: joint-space sines about the ready "
-                        "pose; Baxter: both arms on sines, the head still; from rest holding gravity); sine: "
-                        "0.5 rad sines about q = 0 from rest")
+                   help="auto: the task the model's file states ([task]; Panda: joint-space sines about the ready "
+                        "pose; Baxter: both arms on sines, the head still; from rest holding gravity) where it states "
+                        "one; sine: 0.5 rad sines about q = 0 from rest")
     p.add_argument("--screen", default="none", choices=("none", "linear"),
                    help="linear: reject candidates by the linear sampled-data analysis before Monte Carlo (spectral "
                         "radius and predicted jitter on the box's corners; slow on 7 joints) and name what limits a "
@@ -73,28 +73,18 @@ def add_parser(sub) -> None:
 
 
 def demo_task(m, nominal=None) -> dict:
-    """The demo's task for ``m`` as :func:`fjm_runtime.analysis.search.search.design` keywords; ``{}`` if it has none.
+    """The task ``m``'s model file states (``m.task``) as :func:`fjm_runtime.analysis.search.search.design`
+    keywords ``reference``, ``x0`` and ``task`` (its record); ``{}`` if the model states none.
 
-    Panda: joint-space sines about the ready pose; Baxter: both arms on the same sines, the head still.
-    Both start at rest holding gravity (``nominal`` parameters; default the model's).
+    The start: at rest on the reference at ``t = 0``, holding gravity with the ``nominal`` parameters
+    (default the model's).
     """
-    if m.name in ("panda", "panda_hd"):  # panda_hd: the same arm on harmonic drives
-        from ..experiments import panda as demo  # the demo's task: cli sits on top, like experiments
-        kind, offset, amplitude, omega = ("panda ready-pose sines (the demo's)", list(demo.READY),
-                                          list(demo.AMPLITUDE), list(demo.OMEGA))
-    elif m.name == "baxter":
-        from ..experiments import baxter as demo
-        kind, offset, amplitude, omega = ("baxter two-arm sines, head still (the demo's)",
-                                          [0.0] + list(demo.ARM_POSE) * 2, [0.0] + list(demo.ARM_AMPLITUDE) * 2,
-                                          [1.0] + list(demo.ARM_OMEGA) * 2)
-    else:
+    task = m.task
+    if task is None:
         return {}
     from ..control.design import task_start
-    ref = demo.reference()
-    start = "at rest holding gravity (nominal parameters)"
-    return {"reference": ref, "x0": task_start(m, ref, start, nominal),
-            "task": {"kind": kind, "offset": offset, "amplitude": amplitude, "omega": omega,
-                     "phase": -0.5 * math.pi, "start": start}}
+    ref, record = task.reference(), task.record()
+    return {"reference": ref, "x0": task_start(m, ref, record["start"], nominal), "task": record}
 
 
 #: Largest reference table (samples x 5n doubles) a batch may hold, bytes.

@@ -6,8 +6,10 @@ runs the integral sliding-mode law at 1 kHz in the sampled-data loop as a real o
 with the law's prediction), once reading the full state (``sensing='state'``) and once
 the joint-torque measurement ``[q; dq; tau_J; dtau_J; dq_m]`` that a series-elastic
 actuator provides (``sensing='torque'``, the ``_tau`` laws). The controller knows only
-the NOMINAL parameters (the defaults); the TRUE stiffness differs per joint. Torques are
-saturated at the URDF effort limits; the head holds its pan angle. The gains are those
+the NOMINAL parameters (the defaults); the TRUE stiffness differs per joint. The task (both
+arms on sines, the head holding its pan angle) and the torque limits are the model's
+(``model.task``, ``model.limits.effort``: derive/robots/baxter/baxter.toml's ``[task]``
+and ``[limits]`` over the URDF's efforts). The gains are those
 ``fjm design baxter --predict`` found for the torque-sensed law on this task when the
 package ships them (:meth:`fjm_runtime.control.design.Design.shipped`), else stated ones (the same on
 every joint). :func:`baxter_section` writes a figure and returns the summary table.
@@ -20,23 +22,16 @@ from typing import Callable, Dict, List, Optional, Tuple
 
 import numpy as np
 
-from ..analysis.search.search import EFFORTS
 from ..control.design import Design
 from ..control.factory import make_controller
-from ..control.references import Sinusoid
+from ..control.references import Reference
 from ..sim.rest import rest_state
 from ..sim.sensor import SensorModel
 from ..sim.simulate import SimulationDivergedError, simulate
 from .report import diverged_marker
 
-#: ``<limit effort>`` of head_pan, s0, s1, e0, e1 (50 N m) and w0, w1, w2 (15 N m) in the URDF, q order
-#: (the head's URDF effort, 50000, is a placeholder: 50 N m).
-EFFORT = EFFORTS["baxter"]
-#: Centre of each arm's sines (rad): s1 lowered, elbow bent (inside the URDF limits; holding gravity
-#: there takes ~19 N m on s1, 10 N m on e1: raised poses need the full 50 N m on s1 at rest).
-ARM_POSE = (0.0, 0.6, 0.0, 1.5, 0.0, 0.5, 0.0)
-ARM_AMPLITUDE = (0.2, 0.15, 0.2, 0.2, 0.3, 0.2, 0.3)
-ARM_OMEGA = (1.0, 1.2, 0.9, 1.1, 1.5, 1.3, 1.7)
+#: The left arm's joints in q order (head_pan first, then the left arm, then the right).
+LEFT_ARM = slice(1, 8)
 RATE = 1000.0       # Hz: the control rate
 DELAY = 1           # samples of computation delay, compensated by the law's prediction
 #: Stated gains (every joint), used when no design is shipped.
@@ -46,10 +41,9 @@ SENSING = ("state", "torque")
 DURATION, QUICK_DURATION = 3.0, 0.05
 
 
-def reference() -> Sinusoid:
-    """Both arms on the same sines about :data:`ARM_POSE`, the head still; at rest at t = 0."""
-    return Sinusoid([0.0] + list(ARM_AMPLITUDE) * 2, [1.0] + list(ARM_OMEGA) * 2, n=15,
-                    offset=[0.0] + list(ARM_POSE) * 2, phase=-0.5 * np.pi)
+def reference(model) -> Reference:
+    """The model's task (``model.task``: both arms on the same sines, the head still; at rest at t = 0)."""
+    return model.task.reference()
 
 
 def true_stiffness(model, spread: float) -> Dict[str, float]:
@@ -72,12 +66,12 @@ def run(model, duration: float, backend: str = "casadi",
         progress: Optional[Callable[[str], None]] = None, gains: Optional[dict] = None,
         seed: int = 0) -> Dict[str, Dict[str, object]]:
     """``{sensing: {case: SimulationResult or SimulationDivergedError}}`` (sensor noise of the Panda's model)."""
-    ref = reference()
+    ref = reference(model)
     gains = ismc_gains()[0] if gains is None else gains
     out: Dict[str, Dict[str, object]] = {}
     for sensing in SENSING:
-        ctrl = make_controller("ismc", model, model.default_params, sensing=sensing, u_max=np.asarray(EFFORT),
-                               **gains)
+        ctrl = make_controller("ismc", model, model.default_params, sensing=sensing,
+                               u_max=np.array(model.limits.effort), **gains)
         out[sensing] = {}
         for label, spread in CASES.items():
             if progress:
@@ -146,17 +140,18 @@ def baxter_section(out: Path, duration: float = DURATION, progress: Optional[Cal
     from .. import load
     t0 = time.perf_counter()
     m = load("baxter")
+    task = m.task
     duration = min(duration, QUICK_DURATION) if quick else duration
     gains, source = ismc_gains()
     res = run(m, duration, progress=progress, gains=gains)
     fig = plot(res, Path(out) / "baxter_tracking.png")
     return ["## Tree: Baxter's two series-elastic arms (15 joints), stiffness +-20 %", "",
-            f"Both arms track joint-space sines about {list(ARM_POSE)} (A = {list(ARM_AMPLITUDE)} rad, omega = "
-            f"{list(ARM_OMEGA)} rad/s), the head holds its pan angle; {duration:g} s at {RATE:g} Hz (sampled-data "
+            f"Both arms track joint-space sines about {_arm(task.offset)} (A = {_arm(task.amplitude)} rad, omega = "
+            f"{_arm(task.omega)} rad/s), the head holds its pan angle; {duration:g} s at {RATE:g} Hz (sampled-data "
             "loop, plant on RK4 substeps, zero-order hold, sensor noise of the Panda's model, "
             f"{DELAY} sample of delay with the law's prediction), CasADi backend, starting at rest holding gravity. "
             f"Integral SMC on the NOMINAL parameters, {source}: {_gains_text(gains)}; torques "
-            f"saturated at {list(EFFORT)} N m. TRUE stiffness: the nominal (illustrative SEA values, "
+            f"saturated at {m.limits.effort.tolist()} N m. TRUE stiffness: the nominal (illustrative SEA values, "
             "derive/robots/baxter/README.md) or +20 % / -20 % on alternating joints. 'state': the law reads x; "
             "'torque': it reads [q; dq; tau_J; dtau_J; dq_m], as an SEA measures them, and has no K in its "
             "link-side part (the stiffness error becomes an input-gain error).", "",
@@ -165,6 +160,11 @@ def baxter_section(out: Path, duration: float = DURATION, progress: Optional[Cal
             "The pose keeps s1's gravity load at ~19 N m of its 50 (the real Baxter adds a "
             "gravity-assist spring on s1, not modelled). "
             f"{time.perf_counter() - t0:.0f} s.", ""]
+
+
+def _arm(values) -> list:
+    """One arm's entries of a per-joint task array (both arms run the same)."""
+    return np.asarray(values)[LEFT_ARM].tolist()
 
 
 def _gains_text(gains: dict) -> str:

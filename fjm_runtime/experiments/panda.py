@@ -20,23 +20,25 @@ from typing import Callable, Dict, List, Optional
 
 import numpy as np
 
+from .. import load
 from ..control.factory import DEFAULT_LAYER_RATE, make_controller
 from ..control.references import Sinusoid
 from ..sim.rest import rest_state
 from ..sim.simulate import SimulationDivergedError, SimulationResult, simulate
 from .report import diverged_marker
 
-#: ``<limit effort>`` of panda_joint1..7 in derive/robots/panda/panda.urdf (N m); the runtime
-#: never reads a URDF, tests/test_spatial_control.py checks these against the file.
-PANDA_EFFORT = (87.0, 87.0, 87.0, 87.0, 12.0, 12.0, 12.0)
-#: ``<limit lower upper>`` of panda_joint1..7 (rad), checked against the URDF likewise.
-PANDA_LOWER = (-2.8973, -1.7628, -2.8973, -3.0718, -2.8973, -0.0175, -2.8973)
-PANDA_UPPER = (2.8973, 1.7628, 2.8973, -0.0698, 2.8973, 3.7525, 2.8973)
+_PANDA = load("panda")  # the arm's own facts: its model's limits and task (derive/robots/panda/panda.toml)
+#: Effort limits of panda_joint1..7 (N m): ``Model.limits.effort``, the URDF's ``<limit effort>``.
+PANDA_EFFORT = tuple(float(v) for v in _PANDA.limits.effort)
+#: ``<limit lower upper>`` of panda_joint1..7 (rad): ``Model.limits.position``.
+PANDA_LOWER = tuple(float(v) for v in _PANDA.limits.position[:, 0])
+PANDA_UPPER = tuple(float(v) for v in _PANDA.limits.position[:, 1])
 
-#: Centre of the sines: Franka's "ready" pose (inside every joint's limits).
-READY = (0.0, -0.785, 0.0, -2.356, 0.0, 1.571, 0.785)
-AMPLITUDE = (0.3, 0.25, 0.3, 0.3, 0.4, 0.3, 0.4)   # rad
-OMEGA = (1.0, 1.2, 0.9, 1.1, 1.5, 1.3, 1.7)         # rad/s
+#: Centre of the sines: Franka's "ready" pose (inside every joint's limits), amplitudes (rad) and angular
+#: frequencies (rad/s): the model's task (``Model.task``, the ``[task]`` of panda.toml).
+READY = tuple(float(v) for v in _PANDA.task.offset)
+AMPLITUDE = tuple(float(v) for v in _PANDA.task.amplitude)
+OMEGA = tuple(float(v) for v in _PANDA.task.omega)
 
 #: True stiffness = nominal x factor, per joint.
 STIFFNESS_CASES = {
@@ -73,8 +75,8 @@ GAIN_NOTE = (
 
 
 def reference(n: int = 7) -> Sinusoid:
-    """Joint-space sines about :data:`READY`, starting at rest at ``READY - AMPLITUDE`` (phase -pi/2)."""
-    return Sinusoid(list(AMPLITUDE), list(OMEGA), n=n, offset=list(READY), phase=-0.5 * np.pi)
+    """Joint-space sines about :data:`READY`, starting at rest at ``READY - AMPLITUDE`` (the task's phase, -pi/2)."""
+    return Sinusoid(list(AMPLITUDE), list(OMEGA), n=n, offset=list(READY), phase=_PANDA.task.phase.tolist())
 
 
 def mismatch_ratio(model, factor: float, lam: float = LAM) -> np.ndarray:

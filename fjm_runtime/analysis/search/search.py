@@ -71,22 +71,16 @@ LIN_RATIO = 5.0
 #: Today's default thresholds (kept for importers; :class:`Thresholds` holds the limits).
 MAX_TIME_AT_LIMIT = Thresholds().max_at_limit
 MAX_JITTER = Thresholds().max_jitter
-#: Torque limits by model (N m; the Panda's URDF efforts).
-EFFORTS = {"panda": (87.0, 87.0, 87.0, 87.0, 12.0, 12.0, 12.0),
-           # head_pan, then each arm's s0, s1, e0, e1 (50 N m) and w0, w1, w2 (15 N m): the URDF's <limit effort>
-           # (the head's URDF value, 50000, is a placeholder: 50 N m)
-           "baxter": (50.0,) + (50.0, 50.0, 50.0, 50.0, 15.0, 15.0, 15.0) * 2}
 #: Noise seeds of the re-check: ``seed + RECHECK_SEED_OFFSET + i`` (the search uses ``seed + draw``).
 RECHECK_SEED_OFFSET = 1 << 40
 
 
 def default_efforts(model):
-    """Torque limits of a design: :data:`EFFORTS` for the shipped arms, else the URDF's efforts when every
-    joint states a finite one (``model.effort_limits``), else None (no limit)."""
-    if model.name in EFFORTS:
-        return EFFORTS[model.name]
-    lim = getattr(model, "effort_limits", None)
-    if lim is not None and np.all(np.isfinite(lim)) and np.all(np.asarray(lim) > 0):
+    """Torque limits of a design, N m: the model's effort limits (``model.limits.effort``: its model file's
+    ``[limits]`` over the URDF's ``<limit effort>``) when every joint states a finite one > 0, else None
+    (no limit)."""
+    lim = model.limits.effort
+    if np.all(np.isfinite(lim)) and np.all(lim > 0):
         return tuple(float(v) for v in lim)
     return None
 

@@ -23,8 +23,8 @@ def test_the_section_runs_the_shipped_design(baxter):
         assert np.shape(gains[k]) == (baxter.n,) and np.all(np.asarray(gains[k]) > 0)
     # the design searched the demo's own task, loop and limits
     assert spec.sensing == "torque" and spec.predict is True and spec.delay == bx.DELAY
-    assert spec.gains["u_max"] == list(bx.EFFORT)
-    assert spec.task["offset"] == [0.0] + list(bx.ARM_POSE) * 2
+    assert spec.gains["u_max"] == baxter.limits.effort.tolist()
+    assert spec.task["offset"] == baxter.task.offset.tolist()
     assert spec.report["worst_case"]["diverged"] == 0
 
 
@@ -34,7 +34,7 @@ def test_design_task_round_trips_through_the_gains_file(baxter):
     design = Design(kind="ismc", gains={}, task=task["task"])
     ref, x0 = design.reference(baxter), design.start_state(baxter)
     for t in (0.0, 0.37, 2.5):
-        np.testing.assert_allclose(ref(t)[0], bx.reference()(t)[0], rtol=0, atol=1e-15)
+        np.testing.assert_allclose(ref(t)[0], bx.reference(baxter)(t)[0], rtol=0, atol=1e-15)
         np.testing.assert_allclose(ref(t)[0], task["reference"](t)[0], rtol=0, atol=1e-15)
     np.testing.assert_allclose(x0, task["x0"], rtol=0, atol=1e-15)
     assert np.all(np.asarray(x0[baxter.n:2 * baxter.n]) == 0)  # at rest
