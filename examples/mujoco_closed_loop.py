@@ -29,15 +29,10 @@ import mujoco
 import numpy as np
 
 import fjm_runtime
-from fjm_runtime.control.references import Sinusoid
 from fjm_runtime.export.mjcf import write_mjcf
 
 DT = 1e-3          # s: the control period (1 kHz, the Panda's real loop rate)
 SUBSTEPS = 20      # MuJoCo steps per control period (5e-5 s: the wrist mode is ~700 rad/s)
-READY = np.array([0.0, -0.785, 0.0, -2.356, 0.0, 1.571, 0.785])   # Franka's ready pose, rad
-AMPLITUDE = np.array([0.3, 0.25, 0.3, 0.3, 0.4, 0.3, 0.4])        # rad
-OMEGA = np.array([1.0, 1.2, 0.9, 1.1, 1.5, 1.3, 1.7])             # rad/s
-EFFORT = np.array([87.0, 87.0, 87.0, 87.0, 12.0, 12.0, 12.0])     # N m, the URDF's torque limits
 
 
 def rest_state(model, q, p):
@@ -72,12 +67,12 @@ def main(argv=None) -> dict:
         pos, vel = data.qpos[qpos], data.qvel[qvel]
         return np.concatenate([pos[:n], vel[:n], pos[n:], vel[n:]])
 
-    ref = Sinusoid(list(AMPLITUDE), list(OMEGA), n=n, offset=list(READY), phase=-0.5 * np.pi)
+    ref = m.task.reference()   # the Panda's own task (panda.toml [task]): sines about Franka's ready pose
     x0 = rest_state(m, np.asarray(ref(0.0))[0], true)
 
     def law():  # the nominal model (the defaults), integral sliding surface, torque-limited
         return fjm_runtime.make_controller("ismc", m, m.default_params, lam=10.0, k_s=200.0, delta=1.0,
-                                           u_max=EFFORT)
+                                           u_max=np.array(m.limits.effort))  # N m, the URDF's
     controller = law()
     data.qpos[qpos] = np.concatenate([x0[:n], x0[2 * n:3 * n]])
     data.qvel[qvel] = 0.0
