@@ -126,3 +126,16 @@ def test_builtin_manifests_carry_their_files_facts():
             assert manifest["task"][key] == toml["task"][key]
         assert manifest["task"]["phase"] == [toml["task"]["phase"]] * len(src["joints"])
         assert np.isclose(toml["task"]["phase"], -0.5 * np.pi, rtol=0, atol=1e-16)
+
+
+def test_the_ur5e_example_block_parses_as_documented():
+    """examples/ur5e.toml shows [limits] and [task] commented out: uncommented, they parse to what they say."""
+    path = REPO / "examples" / "ur5e.toml"
+    text = path.read_text()
+    block = "\n".join(line[2:] for line in text.split("For example:\n#\n")[1].splitlines())
+    stated = tomllib.loads(block)
+    facts = parse_model_text(text + "\n" + block, base_dir=path.parent).facts
+    assert facts["limits"]["torque_rate"]["values"] == [stated["limits"]["torque_rate"]] * 6
+    assert facts["task"]["offset"] == stated["task"]["offset"]
+    assert facts["task"]["amplitude"] == [stated["task"]["amplitude"]] * 6
+    assert "task" not in parse_model_text(text, base_dir=path.parent).facts  # as shipped: the URDF's limits only
