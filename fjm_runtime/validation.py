@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import re
 from typing import Mapping, Sequence, Tuple, Union
 
 import numpy as np
@@ -44,58 +43,80 @@ def as_vector(name: str, value, length: int) -> np.ndarray:
     return arr
 
 
-# Parameter groups that must be strictly positive / non-negative (by name prefix).
-# Drive coefficients of a several-joint model carry the joint number: K_1_3, F_c_3 (derive.core.spring).
-_POSITIVE = re.compile(r"^(J_l|J_m|K|M|L|m\d+|l\d+|r\d+|I\d+|K\d+|Jm\d+|m_(?!load$).+|v_s|v_c|v_s\d+|v_c\d+|k1|"
-                       r"K_[123]|T_[12]|w_blend|(v_s|v_c|K_[123]|T_[12]|w_blend|k1)_\d+)$")
-_NON_NEGATIVE = re.compile(r"^(B_m|Bm\d+|g0|m_load|F_c|F_s|F_c\d+|F_s\d+|(F_c|F_s)_\d+)$")
 # Spatial models: inertia tensor of a link about its centre of mass (``symbolic = [...]``).
 _TENSOR = ("ixx", "ixy", "ixz", "iyy", "iyz", "izz")
 
+#: Domain string (manifest ``parameters[].domain``, derive.core.domains) -> (test, expectation).
+_DOMAIN_TESTS = {">0": (lambda v: v > 0, "> 0"), ">=0": (lambda v: v >= 0, ">= 0")}
 
-def _check_three_segment(lookup: Mapping[str, float], arg: str) -> None:
+
+def check_domains(info: Mapping, names: Sequence[str], values: np.ndarray, arg: str = "p") -> None:
+    """Raise a one-line :class:`FjmValueError` for the first value outside its parameter's domain.
+
+    Parameters
+    ----------
+    info : mapping
+        ``name -> ParameterInfo`` (:func:`fjm_runtime.drives.read_parameter_info`: ``domain``, ``unit``,
+        ``meaning``); names it lacks are not checked.
+    names : sequence of str
+    values : ndarray, shape (len(names),)
+    arg : str
+        The argument's name in the message.
+    """
+    for name, v in zip(names, values):
+        p = info.get(name)
+        test = None if p is None else _DOMAIN_TESTS.get(p.domain)
+        if test is not None and not test[0](v):
+            unit = f" {p.unit}" if p.unit else ""
+            raise FjmValueError(f"{arg}[{name!r}] = {v}: expected {test[1]}{unit} ({p.meaning})")
+
+
+def _check_three_segment(names: Sequence[str], values: np.ndarray, drives: Sequence, arg: str) -> None:
     """The three-segment spring's relations (derive/core/spring_laws.py): stiffening segments,
     ordered torque breakpoints, blend windows that neither reach zero nor overlap."""
-    base = ("K_1", "K_2", "K_3", "T_1", "T_2", "w_blend")
-    for suffix in [""] + sorted({k[len("w_blend"):] for k in lookup if re.fullmatch(r"w_blend_\d+", k)}):
-        keys = tuple(k + suffix for k in base)
-        if all(k in lookup for k in keys):
-            _check_one_three_segment(*(float(lookup[k]) for k in keys), arg, suffix)
+    for d in drives:
+        if d.spring_law == "three_segment":
+            keys = [names[i] for i in d.spring]
+            joint = f"; joint {d.joint + 1}" if len(drives) > 1 else ""
+            _check_one_three_segment(*(float(values[i]) for i in d.spring), arg, keys, joint)
 
 
-def _check_one_three_segment(K1, K2, K3, T1, T2, w, arg: str, suffix: str) -> None:
-    """One joint's three-segment relations (``suffix``: ``""``, or ``"_<joint>"`` on a several-joint model)."""
-    keys = lambda *ks: [k + suffix for k in ks]  # noqa: E731
-    joint = f"; joint {suffix[1:]}" if suffix else ""
+def _check_one_three_segment(K1, K2, K3, T1, T2, w, arg: str, keys: Sequence[str], joint: str) -> None:
+    """One joint's three-segment relations (``keys``: its coefficient names in the law's order)."""
     if not K1 <= K2 <= K3:
-        raise FjmValueError(f"{arg}{keys('K_1', 'K_2', 'K_3')} = {[K1, K2, K3]}: expected K_1 <= K_2 <= K_3 (N m/rad; "
+        raise FjmValueError(f"{arg}{keys[:3]} = {[K1, K2, K3]}: expected K_1 <= K_2 <= K_3 (N m/rad; "
                             f"a harmonic drive stiffens{joint})")
     if not T1 < T2:
-        raise FjmValueError(f"{arg}{keys('T_1', 'T_2')} = {[T1, T2]}: expected T_1 < T_2 (N m, torque breakpoints{joint})")
+        raise FjmValueError(f"{arg}{keys[3:5]} = {[T1, T2]}: expected T_1 < T_2 (N m, torque breakpoints{joint})")
     limit = min(2 * T1 / K1, (T2 - T1) / K2)
     if not w <= limit:
-        raise FjmValueError(f"{arg}['w_blend{suffix}'] = {w}: expected <= {limit:.6g} rad (min(2 phi_1, phi_2 - phi_1) "
+        raise FjmValueError(f"{arg}[{keys[5]!r}] = {w}: expected <= {limit:.6g} rad (min(2 phi_1, phi_2 - phi_1) "
                             f"at these breakpoints: the blends must not reach phi = 0 nor overlap{joint})")
 
 
-def check_physical(names: Tuple[str, ...], values: np.ndarray, arg: str = "p") -> None:
+def check_physical(names: Tuple[str, ...], values: np.ndarray, arg: str = "p", info: Mapping = None,
+                   drives: Sequence = ()) -> None:
     """Reject non-physical parameter values.
 
-    Masses, lengths, inertias, stiffnesses and motor inertias must be > 0;
-    damping, motor friction levels (``F_c``, ``F_s``) and gravity >= 0, the friction's
-    velocities (``v_s``, ``v_c``) > 0; a centre of mass must lie on its link
-    (``r_i <= l_i``). Spatial models: a payload mass ``m_load`` >= 0 (its
-    position ``x_load, y_load, z_load`` any finite value), link masses
-    ``m_<link>`` > 0 and each link's tensor ``ixx_<link> .. izz_<link>``
-    positive definite (centres of mass ``cx_<link>..`` any finite value).
+    Each value must lie in its parameter's domain (``info``, from the manifest: masses, lengths,
+    inertias, stiffnesses and motor inertias > 0; damping, friction levels and gravity >= 0; ...);
+    a three-segment spring of ``drives`` must stiffen with ordered breakpoints; a centre of mass must
+    lie on its link (``r_i <= l_i``); each link's tensor ``ixx_<link> .. izz_<link>`` must be
+    positive definite.
+
+    Parameters
+    ----------
+    names : tuple of str
+    values : ndarray, shape (len(names),)
+    arg : str
+    info : mapping, optional
+        ``name -> ParameterInfo`` (:attr:`fjm_runtime.model.Model.parameter_info`); None: no domain check.
+    drives : sequence of Drive, optional
+        :attr:`fjm_runtime.model.Model.drives`.
     """
     lookup = dict(zip(names, values))
-    for name, v in lookup.items():
-        if _POSITIVE.match(name) and not v > 0:
-            raise FjmValueError(f"{arg}[{name!r}] = {v}: expected > 0 (a physical {name} is positive)")
-        if _NON_NEGATIVE.match(name) and not v >= 0:
-            raise FjmValueError(f"{arg}[{name!r}] = {v}: expected >= 0")
-    _check_three_segment(lookup, arg)
+    check_domains(info or {}, names, values, arg)
+    _check_three_segment(names, values, drives, arg)
     for name in names:
         if name.startswith("ixx_"):
             link = name[4:]
@@ -116,8 +137,10 @@ def check_physical(names: Tuple[str, ...], values: np.ndarray, arg: str = "p") -
                     "(the centre of mass must lie on the link)")
 
 
-def params_vector(names: Tuple[str, ...], defaults: Mapping[str, float], p, arg: str = "p") -> np.ndarray:
-    """Convert ``p`` (array in ``names`` order, or dict) to a validated vector.
+def params_vector(names: Tuple[str, ...], defaults: Mapping[str, float], p, arg: str = "p", info: Mapping = None,
+                  drives: Sequence = ()) -> np.ndarray:
+    """Convert ``p`` (array in ``names`` order, or dict) to a vector checked by :func:`check_physical`
+    (``info``, ``drives``: its domains and drive relations).
 
     A dict may omit keys (they take their defaults) but must not contain
     unknown ones.
@@ -138,7 +161,7 @@ def params_vector(names: Tuple[str, ...], defaults: Mapping[str, float], p, arg:
         values = as_vector(arg, values, len(names))
     else:
         values = as_vector(arg, p, len(names))
-    check_physical(names, values, arg)
+    check_physical(names, values, arg, info, drives)
     return values
 
 

@@ -34,6 +34,7 @@ from ..core.linearize import Linearization
 from .chain_json import write_chain_json
 from .controls import KINDS, TORQUE_KINDS, law_pair, build_core, manifest_entry
 from .functions import QUANTITIES, operation_count
+from .parameters import drive_table, parameter_entries
 from .report import controllability_lines
 from .spring_chain import (build_chain_functions, c_functions as chain_c_functions, cores as chain_cores,
                            inverse_sx_function, spring_sx_function)
@@ -193,12 +194,13 @@ def write_spring_model(lin: Linearization, outdir: Path,
                 "inputs": inputs, **extra, "operations": ops[name], "casadi_bytes": sizes[name]}
 
     controls = _control_entries(m, laws, ops, entry)
+    drives = drive_table(m)
     manifest = {
         "header": HEADER, "model": m.name, "description": m.description,
         **({"source": m.source} if m.source is not None else {}),  # URDF-built models only
         **(m.robot_facts or {}),  # "limits" and "task" of the robot's files
         "n": m.n, "nx": 4 * m.n,
-        "parameters": [{"name": p.name, "default": p.default, "meaning": p.meaning, "unit": p.unit} for p in m.params],
+        "parameters": parameter_entries(m, drives), "drives": drives,
         "arguments": argument_layout(lin),
         "functions": {name: {"casadi_file": f"{name}.casadi", "c_name": f"{m.name}_{name}", "meaning": meaning,
                              "shape": list(fns[name].size_out(0)), "operations": ops[name],

@@ -31,6 +31,7 @@ from __future__ import annotations
 
 from typing import Dict, List, Optional, Sequence, Tuple
 
+from ..core.domains import FRICTION_DOMAINS, SPRING_DOMAINS
 from ..core.friction import FRICTION_PARAMETERS
 from ..core.spring_laws import LAW_COEFFICIENTS, SPRING_KINDS, SPRING_PARAMETERS, SpringError
 from .schema import Checker, got, number, show, suggest
@@ -41,8 +42,7 @@ __all__ = ["DRIVE_TABLES", "SpringSpec", "parse_spring_table", "parse_friction_t
 DRIVE_TABLES = ("spring", "friction")
 
 #: The bound each coefficient must meet in a file (``number``'s kinds; ``"any"``: none).
-_BOUNDS = {"k1": ">0", "k3": "any", "K_1": ">0", "K_2": ">0", "K_3": ">0", "T_1": ">0", "T_2": ">0", "w_blend": ">0",
-           "F_c": ">=0", "F_s": ">=0", "v_s": ">0", "v_c": ">0"}
+_BOUNDS = {**SPRING_DOMAINS, **FRICTION_DOMAINS}
 
 #: Coefficients of each law: key -> (unit, bound, meaning). ``linear`` takes K1 from [parameters].
 SPRING_COEFFICIENTS: Dict[str, Dict[str, Tuple[str, str, str]]] = {

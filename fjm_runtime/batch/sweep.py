@@ -80,6 +80,13 @@ class SweepSpec:
     x0: Optional[tuple] = None
 
 
+def _inertia_names(model) -> List[str]:
+    """The link inertias (kg m^2, > 0, no drive role) and the rotor inertias of ``model``: the default spread."""
+    info = model.parameter_info
+    return [k for k in model.param_names if info[k].role == "rotor_inertia"
+            or (info[k].role is None and info[k].unit == "kg m^2" and info[k].domain == ">0")]
+
+
 def sample_parameters(model, n_samples: int, seed: int = 0, k_range=(100.0, 200.0),
                       spread: Optional[Dict[str, float]] = None, k_relative=None) -> np.ndarray:
     """TRUE parameter rows: stiffness(es) uniform in ``k_range``, others within ``+-spread``.
@@ -111,15 +118,16 @@ def sample_parameters(model, n_samples: int, seed: int = 0, k_range=(100.0, 200.
             raise FjmValueError(f"k_range = {k_range!r}: expected 0 < K_min <= K_max < inf")
         raise FjmValueError(f"k_relative = {k_relative!r}: expected 0 < lo <= hi < inf (factors of the defaults)")
     if spread is None:
-        spread = {k: 0.2 for k in model.param_names if k in ("J_l", "J_m") or k.startswith(("Jm", "I"))}
+        spread = {k: 0.2 for k in _inertia_names(model)}
     unknown = sorted(set(spread) - set(model.param_names))
     if unknown:
         raise FjmValueError(f"spread: unknown parameter name(s) {unknown}; expected among {list(model.param_names)}")
     rng = np.random.default_rng(seed)
     base = np.array([model.default_params[k] for k in model.param_names])
     P = np.tile(base, (int(n_samples), 1))
+    linear_K = {d.stiffness for d in model.drives if d.spring_law == "linear"}
     for j, name in enumerate(model.param_names):
-        if name == "K" or (name.startswith("K") and name[1:].isdigit()):
+        if j in linear_K:
             P[:, j] = rng.uniform(lo, hi, len(P)) * (1.0 if k_relative is None else base[j])
         elif name in spread:
             P[:, j] = base[j] * rng.uniform(1 - spread[name], 1 + spread[name], len(P))

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from ..drives import linear_stiffness_indices
 from ..export.mjcf import is_complete, write_mjcf
 from ..validation import FjmValueError
 from .common import check_output_file, parse_assignments
@@ -88,8 +89,8 @@ def run(args) -> int:
     m = _model(args)
     params = parse_assignments(args.param, "--param")
     if args.K is not None:
-        for name in (["K"] if "K" in m.param_names else [f"K{i + 1}" for i in range(m.n)]):
-            params.setdefault(name, args.K)
+        for i in linear_stiffness_indices(m, "--K"):
+            params.setdefault(m.param_names[i], args.K)
     m.params_array(params, arg="--param")  # unknown names and bad values: one line naming --param
     complete = is_complete(m)
     if complete and args.gear_ratio is not None:

@@ -20,6 +20,7 @@ from ..analysis.certificates.lemma1 import (FALLBACK_SWITCHING_GAIN, default_err
                                paper_beta_hat, paper_bound_applies)
 from ..control.factory import CONTROLLER_KINDS, DEFAULT_LAYER_RATE, default_delta, make_controller
 from ..control.references import REFERENCE_KINDS, make_reference
+from ..drives import linear_stiffness_indices
 from ..sim.metrics import peak_torque, rms_second_half, time_at_limit, time_at_rate_limit, torque_jitter
 from ..sim.sensor import PRESETS, SensorModel, sensor_from_spec
 from ..sim.simulate import SimulationDivergedError, simulate, stderr_progress
@@ -128,11 +129,8 @@ def _true_params(m, args, nominal) -> Dict[str, float]:
     from ..sim.sample_step import stiffness_indices
     true = parse_assignments(args.param, "--param")
     if args.K is not None:
-        if "K" in m.param_names:
-            true.setdefault("K", args.K)
-        else:
-            for i in range(m.n):
-                true.setdefault(f"K{i + 1}", args.K)
+        for i in linear_stiffness_indices(m, "--K"):
+            true.setdefault(m.param_names[i], args.K)
     p_nom = m.params_array(nominal)
     for flag, text, which in (("--k-scale", args.k_scale, 0), ("--jm-scale", args.jm_scale, 1)):
         factors = _scales(text, m.n, flag)

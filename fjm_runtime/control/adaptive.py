@@ -82,6 +82,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..drives import drive_indices, linear_stiffness_indices
 from .defaults import DEFAULT_FILTER_RATE, DEFAULT_LS_GAIN, default_K_bounds
 from .laws import SlidingModeController
 
@@ -92,30 +93,20 @@ ESTIMATOR_BLOCKS = ("K_hat", "u_f", "phi_f", "w_f", "P")
 
 
 def param_indices(model):
-    """Indices of the stiffness, motor inertia and motor damping of each joint in ``param_names``.
+    """Indices of the stiffness, motor inertia and motor damping of each joint in ``param_names``
+    (``model.drives``).
 
     Returns
     -------
     (idx_K, idx_Jm, idx_Bm) : three ndarray of int, shape (n,)
-        ``K``, ``J_m``, ``B_m`` for link1; ``K_i``, ``Jm_i``, ``Bm_i`` for the chains.
 
     Raises
     ------
     ValueError
-        The model has no such parameters.
+        A joint's spring is not linear (the estimator adapts ``K``).
     """
-    names = list(model.param_names)
-    n = int(model.n)
-    if n == 1 and "K" in names:
-        groups = (["K"], ["J_m"], ["B_m"])
-    else:
-        groups = ([f"K{i + 1}" for i in range(n)], [f"Jm{i + 1}" for i in range(n)],
-                  [f"Bm{i + 1}" for i in range(n)])
-    try:
-        return tuple(np.array([names.index(nm) for nm in g], dtype=int) for g in groups)
-    except ValueError:
-        raise ValueError(f"model {getattr(model, 'name', '?')!r}: adaptive stiffness needs parameters "
-                         f"{groups[0]}, {groups[1]}, {groups[2]} (found {names})") from None
+    return (linear_stiffness_indices(model, "adaptive stiffness"), drive_indices(model, "rotor_inertia"),
+            drive_indices(model, "damping"))
 
 
 def _bounds(K_bounds, n: int):

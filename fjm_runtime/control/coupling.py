@@ -43,6 +43,7 @@ from typing import Dict
 
 import numpy as np
 
+from ..drives import drive_indices
 from ..validation import FjmValueError
 
 __all__ = ["CompletePlant", "CouplingCompensatedController", "complete_plant", "coupling_function", "coupling_terms"]
@@ -82,7 +83,7 @@ class CompletePlant:
 
     Attributes
     ----------
-    name, n, nx, param_names, default_params, form, reduced_model
+    name, n, nx, param_names, default_params, form, reduced_model, drives, parameter_info
         As the complete model's (``form`` is ``'complete'``).
     functions : dict str -> casadi.Function
         ``f``, ``g``, ``inertia``, ``coupling``, ``energy`` of the complete model; ``T``, ``alpha``,
@@ -96,6 +97,7 @@ class CompletePlant:
         self.param_names, self.default_params = complete.param_names, complete.default_params
         self.form, self.reduced_model = complete.form, complete.reduced_model
         self.manifest = complete.manifest
+        self.drives, self.parameter_info = complete.drives, complete.parameter_info
         n_par, n_red = len(complete.param_names), len(reduced.param_names)
         self.functions: Dict[str, object] = dict(complete.functions)
         for q in ("T", "alpha", "beta"):
@@ -153,10 +155,9 @@ def complete_plant(complete, reduced=None) -> CompletePlant:
     return CompletePlant(c, r)
 
 
-def _param(model, p, name: str, n: int) -> np.ndarray:
-    """``[name1..namen]`` of parameter vector ``p`` of ``model``, shape (n,)."""
-    names = list(model.param_names)
-    return np.array([p[names.index(f"{name}{i + 1}")] for i in range(n)], dtype=float)
+def _param(model, p, role: str) -> np.ndarray:
+    """One drive ``role`` per joint (``model.drives``) of parameter vector ``p`` of ``model``, shape (n,)."""
+    return np.asarray(p, dtype=float)[drive_indices(model, role)]
 
 
 def coupling_terms(complete, reduced, x, ddq, ddq_m, p):
@@ -225,7 +226,7 @@ def coupling_function(complete, reduced, p_nom, motor: bool = True):
     d_l, d_m = coupling_terms(complete, reduced, ca.vertcat(q, dq, q, dq), ddq, ddq, ca.DM(pv))
     d_l1 = ca.jtimes(d_l, Z, Zdot)
     d_l2 = ca.jtimes(d_l1, Z, Zdot)
-    K, B, Jm = (ca.DM(_param(complete, pv, k, n)) for k in ("K", "Bm", "Jm"))
+    K, B, Jm = (ca.DM(_param(complete, pv, k)) for k in ("stiffness", "damping", "rotor_inertia"))
     x_t = ca.vertcat(x[:2 * n], x[2 * n:3 * n] - d_l / K, x[3 * n:] - d_l1 / K)
     u_add = d_l + (d_m if motor else 0) + (B * d_l1 + Jm * d_l2) / K
     inner = ca.Function("inner", [q, dq, ddq, d3, d4, x], [x_t, u_add, d_l, d_m])
@@ -275,7 +276,7 @@ def measured_coupling_function(complete, reduced, p_nom, motor: bool = True, ord
     xd = complete.functions["f"](x, p) + ca.mtimes(complete.functions["g"](x, p), u)
     d_l, d_m = coupling_terms(complete, reduced, x, xd[n:2 * n], xd[3 * n:], p)
     d_l, d_l1, d_l2 = _derivatives(d_l, x, xd, order)
-    K, B, Jm = (ca.DM(_param(complete, pv, k, n)) for k in ("K", "Bm", "Jm"))
+    K, B, Jm = (ca.DM(_param(complete, pv, k)) for k in ("stiffness", "damping", "rotor_inertia"))
     x_t = ca.vertcat(x[:2 * n], x[2 * n:3 * n] - d_l / K, x[3 * n:] - d_l1 / K)
     u_add = d_l + (d_m if motor else 0) + (B * d_l1 + Jm * d_l2) / K
     return ca.Function("measured_coupling_compensation", [x, u], [x_t, u_add, d_l, d_m], ["x", "u_prev"],
@@ -349,7 +350,7 @@ class CouplingCompensatedController:
         self.n_states = self.n_inner + (self.n if source == "measured" else 0)
         self.compensation = (measured_coupling_function(complete, inner.model, self.p_nom, motor, order)
                              if source == "measured" else coupling_function(complete, inner.model, self.p_nom, motor))
-        self._K = _param(complete, self.p_nom, "K", self.n)
+        self._K = _param(complete, self.p_nom, "stiffness")
 
     # -- the law, composed in CasADi (numeric calls go through the same graph) --
     def _split(self, x, z, r):

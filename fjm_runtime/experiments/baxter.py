@@ -25,6 +25,7 @@ import numpy as np
 from ..control.design import Design
 from ..control.factory import make_controller
 from ..control.references import Reference
+from ..drives import role_names
 from ..sim.rest import rest_state
 from ..sim.sensor import SensorModel
 from ..sim.simulate import SimulationDivergedError, simulate
@@ -48,8 +49,8 @@ def reference(model) -> Reference:
 
 def true_stiffness(model, spread: float) -> Dict[str, float]:
     """TRUE ``K_i = K_nom,i (1 + spread)`` on even q indices, ``(1 - spread)`` on odd ones."""
-    return {f"K{i + 1}": model.default_params[f"K{i + 1}"] * (1.0 - spread if i % 2 else 1.0 + spread)
-            for i in range(model.n)}
+    return {k: model.default_params[k] * (1.0 - spread if i % 2 else 1.0 + spread)
+            for i, k in enumerate(role_names(model, "stiffness"))}
 
 
 def ismc_gains() -> Tuple[dict, str]:

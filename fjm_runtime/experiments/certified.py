@@ -22,6 +22,7 @@ from ..analysis.certificates.lemma1 import beta_hat_link1, lemma1_gain, paper_bo
 from ..control.disturbance import with_motor_disturbance
 from ..control.factory import make_controller
 from ..control.laws import coefficients_from_pole
+from ..drives import role_names
 from ..sim.simulate import SimulationDivergedError, simulate
 from .report import METRIC_HEADER, diverged_marker, fmt_vec, result_row
 from .settings import ETA, K_NOM, LAM, LAYER_RATE, TASKS, DemoContext, chain_reference
@@ -122,8 +123,8 @@ def certificates_section(ctx: DemoContext) -> Section:
         ref = chain_reference(n)
         ctx.progress(f"tune {name} tracking")
         for law, integral in (("smc", False), ("ismc", True)):
-            r = synthesize_gains(mn, {f"K{i + 1}": K_NOM for i in range(n)},
-                                 param_box={f"K{i + 1}": K_RANGE for i in range(n)},
+            r = synthesize_gains(mn, {k: K_NOM for k in role_names(mn, "stiffness")},
+                                 param_box={k: K_RANGE for k in role_names(mn, "stiffness")},
                                  reference_bounds=ref.derivative_bounds(), error_bounds=E_CHAIN,
                                  lam=LAM, integral=integral, eta=ETA, u_max=U_MAX)
             gains[(name, "tracking", law)] = r
@@ -143,10 +144,10 @@ def _chain_closed_loop(ctx: DemoContext, gains, md: List[str]) -> None:
         mn = load(name)
         n = mn.n
         ref = chain_reference(n)
-        nominal = {f"K{i + 1}": K_NOM for i in range(n)}
+        nominal = {k: K_NOM for k in role_names(mn, "stiffness")}
         ctx.progress(f"closed loop {name}: inadmissible synthesized gains under the torque limit, adaptive law")
         for Ks in ((100.0,) * n, (200.0,) * n, (200.0, 100.0, 150.0)[:n]):
-            true = {f"K{i + 1}": v for i, v in enumerate(Ks)}
+            true = dict(zip(role_names(mn, "stiffness"), Ks))
             label = "K = (" + ", ".join(f"{v:g}" for v in Ks) + ")"
             for law in ("smc", "ismc", "adaptive"):
                 if law == "adaptive":

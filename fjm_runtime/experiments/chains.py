@@ -9,6 +9,7 @@ from typing import Dict, List, Tuple
 from .. import load
 from ..analysis.certificates.regulation import closed_loop_eigenvalues
 from ..control.factory import default_delta, make_controller
+from ..drives import role_names
 from ..sim.simulate import SimulationDivergedError, SimulationResult, simulate
 from .plots import plot_controller_comparison
 from .report import METRIC_HEADER, diverged_row, metrics_row
@@ -25,13 +26,14 @@ def _chain_runs(ctx: DemoContext, name: str, md: List[str]) -> Dict[str, Dict[st
     mn = load(name)
     n = mn.n
     ref = chain_reference(n)
-    nominal = {f"K{i + 1}": K_NOM for i in range(n)}
+    K_names = role_names(mn, "stiffness")
+    nominal = {k: K_NOM for k in K_names}
     per_kind: Dict[str, Dict[str, SimulationResult]] = {}
     for kind in ("smc", "ismc", "adaptive", "fl"):
         per_kind[kind] = {}
         for k_s in ((0.0,) if kind == "fl" else (1000.0, 20000.0)):
             for Ks in N_LINK_CASES[name]:
-                true = {f"K{i + 1}": k for i, k in enumerate(Ks)}
+                true = dict(zip(K_names, Ks))
                 label = "K = (" + ", ".join(f"{k:g}" for k in Ks) + ")"
                 ctrl = make_controller(kind, mn, nominal, lam=LAM, k_s=k_s, delta=default_delta(k_s))
                 try:
@@ -79,7 +81,7 @@ def eigenvalue_section(ctx: DemoContext) -> Section:
           "|---|---|---|---|---|---|---|"]
     for name in ("link1", "planar2", "planar3"):
         mn = load(name)
-        names = ["K"] if name == "link1" else [f"K{i + 1}" for i in range(mn.n)]
+        names = role_names(mn, "stiffness")
         for kind in ("smc", "fl"):
             ctrl = make_controller(kind, mn, {k: K_NOM for k in names}, lam=LAM, k_s=1000.0, delta=5.0)
             cells = [f"{closed_loop_eigenvalues(mn, ctrl, {k: K for k in names})[0].real:+.2f}"
@@ -110,12 +112,12 @@ def low_nominal_section(ctx: DemoContext) -> Section:
         ref = chain_reference(n)
         for kind in ("smc", "ismc"):
             for K in (100.0, 150.0, 200.0):
-                ctrl = make_controller(kind, mn, {f"K{i + 1}": k_low for i in range(n)}, lam=LAM, k_s=20000.0,
+                ctrl = make_controller(kind, mn, {k: k_low for k in role_names(mn, "stiffness")}, lam=LAM, k_s=20000.0,
                                        delta=20000.0 / LAYER_RATE)
                 label = f"K_i = {K:g}"
                 try:
                     r = simulate(mn, ctrl, ref, duration=ctx.duration,
-                                 true_params={f"K{i + 1}": K for i in range(n)})
+                                 true_params={k: K for k in role_names(mn, "stiffness")})
                 except SimulationDivergedError as exc:
                     md.append(diverged_row([name, CTRL_LABELS[kind], label], exc.t))
                     continue

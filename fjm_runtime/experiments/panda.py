@@ -23,6 +23,7 @@ import numpy as np
 from .. import load
 from ..control.factory import DEFAULT_LAYER_RATE, make_controller
 from ..control.references import Sinusoid
+from ..drives import drive_indices, role_names
 from ..sim.rest import rest_state
 from ..sim.simulate import SimulationDivergedError, SimulationResult, simulate
 from .report import diverged_marker
@@ -97,9 +98,7 @@ def mismatch_ratio(model, factor: float, lam: float = LAM) -> np.ndarray:
     x = rest_state(model, READY[:n], None)
     inertia = np.diag(np.asarray(model.inertia(x), dtype=float))
     pv = model.params_array()
-    names = list(model.param_names)
-    K = pv[[names.index(f"K{i + 1}") for i in range(n)]]
-    Jm = pv[[names.index(f"Jm{i + 1}") for i in range(n)]]
+    K, Jm = pv[drive_indices(model, "stiffness")], pv[drive_indices(model, "rotor_inertia")]
     a = abs(1.0 - factor) * K * (1.0 / (inertia * Jm) + 1.0 / inertia ** 2)
     return a * inertia / (6.0 * lam ** 2)
 
@@ -108,7 +107,7 @@ def controller(kind: str, model, lam: float = LAM, k_s: float = K_S, u_max=PANDA
     """One of :data:`CONTROLLERS` on the model's NOMINAL (default) parameters, torque-limited."""
     kw = dict(lam=lam, k_s=k_s, delta=k_s / LAYER_RATE, u_max=np.asarray(u_max, dtype=float))
     if kind == "adaptive":
-        K0 = np.array([model.default_params[f"K{i + 1}"] for i in range(model.n)])
+        K0 = model.params_array()[drive_indices(model, "stiffness")]
         kw["K_bounds"] = (K_BOUNDS[0] * K0, K_BOUNDS[1] * K0)
     return make_controller(kind, model, model.default_params, **kw)
 
@@ -125,7 +124,7 @@ def run_cases(model, duration: float = DURATION, dt: float = DT, cases=None, kin
         for label, factors in cases.items():
             if progress:
                 progress(f"panda {kind}, true K = nominal x ({label})")
-            p_true = {f"K{i + 1}": model.default_params[f"K{i + 1}"] * f for i, f in enumerate(factors)}
+            p_true = {k: model.default_params[k] * f for k, f in zip(role_names(model, "stiffness"), factors)}
             x0 = rest_state(model, ref(0.0)[0], p_true)
             try:
                 out[kind][label] = simulate(model, ctrl, ref, duration=duration, dt=dt, true_params=p_true,

@@ -33,6 +33,8 @@ from typing import Dict, List, Optional, Tuple
 
 import numpy as np
 
+from ..drives import joint_coefficients, role_names
+
 #: The compared laws: (label, model the law is built on, nominal edits of panda_hd's datasheet values, kind).
 LAWS = (("curve + friction FF", "panda_hd", {}, "ismc"),
         ("curve + friction FF, panda_hd's own design", "panda_hd", {}, "ismc_hd"),
@@ -64,11 +66,11 @@ def true_rows(model, draws: int, seed: int = 28) -> np.ndarray:
     for _ in range(draws):
         p = dict(d)
         k, t, f, j = (rng.uniform(lo, hi, n) for lo, hi in ((0.8, 1.2), (0.8, 1.2), (0.5, 1.5), (0.8, 1.2)))
-        for i in range(1, n + 1):
-            p.update({f"{c}_{i}": k[i - 1] * d[f"{c}_{i}"] for c in ("K_1", "K_2", "K_3")})
-            p.update({f"{c}_{i}": t[i - 1] * d[f"{c}_{i}"] for c in ("T_1", "T_2")})
-            p.update({f"{c}_{i}": f[i - 1] * d[f"{c}_{i}"] for c in ("F_c", "F_s")})
-            p[f"Jm{i}"] = j[i - 1] * d[f"Jm{i}"]
+        for i, jm in enumerate(role_names(model, "rotor_inertia")):
+            names = joint_coefficients(model, i)
+            for factor, coefficients in ((k, ("K_1", "K_2", "K_3")), (t, ("T_1", "T_2")), (f, ("F_c", "F_s"))):
+                p.update({names[c]: factor[i] * d[names[c]] for c in coefficients})
+            p[jm] = j[i] * d[jm]
         p["m_load"] = rng.uniform(0.0, 1.0)
         rows.append(model.params_array(p))
     return np.array(rows)
@@ -81,9 +83,10 @@ def _nominal(hd, base, edits: Optional[dict]) -> Tuple[object, dict]:
         m = load("panda")
         return m, dict(m.default_params)
     d = dict(hd.default_params)
-    for i in range(1, hd.n + 1):
+    for i in range(hd.n):
+        names = joint_coefficients(hd, i)
         for k, v in edits.items():
-            d[f"{k}_{i}"] = d[f"{v}_{i}"] if isinstance(v, str) else v
+            d[names[k]] = d[names[v]] if isinstance(v, str) else v
     return hd, d
 
 
@@ -194,7 +197,8 @@ def plot(runs: Dict[str, object], path: Path) -> Path:
     first = next(iter(runs.values()))
     defl = first.x[:, 2 * n:3 * n] - first.x[:, :n]
     for j, c in ((3, "C0"), (5, "C1")):  # the two joints whose runs work past their first breakpoint
-        ax[0].plot(1e3 * phi, psi[:, j], c, label=f"joint {j + 1} (K_1 {d[f'K_1_{j + 1}']:.3g} N m/rad)")
+        K_1 = d[joint_coefficients(hd, j)["K_1"]]
+        ax[0].plot(1e3 * phi, psi[:, j], c, label=f"joint {j + 1} (K_1 {K_1:.3g} N m/rad)")
         ax[0].axvspan(1e3 * defl[:, j].min(), 1e3 * defl[:, j].max(), color=c, alpha=0.15)
     ax[0].set(xlabel="deflection q_m - q (mrad)", ylabel="tau_J (N m)", title="panda_hd springs (shaded: the run)")
     ax[0].legend(fontsize=8)

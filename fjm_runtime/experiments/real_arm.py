@@ -22,6 +22,7 @@ from ..analysis.certificates.certify_tau import gamma_tolerance
 from ..control import defaults
 from ..control.design import Design
 from ..control.factory import make_controller
+from ..drives import role_names
 from ..sim.metrics import rms_second_half, time_at_limit, torque_jitter
 from ..sim.sensor import SensorModel
 from ..sim.rest import rest_state
@@ -71,8 +72,8 @@ def draws(model, n_random: int = N_RANDOM, seed: int = SEED) -> List[dict]:
 
     def plant(kf, jf, load):
         p = dict(p0)
-        p.update({f"K{i + 1}": p0[f"K{i + 1}"] * kf[i] for i in range(n)})
-        p.update({f"Jm{i + 1}": p0[f"Jm{i + 1}"] * jf[i] for i in range(n)})
+        p.update({k: p0[k] * kf[i] for i, k in enumerate(role_names(model, "stiffness"))})
+        p.update({j: p0[j] * jf[i] for i, j in enumerate(role_names(model, "rotor_inertia"))})
         p["m_load"] = float(load)
         return p, np.asarray(kf, dtype=float), np.asarray(jf, dtype=float)
 

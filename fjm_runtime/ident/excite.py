@@ -31,6 +31,7 @@ from typing import NamedTuple, Optional
 import numpy as np
 
 from ..control.references import Reference
+from ..drives import drive_indices, spring_laws
 from ..validation import FjmValueError
 
 __all__ = ["FourierReference", "Excitation", "Limits", "design_excitation", "joint_conditions", "limits_of",
@@ -175,21 +176,18 @@ def link_jets(model, R: np.ndarray, p) -> tuple:
 
 
 def drive_parameters(model, p) -> dict:
-    """The motor and spring values of ``p``: ``J_m``, ``B_m`` (n,), and ``K`` (n,) or ``k1``, ``k3``."""
-    names, n = list(model.param_names), int(model.n)
+    """The motor and spring values of ``p`` (``model.drives``): ``J_m``, ``B_m`` (n,), and ``K`` (n,) or,
+    for a one-joint cubic spring, ``k1``, ``k3`` (1,)."""
     p = np.asarray(p, dtype=float)
-    get = lambda keys: np.array([p[names.index(k)] for k in keys])  # noqa: E731
-    single = n == 1 and "J_m" in names
-    out = {"J_m": get(["J_m"] if single else [f"Jm{i + 1}" for i in range(n)]),
-           "B_m": get(["B_m"] if single else [f"Bm{i + 1}" for i in range(n)])}
-    if n == 1 and {"k1", "k3"} <= set(names) and "K" not in names:
-        out["k1"], out["k3"] = get(["k1"]), get(["k3"])
+    out = {"J_m": p[drive_indices(model, "rotor_inertia")], "B_m": p[drive_indices(model, "damping")]}
+    laws = spring_laws(model)
+    if laws == ("cubic",):
+        out["k1"], out["k3"] = (p[[i]] for i in model.drives[0].spring)
+    elif set(laws) == {"linear"}:
+        out["K"] = p[drive_indices(model, "stiffness")]
     else:
-        keys = ["K"] if (n == 1 and "K" in names) else [f"K{i + 1}" for i in range(n)]
-        if not set(keys) <= set(names):
-            raise FjmValueError(f"excite: {model.name} has no stiffness parameters {keys[0]}..{keys[-1]} nor k1, k3; "
-                                "expected a reduced model with a linear or cubic spring")
-        out["K"] = get(keys)
+        raise FjmValueError(f"excite: {model.name} has spring laws {sorted(set(laws))}; expected a reduced model "
+                            "with a linear or cubic spring")
     return out
 
 

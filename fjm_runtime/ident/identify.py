@@ -28,6 +28,7 @@ from typing import Dict, List, Optional, Tuple
 
 import numpy as np
 
+from ..drives import role_names, spring_laws
 from ..validation import FjmValueError
 from .linkeq import link_torque
 from .log import Log
@@ -104,20 +105,16 @@ class Identification:
 
 
 def parameter_names(model, spring: str) -> Tuple[List[List[str]], List[str], List[str]]:
-    """``(spring names per joint, J_m names, B_m names)`` of ``model`` in fjm's naming."""
-    names, n = list(model.param_names), int(model.n)
-    if spring == "cubic":
-        if n != 1 or not {"k1", "k3"} <= set(names):
-            raise FjmValueError(f"--spring cubic: {model.name} has no cubic spring parameters k1, k3; expected a "
-                                "model with a cubic spring (e.g. link1_hd) or --spring linear")
-        return [["k1", "k3"]], ["J_m"], ["B_m"]
-    if n == 1 and "K" in names:
-        return [["K"]], ["J_m"], ["B_m"]
-    K = [f"K{i + 1}" for i in range(n)]
-    if not set(K) <= set(names):
-        raise FjmValueError(f"{model.name}: no linear stiffness parameters {K[0]}..{K[-1]} (found "
-                            f"{', '.join(names[:8])} ...); expected --spring cubic for a nonlinear spring")
-    return [[k] for k in K], [f"Jm{i + 1}" for i in range(n)], [f"Bm{i + 1}" for i in range(n)]
+    """``(spring names per joint, J_m names, B_m names)`` of ``model`` (``model.drives``)."""
+    laws = spring_laws(model)
+    if spring == "cubic" and laws != ("cubic",):
+        raise FjmValueError(f"--spring cubic: {model.name} has no cubic spring parameters k1, k3; expected a "
+                            "model with a cubic spring (e.g. link1_hd) or --spring linear")
+    if spring != "cubic" and set(laws) != {"linear"}:
+        raise FjmValueError(f"{model.name}: no linear stiffness parameters (spring laws {sorted(set(laws))}); "
+                            "expected --spring cubic for a nonlinear spring")
+    springs = [[model.param_names[i] for i in d.spring] for d in model.drives]
+    return springs, role_names(model, "rotor_inertia"), role_names(model, "damping")
 
 
 def _fit(A: np.ndarray, b: np.ndarray, names: List[str], max_lag: int, noise_var=None) -> JointFit:
@@ -195,7 +192,7 @@ def identify(model, log: Log, *, spring: Optional[str] = None, friction: str = "
         raise FjmValueError(f"identify: {model.name} is a complete model (rotor coupling); expected its reduced "
                             "model (e.g. panda for panda_complete): the motor equations are identified per joint")
     if spring is None:
-        spring = "cubic" if {"k1", "k3"} <= set(names) and "K" not in names else "linear"
+        spring = "cubic" if spring_laws(model) == ("cubic",) else "linear"
     if spring not in SPRINGS or friction not in FRICTIONS:
         raise FjmValueError(f"identify: spring {spring!r}, friction {friction!r}; expected spring in {SPRINGS} and "
                             f"friction in {FRICTIONS}")
@@ -240,11 +237,11 @@ def identify(model, log: Log, *, spring: Optional[str] = None, friction: str = "
 
 
 def friction_names(model, i: int) -> Tuple[str, str]:
-    """The Coulomb and static friction names of joint ``i`` (0-based): the model's (``F_c``, ``F_s`` of a
-    one-joint model, ``F_c<i>``, ``F_s<i>``) where it has them, else ``F_c<i>``, ``F_s<i>``."""
-    names = set(model.param_names)
-    if model.n == 1 and {"F_c", "F_s"} <= names:
-        return "F_c", "F_s"
+    """The Coulomb and static friction names of joint ``i`` (0-based): the model's (``model.drives``) where
+    its drive has motor friction, else ``F_c<i>``, ``F_s<i>`` (names of the identified values only)."""
+    friction = model.drives[i].friction
+    if friction is not None:
+        return model.param_names[friction[0]], model.param_names[friction[1]]
     return f"F_c{i + 1}", f"F_s{i + 1}"
 
 

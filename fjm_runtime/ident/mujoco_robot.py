@@ -17,6 +17,7 @@ from typing import List, Tuple
 
 import numpy as np
 
+from ..drives import linear_stiffness_indices, role_names
 from ..sim.sensor import SensorModel
 from ..sim.substeps import resolve_substeps
 from .excite import nominal_motion
@@ -32,11 +33,9 @@ PD_OMEGA = 30.0
 
 
 def drive_names(model) -> Tuple[List[str], List[str], List[str]]:
-    """``(K, J_m, B_m)`` parameter names per joint (link1: ``K, J_m, B_m``; chains: ``K<i>, Jm<i>, Bm<i>``)."""
-    n, p = model.n, list(model.param_names)
-    if n == 1 and "K" in p:
-        return ["K"], ["J_m"], ["B_m"]
-    return [f"K{i + 1}" for i in range(n)], [f"Jm{i + 1}" for i in range(n)], [f"Bm{i + 1}" for i in range(n)]
+    """``(K, J_m, B_m)`` parameter names per joint (``model.drives``; linear springs)."""
+    linear_stiffness_indices(model, "the MuJoCo robot")
+    return tuple(role_names(model, role) for role in ("stiffness", "rotor_inertia", "damping"))
 
 
 def true_params(model) -> dict:

@@ -11,6 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..drives import drive_indices, linear_stiffness_indices
 from ..validation import FjmValueError
 from .sensor import SensorModel
 
@@ -22,40 +23,26 @@ _NO_LIMIT = 1e300
 
 
 def stiffness_indices(model):
-    """Indices of ``K_i`` and ``J_mi`` in ``model.param_names``: ``(idx_K, idx_Jm)``, each shape (n,)."""
-    names, n = list(model.param_names), int(model.n)
-    groups = (["K"], ["J_m"]) if (n == 1 and "K" in names) else \
-        ([f"K{i + 1}" for i in range(n)], [f"Jm{i + 1}" for i in range(n)])
-    try:
-        return tuple(np.array([names.index(g) for g in grp], dtype=int) for grp in groups)
-    except ValueError:
-        raise FjmValueError(f"model {getattr(model, 'name', '?')!r}: torque sensing needs the stiffness "
-                            f"parameters {groups[0]} (found {names})") from None
+    """Indices of the linear springs' ``K_i`` and the rotor inertias ``J_mi`` in ``model.param_names``
+    (``model.drives``): ``(idx_K, idx_Jm)``, each shape (n,); FjmValueError for a nonlinear spring."""
+    return linear_stiffness_indices(model, "torque sensing"), drive_indices(model, "rotor_inertia")
 
 
 def spring_scale_groups(model):
     """Per joint, the indices of the parameters that scale its spring torque together, list of n int arrays.
 
     Multiplying a group by ``g`` multiplies that joint's ``psi`` by ``g`` exactly: a linear spring's ``K``; a
-    nonlinear law's coefficients (manifest ``springs``) but the blend width: the cubic's ``k1, k3``, the
-    three-segment curve's ``K_1, K_2, K_3, T_1, T_2`` (its breakpoints ``T / K`` stay). The first index of a
-    group is the joint's stiffness at small deflection (``K``, ``k1``, ``K_1``).
+    nonlinear law's coefficients but the blend width: the cubic's ``k1, k3``, the three-segment curve's
+    ``K_1, K_2, K_3, T_1, T_2`` (its breakpoints ``T / K`` stay). The first index of a group is the joint's
+    stiffness at small deflection (``K``, ``k1``, ``K_1``).
     """
-    joints = ((getattr(model, "manifest", None) or {}).get("springs") or {}).get("joints")
-    if not joints:
-        return [np.array([i]) for i in stiffness_indices(model)[0]]
-    names = list(model.param_names)
-    return [np.array([names.index(c) for c in j["parameters"] if not c.startswith("w_blend")])
-            for j in sorted(joints, key=lambda j: j["joint"])]
+    return [np.array(d.spring[:5] if d.spring_law == "three_segment" else d.spring, dtype=int) for d in model.drives]
 
 
 def stiffness_scale_indices(model):
     """``(idx_K, idx_Jm)`` as :func:`stiffness_indices`, with a nonlinear spring's small-deflection stiffness
     (the first index of each :func:`spring_scale_groups` group) standing for ``K_i``."""
-    groups = spring_scale_groups(model)
-    names, n = list(model.param_names), int(model.n)
-    jm = ["J_m"] if (n == 1 and "J_m" in names) else [f"Jm{i + 1}" for i in range(n)]
-    return np.array([int(g[0]) for g in groups], dtype=int), np.array([names.index(j) for j in jm], dtype=int)
+    return drive_indices(model, "stiffness"), drive_indices(model, "rotor_inertia")
 
 
 def controller_model(controller, plant):

@@ -15,6 +15,7 @@ from fjm_runtime.control.factory import make_controller
 from fjm_runtime.control.references import Sinusoid
 from fjm_runtime.sim.simulate import simulate
 from fjm_runtime.batch.sweep import run_chunk, sample_parameters, SweepSpec
+from fjm_runtime.drives import ParameterInfo
 from fjm_runtime.validation import FjmValueError, check_physical
 
 from support.paths import REPO  # noqa: E402
@@ -118,13 +119,14 @@ def test_symbolic_link_inertials_are_checked():
     names = ("K1", "m_forearm", "cx_forearm", "ixx_forearm", "ixy_forearm", "ixz_forearm",
              "iyy_forearm", "iyz_forearm", "izz_forearm")
     good = np.array([100.0, 2.0, -0.3, 0.02, 0.001, 0.0, 0.03, 0.0, 0.01])
-    check_physical(names, good)
+    info = {"K1": ParameterInfo("N m/rad", "stiffness", ">0"), "m_forearm": ParameterInfo("kg", "mass", ">0")}
+    check_physical(names, good, info=info)
     for idx, value, pattern in ((1, 0.0, "m_forearm"), (1, -1.0, "m_forearm"),
                                 (3, -0.02, "positive definite"), (4, 0.05, "positive definite")):
         bad = good.copy()
         bad[idx] = value
         with pytest.raises(FjmValueError, match=pattern):
-            check_physical(names, bad)
+            check_physical(names, bad, info=info)
 
 
 # -- the demo's Panda section -----------------------------------------------------------------
