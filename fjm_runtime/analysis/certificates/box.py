@@ -14,6 +14,7 @@ from typing import Dict, List, Optional, Tuple
 import numpy as np
 
 from ...control.laws import coefficients_from_pole
+from ...drives import linear_stiffness_indices, role_names
 
 # ---------------------------------------------------------------------------------------------
 # inputs
@@ -45,23 +46,20 @@ def param_box_from_ranges(model, k_range=None, jm_range=None, bm_range=None, mas
     extra : dict, optional
         Further ``name: (lo, hi)`` entries (override the above).
     """
-    names = list(model.param_names)
-    n = int(model.n)
-
-    def pick(single, pattern):
-        if single in names:
-            return [single]
-        return [pattern.format(i + 1) for i in range(n) if pattern.format(i + 1) in names]
-
+    info = model.parameter_info
+    masses = [k for k in model.param_names if info[k].role is None and info[k].unit == "kg" and info[k].domain == ">0"]
     box: Dict[str, Tuple[float, float]] = {}
-    for rng, single, pattern in ((k_range, "K", "K{}"), (jm_range, "J_m", "Jm{}"),
-                                 (bm_range, "B_m", "Bm{}"), (mass_range, "M", "m{}")):
+    for rng, what in ((k_range, "stiffness"), (jm_range, "rotor_inertia"), (bm_range, "damping"),
+                      (mass_range, "link mass")):
         if rng is None:
             continue
-        lst = pick(single, pattern)
+        if what == "stiffness":
+            lst = [model.param_names[i] for i in linear_stiffness_indices(model, "k_range")]
+        else:
+            lst = masses if what == "link mass" else role_names(model, what)
         if not lst:
-            raise ValueError(f"model {model.name!r} has no parameter {single!r} or {pattern.format(1)!r}; "
-                             f"parameters: {names}")
+            raise ValueError(f"model {model.name!r} has no {what.replace('_', ' ')} parameter; "
+                             f"parameters: {list(model.param_names)}")
         for nm in lst:
             box[nm] = (float(rng[0]), float(rng[1]))
     box.update(extra or {})
@@ -225,11 +223,9 @@ def box_maximize(fg, v0: np.ndarray, maxiter: int = 60, tol: float = 1e-12) -> n
 
 
 def stiffness_names(model) -> List[str]:
-    """Names of the joint stiffnesses of ``model``: ``['K']`` (link1) or ``['K1', ..., 'Kn']``."""
-    names = list(model.param_names)
-    if "K" in names:
-        return ["K"]
-    return [f"K{i + 1}" for i in range(int(model.n)) if f"K{i + 1}" in names]
+    """Names of the linear joint stiffnesses of ``model`` (``model.drives``): ``['K']`` (link1) or
+    ``['K1', ..., 'Kn']``; empty for nonlinear springs."""
+    return [model.param_names[d.stiffness] for d in model.drives if d.spring_law == "linear"]
 
 
 

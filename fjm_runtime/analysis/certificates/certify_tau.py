@@ -53,6 +53,7 @@ import numpy as np
 from .certify import InfeasibleGainError, TuneResult, synthesize_gains
 from .evaluator import Evaluator
 from ...control.defaults import DEFAULT_LAYER_RATE
+from ...drives import drive_indices, linear_stiffness_indices
 
 __all__ = ["GUARANTEE_TAU", "TorqueEvaluator", "build_torque_inverse", "build_torque_nominal_fn",
            "torque_param_box", "synthesize_torque_gains", "gamma_tolerance", "obstacle", "input_gain_summary", "state_from_y_hat"]
@@ -66,11 +67,11 @@ GUARANTEE_TAU = ("continuous time, no delay, no sensor noise, dtau_J measured, k
 """What a feasible torque-sensed certificate guarantees (reported by ``fjm tune --sensing torque``)."""
 
 
-def _indices(model, prefix: str, single: str):
-    names = list(model.param_names)
-    if single in names:
-        return [names.index(single)]
-    return [names.index(f"{prefix}{i + 1}") for i in range(int(model.n))]
+def _indices(model, role: str):
+    """Indices of one drive role per joint; the stiffness of linear springs only (``model.drives``)."""
+    if role == "stiffness":
+        return list(linear_stiffness_indices(model, "the torque-sensed certificate"))
+    return list(drive_indices(model, role))
 
 
 def _measurement(x, K, n):
@@ -88,7 +89,7 @@ def build_torque_inverse(model, p_nom: np.ndarray):
     import casadi as ca
     n, nx, npar = int(model.n), int(model.nx), len(model.param_names)
     x, y, p = ca.SX.sym("x", nx), ca.SX.sym("y", nx), ca.SX.sym("p", npar)
-    K = p[_indices(model, "K", "K")]
+    K = p[_indices(model, "stiffness")]
     Ym = model.torque_functions["T_tau"](_measurement(x, K, n), ca.DM(p_nom))[2 * n:]
     return ca.Function("tune_tau_newton", [x, y, p], [Ym - y[2 * n:], ca.jacobian(Ym, x[2 * n:])])
 
@@ -110,7 +111,7 @@ def build_torque_nominal_fn(model, p_nom: np.ndarray, c_last: np.ndarray, beta_h
     fns, tf = model.functions, model.torque_functions
     x, y, p = ca.SX.sym("x", nx), ca.SX.sym("y", 4 * n), ca.SX.sym("p", npar)
     pn = ca.DM(p_nom)
-    m = _measurement(x, p[_indices(model, "K", "K")], n)
+    m = _measurement(x, p[_indices(model, "stiffness")], n)
     J = ca.jacobian(tf["T_tau"](m, pn), x)
     C = ca.horzcat(*[float(c_last[k]) * ca.SX.eye(n) for k in range(3)], ca.SX.eye(n))
     f = fns["f"](x, p)
@@ -208,10 +209,10 @@ def torque_param_box(model, nominal_params=None, gamma_range=(0.7, 1.3), jm_rang
     if not (np.isfinite(payload) and payload >= 0):
         raise ValueError(f"payload = {payload!r}: expected a finite mass >= 0 kg")
     box = {}
-    for rng, prefix, single in ((gamma_range, "K", "K"), (jm_range, "Jm", "J_m")):
+    for rng, role in ((gamma_range, "stiffness"), (jm_range, "rotor_inertia")):
         if rng is None:
             continue
-        for j in _indices(model, prefix, single):
+        for j in _indices(model, role):
             box[names[j]] = (float(rng[0]) * pv[j], float(rng[1]) * pv[j])
     mass = "m_load" if "m_load" in names else ("M" if "M" in names else f"m{int(model.n)}")
     if payload > 0 and mass in names:
@@ -300,7 +301,7 @@ def obstacle(model, res: TuneResult, box) -> str:
     n = int(model.n)
     names = list(model.param_names)
     ratio = []
-    for j in _indices(model, "K", "K"):
+    for j in _indices(model, "stiffness"):
         lo, hi = box.get(names[j], (None, None))
         if lo is not None:
             k0 = float(res.settings["nominal_params"][names[j]])
