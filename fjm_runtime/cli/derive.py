@@ -13,14 +13,6 @@ from ..validation import FjmValueError
 DESCRIPTION = ("Derive models symbolically (SymPy: feedback linearization T, alpha, beta and the controllers) and "
                "emit CasADi functions, C sources, manifest.json and REPORT.md per model into --out. Needs the "
                "build-time extra: pip install '.[derive]'.")
-HELP = "derive and emit models (needs .[derive]); --out DIR (default generated/, only in a source checkout)"
-
-
-def add_parser(sub) -> None:
-    """List ``derive`` in ``fjm --help`` (its arguments are handed to ``python -m derive`` as they are)."""
-    sub.add_parser("derive", add_help=False, help=HELP + "; see `fjm derive --help`")
-
-
 def out_argument(argv: List[str]) -> Optional[str]:
     """The value of ``--out`` in ``argv`` (``--out DIR`` or ``--out=DIR``), or None."""
     for i, a in enumerate(argv):

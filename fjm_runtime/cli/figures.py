@@ -13,10 +13,8 @@ DESCRIPTION = ("Reproduce the paper's Figs 1-4 on link1 (sliding-mode control wi
                "same pipeline in under a minute with numbers that are not the documented ones.")
 
 
-def add_parser(sub) -> None:
-    """Add ``figures`` to the sub-command set ``sub``."""
-    fig = sub.add_parser("figures", help="reproduce the paper's figures and the comparisons (make demo)",
-                         description=DESCRIPTION)
+def add_arguments(fig) -> None:
+    """The arguments of ``fjm figures`` on its parser ``fig`` (its name and help: ``cli.main.COMMANDS``)."""
     fig.add_argument("--out", type=Path, default=Path("out"),
                      help="output directory, created if its parent exists (default out)")
     fig.add_argument("--samples", type=int, default=40, help="Monte Carlo samples (default 40)")

@@ -5,17 +5,19 @@ from pathlib import Path
 
 from .common import check_output_file
 
-__all__ = ["add_parser", "run"]
+__all__ = ["add_arguments", "run"]
 
 
-def add_parser(sub) -> None:
-    """Register ``fjm identify``."""
-    p = sub.add_parser("identify", help="identify joint stiffness, rotor inertia, damping, friction from a log",
-                       description="Least squares on a log (t, q_<i>, q_m_<i>, u_<i>, tau_J_<i> when sensed; "
-                                   "docs/identification.md): per joint the spring law, J_m, B_m and friction, with "
-                                   "standard errors, condition numbers and residuals; writes a parameter file that "
-                                   "fjm design --params, fjm simulate --params and fjm export controller --params "
-                                   "read.")
+#: The text of ``fjm identify --help``.
+DESCRIPTION = ("Least squares on a log (t, q_<i>, q_m_<i>, u_<i>, tau_J_<i> when sensed; "
+               "docs/identification.md): per joint the spring law, J_m, B_m and friction, with "
+               "standard errors, condition numbers and residuals; writes a parameter file that "
+               "fjm design --params, fjm simulate --params and fjm export controller --params "
+               "read.")
+
+
+def add_arguments(p) -> None:
+    """The arguments of ``fjm identify`` on its parser ``p`` (its name and help: ``cli.main.COMMANDS``)."""
     p.add_argument("model", help="the reduced model the log is of (see `fjm models`)")
     p.add_argument("log", type=Path, help="the log: .csv (header t, q_1, q_m_1, u_1, [tau_J_1], ...) or .npz")
     p.add_argument("--out", type=Path, required=True, help="parameter file to write (TOML)")

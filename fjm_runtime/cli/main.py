@@ -20,19 +20,34 @@ import importlib.util
 import sys
 from typing import List, Optional
 
-from . import analyze, derive, design, excite, export, figures, identify, models, simulate, sweep
 from ..validation import FjmValueError
 
-#: Sub-commands with an ``add_parser(sub)`` and a ``run(args)``, in ``--help`` order.
-COMMANDS = {"simulate": simulate, "design": design, "analyze": analyze, "sweep": sweep, "figures": figures, "models": models,
-            "export": export, "excite": excite, "identify": identify}
+#: The sub-commands, in ``fjm --help`` order: (name, module of ``fjm_runtime.cli``, one-line help).
+#: A module has ``run(args)`` and ``add_arguments(parser)`` (its ``DESCRIPTION`` is the text of
+#: ``fjm NAME --help``), or, without ``add_arguments``, ``run(argv)`` on the arguments as they are.
+#: A module missing from the install (``tune``) is left out.
+COMMANDS = (
+    ("simulate", "simulate", "simulate one closed loop and print its metrics"),
+    ("design", "design", "search gains over sampled closed loops (batch engine)"),
+    ("analyze", "analyze", "linear sampled-data analysis of gains (radius, margins, jitter)"),
+    ("derive", "derive", "derive and emit models (needs .[derive]); --out DIR (default generated/, only in a "
+                         "source checkout); see `fjm derive --help`"),
+    ("sweep", "sweep", "Monte Carlo sweep of the closed loop on Dask (chunks of compiled batches)"),
+    ("figures", "figures", "reproduce the paper's figures and the comparisons (make demo)"),
+    ("models", "models", "list the models: name, joints, parameters, source"),
+    ("export", "export", "write a model for another tool (mjcf: MuJoCo)"),
+    ("excite", "excite", "an excitation trajectory (rest-to-rest Fourier series) for fjm identify"),
+    ("identify", "identify", "identify joint stiffness, rotor inertia, damping, friction from a log"),
+    ("tune", "tune", "synthesize per-joint switching gains with a reaching certificate (JSON)"),
+)
 
 
-def _tune_module():
-    """``fjm_runtime.cli.tune`` when it is there (``add_parser(sub)``, ``run(args)``), else None."""
-    if importlib.util.find_spec(f"{__package__}.tune") is None:
+def command_module(name: str):
+    """The module of sub-command ``name`` (see :data:`COMMANDS`), or None (unknown, or not installed)."""
+    module = next((mod for cmd, mod, _ in COMMANDS if cmd == name), None)
+    if module is None or importlib.util.find_spec(f"{__package__}.{module}") is None:
         return None
-    return importlib.import_module(f"{__package__}.tune")
+    return importlib.import_module(f"{__package__}.{module}")
 
 
 def version() -> str:
@@ -55,19 +70,14 @@ def build_parser() -> argparse.ArgumentParser:
         prog="fjm", description="Flexible-joint manipulators: feedback linearization + sliding-mode control.")
     parser.add_argument("--version", action="version", version=f"fjm {version()}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
-    simulate.add_parser(sub)
-    design.add_parser(sub)
-    analyze.add_parser(sub)
-    derive.add_parser(sub)
-    sweep.add_parser(sub)
-    figures.add_parser(sub)
-    models.add_parser(sub)
-    export.add_parser(sub)
-    excite.add_parser(sub)
-    identify.add_parser(sub)
-    tune = _tune_module()
-    if tune is not None:
-        tune.add_parser(sub)
+    for name, _, help_line in COMMANDS:
+        module = command_module(name)
+        if module is None:
+            continue
+        own_args = hasattr(module, "add_arguments")
+        p = sub.add_parser(name, help=help_line, description=getattr(module, "DESCRIPTION", None), add_help=own_args)
+        if own_args:
+            module.add_arguments(p)
     return parser
 
 
@@ -80,17 +90,15 @@ def main(argv: Optional[List[str]] = None) -> int:
     """Run ``fjm`` with ``argv`` (default ``sys.argv[1:]``); returns the exit status."""
     argv = sys.argv[1:] if argv is None else list(argv)
     try:
-        if argv[:1] == ["derive"]:
-            return derive.run(argv[1:])
+        module = command_module(argv[0]) if argv else None
+        if module is not None and not hasattr(module, "add_arguments"):  # ``fjm derive``: arguments as they are
+            return module.run(argv[1:])
         parser = build_parser()
         args = parser.parse_args(argv)
         if args.command is None:
             parser.print_help()
             return 2
-        module = COMMANDS.get(args.command) or (_tune_module() if args.command == "tune" else None)
-        if module is None:
-            return _error(f"unknown command {args.command!r}")
-        return module.run(args)
+        return command_module(args.command).run(args)
     except (FjmValueError, ValueError) as exc:
         return _error(str(exc).splitlines()[0] if str(exc) else type(exc).__name__)
     except OSError as exc:

@@ -128,3 +128,33 @@ def test_derive_help_is_plain_text():
     text = plain_help(raw)
     assert "``" not in text and text.startswith("usage: fjm derive") and "Derive models" in text
     assert "output root (default: generated/)" in text
+
+
+#: The fewest arguments each command parses (derive's are passed on as they are).
+ARGS = {"simulate": ["link1"], "design": ["link1"], "analyze": ["link1", "--gains", "g.json"], "derive": ["--x", "1"],
+        "sweep": ["link1"], "export": ["mjcf", "link1", "--out", "m.xml"], "tune": ["link1"],
+        "excite": ["link1", "--duration", "1", "--out", "e"], "identify": ["link1", "log.csv", "--out", "p.toml"]}
+
+
+def test_one_command_table_builds_the_parser_the_help_and_the_dispatch(capsys, monkeypatch):
+    """cli.main.COMMANDS is the one list: the sub-parsers in its order with its help lines, each
+    parsed command runs its module's ``run``, and a command without ``add_arguments`` (derive) gets
+    its arguments as they are."""
+    import importlib
+
+    from fjm_runtime.cli.main import COMMANDS
+    parser = build_parser()
+    action = next(a for a in parser._actions if getattr(a, "choices", None) and "simulate" in a.choices)
+    assert list(action.choices) == [name for name, _, _ in COMMANDS]
+    assert [c.help for c in action._choices_actions] == [h for _, _, h in COMMANDS]
+    assert main([]) == 2
+    listing = capsys.readouterr().out
+    positions = [listing.index(f"    {name} ") for name, _, _ in COMMANDS]
+    assert positions == sorted(positions)
+    for name, module, _ in COMMANDS:
+        mod = importlib.import_module(f"fjm_runtime.cli.{module}")
+        seen = []
+        monkeypatch.setattr(mod, "run", lambda args, seen=seen: seen.append(args) or 7)
+        argv = [name] + ARGS.get(name, [])
+        assert main(argv) == 7, name
+        assert seen and (seen[0] == ["--x", "1"] if name == "derive" else seen[0].command == name), name
