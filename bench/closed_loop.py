@@ -22,7 +22,8 @@ import numpy as np
 
 import fjm_runtime
 from fjm_runtime.analysis.certificates.lemma1 import beta_bounds_link1, lemma1_gain
-from fjm_runtime.control.factory import DEFAULT_LAYER_RATE, default_delta, make_controller
+from fjm_runtime.control.defaults import DEFAULT_LAM, DEFAULT_LAYER_RATE, PAPER_K_RANGE, default_delta
+from fjm_runtime.control.factory import make_controller
 from fjm_runtime.control.laws import coefficients_from_pole
 from fjm_runtime.control.references import Sinusoid
 from fjm_runtime.sim.compiled import sampled_loop_runner
@@ -40,9 +41,9 @@ HERE = Path(__file__).resolve().parent
 #: ``-LAM``, nominal stiffness ``K_NOM``, true stiffness in ``K_BOUNDS``, Lemma 1 margin
 #: ``ETA``, boundary layer ``k_s / LAYER_RATE``; the reference and the error region E
 #: of Lemma 1 are ``TASKS["tracking"]``.
-LAM = 8.0
+LAM = DEFAULT_LAM
 K_NOM = 150.0
-K_BOUNDS = {"K": (100.0, 200.0)}
+K_BOUNDS = {"K": PAPER_K_RANGE}
 ETA = 10.0
 LAYER_RATE = DEFAULT_LAYER_RATE
 TASKS = {"tracking": (lambda: Sinusoid(0.5, 1.0), (0.05, 0.5, 0.5, 0.5), "0.5 sin(t) rad")}

@@ -92,7 +92,8 @@ def bench_batch(reps: int, slow_reps: int, checks: list, n_runs: int = 1000) -> 
     from fjm_runtime.batch.runner import METRIC_NAMES, SimdFallbackWarning, simulate_batch, vector_isa
     from .closed_loop import link1_case, numpy_batch
     case = link1_case()
-    Ks = np.random.default_rng(0).uniform(100.0, 200.0, n_runs)
+    from fjm_runtime.control.defaults import PAPER_K_RANGE
+    Ks = np.random.default_rng(0).uniform(*PAPER_K_RANGE, n_runs)
     P = np.tile(case.p_true, (n_runs, 1))
     P[:, 2] = Ks
 

@@ -21,10 +21,12 @@ from pathlib import Path
 
 import numpy as np
 
+from fjm_runtime.control.defaults import DEFAULT_LAM, DEFAULT_SWITCHING_GAIN, default_delta
+
 KEY = "sampled_loop"
 DURATION, DT = 10.0, 1e-3
 PANDA_GAINS = dict(lam=80.0, k_lin=400.0, k_s=2000.0, delta=10.0, u_max=(87.0,) * 4 + (12.0,) * 3)
-LINK1_GAINS = dict(lam=8.0, k_s=1000.0, delta=5.0)
+LINK1_GAINS = dict(lam=DEFAULT_LAM, k_s=DEFAULT_SWITCHING_GAIN, delta=default_delta(DEFAULT_SWITCHING_GAIN))
 STIFFNESS = (("exact", 1.0), ("x0.7", 0.7), ("x1.3", 1.3))
 
 

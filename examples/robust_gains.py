@@ -14,6 +14,7 @@ import time
 import numpy as np
 
 import fjm_runtime as fjm
+from fjm_runtime.control.defaults import DEFAULT_LAM, PAPER_K_RANGE
 from fjm_runtime.control.references import Sinusoid, SmoothStep
 from fjm_runtime.analysis.certificates.lemma1 import beta_hat_link1
 from fjm_runtime.analysis.certificates.certify import synthesize_gains
@@ -30,15 +31,15 @@ def cases(models, u_max):
         if name == "link1":
             for task, ref, E in (("regulation", SmoothStep(1.0, rise_time=2.0), (0.05, 0.1, 0.5, 1.0)),
                                  ("tracking", Sinusoid(0.5, 1.0), (0.05, 0.5, 0.5, 0.5))):
-                for lam in (8.0, 20.0, 30.0):
+                for lam in (DEFAULT_LAM, 20.0, 30.0):
                     yield (m, f"{task}, K in [100, 200], K_nom = 150, beta_hat paper", lam,
-                           dict(nominal_params={"K": 150.0}, param_box={"K": (100.0, 200.0)},
+                           dict(nominal_params={"K": 150.0}, param_box={"K": PAPER_K_RANGE},
                                 reference_bounds=ref.derivative_bounds()[:, 0], error_bounds=E,
-                                beta_hat=beta_hat_link1({"K": 150.0}, {"K": (100.0, 200.0)})))
+                                beta_hat=beta_hat_link1({"K": 150.0}, {"K": PAPER_K_RANGE})))
             continue
         ref = Sinusoid([0.5, 0.3, 0.2][:n], [1.0, 1.5, 2.0][:n], n=n, phase=[0.0, 0.5, 0.0][:n])
-        for k_nom, (lo, hi) in ((150.0, (100.0, 200.0)), (100.0, (100.0, 200.0)), (150.0, (140.0, 160.0))):
-            yield (m, f"tracking, K_i in [{lo:g}, {hi:g}], K_nom = {k_nom:g}", 8.0,
+        for k_nom, (lo, hi) in ((150.0, PAPER_K_RANGE), (100.0, PAPER_K_RANGE), (150.0, (140.0, 160.0))):
+            yield (m, f"tracking, K_i in [{lo:g}, {hi:g}], K_nom = {k_nom:g}", DEFAULT_LAM,
                    dict(nominal_params={f"K{i + 1}": k_nom for i in range(n)},
                         param_box={f"K{i + 1}": (lo, hi) for i in range(n)},
                         reference_bounds=ref.derivative_bounds(), error_bounds=(0.05, 0.5, 0.5, 0.5)))

@@ -29,6 +29,7 @@ from typing import Callable, Dict, List, Optional
 
 import numpy as np
 
+from ..control.defaults import PAPER_K_RANGE
 from ..validation import FjmValueError
 
 
@@ -87,7 +88,7 @@ def _inertia_names(model) -> List[str]:
             or (info[k].role is None and info[k].unit == "kg m^2" and info[k].domain == ">0")]
 
 
-def sample_parameters(model, n_samples: int, seed: int = 0, k_range=(100.0, 200.0),
+def sample_parameters(model, n_samples: int, seed: int = 0, k_range=PAPER_K_RANGE,
                       spread: Optional[Dict[str, float]] = None, k_relative=None) -> np.ndarray:
     """TRUE parameter rows: stiffness(es) uniform in ``k_range``, others within ``+-spread``.
 

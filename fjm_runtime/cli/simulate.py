@@ -18,7 +18,8 @@ import numpy as np
 
 from ..analysis.certificates.lemma1 import (FALLBACK_SWITCHING_GAIN, default_error_bounds, default_switching_gain,
                                paper_beta_hat, paper_bound_applies)
-from ..control.factory import CONTROLLER_KINDS, DEFAULT_LAYER_RATE, default_delta, make_controller
+from ..control.defaults import DEFAULT_LAM, DEFAULT_LAYER_RATE, PAPER_K_RANGE, default_delta
+from ..control.factory import CONTROLLER_KINDS, make_controller
 from ..control.references import REFERENCE_KINDS, make_reference
 from ..drives import linear_stiffness_indices
 from ..sim.metrics import peak_torque, rms_second_half, time_at_limit, time_at_rate_limit, torque_jitter
@@ -30,8 +31,6 @@ from ..control.design import Design
 from .simulate_checks import (DEFAULT_MAX_MEMORY_GB, check_pole, check_run_size, check_substeps,
                               gains_provenance, workspace_exit)
 
-#: ``--lam`` when neither the flag nor a gains file gives it (1/s).
-DEFAULT_LAM = 8.0
 
 
 #: The text of ``fjm simulate --help``.
@@ -70,8 +69,10 @@ def add_arguments(sim) -> None:
                           f"[--k-min, --k-max]; {FALLBACK_SWITCHING_GAIN:g} otherwise)")
     sim.add_argument("--delta", type=float, default=None,
                      help=f"boundary layer (default max(k_s, 1) / {DEFAULT_LAYER_RATE:g})")
-    sim.add_argument("--k-min", type=float, default=100.0, help="stiffness lower bound for Lemma 1 (default 100)")
-    sim.add_argument("--k-max", type=float, default=200.0, help="stiffness upper bound for Lemma 1 (default 200)")
+    sim.add_argument("--k-min", type=float, default=PAPER_K_RANGE[0],
+                     help=f"stiffness lower bound for Lemma 1 (default {PAPER_K_RANGE[0]:g})")
+    sim.add_argument("--k-max", type=float, default=PAPER_K_RANGE[1],
+                     help=f"stiffness upper bound for Lemma 1 (default {PAPER_K_RANGE[1]:g})")
     sim.add_argument("--beta-hat", choices=("paper", "model"), default="paper",
                      help="link1: paper's constant (beta_max + beta_min)/2 or beta(x; nominal) (default paper)")
     sim.add_argument("--u-max", type=float, default=None, help="torque limit, N m (default none)")

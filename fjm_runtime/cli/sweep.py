@@ -8,13 +8,14 @@ from pathlib import Path
 
 import numpy as np
 
-from ..control.factory import CONTROLLER_KINDS, DEFAULT_LAYER_RATE, default_delta
+from ..control.defaults import DEFAULT_LAM, DEFAULT_LAYER_RATE, DEFAULT_SWITCHING_GAIN, PAPER_K_RANGE, default_delta
+from ..control.factory import CONTROLLER_KINDS
 from ..control.references import REFERENCE_KINDS
 from ..validation import FjmValueError
 from .common import check_output_file, finite_or_note
 
 #: The absolute stiffness range used when every nominal stiffness lies in it (link1, planar<n>).
-ABSOLUTE_K_RANGE = (100.0, 200.0)
+ABSOLUTE_K_RANGE = PAPER_K_RANGE
 #: The relative range used otherwise (factors of each joint's nominal stiffness).
 RELATIVE_K_RANGE = (0.7, 1.3)
 
@@ -44,8 +45,9 @@ def add_arguments(sw) -> None:
                          "(spatial arms, e.g. panda --k-rel 0.7 1.3)")
     sw.add_argument("--controller", default=None, choices=CONTROLLER_KINDS,
                     help="controller (default: the kind of --gains, else smc)")
-    sw.add_argument("--lam", type=float, default=8.0, help="pole magnitude lambda, 1/s (default 8)")
-    sw.add_argument("--k-s", type=float, default=1000.0, help="switching gain, rad/s^4 (default 1000)")
+    sw.add_argument("--lam", type=float, default=DEFAULT_LAM, help=f"pole magnitude lambda, 1/s (default {DEFAULT_LAM:g})")
+    sw.add_argument("--k-s", type=float, default=DEFAULT_SWITCHING_GAIN,
+                    help=f"switching gain, rad/s^4 (default {DEFAULT_SWITCHING_GAIN:g})")
     sw.add_argument("--delta", type=float, default=None,
                     help=f"boundary layer (default max(k_s, 1) / {DEFAULT_LAYER_RATE:g})")
     sw.add_argument("--reference", default=None,

@@ -16,7 +16,7 @@ from ..analysis.certificates.box import default_stiffness_box, param_box_from_ra
 from ..analysis.certificates.certify import GUARANTEE, synthesize_gains
 from ..analysis.certificates.certify_tau import GUARANTEE_TAU, synthesize_torque_gains, torque_param_box
 from ..analysis.certificates.lemma1 import paper_beta_hat
-from ..control.defaults import DEFAULT_LAYER_RATE
+from ..control.defaults import DEFAULT_LAM, DEFAULT_LAYER_RATE
 
 DEFAULT_ERROR_BOX = {"sine": [0.05, 0.5, 0.5, 0.5], "step": [0.05, 0.1, 0.5, 1.0]}
 
@@ -78,7 +78,7 @@ def add_arguments(tp) -> None:
     tp.add_argument("--payload", type=_number, default=1.0, metavar="KG",
                     help="--sensing torque: unknown payload 0..KG kg (m_load; planar chains: added to the last "
                          "link's mass) (default 1)")
-    tp.add_argument("--lam", type=_number, default=8.0, help="pole magnitude lambda, 1/s (default 8)")
+    tp.add_argument("--lam", type=_number, default=DEFAULT_LAM, help=f"pole magnitude lambda, 1/s (default {DEFAULT_LAM:g})")
     tp.add_argument("--nominal", action="append", default=[], metavar="NAME=VALUE",
                     help="NOMINAL controller parameter (repeatable); default: model defaults")
     tp.add_argument("--k-range", type=_number, nargs=2, default=None, metavar=("LO", "HI"),

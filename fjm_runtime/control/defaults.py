@@ -8,6 +8,10 @@ of ``sat(s / delta)`` inside the layer is ``k_s / delta = 200`` 1/s, well inside
 that it never collapses to zero). A controller built directly without ``delta`` uses
 the fixed width :data:`DEFAULT_DELTA`.
 
+The tracking laws' pole :data:`DEFAULT_LAM`, the switching gain :data:`DEFAULT_SWITCHING_GAIN` and the
+paper's stiffness range :data:`PAPER_K_RANGE` are the ones every command-line default, experiment,
+benchmark and example starts from.
+
 The adaptive stiffness estimator: regressor filter bandwidth :data:`DEFAULT_FILTER_RATE`,
 initial covariance :data:`DEFAULT_LS_GAIN`, stiffness bounds :func:`default_K_bounds`.
 
@@ -17,8 +21,18 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["DEFAULT_DELTA", "DEFAULT_FILTER_RATE", "DEFAULT_LAYER_RATE", "DEFAULT_LS_GAIN",
-           "PANDA_ISMC_TAU_START", "default_K_bounds", "default_delta"]
+__all__ = ["DEFAULT_DELTA", "DEFAULT_FILTER_RATE", "DEFAULT_LAM", "DEFAULT_LAYER_RATE", "DEFAULT_LS_GAIN",
+           "DEFAULT_SWITCHING_GAIN", "PAPER_K_RANGE", "PANDA_ISMC_TAU_START", "default_K_bounds", "default_delta"]
+
+#: Pole magnitude ``lambda`` of the tracking laws when none is given, 1/s (the paper's link1 value).
+DEFAULT_LAM = 8.0
+
+#: Switching gain ``k_s`` when neither the caller nor the Lemma 1 bound gives one, rad/s^4.
+DEFAULT_SWITCHING_GAIN = 1000.0
+
+#: The paper's range of the TRUE joint stiffness, N m/rad (nominal 150): Lemma 1's default box, the
+#: sweeps' absolute range, the adaptive estimator's projection in the experiments.
+PAPER_K_RANGE = (100.0, 200.0)
 
 #: Slope ``k_s / delta`` of the boundary layer, 1/s (see :func:`default_delta`).
 DEFAULT_LAYER_RATE = 200.0

@@ -2,12 +2,16 @@
 
 >>> import fjm_runtime
 >>> from fjm_runtime.control.factory import make_controller, default_delta
+>>> from fjm_runtime.control.defaults import DEFAULT_LAM
 >>> m = fjm_runtime.load("link1")
->>> ctrl = make_controller("smc", m, {}, lam=8.0, k_s=1000.0, delta=default_delta(1000.0))
+>>> ctrl = make_controller("smc", m, {}, lam=DEFAULT_LAM, k_s=1000.0, delta=default_delta(1000.0))
 >>> float(ctrl.delta[0])
 5.0
 """
 from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Callable, Dict, Mapping, Tuple
 
 from .adaptive import make_adaptive
 from .defaults import (DEFAULT_DELTA, DEFAULT_FILTER_RATE, DEFAULT_LAYER_RATE, DEFAULT_LS_GAIN,  # noqa: F401
@@ -16,15 +20,41 @@ from .laws import SlidingModeController
 from .pdg import MotorPDGravityController
 from .sensing import SENSING_KINDS, torque_measurement, torque_measurement_symbolic  # noqa: F401
 
-__all__ = ["CONTROLLER_KINDS", "REGULATION_KINDS", "SENSING_KINDS", "TORQUE_SENSED_KINDS", "DEFAULT_DELTA",
-           "DEFAULT_FILTER_RATE", "DEFAULT_LAYER_RATE", "DEFAULT_LS_GAIN", "default_K_bounds", "default_delta",
+__all__ = ["CONTROLLER_KINDS", "LAWS", "Law", "REGULATION_KINDS", "SENSING_KINDS", "TORQUE_SENSED_KINDS",
+           "DEFAULT_DELTA", "DEFAULT_FILTER_RATE", "DEFAULT_LAYER_RATE", "DEFAULT_LS_GAIN", "default_K_bounds", "default_delta",
            "make_controller", "torque_measurement", "torque_measurement_symbolic"]
 
-#: The names :func:`make_controller` accepts.
-CONTROLLER_KINDS = ("smc", "ismc", "fl", "sign", "adaptive")
+
+@dataclass(frozen=True)
+class Law:
+    """How :func:`make_controller` builds one law: ``build(model, nominal_params, **fixed, **defaults
+    overridden by the caller's keywords)``, the caller's ``ignored`` keywords dropped first."""
+
+    build: Callable[..., object]
+    fixed: Mapping[str, object] = field(default_factory=dict)
+    defaults: Mapping[str, object] = field(default_factory=dict)
+    ignored: Tuple[str, ...] = ()
+
+    def __call__(self, model, nominal_params, **kwargs):
+        kw = {**self.defaults, **{k: v for k, v in kwargs.items() if k not in self.ignored}}
+        return self.build(model, nominal_params, **self.fixed, **kw)
+
+
+#: Every law by name: the tracking laws, then the regulation law ``pdg``.
+LAWS: Dict[str, Law] = {
+    "smc": Law(SlidingModeController, fixed={"mode": "sat"}),
+    "ismc": Law(SlidingModeController, fixed={"integral": True}, defaults={"mode": "sat"}),
+    "fl": Law(SlidingModeController, fixed={"mode": "fl"}, ignored=("k_s",)),    # no switching term
+    "sign": Law(SlidingModeController, fixed={"mode": "sign"}),
+    "adaptive": Law(make_adaptive),
+    "pdg": Law(MotorPDGravityController),
+}
 
 #: Regulation laws (set point ``r[0]`` only), also accepted by :func:`make_controller`.
 REGULATION_KINDS = ("pdg",)
+
+#: The names :func:`make_controller` accepts for tracking.
+CONTROLLER_KINDS = tuple(k for k in LAWS if k not in REGULATION_KINDS)
 
 #: The kinds that accept ``sensing='torque'`` (emitted as ``control_<kind>_tau``).
 TORQUE_SENSED_KINDS = ("smc", "ismc", "fl")
@@ -64,25 +94,9 @@ def make_controller(kind: str, model, nominal_params, sensing: str = "state", **
     if sensing == "torque" and kind not in TORQUE_SENSED_KINDS:
         raise ValueError(f"controller = {kind!r} with sensing = 'torque': torque-sensed laws exist for "
                          f"{', '.join(TORQUE_SENSED_KINDS)} (use sensing = 'state')")
-    if kind == "pdg":
-        return MotorPDGravityController(model, nominal_params, **kwargs)
+    law = LAWS.get(kind)
+    if law is None:
+        raise ValueError(f"controller = {kind!r}: expected one of {', '.join(CONTROLLER_KINDS + REGULATION_KINDS)}")
     if sensing == "torque":
         kwargs["sensing"] = "torque"
-    return _make_state_law(kind, model, nominal_params, **kwargs)
-
-
-def _make_state_law(kind: str, model, nominal_params, **kwargs) -> SlidingModeController:
-    """The controllers of :data:`CONTROLLER_KINDS` (``sensing`` already in ``kwargs`` when torque)."""
-    if kind == "smc":
-        return SlidingModeController(model, nominal_params, mode="sat", **kwargs)
-    if kind == "sign":
-        return SlidingModeController(model, nominal_params, mode="sign", **kwargs)
-    if kind == "ismc":
-        return SlidingModeController(model, nominal_params, mode=kwargs.pop("mode", "sat"),
-                                     integral=True, **kwargs)
-    if kind == "fl":
-        kwargs.pop("k_s", None)
-        return SlidingModeController(model, nominal_params, mode="fl", **kwargs)
-    if kind == "adaptive":
-        return make_adaptive(model, nominal_params, **kwargs)
-    raise ValueError(f"controller = {kind!r}: expected one of {', '.join(CONTROLLER_KINDS + REGULATION_KINDS)}")
+    return law(model, nominal_params, **kwargs)

@@ -19,6 +19,7 @@ from .. import load
 from ..analysis.certificates.adaptive_gains import synthesize_adaptive_gains
 from ..analysis.certificates.certify import certificate, synthesize_gains
 from ..analysis.certificates.lemma1 import beta_hat_link1, lemma1_gain, paper_bound
+from ..control.defaults import PAPER_K_RANGE
 from ..control.disturbance import with_motor_disturbance
 from ..control.factory import make_controller
 from ..control.laws import coefficients_from_pole
@@ -34,7 +35,7 @@ U_MAX = 100.0
 #: Coulomb friction level of the disturbance experiment (N m) and its tanh smoothing (rad/s).
 COULOMB = 2.0
 COULOMB_SMOOTHING = 0.01
-K_RANGE = (100.0, 200.0)
+K_RANGE = PAPER_K_RANGE
 #: Error boxes E (nominal coordinates) per (task, law). They contain what the stiffness mismatch leaves
 #: at steady state (K in [100, 200], K_nom = 150): the paper surface's regulation offset (0.17 rad) and
 #: y3_hat - y3d = (K_nom/K - 1)(y3 + g sin y1) (up to 4.3 rad/s^2 at rest at 1 rad, about 3 in tracking);

@@ -8,7 +8,8 @@ from typing import Dict, List, Tuple
 
 from .. import load
 from ..analysis.certificates.regulation import closed_loop_eigenvalues
-from ..control.factory import default_delta, make_controller
+from ..control.defaults import DEFAULT_SWITCHING_GAIN, default_delta
+from ..control.factory import make_controller
 from ..drives import role_names
 from ..sim.simulate import SimulationDivergedError, SimulationResult, simulate
 from .plots import plot_controller_comparison
@@ -31,7 +32,7 @@ def _chain_runs(ctx: DemoContext, name: str, md: List[str]) -> Dict[str, Dict[st
     per_kind: Dict[str, Dict[str, SimulationResult]] = {}
     for kind in ("smc", "ismc", "adaptive", "fl"):
         per_kind[kind] = {}
-        for k_s in ((0.0,) if kind == "fl" else (1000.0, 20000.0)):
+        for k_s in ((0.0,) if kind == "fl" else (DEFAULT_SWITCHING_GAIN, 20000.0)):
             for Ks in N_LINK_CASES[name]:
                 true = dict(zip(K_names, Ks))
                 label = "K = (" + ", ".join(f"{k:g}" for k in Ks) + ")"
@@ -41,7 +42,7 @@ def _chain_runs(ctx: DemoContext, name: str, md: List[str]) -> Dict[str, Dict[st
                 except SimulationDivergedError as exc:
                     md.append(diverged_row([name, CTRL_LABELS[kind], f"{k_s:g}", label], exc.t))
                     continue
-                if k_s != 1000.0:
+                if k_s != DEFAULT_SWITCHING_GAIN:
                     per_kind[kind][label] = r
                 md.append(metrics_row([name, CTRL_LABELS[kind], f"{k_s:g}", label], r))
     return per_kind
@@ -83,7 +84,8 @@ def eigenvalue_section(ctx: DemoContext) -> Section:
         mn = load(name)
         names = role_names(mn, "stiffness")
         for kind in ("smc", "fl"):
-            ctrl = make_controller(kind, mn, {k: K_NOM for k in names}, lam=LAM, k_s=1000.0, delta=5.0)
+            ctrl = make_controller(kind, mn, {k: K_NOM for k in names}, lam=LAM, k_s=DEFAULT_SWITCHING_GAIN,
+                                   delta=default_delta(DEFAULT_SWITCHING_GAIN))
             cells = [f"{closed_loop_eigenvalues(mn, ctrl, {k: K for k in names})[0].real:+.2f}"
                      for K in (100.0, 140.0, 150.0, 160.0, 200.0)]
             md.append(f"| {name} | {CTRL_LABELS[kind]} | " + " | ".join(cells) + " |")

@@ -15,6 +15,7 @@ import numpy as np
 
 from .. import load
 from ..analysis.certificates.regulation import predict_regulation_offset
+from ..control.defaults import PAPER_K_RANGE
 from ..control.factory import make_controller
 from ..control.laws import coefficients_from_pole
 from ..control.references import SmoothStep
@@ -217,7 +218,7 @@ def anti_windup_section(ctx: DemoContext) -> Section:
           "is saturated and e1_i would push it further into the limit.", "",
           "| true K | anti-windup | overshoot (rad) | final abs(e1) (rad) | max abs(z) (rad s) | max abs(u) (N m) |",
           "|---|---|---|---|---|---|"]
-    for K in (100.0, 200.0):
+    for K in PAPER_K_RANGE:
         for aw in (True, False):
             ctrl = make_controller("ismc", ctx.link1, {"K": K_NOM}, lam=LAM, k_s=d.k_s, delta=d.delta,
                                    beta_hat=d.beta_hat, u_max=10.0, anti_windup=aw)

@@ -18,17 +18,18 @@ from dataclasses import dataclass
 
 from .. import load
 from ..analysis.certificates.lemma1 import beta_bounds_link1, lemma1_gain
-from ..control.factory import DEFAULT_LAYER_RATE, make_controller
+from ..control.defaults import DEFAULT_LAM, DEFAULT_LAYER_RATE, PAPER_K_RANGE
+from ..control.factory import make_controller
 from ..control.laws import coefficients_from_pole
 from ..control.references import Sinusoid, SmoothStep
 from ..sim.simulate import SimulationResult, simulate
 
-LAM = 8.0
+LAM = DEFAULT_LAM
 LAYER_RATE = DEFAULT_LAYER_RATE
 K_NOM = 150.0
 K_CASES = (100.0, 150.0, 200.0)
-K_BOUNDS = {"K": (100.0, 200.0)}
-MC_BOUNDS = {"K": (100.0, 200.0), "J_l": (0.8, 1.2), "J_m": (1.6, 2.4)}
+K_BOUNDS = {"K": PAPER_K_RANGE}
+MC_BOUNDS = {"K": PAPER_K_RANGE, "J_l": (0.8, 1.2), "J_m": (1.6, 2.4)}
 DURATION = 10.0
 #: ``fjm figures --quick``: every experiment, figure and table, with short runs and few samples
 #: (a smoke test of the pipeline; its numbers are not the documented ones).

@@ -64,6 +64,7 @@ from typing import Optional
 
 import numpy as np
 
+from ...control.defaults import DEFAULT_SWITCHING_GAIN, PAPER_K_RANGE
 from .box import assemble, box_dims, box_maximize, check_box, classify_affine, per_joint, surface_coefficients
 from .evaluator import Evaluator, build_true_fn
 from .link1 import POSITIVE, link1_bounds, link1_model, link1_params
@@ -377,7 +378,7 @@ def paper_bound(model, nominal_params=None, *, param_box, reference_bounds, erro
 
 # ---------------------------------------------------------------------------------------------
 # defaults of the command line (policy lives here, the CLI only calls it)
-FALLBACK_SWITCHING_GAIN = 1000.0
+FALLBACK_SWITCHING_GAIN = DEFAULT_SWITCHING_GAIN
 """Switching gain (rad/s^4) used where the paper's bound does not apply (chains, spatial arms)."""
 
 
@@ -427,7 +428,7 @@ def _check_k_bounds(k_bounds) -> tuple:
     return lo, hi
 
 
-def paper_beta_hat(model, nominal_params=None, k_bounds=(100.0, 200.0), *, box=None):
+def paper_beta_hat(model, nominal_params=None, k_bounds=PAPER_K_RANGE, *, box=None):
     """The paper's constant ``beta_hat = (beta_max + beta_min) / 2`` over ``K in k_bounds``, or None.
 
     Parameters
@@ -452,7 +453,7 @@ def paper_beta_hat(model, nominal_params=None, k_bounds=(100.0, 200.0), *, box=N
     return beta_bounds_link1(nominal_params, {"K": _check_k_bounds(k_bounds)})[2]
 
 
-def default_switching_gain(model, nominal_params, lam: float, reference_bounds, *, k_bounds=(100.0, 200.0),
+def default_switching_gain(model, nominal_params, lam: float, reference_bounds, *, k_bounds=PAPER_K_RANGE,
                            error_bounds=(0.05, 0.5, 0.5, 0.5), eta: float = 10.0):
     """The Lemma 1 gain ``fjm simulate`` uses by default, or None where the paper's bound does not apply.
 
