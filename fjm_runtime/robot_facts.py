@@ -17,7 +17,7 @@ from .validation import FjmValueError
 
 __all__ = ["JointLimits", "Task", "joint_limits", "task_from_manifest", "START_TEXT"]
 
-#: The design file's words for a task's ``start = "rest"`` (``design_task`` reads "holding gravity").
+#: The design file's words for a task's ``start = "rest"`` (:func:`fjm_runtime.control.design.task_start` reads "holding gravity").
 START_TEXT = {"rest": "at rest holding gravity (nominal parameters)"}
 
 
