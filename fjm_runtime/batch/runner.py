@@ -20,7 +20,7 @@ from typing import Dict, List, Optional
 
 import numpy as np
 
-from ..sim.loops import check_loop_name
+from ..sim.sample_step import check_loop_settings
 from .scalar import threads_arg
 from .simd import vector_isa
 
@@ -122,9 +122,7 @@ def simulate_batch(model, controller, reference, params_true_array, *, duration:
         OpenMP across runs; vector lanes across runs (falls back to the scalar loop with a
         :class:`SimdFallbackWarning`); threads for this call (default all cores).
     loop : {'sampled'}
-        The one loop; ``'legacy'`` (the former one-RK4-step-per-sample batch) was retired: it
-        raises :class:`FjmValueError` (``substeps=1`` and no sensor, delay or prediction is the
-        sampled loop closest to it).
+        The one loop (any other name raises :class:`FjmValueError`).
 
     Returns
     -------
@@ -132,7 +130,7 @@ def simulate_batch(model, controller, reference, params_true_array, *, duration:
         ``metrics`` (the :class:`Metrics` fields) and ``joint_metrics`` (per joint, shape (B, n):
         ``rms_second_half``, ``peak_torque``, ``time_at_limit``, ``torque_jitter``).
     """
-    check_loop_name(loop)
+    check_loop_settings(sensor, delay_samples, predict, loop)
     from .sampled_runner import run_sampled_batch
     P = _true_params_rows(model, params_true_array)
     threads_arg(threads)

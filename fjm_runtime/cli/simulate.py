@@ -370,7 +370,7 @@ def run(args) -> int:
         print(json.dumps(_script_report(res, settings, None, provenance, left), allow_nan=False))
         status = 0
     else:
-        status = _legacy_report(m, args, res, kind, true, nominal, k_s, delta, gain, ctrl, provenance, left)
+        status = _print_report(m, args, res, kind, true, nominal, k_s, delta, gain, ctrl, provenance, left)
     if left is not None:
         print(f"fjm: diverged: the run {left[1]}", file=sys.stderr)
         return 3
@@ -400,7 +400,7 @@ def _check_size(m, args, ctrl, ref, x0, true, sensor, dt) -> None:
     check_run_size(layout.nw, m.n, layout.nm, args.duration, dt, args.max_memory)
 
 
-def _legacy_report(m, args, res, kind, true, nominal, k_s, delta, gain, ctrl, provenance, left) -> int:
+def _print_report(m, args, res, kind, true, nominal, k_s, delta, gain, ctrl, provenance, left) -> int:
     """The indented report (and the optional PNG) of ``fjm simulate`` without ``--json``."""
     metrics: Dict[str, object] = {}
     for k, v in res.metrics.as_dict().items():

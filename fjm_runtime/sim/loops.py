@@ -11,24 +11,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..validation import FjmValueError
 from .sample_step import StepLayout, python_sample_step, sample_step_function
 from .step import check_divergence
 
-__all__ = ["LOOPS", "check_loop_name", "run_casadi", "run_python"]
-
-
-def check_loop_name(loop) -> None:
-    """Accept ``loop='sampled'`` (the one loop of ``simulate`` and ``simulate_batch``); else a one-line error.
-
-    ``'legacy'`` (one RK4 step per sample with ``[x; z]`` integrated together) was retired; its
-    closest sampled form is ``substeps=1`` with no sensor, delay or prediction.
-    """
-    if loop == "legacy":
-        raise FjmValueError("loop = 'legacy' was retired: use loop='sampled' (the default; substeps=1 and no "
-                            "sensor, delay or prediction is the closest to the former loop)")
-    if loop != "sampled":
-        raise FjmValueError(f"loop = {loop!r}: expected 'sampled'")
+__all__ = ["BACKENDS", "run_casadi", "run_compiled", "run_python"]
 
 
 def run_python(model, controller, L: StepLayout, p_true, w0, t, R, NOISE, progress, max_state):
@@ -89,4 +75,4 @@ def run_compiled(model, controller, L: StepLayout, p_true, w0, t, R, NOISE, prog
 
 
 #: The sampled-data runners by ``backend`` name (signature in the module docstring).
-LOOPS = {"python": run_python, "casadi": run_casadi, "compiled": run_compiled}
+BACKENDS = {"python": run_python, "casadi": run_casadi, "compiled": run_compiled}

@@ -451,8 +451,8 @@ def sample_step_function(model, controller, L: StepLayout, outline: bool = False
     return casadi_sample_step(fns, controller, L, len(model.param_names), nominal_fns, outline=outline)
 
 
-def check_loop_settings(sensor, delay_samples, predict):
-    """The sensor (default ideal), the delay and the prediction flag of a sampled-data loop, checked.
+def check_loop_settings(sensor, delay_samples, predict, loop="sampled"):
+    """The sensor (default ideal), the delay, the prediction flag and the loop name of a sampled-data loop, checked.
 
     Shared by :func:`fjm_runtime.sim.simulate.simulate` and the batch engine.
 
@@ -474,4 +474,6 @@ def check_loop_settings(sensor, delay_samples, predict):
         raise FjmValueError(f"delay_samples = {delay_samples!r}: expected an integer >= 0 (samples of delay)")
     if not isinstance(predict, (bool, np.bool_)):
         raise FjmValueError(f"predict = {predict!r}: expected True or False")
+    if loop != "sampled":  # the keyword of simulate and simulate_batch: one loop remains
+        raise FjmValueError(f"loop = {loop!r}: expected 'sampled'")
     return sensor, int(delay_samples)

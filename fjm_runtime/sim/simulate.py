@@ -15,7 +15,7 @@ from typing import Callable, Optional
 
 import numpy as np
 
-from ..sim.loops import LOOPS, check_loop_name
+from ..sim.loops import BACKENDS
 from ..sim.metrics import Metrics, compute_metrics
 from ..sim.sample_step import check_loop_settings, initial_measurement, initial_step_state, make_layout
 from ..sim.sensor import SensorModel, noise_array
@@ -165,9 +165,7 @@ def simulate(model, controller, reference, *, duration: float, dt: float = 1e-3,
         With ``d > 0``: predict the measurement ``d`` samples ahead with the NOMINAL model
         under the torques already sent (see :mod:`fjm_runtime.sim.sample_step`).
     loop : {'sampled'}
-        The one loop; ``'legacy'`` (the former one-RK4-step-per-sample loop) was retired: it
-        raises :class:`FjmValueError` (``substeps=1`` and no sensor, delay or prediction is the
-        sampled loop closest to it).
+        The one loop (any other name raises :class:`FjmValueError`).
 
     Returns
     -------
@@ -181,8 +179,7 @@ def simulate(model, controller, reference, *, duration: float, dt: float = 1e-3,
         The state became non-finite or exceeded ``max_state``; ``.t`` is the time.
     """
     p_true, x, n_steps = _initial_conditions(model, controller, reference, duration, dt, true_params, x0)
-    check_loop_name(loop)
-    sensor, delay = check_loop_settings(sensor, delay_samples, predict)
+    sensor, delay = check_loop_settings(sensor, delay_samples, predict, loop)
     subs = resolve_substeps(substeps, model, x, p_true, float(dt))
     L = make_layout(model, controller, float(dt), subs, sensor, delay, predict)
     t = dt * np.arange(n_steps + 1)
@@ -192,7 +189,7 @@ def simulate(model, controller, reference, *, duration: float, dt: float = 1e-3,
     R = _reference_rows(reference, t, L.n)
     NOISE = noise_array(sensor, L.sensing, L.n, t.size)
     name = _choose_backend(backend, model, controller)
-    W, AUX = LOOPS[name](model, controller, L, p_true, w0, t, R, NOISE, progress, max_state)
+    W, AUX = BACKENDS[name](model, controller, L, p_true, w0, t, R, NOISE, progress, max_state)
     settings = {"rate": 1.0 / float(dt), "dt": float(dt), "substeps": subs, "delay_samples": delay,
                 "predict": bool(predict), "sensing": L.sensing, "seed": int(sensor.seed), "backend": name,
                 "sensor": sensor.name, "torque_rate_limit": sensor.as_dict()["torque_rate_limit"]}
@@ -280,10 +277,6 @@ def _true_outputs(model, p_true, X):
         T_all = _mapped(fns["T"], X.shape[0])
         return np.asarray(T_all(X.T, p_true)).T.reshape(-1, 4, n)
     return np.stack([np.asarray(model.T(xk, p_true), dtype=float).reshape(4, n) for xk in X])
-
-
-#: The closed-loop runners by ``backend`` name (:data:`fjm_runtime.sim.loops.LOOPS`).
-BACKENDS = LOOPS
 
 
 def stderr_progress(label: str) -> Callable[[float], None]:

@@ -22,10 +22,3 @@ class Spy:
     def initial_state(self, *a):
         return self.inner.initial_state(*a)
 
-
-def rk4(f, x, h, steps):
-    """``steps`` classical RK4 steps of ``x' = f(x)`` of size ``h``."""
-    for _ in range(steps):
-        k1 = f(x); k2 = f(x + 0.5 * h * k1); k3 = f(x + 0.5 * h * k2); k4 = f(x + h * k3)  # noqa: E702
-        x = x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
-    return x

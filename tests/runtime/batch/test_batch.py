@@ -97,13 +97,13 @@ def test_bad_params_shape_is_a_clear_error():
 
 @pytest.mark.parametrize("loop", ["legacy", "fused"])
 def test_only_the_sampled_loop_is_accepted(loop):
-    """loop='legacy' was retired (one line naming what to use); any other name is refused too."""
+    """loop='sampled' is the one loop: the retired 'legacy' and any other name are a one-line error."""
     m = fjm_runtime.load("link1")
     with pytest.raises(FjmValueError) as exc:
         simulate_batch(m, _link1_ctrl(m), Sinusoid(0.5, 1.0), m.params_array({})[None], duration=0.1, loop=loop)
     msg = str(exc.value)
     assert "\n" not in msg and f"loop = {loop!r}" in msg
-    assert ("retired: use loop='sampled'" in msg) if loop == "legacy" else msg.endswith("expected 'sampled'")
+    assert msg.endswith("expected 'sampled'")
 
 
 def _expected_simd_path():

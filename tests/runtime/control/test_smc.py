@@ -6,9 +6,9 @@ import fjm_runtime
 from fjm_runtime.control.factory import make_controller
 from fjm_runtime.control.laws import SlidingModeController, coefficients_from_pole
 from fjm_runtime.control.references import Sinusoid
-from fjm_runtime.sim.rk4 import integrate
 from fjm_runtime.analysis.certificates.lemma1 import beta_hat_link1, lemma1_gain
 from fjm_runtime.sim.simulate import simulate
+from support.numerics import rk4
 
 LAM = 8.0
 K_BOUNDS = {"K": (100.0, 200.0)}
@@ -23,11 +23,12 @@ def linear_error_dynamics(e0, c, k_s, delta, t_end, dt=2.5e-4):
     """Exact-model error dynamics: e1'=e2, e2'=e3, e3'=e4, e4' = -(c1 e2+c2 e3+c3 e4) - k_s sat(s/delta)."""
     c1, c2, c3 = c
 
-    def rhs(t, e):
+    def rhs(e):
         s = c1 * e[0] + c2 * e[1] + c3 * e[2] + e[3]
         return np.array([e[1], e[2], e[3], -(c1 * e[1] + c2 * e[2] + c3 * e[3])
                          - k_s * np.clip(s / delta, -1, 1)])
-    return integrate(rhs, e0, 0.0, dt, int(round(t_end / dt)))
+    steps = int(round(t_end / dt))
+    return dt * np.arange(steps + 1), rk4(rhs, e0, dt, steps)
 
 
 def test_exact_parameters_follow_linear_error_dynamics(link1):

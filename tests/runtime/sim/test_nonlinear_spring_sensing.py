@@ -19,7 +19,8 @@ from fjm_runtime import make_controller, make_reference, simulate
 from fjm_runtime.sim.sample_step import initial_step_state, make_layout, python_sample_step
 from fjm_runtime.sim.sensor import SensorModel
 
-from support.spy import Spy, rk4
+from support.numerics import rk4
+from support.spy import Spy
 
 
 @pytest.fixture(scope="module")
@@ -79,7 +80,7 @@ def test_predictor_uses_the_controllers_spring_with_nominal_parameters(hd, nomin
     def predicted(model, p, spring):
         phi = spring[1](tau)
         f = lambda x: model.f(x, p) + model.g(x, p) @ u_prev  # noqa: E731
-        xh = rk4(f, np.array([q, dq, q + phi, dqm]), T / subs, subs)
+        xh = rk4(f, np.array([q, dq, q + phi, dqm]), T / subs, subs)[-1]
         psi, dpsi = spring[0](xh[2] - xh[0])
         return np.array([xh[0], xh[1], psi, dpsi * (xh[3] - xh[1]), xh[3]])
 

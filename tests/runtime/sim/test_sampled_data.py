@@ -8,11 +8,11 @@ import pytest
 import fjm_runtime
 from fjm_runtime.control.factory import make_controller
 from fjm_runtime.control.references import Sinusoid
-from fjm_runtime.sim.rk4 import rk4_step
 from fjm_runtime.sim.sensor import SensorModel
 from fjm_runtime.sim.simulate import simulate
 from fjm_runtime.sim.substeps import CoarseIntegrationWarning, fastest_mode, resolve_substeps
 from fjm_runtime.validation import FjmValueError
+from support.numerics import rk4
 
 
 @pytest.fixture(scope="module")
@@ -87,9 +87,8 @@ def test_zero_order_hold_and_once_per_sample_controller_state(link1):
     for k in (0, 17, 42):
         x = res.x[k].copy()
         u = res.u[k]
-        rhs = lambda t, w: np.asarray(link1.f(w, p)).ravel() + np.asarray(link1.g(w, p)).reshape(4, 1) @ u
-        for j in range(4):
-            x = rk4_step(rhs, k * T + j * h, x, h)
+        rhs = lambda w: np.asarray(link1.f(w, p)).ravel() + np.asarray(link1.g(w, p)).reshape(4, 1) @ u
+        x = rk4(rhs, x, h, 4)[-1]
         assert np.max(np.abs(x - res.x[k + 1])) < 1e-13
         # z_{k+1} = z_k + T e1_k (the integrator of a digital controller, e1 from the measurement)
         e1 = res.x[k, 0] - res.ref[k, 0, 0]
@@ -109,8 +108,8 @@ def _reference_delay_loop(m, ctrl, ref, p_true, d, n_samples):
         smp = ctrl.evaluate(k * 1e-3, seen, z, r)
         z = z + 1e-3 * ctrl.state_derivative(k * 1e-3, seen, z, r, smp)
         us.append(smp.u)
-        rhs = lambda t, w, u=smp.u: np.asarray(m.f(w, p_true)).ravel() + np.asarray(m.g(w, p_true)).reshape(nx, n) @ u
-        x = rk4_step(rhs, k * 1e-3, x, 1e-3)
+        rhs = lambda w, u=smp.u: np.asarray(m.f(w, p_true)).ravel() + np.asarray(m.g(w, p_true)).reshape(nx, n) @ u
+        x = rk4(rhs, x, 1e-3, 1)[-1]
     return np.array(us)
 
 
@@ -192,9 +191,9 @@ def test_one_substep_and_a_stateless_law_is_the_former_single_step_loop(link1):
 
 @pytest.mark.parametrize("loop", ["legacy", "continuous"])
 def test_only_the_sampled_loop_is_accepted(link1, loop):
-    """loop='legacy' was retired: a one-line error naming what to use instead; other names are refused."""
+    """loop='sampled' is the one loop: the retired 'legacy' and any other name are a one-line error."""
     with pytest.raises(FjmValueError) as exc:
         simulate(link1, _ismc(link1), Sinusoid(0.5, 1.0), duration=0.01, loop=loop)
     msg = str(exc.value)
     assert "\n" not in msg and f"loop = {loop!r}" in msg
-    assert ("retired: use loop='sampled'" in msg) if loop == "legacy" else msg.endswith("expected 'sampled'")
+    assert msg.endswith("expected 'sampled'")

@@ -25,7 +25,8 @@ from fjm_runtime.sim.metrics import time_at_rate_limit
 from fjm_runtime.sim.sample_step import initial_step_state, make_layout, python_sample_step
 from fjm_runtime.sim.sensor import SensorModel, noise_array, offset_normals, sensor_from_spec
 from fjm_runtime.validation import FjmValueError
-from support.spy import Spy, rk4
+from support.numerics import rk4
+from support.spy import Spy
 
 
 def _torque_law(m, K_nom):
@@ -63,7 +64,7 @@ def test_predictor_integrates_the_nominal_model_with_nominal_parameters(link1):
     def predicted(p, K):
         xh = np.array([q, dq, q + tau / K, dqm])
         f = lambda x: link1.f(x, p) + link1.g(x, p) @ u_prev  # noqa: E731
-        xh = rk4(f, xh, T / subs, subs)
+        xh = rk4(f, xh, T / subs, subs)[-1]
         return np.array([xh[0], xh[1], K * (xh[2] - xh[0]), K * (xh[3] - xh[1]), xh[3]])
 
     expected = predicted(p_nom, K_nom)
