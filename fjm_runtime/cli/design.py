@@ -131,6 +131,7 @@ def run(args) -> int:
     from ..analysis.search.search import design
     from ..analysis.search.settings import SearchSettings
     from ..analysis.search.report import summary_lines
+    from ..control.design import Design
     if args.out is not None and not args.out.parent.is_dir():
         raise FjmValueError(f"--out {args.out}: the directory {args.out.parent} does not exist")
     if args.draws < 1 or args.duration <= 0 or args.delay_samples < 0 or args.rate <= 0:
@@ -154,15 +155,13 @@ def run(args) -> int:
                               spread=spread, recheck_draws=args.recheck_draws, scheduler=args.scheduler,
                               screen_draws=args.screen_draws, screen=None if args.screen == "none" else args.screen,
                               screen_duration=args.screen_duration, rounds=args.rounds, **task)
-    out = design(m, settings)
-    out["wall_seconds"] = time.perf_counter() - t0
-    out["noise"] = args.noise
-    text = json.dumps(out, indent=2, allow_nan=False)
+    found = Design.from_dict({**design(m, settings), "wall_seconds": time.perf_counter() - t0, "noise": args.noise},
+                             "fjm design")
     if args.out is None:
-        print(text)
+        print(json.dumps(found.as_dict(), indent=2, allow_nan=False))
     else:
-        args.out.write_text(text + "\n")
-        print(f"fjm design: wrote {args.out} ({out['wall_seconds']:.0f} s)", file=sys.stderr)
-    for line in summary_lines(out):
+        found.save(args.out)
+        print(f"fjm design: wrote {args.out} ({found.report['wall_seconds']:.0f} s)", file=sys.stderr)
+    for line in summary_lines(found.as_dict()):
         print(f"fjm design: {line}", file=sys.stderr)
-    return 0 if out["meets"] else 1
+    return 0 if found.meets else 1

@@ -168,9 +168,10 @@ class Design:
         return cls.from_dict(d, where)
 
     def as_dict(self) -> Dict[str, Any]:
-        """The JSON object (the keys in the order read, new ones after; unrecorded conditions left out)."""
+        """The JSON object (the keys in the order read, new ones after; an unrecorded condition left out
+        unless the file it was read from held it as null)."""
         out = {k: getattr(self, _FIELD_OF_KEY.get(k, k)) for k in _TYPED_KEYS}
-        out = {k: v for k, v in out.items() if v is not None}
+        out = {k: v for k, v in out.items() if v is not None or k in self.key_order}
         out.update(self.report)
         order = [k for k in self.key_order if k in out] + [k for k in out if k not in self.key_order]
         return {k: out[k] for k in order}

@@ -117,3 +117,13 @@ def test_nominal_values_come_from_params(panda):
     assert d.nominal(panda) == {"K1": 120.0}
     with pytest.raises(FjmValueError, match="params.nominal.K9"):
         Design(kind="smc", gains={}, params={"nominal": {"K9": 1.0}}).nominal(panda)
+
+
+def test_a_null_condition_stays_in_the_file(tmp_path):
+    """Keys an older writer left null (``reference``: no task) are written back as null, in place."""
+    raw = {"model": "link1", "kind": "ismc", "reference": None, "gains": {"lam": 8.0, "k_s": 1.0, "delta": 1.0},
+           "draws": 3}
+    d = Design.from_dict(raw)
+    assert d.task is None and d.as_dict() == raw and list(d.as_dict()) == list(raw)
+    d.save(tmp_path / "g.json")
+    assert json.loads((tmp_path / "g.json").read_text()) == raw
