@@ -30,9 +30,13 @@ def add_arguments(ex) -> None:
     ex.add_argument("--params", type=Path, default=None, metavar="FILE",
                     help="controller: parameter file (TOML [parameters], e.g. from `fjm identify`): the law's "
                          "nominal values (over the design file's params.nominal)")
-    ex.add_argument("--substeps", type=int, default=None,
-                    help="controller: RK4 substeps of the predictor per sample (default: the substeps rule)")
+    ex.add_argument("--substeps", type=float, default=None,
+                    help="controller: RK4 substeps of the predictor per sample, an integer 1..1000 (default: the "
+                         "substeps rule); only for a design that predicts")
     ex.add_argument("--name", default=None, help="controller: C prefix (default <model>_<kind>[_tau])")
+    ex.add_argument("--unverified", action="store_true",
+                    help="controller: export a design that records \"meets\": false (refused otherwise), labelled "
+                         "unverified in its README and header")
     ex.add_argument("--complete", action="store_true",
                     help="the complete model (rotor i on link i-1, spin coupling; gear ratios N1..Nn from "
                          "<model>_complete): needs a generated <model>_complete")
@@ -43,7 +47,29 @@ def add_arguments(ex) -> None:
     ex.add_argument("--gear-ratio", type=float, default=None,
                     help="reduced model: rotor angle = GEAR_RATIO * q_m for every joint (default 1; complete "
                          "models take N1..Nn via --param)")
-    ex.add_argument("--timestep", type=float, default=1e-4, help="MuJoCo step, s (integrator RK4; default 1e-4)")
+    ex.add_argument("--timestep", type=float, default=None, help="MuJoCo step, s (integrator RK4; default 1e-4)")
+
+
+#: The flags each format reads; any other given flag is refused (not silently ignored).
+_FLAGS = {"controller": ("gains", "params", "substeps", "name", "unverified"),
+          "mjcf": ("complete", "K", "param", "gear_ratio", "timestep")}
+_UNSET = {"gains": None, "params": None, "substeps": None, "name": None, "unverified": False, "complete": False,
+          "K": None, "param": [], "gear_ratio": None, "timestep": None}
+
+
+def _refuse_foreign_flags(args) -> None:
+    """One line for the first flag given that ``args.format`` does not read."""
+    for dest, unset in _UNSET.items():
+        value = getattr(args, dest)
+        if dest not in _FLAGS[args.format] and value != unset:
+            flag = "--" + dest.replace("_", "-")
+            shown = "" if isinstance(value, bool) else " " + (
+                " ".join(value) if isinstance(value, list) else f"{value:g}" if isinstance(value, float) else str(value))
+            other = next(f for f, dests in _FLAGS.items() if dest in dests)
+            hint = (" (its nominal parameters come from --params FILE or the design's params.nominal)"
+                    if dest in ("K", "param") else "")
+            raise FjmValueError(f"{flag}{shown}: export {args.format} does not use it{hint}; expected it only with "
+                                f"export {other}")
 
 
 def _model(args):
@@ -73,18 +99,24 @@ def _run_controller(args) -> int:
     if gains.model not in (None, m.name):
         raise FjmValueError(f"--gains {args.gains}: designed for model {gains.model!r}, not {m.name!r}")
     gains = dataclasses.replace(gains, file=gains.file or str(args.gains))
+    from ..export.controller_checks import check_c_values
     from .simulate import params_file_nominal
-    nominal = {**gains.nominal(m), **params_file_nominal(args.params, m)}
-    design = design_controller(m, gains, nominal=nominal or None, substeps=args.substeps, name=args.name)
+    design_nominal, file_nominal = gains.nominal(m), params_file_nominal(args.params, m)
+    check_c_values(design_nominal, design_nominal.values(), f"--gains {args.gains}: params.nominal.")
+    check_c_values(file_nominal, file_nominal.values(), f"--params {args.params}: [parameters] ")
+    nominal = {**design_nominal, **file_nominal}
+    design = design_controller(m, gains, nominal=nominal or None, substeps=args.substeps, name=args.name,
+                               unverified=args.unverified)
     files = export_controller(design, args.out)
     print(f"wrote {len(files)} files to {args.out} ({design.name}: {m.name}, {design.controller.law_kind}, "
           f"{1.0 / design.layout.T:g} Hz, delay {design.layout.delay}, {design.layout.substeps} substeps); "
-          f"build with `make -C {args.out}`")
+          f"build with `make -C {args.out}`{'; UNVERIFIED design (meets: false)' if gains.meets is False else ''}")
     return 0
 
 
 def run(args) -> int:
     """Run ``fjm export``; returns the exit status."""
+    _refuse_foreign_flags(args)
     if args.format == "controller":
         return _run_controller(args)
     check_output_file(args.out, "--out")
@@ -98,7 +130,8 @@ def run(args) -> int:
     if complete and args.gear_ratio is not None:
         raise FjmValueError(f"--gear-ratio: model {m.name} takes its gear ratios as parameters N1..N{m.n} "
                             "(e.g. --param N1=100)")
-    write_mjcf(m, args.out, params, complete=complete, gear_ratio=args.gear_ratio, timestep=args.timestep)
+    write_mjcf(m, args.out, params, complete=complete, gear_ratio=args.gear_ratio,
+               timestep=1e-4 if args.timestep is None else args.timestep)
     print(f"wrote {args.out} (model {m.name}, {'complete' if complete else 'reduced'}, {m.n} joints; "
           "load it with mujoco.MjModel.from_xml_path)")
     return 0

@@ -39,6 +39,7 @@ _HEADER = Template(r"""/* ${NAME}_controller.h: the sampled controller of design
  * Model $MODEL ($N joints), law $KIND ($SENSING sensing), $RATE Hz, delay $DELAY sample(s),
  * prediction $PREDICT, $SUBSTEPS RK4 substeps per sample in the predictor; sensor pre-processing:
  * $PREPROC; torque-rate limit: $RATE_LIMIT.
+ * Design: $VERIFIED.
  *
  * Use (no allocation after init, no globals: one struct per controller, any number side by side):
  *   ${NAME}_controller c;

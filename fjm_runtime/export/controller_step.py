@@ -160,7 +160,9 @@ def controller_functions(model, controller, L: StepLayout, name: str):
     c, m_raw = ca.MX.sym("c", CL.nc), ca.MX.sym("m", L.nm)
     r, p, gains = ca.MX.sym("r", 5 * n), ca.MX.sym("p", n_par), ca.MX.sym("gains", n_gains)
     K_nom = None
-    if L.sensing == "torque" and not L.nominal_spring:  # a nonlinear spring predicts through psi^-1 instead
+    # the predictor's q_m = q + K_nom^-1 tau_J (a nonlinear spring predicts through psi^-1 instead); no
+    # prediction, no K_nom (a harmonic-drive model has no K_i)
+    if L.sensing == "torque" and L.predict and not L.nominal_spring:
         K_nom = ops.take(p, stiffness_indices(model)[0])
     b = CL.split(c)
     m_k, filt_next, venc_next = ss._condition(ops, L, _blocks(m_raw, L), b["venc"], b["filt"])

@@ -9,7 +9,6 @@ never give a NaN torque; two controllers interleaved give the torques of each al
 """
 from __future__ import annotations
 
-import ctypes
 import json
 import subprocess
 
@@ -17,162 +16,25 @@ import numpy as np
 import pytest
 
 import fjm_runtime
-from fjm_runtime.ccache import compile_library
 from fjm_runtime.control.design import Design
-from fjm_runtime.export.controller import amalgamation, design_controller, export_controller
-from fjm_runtime.export.controller_step import raw_reading, rest_reading
-from fjm_runtime.sim.sensor import noise_array, offset_normals
-from fjm_runtime.sim.simulate import simulate
+from fjm_runtime.export.controller import design_controller, export_controller
 
-STRICT = ("-O2", "-fPIC", "-shared", "-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic")
-OK, SATURATED, NOT_FINITE, BAD = 0, 1, 2, 3
-
-
-class CController:
-    """One controller struct of an exported library, driven through ctypes (double or float)."""
-
-    def __init__(self, lib, name, design, real):
-        self.lib, self.name, self.real = lib, name, real
-        L = design.layout
-        self.n, self.nm = L.n, L.nm
-        ptr = ctypes.POINTER(ctypes.c_float if real == "float" else ctypes.c_double)
-        self.nc = design.cstate.nc
-        for fn in ("init", "reset", "step", "set_state", "get_state"):
-            lib[f"{name}_{fn}"].restype = ctypes.c_int
-        lib[f"{name}_sizeof"].restype = ctypes.c_size_t
-        self.buf = ctypes.create_string_buffer(int(lib[f"{name}_sizeof"]()))
-        self._ptr, self.dtype = ptr, np.float32 if real == "float" else np.float64
-        assert lib[f"{name}_init"](self.buf, None, None) == OK
-
-    def _p(self, v):
-        a = np.ascontiguousarray(v, dtype=self.dtype)
-        return a, a.ctypes.data_as(self._ptr)
-
-    def reset(self, m0):
-        m0, p0 = self._p(m0)
-        return self.lib[f"{self.name}_reset"](self.buf, p0)
-
-    def set_state(self, c, u_last):
-        (c, pc), (u, pu) = self._p(c), self._p(u_last)
-        return self.lib[f"{self.name}_set_state"](self.buf, pc, pu)
-
-    def get_state(self):
-        (c, pc) = self._p(np.zeros(max(self.nc, 1)))
-        assert self.lib[f"{self.name}_get_state"](self.buf, pc, None) == OK
-        return c[:self.nc].astype(float)
-
-    def step(self, m, r):
-        (m, pm), (r, pr), (u, pu) = self._p(m), self._p(r), self._p(np.zeros(self.n))
-        st = self.lib[f"{self.name}_step"](self.buf, pm, pr, pu)
-        return st, u.astype(float)
-
-
-_LIBS: dict = {}
-
-
-def _library(design, tmp_factory, real="double"):
-    """The exported library of ``design`` compiled (strict flags, through the C cache) and loaded."""
-    key = (design.name, json.dumps(design.design.as_dict(), sort_keys=True, default=str), real)
-    if key not in _LIBS:
-        out = tmp_factory.mktemp(design.name)
-        export_controller(design, out)
-        so = compile_library(amalgamation(out, design.name, real), f"{design.name}_controller_{real}", STRICT)
-        _LIBS[key] = ctypes.CDLL(str(so))
-    return CController(_LIBS[key], design.name + ("_float" if real == "float" else ""), design, real)
-
-
-class Run:
-    """The simulator's run of a design (true plant = nominal): the sample step folded by the casadi
-    runner :func:`fjm_runtime.simulate` uses, so its step states ``W`` are at hand.
-
-    ``W`` (N+1, nw) step states, ``U`` (N+1, n) applied torques (aux), ``R`` (N+1, 5n) reference rows,
-    ``M`` (N+1, nm) the raw reading of every sample as the step made it, ``C`` (N+1, nc) the
-    controller states, ``m0`` the rest reading, ``u0`` the torque holding the rest state.
-    """
-
-    def __init__(self, design, duration, reference=None, x0=None):
-        from fjm_runtime.sim.loops import run_casadi
-        from fjm_runtime.sim.sample_step import initial_step_state
-        model, L, sensor, ctrl = design.model, design.layout, design.sensor, design.controller
-        if reference is None:
-            reference, x0 = design.design.reference(model), design.design.start_state(model)
-        p = np.asarray(ctrl.p_nom, dtype=float)
-        t = L.T * np.arange(int(round(duration / L.T)) + 1)
-        if x0 is None:
-            q0 = np.asarray(reference(0.0))[0]
-            x0 = np.concatenate([q0, np.zeros(L.n), q0, np.zeros(L.n)])
-        w0 = initial_step_state(model, L, x0, np.zeros(L.nz), p, seed=int(sensor.seed), sensor=sensor)
-        self.R = np.asarray(reference.sample(t), dtype=float).reshape(t.size, 5 * L.n)
-        NOISE = noise_array(sensor, L.sensing, L.n, t.size)
-        self.W, AUX = run_casadi(model, ctrl, L, p, w0, t, self.R, NOISE, None, 1e6)
-        self.U = AUX[:, :L.n]
-        self.M = np.stack([raw_reading(model, L, self.W[k], NOISE[k], p) for k in range(t.size)])
-        self.C = design.cstate.from_step_state(self.W)
-        self.m0 = rest_reading(model, L, x0, p)
-        self.u0 = self.C[0][design.cstate.split(np.arange(design.cstate.nc))["u_buf"]][:L.n] \
-            if L.delay else None
-
-
-def _free_running(ctrl, run, samples=None):
-    """The library from ``reset(m0)`` on the run's readings: torques (k, n) and statuses."""
-    k_end = run.M.shape[0] if samples is None else samples
-    assert ctrl.reset(run.m0) == OK
-    U, S = np.empty((k_end, ctrl.n)), np.empty(k_end, dtype=int)
-    for k in range(k_end):
-        S[k], U[k] = ctrl.step(run.M[k], run.R[k])
-    return U, S
-
-
-def _per_sample(ctrl, run):
-    """The library's torque at every sample, and its next controller state, from the SIMULATOR's
-    controller state at that sample: ``(U, S, C_next)``."""
-    U, S = np.empty_like(run.U), np.empty(run.U.shape[0], dtype=int)
-    C_next = np.empty_like(run.C)
-    for k in range(run.M.shape[0]):
-        assert ctrl.set_state(run.C[k], run.U[k - 1] if k else run.U[0]) == OK
-        S[k], U[k] = ctrl.step(run.M[k], run.R[k])
-        C_next[k] = ctrl.get_state()
-    return U, S, C_next
-
-
-def _relative(U, U_ref):
-    """Per joint: the largest deviation over the run / that joint's largest torque; the worst joint."""
-    scale = np.maximum(np.max(np.abs(U_ref), axis=0), 1e-300)
-    return float(np.max(np.max(np.abs(U - U_ref), axis=0) / scale))
+from support.controller_runs import (BAD, FREE_SAMPLES, NOT_FINITE, OK, SATURATED, Run, free_running, library,
+                                     make_design, per_sample, relative, sine)
 
 
 def _panda_design():
     return design_controller(fjm_runtime.load("panda"), Design.shipped("panda", "ismc", "torque", 1000.0, 1))
 
 
-def _design(model, kind, sensing, noise, delay=1, u_max=None, **gains):
-    spec = {"model": model, "kind": kind, "sensing": sensing, "rate": 1000.0, "delay": delay, "predict": delay > 0,
-            "noise": noise, "gains": {"lam": 20.0, "k_s": 200.0, "delta": 5.0, **gains}}
-    if u_max is not None:
-        spec["gains"]["u_max"] = u_max
-    return design_controller(fjm_runtime.load(model), Design.from_dict(spec))
-
-
-def _sine(design, amplitude=0.5, omega=2.0):
-    from fjm_runtime.control.references import make_reference
-    return make_reference("sine", design.layout.n, amplitude=amplitude, omega=omega)
-
-
-#: Samples of the free-running comparison (from reset): the predictor and the law in replay, without
-#: the plant, amplify a rounding difference by up to ~1.26 a sample (the Panda design), so only the
-#: first samples of a free-running replay can agree to 1e-12; every sample is compared from the
-#: simulator's own controller state (:func:`_per_sample`).
-FREE_SAMPLES = 10
-
-
 def _check_equal(design, tmp_path_factory, duration, reference=None, float_bound=None):
     run = Run(design, duration, reference)
-    lib = _library(design, tmp_path_factory)
-    U, S, C_next = _per_sample(lib, run)
-    rel = _relative(U, run.U)
-    rel_c = _relative(C_next[:-1], run.C[1:]) if run.C.shape[1] else 0.0
-    Uf, _ = _free_running(lib, run, FREE_SAMPLES)
-    rel_free = _relative(Uf, run.U[:FREE_SAMPLES])
+    lib = library(design, tmp_path_factory)
+    U, S, C_next = per_sample(lib, run)
+    rel = relative(U, run.U)
+    rel_c = relative(C_next[:-1], run.C[1:]) if run.C.shape[1] else 0.0
+    Uf, _ = free_running(lib, run, FREE_SAMPLES)
+    rel_free = relative(Uf, run.U[:FREE_SAMPLES])
     print(f"\n{design.name} ({design.sensor.name}, {duration:g} s): double max rel dev per sample {rel:.3g}, "
           f"free-running first {FREE_SAMPLES} samples {rel_free:.3g}, state {rel_c:.3g}")
     assert np.all(np.isfinite(U)) and np.all(S != NOT_FINITE)
@@ -180,8 +42,8 @@ def _check_equal(design, tmp_path_factory, duration, reference=None, float_bound
     assert rel_c <= 1e-12, f"{design.name}: the C controller state deviates by {rel_c:.3g} (relative)"
     assert rel_free <= 1e-12, f"{design.name}: from reset, the C torques deviate by {rel_free:.3g} (relative)"
     if float_bound is not None:
-        U32, _, _ = _per_sample(_library(design, tmp_path_factory, "float"), run)
-        rel_f = _relative(U32, run.U)
+        U32, _, _ = per_sample(library(design, tmp_path_factory, "float"), run)
+        rel_f = relative(U32, run.U)
         print(f"{design.name}: float max rel dev per sample {rel_f:.3g}")
         assert rel_f <= float_bound, f"{design.name}: float build deviates by {rel_f:.3g} > {float_bound:g}"
     return run, S
@@ -222,12 +84,15 @@ def test_panda_hd_shipped_design_equals_simulator(tmp_path_factory):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("sensing, noise", [("torque", "franka_like"), ("state", "panda_white")])
-def test_datasheet_spring_equals_simulator(tmp_path_factory, sensing, noise):
+@pytest.mark.parametrize("sensing, noise, predict", [("torque", "franka_like", None), ("state", "panda_white", None),
+                                                     ("torque", "panda_white", False)])
+def test_datasheet_spring_equals_simulator(tmp_path_factory, sensing, noise, predict):
     """arm1_hd (a three-segment curve): torque sensing predicts through psi^-1, state sensing resets the
-    held torque to psi(q_m - q); 2 s, C == simulator to 1e-12."""
-    design = _design("arm1_hd", "ismc", sensing, noise, u_max=60.0, lam=30.0, k_s=100.0, delta=5.0)
-    _check_equal(design, tmp_path_factory, 2.0, _sine(design, amplitude=0.3, omega=3.0), float_bound=1e-2)
+    held torque to psi(q_m - q), torque sensing without prediction (fjm design's default) needs no K_i;
+    2 s, C == simulator to 1e-12."""
+    design = make_design("arm1_hd", "ismc", sensing, noise, u_max=60.0, predict=predict, lam=30.0, k_s=100.0,
+                         delta=5.0)
+    _check_equal(design, tmp_path_factory, 2.0, sine(design, amplitude=0.3, omega=3.0), float_bound=1e-2)
 
 
 #: Gains that track on a 2 s sine with a torque limit below the run's peak (the limit is reached,
@@ -247,8 +112,8 @@ _SOFT = {"lam": 5.0, "k_s": 10.0, "delta": 20.0}
 def test_small_models_equal_simulator(tmp_path_factory, model, kind, sensing, noise, gains, u_max):
     """Each sensing, law and sensor pre-processing: 2 s, C == simulator to 1e-12; the limits are
     reached on some samples and most samples are the unclipped law."""
-    design = _design(model, kind, sensing, noise, u_max=u_max, **gains)
-    run, S = _check_equal(design, tmp_path_factory, 2.0, _sine(design), float_bound=1e-3)
+    design = make_design(model, kind, sensing, noise, u_max=u_max, **gains)
+    run, S = _check_equal(design, tmp_path_factory, 2.0, sine(design), float_bound=1e-3)
     print(f"{design.name}: limited on {np.mean(S == SATURATED):.1%} of the samples")
     assert np.any(S == SATURATED), "the run never reaches a limit: the limits are not exercised"
     assert np.mean(S == OK) > 0.5, "the run is mostly at a limit: the law itself is hardly compared"
@@ -258,9 +123,9 @@ def test_small_models_equal_simulator(tmp_path_factory, model, kind, sensing, no
 def test_rate_limit_is_applied_in_c(tmp_path_factory):
     """franka_like (1000 N m/s): the C torque never changes by more than 1 N m a sample, and it does
     change by exactly that while the limit holds it (the clip is in the library, not the caller)."""
-    design = _design("link1", "ismc", "torque", "franka_like", u_max=25.0, lam=10.0, k_s=20.0, delta=20.0)
-    run = Run(design, 1.0, _sine(design))
-    U, S = _free_running(_library(design, tmp_path_factory), run)
+    design = make_design("link1", "ismc", "torque", "franka_like", u_max=25.0, lam=10.0, k_s=20.0, delta=20.0)
+    run = Run(design, 1.0, sine(design))
+    U, S = free_running(library(design, tmp_path_factory), run)
     dU = np.abs(np.diff(np.vstack([run.u0[None], U]), axis=0))
     assert np.max(dU) <= 1.0 + 1e-9
     at_limit = np.isclose(dU[:, 0], 1.0, rtol=0, atol=1e-9)
@@ -275,10 +140,10 @@ def test_rate_limit_is_applied_in_c(tmp_path_factory):
 def test_non_finite_reading_holds_the_last_torque(tmp_path_factory, bad):
     """A NaN/inf reading (any slot) or reference: the last torque again, status INPUT_NOT_FINITE, the
     state kept (the next good sample gives, bit for bit, the torque it gives without the bad one)."""
-    design = _design("planar3", "ismc", "torque", "panda_white", u_max=60.0, **_SOFT)
-    run = Run(design, 0.1, _sine(design))
-    U_ref, _ = _free_running(_library(design, tmp_path_factory), run)
-    ctrl = _library(design, tmp_path_factory)
+    design = make_design("planar3", "ismc", "torque", "panda_white", u_max=60.0, **_SOFT)
+    run = Run(design, 0.1, sine(design))
+    U_ref, _ = free_running(library(design, tmp_path_factory), run)
+    ctrl = library(design, tmp_path_factory)
     assert ctrl.reset(run.m0) == OK
     k_bad = 50
     for k in range(run.M.shape[0]):
@@ -300,10 +165,10 @@ def test_non_finite_reading_holds_the_last_torque(tmp_path_factory, bad):
 def test_overflowing_reading_never_gives_a_nan_torque(tmp_path_factory):
     """A finite reading whose law overflows (1e308 rad): the result is checked too; the torque is
     finite whatever the status."""
-    design = _design("planar3", "ismc", "torque", "panda_white", u_max=60.0, **_SOFT)
-    run = Run(design, 0.02, _sine(design))
+    design = make_design("planar3", "ismc", "torque", "panda_white", u_max=60.0, **_SOFT)
+    run = Run(design, 0.02, sine(design))
     for slot in range(run.M.shape[1]):
-        ctrl = _library(design, tmp_path_factory)
+        ctrl = library(design, tmp_path_factory)
         assert ctrl.reset(run.m0) == OK
         m = run.M[5].copy(); m[slot] = 1e308
         st, u = ctrl.step(m, run.R[5])
@@ -314,11 +179,11 @@ def test_overflowing_reading_never_gives_a_nan_torque(tmp_path_factory):
 def test_two_controllers_interleaved_equal_each_alone(tmp_path_factory):
     """Two structs of one library, stepped alternately on different readings: each gives, bit for
     bit, the torques it gives alone (no hidden shared state)."""
-    design = _design("planar3", "ismc", "state", "franka_like", u_max=40.0, **_SOFT)
-    run_a, run_b = Run(design, 0.5, _sine(design)), Run(design, 0.5, _sine(design, 0.3, 3.0))
-    U_a, _ = _free_running(_library(design, tmp_path_factory), run_a)
-    U_b, _ = _free_running(_library(design, tmp_path_factory), run_b)
-    a, b = _library(design, tmp_path_factory), _library(design, tmp_path_factory)
+    design = make_design("planar3", "ismc", "state", "franka_like", u_max=40.0, **_SOFT)
+    run_a, run_b = Run(design, 0.5, sine(design)), Run(design, 0.5, sine(design, 0.3, 3.0))
+    U_a, _ = free_running(library(design, tmp_path_factory), run_a)
+    U_b, _ = free_running(library(design, tmp_path_factory), run_b)
+    a, b = library(design, tmp_path_factory), library(design, tmp_path_factory)
     assert a.reset(run_a.m0) == OK and b.reset(run_b.m0) == OK
     for k in range(run_a.M.shape[0]):
         _, ua = a.step(run_a.M[k], run_a.R[k])
@@ -331,8 +196,8 @@ def test_two_controllers_interleaved_equal_each_alone(tmp_path_factory):
 @pytest.mark.slow
 def test_step_before_reset_is_refused(tmp_path_factory):
     """``step`` before ``reset``: BAD_ARGUMENT and no torque written."""
-    design = _design("link1", "smc", "state", "ideal", delay=0)
-    lib = _library(design, tmp_path_factory)
+    design = make_design("link1", "smc", "state", "ideal", delay=0)
+    lib = library(design, tmp_path_factory)
     st, u = lib.step(np.zeros(4), np.zeros(5))
     assert st == BAD and np.all(u == 0)
 
@@ -450,7 +315,7 @@ def test_cxx_class_after_casadi_header_and_float_double_in_one_program(tmp_path)
     import casadi
     if shutil.which("make") is None or shutil.which("g++") is None or shutil.which("nm") is None:
         pytest.skip("make, g++ and nm needed")
-    design = _design("planar2", "ismc", "torque", "franka_like", u_max=40.0, **_SOFT)
+    design = make_design("planar2", "ismc", "torque", "franka_like", u_max=40.0, **_SOFT)
     out, name = tmp_path / "lib", design.name
     export_controller(design, out)
     proc = subprocess.run(["make", "-C", str(out), "CC=gcc", "CXX=g++"], capture_output=True, text=True)
@@ -467,7 +332,7 @@ def test_cxx_class_after_casadi_header_and_float_double_in_one_program(tmp_path)
                            f"-I{standin.parent}", str(src), str(out / f"lib{name}.a"), str(out / f"lib{name}_float.a"),
                            "-lm", "-o", str(exe)], capture_output=True, text=True)
     assert proc.returncode == 0, proc.stderr[-3000:]
-    run = Run(design, 0.5, _sine(design))
+    run = Run(design, 0.5, sine(design))
     K, n = run.M.shape[0], design.layout.n
     np.concatenate([run.m0] + [np.concatenate([run.M[k], run.R[k]]) for k in range(K)]).tofile(tmp_path / "in.bin")
     proc = subprocess.run([str(exe), str(K), str(tmp_path / "in.bin"), str(tmp_path / "out.bin")],
@@ -480,10 +345,10 @@ def test_cxx_class_after_casadi_header_and_float_double_in_one_program(tmp_path)
         np.testing.assert_array_equal(r[:, 2 * n], r[:, 2 * n + 1], err_msg=real)
         assert np.all(np.isfinite(r[:, :2 * n])) and np.all(r[:, 2 * n] <= SATURATED), real
     U_d, U_f = rows[0][:, 0:2 * n:2], rows[1][:, 0:2 * n:2]
-    rel = _relative(U_d, run.U)
-    rel_f = _relative(U_f, U_d)
+    rel = relative(U_d, run.U)
+    rel_f = relative(U_f, U_d)
     print(f"{name}: C++ double vs simulator, free running {rel:.3g}; float vs double {rel_f:.3g}")
-    assert _relative(U_d[:FREE_SAMPLES], run.U[:FREE_SAMPLES]) <= 1e-12 and rel_f <= 1e-2
+    assert relative(U_d[:FREE_SAMPLES], run.U[:FREE_SAMPLES]) <= 1e-12 and rel_f <= 1e-2
     real_hpp = Path(casadi.__file__).parent / "include" / "casadi" / "casadi.hpp"
     if real_hpp.is_file():
         use = tmp_path / "use_casadi.cpp"

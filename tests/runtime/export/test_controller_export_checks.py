@@ -1,0 +1,156 @@
+"""``fjm export controller`` exports what was verified and refuses what it cannot honour.
+
+A design whose search found it misses its thresholds (``"meets": false``) is refused unless
+``--unverified`` (then labelled so); a flag of the other export format, substeps out of range or
+without prediction, a parameter or gain the C cannot hold, a name that is not a C prefix: one line
+naming the flag, the value and the range, nothing written. Every shipped design exports, and its
+exported step (the CasADi Function the C is generated from) gives the simulator's torques.
+"""
+from __future__ import annotations
+
+import json
+import re
+
+import numpy as np
+import pytest
+
+import fjm_runtime
+from fjm_runtime.cli.main import main as fjm_main
+from fjm_runtime.control.design import Design
+from fjm_runtime.export.controller import design_controller, export_controller
+from fjm_runtime.export.controller_checks import MAX_SUBSTEPS, default_c_name
+from fjm_runtime.export.controller_step import controller_functions
+
+from support.controller_runs import Run, relative
+
+LINK1 = {"model": "link1", "kind": "ismc", "sensing": "torque", "rate": 1000.0, "delay": 1, "predict": True,
+         "noise": "franka_like", "gains": {"lam": 10.0, "k_s": 20.0, "delta": 20.0, "u_max": 25.0}}
+
+
+def _file(tmp_path, spec, name="design.json"):
+    p = tmp_path / name
+    p.write_text(json.dumps(spec))
+    return p
+
+
+def _refused(tmp_path, capsys, argv):
+    """``fjm export ...`` with ``argv``: status 2, one stderr line without a traceback, nothing written."""
+    out = tmp_path / "out"
+    status = fjm_main(["export", *argv, "--out", str(out)])
+    err = capsys.readouterr().err.strip()
+    assert status == 2 and err.count("\n") == 0 and "Traceback" not in err, (status, err)
+    assert not out.exists(), err
+    return err
+
+
+def _c_values(path, array):
+    """The numbers of the C initializer ``array`` in the source at ``path``."""
+    body = re.search(rf"{array}\[[A-Z0-9_]+\] = \{{(.*?)\}};", path.read_text(), re.S).group(1)
+    return np.array([float(v) for v in body.replace("\n", " ").split(",")])
+
+
+def test_unverified_design_is_refused_and_labelled(tmp_path, capsys):
+    gains = _file(tmp_path, {**LINK1, "meets": False, "misses": [{"message": "rms"}]})
+    err = _refused(tmp_path, capsys, ["controller", "link1", "--gains", str(gains)])
+    assert f"--gains {gains}: \"meets\": false" in err and "--unverified" in err, err
+    labels = {}
+    for meets, flag in ((False, ["--unverified"]), (True, []), (None, [])):
+        spec = {**LINK1, **({} if meets is None else {"meets": meets})}
+        out = tmp_path / f"lib_{meets}"
+        assert fjm_main(["export", "controller", "link1", "--gains", str(_file(tmp_path, spec)), "--out", str(out),
+                         *flag]) == 0
+        header = (out / "link1_ismc_tau_controller.h").read_text()
+        labels[meets] = re.search(r"\* Design: (\w+)", header).group(1)
+        assert f"**Design: {labels[meets]}" in (out / "README.md").read_text()
+        # the library holds exactly the design's gains and nominal parameters, verified or not
+        design = design_controller(fjm_runtime.load("link1"), Design.from_dict(spec), unverified=True)
+        np.testing.assert_array_equal(_c_values(out / "link1_ismc_tau_controller.c", "link1_ismc_tau_gains_design"),
+                                      np.asarray(design.controller.gains, dtype=float))
+        np.testing.assert_array_equal(_c_values(out / "link1_ismc_tau_controller.c", "link1_ismc_tau_p_design"),
+                                      np.asarray(design.controller.p_nom, dtype=float))
+    assert labels == {False: "UNVERIFIED", True: "verified", None: "not"}, labels
+
+
+@pytest.mark.parametrize("argv,expect", [
+    (["--K", "3000"], "--K 3000: export controller does not use it"),
+    (["--param", "K=3"], "--param K=3: export controller does not use it"),
+    (["--timestep", "0.001"], "--timestep 0.001: export controller does not use it"),
+    (["--gear-ratio", "100"], "--gear-ratio 100: export controller does not use it"),
+    (["--substeps", "1e8"], f"--substeps 1e+08: expected an integer 1..{MAX_SUBSTEPS}"),
+    (["--substeps", "0"], f"--substeps 0: expected an integer 1..{MAX_SUBSTEPS}"),
+    (["--substeps", "2.5"], f"--substeps 2.5: expected an integer 1..{MAX_SUBSTEPS}"),
+    (["--substeps", "nan"], f"--substeps nan: expected an integer 1..{MAX_SUBSTEPS}"),
+    (["--name", "bad name!"], "--name 'bad name!': expected a C identifier of 1..64 characters"),
+    (["--name", "a__b"], "--name 'a__b': expected a C identifier"),
+    (["--name", "ctrl_"], "--name 'ctrl_': expected a C identifier"),
+    (["--name", "int"], "--name 'int': expected a C identifier"),
+    (["--name", "x" * 65], "expected a C identifier of 1..64 characters"),
+])
+def test_controller_flags_it_cannot_honour(tmp_path, capsys, argv, expect):
+    err = _refused(tmp_path, capsys, ["controller", "link1", "--gains", str(_file(tmp_path, LINK1)), *argv])
+    assert expect in err, err
+
+
+def test_substeps_without_prediction_and_values_the_c_cannot_hold(tmp_path, capsys):
+    no_predict = _file(tmp_path, {**LINK1, "predict": False}, "np.json")
+    err = _refused(tmp_path, capsys, ["controller", "link1", "--gains", str(no_predict), "--substeps", "5"])
+    assert f"--substeps 5: the design does not predict" in err and f"1..{MAX_SUBSTEPS}" in err, err
+    params = tmp_path / "p.toml"
+    for value in ("1e300", "1e-300"):
+        params.write_text(f"[parameters]\nK = {value}\n")
+        err = _refused(tmp_path, capsys, ["controller", "link1", "--gains", str(_file(tmp_path, LINK1)),
+                                          "--params", str(params)])
+        assert f"--params {params}: [parameters] K = {float(value):g}: expected 0 or 1e-12 <= |value| <= 1e+12" \
+            in err, err
+    nominal = _file(tmp_path, {**LINK1, "params": {"nominal": {"J_m": 1e300}}}, "nom.json")
+    err = _refused(tmp_path, capsys, ["controller", "link1", "--gains", str(nominal)])
+    assert f"--gains {nominal}: params.nominal.J_m = 1e+300: expected 0 or 1e-12" in err, err
+    huge = _file(tmp_path, {**LINK1, "gains": {**LINK1["gains"], "k_s": 1e300}}, "ks.json")
+    err = _refused(tmp_path, capsys, ["controller", "link1", "--gains", str(huge)])
+    assert f"--gains {huge}: gain k_s = 1e+300: expected 0 or 1e-12 <= |value| <= 1e+20" in err, err
+
+
+@pytest.mark.parametrize("argv", [["--gains", "g.json"], ["--unverified"], ["--substeps", "4"], ["--name", "x"],
+                                  ["--params", "p.toml"]])
+def test_mjcf_refuses_the_controller_flags(tmp_path, capsys, argv):
+    err = _refused(tmp_path, capsys, ["mjcf", "link1", *argv])
+    assert err.startswith(f"fjm: error: {argv[0]}") and "export mjcf does not use it" in err, err
+
+
+def test_accepted_edges_and_default_names():
+    """The range's ends are accepted as given; a model name that is not a C prefix gives a usable one."""
+    m = fjm_runtime.load("link1")
+    for substeps in (1, float(MAX_SUBSTEPS)):
+        assert design_controller(m, Design.from_dict(LINK1), substeps=substeps).layout.substeps == int(substeps)
+    assert design_controller(m, Design.from_dict(LINK1), name="arm_2").name == "arm_2"
+    names = {t: default_c_name(t) for t in ("my-arm_ismc", "2dof_smc", "arm__x-_ismc", "int")}
+    assert names == {"my-arm_ismc": "my_arm_ismc", "2dof_smc": "ctrl_2dof_smc", "arm__x-_ismc": "arm_x_ismc",
+                     "int": "int_ctrl"}, names
+
+
+def _shipped():
+    from importlib import resources
+    folder = resources.files("fjm_runtime.control").joinpath("designed")
+    return sorted(p.name for p in folder.iterdir() if p.name.endswith(".json"))
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("file", _shipped())
+def test_every_shipped_design_exports_and_its_step_is_the_simulators(tmp_path, file):
+    """Each shipped design (panda_hd: seven nonlinear springs, predicted through psi^-1) exports, as does
+    the same design without prediction (fjm design's default; no K_i needed); the exported step Function,
+    evaluated from the simulator's controller state at each of 20 samples, gives the run's torques to 1e-12."""
+    model_name = file.split("_ismc")[0]
+    model = fjm_runtime.load(model_name)
+    spec = Design.load(fjm_runtime.__path__[0] + f"/control/designed/{file}").as_dict()
+    for predict in (True, False):
+        design = design_controller(model, Design.from_dict({**spec, "predict": predict}))
+        files = export_controller(design, tmp_path / f"lib_{predict}")
+        assert f"{design.name}_float_ctrl_step.c" in files and f"{design.name}_controller.hpp" in files
+        step, _ = controller_functions(model, design.controller, design.layout, design.name)
+        run = Run(design, 0.02)
+        p, g = np.asarray(design.controller.p_nom), np.asarray(design.controller.gains)
+        U = np.stack([np.asarray(step(run.C[k], run.M[k], run.R[k], p, g)[0]).ravel() for k in range(run.M.shape[0])])
+        rel = relative(U, run.U)
+        print(f"{file} predict {predict}: exported step vs simulator, 20 samples: {rel:.3g}")
+        assert rel <= 1e-12
