@@ -90,7 +90,7 @@ def _link1_certificates(ctx: DemoContext, gains: Dict[tuple, object], md: List[s
             cert_l1 = certificate(m, lg.k_s, {"K": K_NOM}, param_box=box, reference_bounds=R, error_bounds=E,
                                   lam=LAM, integral=integral, beta_hat=bh, **grid)["certificate"][0]
             md.append(f"| link1 | {task} | {law} | {E} | {fmt_vec(r.k_s)} | {fmt_vec(r.certificate)} | "
-                      f"{fmt_vec(r.u_bound)} | {'yes' if r.feasible else '**no**'} | {pb.k_s:.1f} (E = {E_l1}) | "
+                      f"{fmt_vec(r.u_bound)} | {'yes' if r.feasible else '**no**'} | {pb.k_s_tight:.1f} (E = {E_l1}) | "
                       f"{cert_l1:+.1f} (k_s = {lg.k_s:.0f}) |")
         E = BOXES[(task, "adaptive")]
         ra = synthesize_adaptive_gains(m, {"K": K_NOM}, K_bounds=K_RANGE, reference_bounds=R, error_bounds=E,

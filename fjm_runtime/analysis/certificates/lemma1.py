@@ -47,14 +47,17 @@ the law that runs (on link1 it fails from lambda ~ 20):
 :func:`fjm_runtime.analysis.certificates.certify.synthesize_gains` (``fjm tune``) certifies
 gains for the implemented law.
 
-One bound, two entry points
----------------------------
-:func:`paper_bound` evaluates the bound for any one-joint model (``H`` by a grid with
-vertices along affine coordinates and local maximization, ``beta`` sampled on the same
-points); :func:`lemma1_gain` is the link1 reading on a fixed grid (the numbers of the
-figures and of ``fjm simulate``). Both take ``alpha``, ``beta`` and ``T^{-1}`` from the
-generated model (:mod:`fjm_runtime.analysis.certificates.link1`) through the same evaluator
-(:func:`mismatch_evaluator`) and the same formulas (:func:`surface_W`, :func:`lemma1_terms`).
+One evaluation, two entry points
+--------------------------------
+:func:`lemma1_on_box` is the one place Lemma 1 is evaluated: ``W`` (:func:`surface_W`), ``H`` and
+the range of ``beta``
+(:func:`~fjm_runtime.analysis.certificates.mismatch.mismatch_supremum`: ``alpha``, ``beta`` and
+``T^{-1}`` of the generated model, vertices along the coordinates where the mismatch is affine, a
+grid along the others), then eq (16) (:func:`lemma1_terms`). :func:`paper_bound` calls it for any one-joint
+model with a fine grid and local maximization; :func:`lemma1_gain` for link1
+(:mod:`fjm_runtime.analysis.certificates.link1`) on the fixed grid of :func:`alpha_mismatch_bound`, no
+refinement (the numbers of the figures and of ``fjm simulate``). Both return a :class:`Lemma1Gain`:
+``k_s`` is always the paper's eq (16), ``k_s_tight`` the value with ``rho``.
 """
 from __future__ import annotations
 
@@ -65,9 +68,9 @@ from typing import Optional
 import numpy as np
 
 from ...control.defaults import DEFAULT_SWITCHING_GAIN, PAPER_K_RANGE
-from .box import assemble, box_dims, box_maximize, check_box, classify_affine, per_joint, surface_coefficients
-from .evaluator import Evaluator, build_true_fn
+from .box import check_box, per_joint, surface_coefficients
 from .link1 import POSITIVE, link1_bounds, link1_model, link1_params
+from .mismatch import mismatch_supremum
 
 
 # ---------------------------------------------------------------------------------------------
@@ -82,7 +85,7 @@ def lemma1_terms(W: float, H: float, beta_min: float, beta_max: float, beta_hat:
 
     Returns
     -------
-    k_s_eq16 : float
+    k_s : float
         ``W + H / beta_hat + eta`` (the paper's eq 16).
     k_s_tight : float
         ``rho W + H / beta_hat + eta``.
@@ -91,15 +94,6 @@ def lemma1_terms(W: float, H: float, beta_min: float, beta_max: float, beta_hat:
     """
     rho = max(abs(1 - beta_min / beta_hat), abs(1 - beta_max / beta_hat))
     return W + H / beta_hat + eta, rho * W + H / beta_hat + eta, rho
-
-
-def mismatch_evaluator(model, p_nom) -> Evaluator:
-    """``(Y (N, 4n), P (N, npar)) -> [alpha(x; p_nom) - alpha(x; p), vec beta(x; p)]`` at ``x = T^{-1}(y; p)``.
-
-    The state the TRUE plant is in when its linearizing coordinates are ``y``;
-    ``alpha_hat`` is evaluated there with the nominal parameters, as the controller does.
-    """
-    return Evaluator(model, build_true_fn(model, np.asarray(p_nom, dtype=float)))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -145,11 +139,31 @@ def beta_hat_link1(nominal=None, bounds=None) -> float:
     return beta_bounds_link1(nominal, bounds)[2]
 
 
+def _link1_grid(n_grid: int, n_param: int, endpoints_only: bool):
+    """Grid points per box coordinate of the link1 reading: ``y1`` n_grid, ``y2..y4`` 9/5/5, parameters n_param."""
+    y_points = (n_grid, 9, 5, 5)
+    return lambda dim: y_points[dim.index] if dim.kind == "y" else (2 if endpoints_only else n_param)
+
+
+def _link1_box(nominal, bounds, n_grid: int, n_param: int, endpoints_only: Optional[bool]):
+    """``(model, p_nom (npar,), box, points)`` of the link1 reading (see :func:`alpha_mismatch_bound`)."""
+    m = link1_model()
+    names = list(m.param_names)
+    nom = link1_params(nominal or {})
+    box = {k: v for k, v in link1_bounds(nom, bounds).items() if v[0] != v[1]}
+    # K-only uncertainty with B_m = 0: the mismatch is affine in 1/K at each y (alpha_mismatch_bound's Notes),
+    # so its modulus peaks at an end of the interval and the interior K points cannot raise the supremum.
+    if endpoints_only is None:
+        endpoints_only = list(box) == ["K"] and nom.get("B_m", 0.0) == 0.0
+    return m, np.array([nom[k] for k in names]), box, _link1_grid(n_grid, n_param, endpoints_only)
+
+
 def alpha_mismatch_bound(y_box, nominal=None, bounds=None, n_grid: int = 41, n_param: int = 5,
                          endpoints_only: Optional[bool] = None) -> float:
     """``H = sup |alpha(x; p_nom) - alpha(x; p)|`` over a y-box and the parameter box (link1).
 
-    ``x = T^{-1}(y; p)`` (:func:`mismatch_evaluator`).
+    ``x = T^{-1}(y; p)``; the grid supremum of
+    :func:`~fjm_runtime.analysis.certificates.mismatch.mismatch_supremum`.
 
     Parameters
     ----------
@@ -174,42 +188,25 @@ def alpha_mismatch_bound(y_box, nominal=None, bounds=None, n_grid: int = 41, n_p
     Y = np.asarray(y_box, dtype=float)
     if Y.shape != (4,) or not np.all(np.isfinite(Y)) or np.any(Y < 0):
         raise ValueError(f"y_box = {Y.tolist()}: expected 4 finite half-widths >= 0")
-    m = link1_model()
-    names = list(m.param_names)
-    nom = link1_params(nominal or {})
-    b = link1_bounds(nom, bounds)
-    axes = [np.linspace(-Y[0], Y[0], n_grid), np.linspace(-Y[1], Y[1], 9),
-            np.linspace(-Y[2], Y[2], 5), np.linspace(-Y[3], Y[3], 5)]
-    grid = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 4)
-    uncertain = [k for k in names if b[k][0] != b[k][1]]
-    p_nom = np.array([nom[k] for k in names])
-    ev = mismatch_evaluator(m, p_nom)
-    H = 0.0
-    # K-only uncertainty with B_m = 0: the mismatch is affine in 1/K at each y (Notes), so its modulus
-    # peaks at an end of the interval and the interior K points cannot raise the supremum.
-    if endpoints_only is None:
-        endpoints_only = uncertain == ["K"] and nom.get("B_m", 0.0) == 0.0
-    for combo in product(*[np.linspace(b[k][0], b[k][1], 2 if endpoints_only else n_param) for k in uncertain]):
-        p = p_nom.copy()
-        p[[names.index(k) for k in uncertain]] = combo
-        V = ev(grid, np.repeat(p[None, :], grid.shape[0], axis=0))
-        H = max(H, float(np.max(np.abs(V[:, 0]))))
-    return H
+    m, p_nom, box, points = _link1_box(nominal, bounds, n_grid, n_param, endpoints_only)
+    return mismatch_supremum(m, p_nom, box, Y[:, None], points).H
 
 
 @dataclass
 class Lemma1Gain:
-    """Result of :func:`lemma1_gain` (see the module docstring for the formulas).
+    """Lemma 1 on a region (:func:`lemma1_gain`, :func:`paper_bound`; the module docstring has the formulas).
 
     Attributes
     ----------
     k_s : float
-        Paper eq (16) reading: ``W + H / beta_hat + eta`` (rad/s^4).
+        The paper's eq (16): ``W + H / beta_hat + eta`` (rad/s^4).
     k_s_tight : float
-        ``rho W + H / beta_hat + eta``.
+        Eq (16) with ``rho``: ``rho W + H / beta_hat + eta`` (rad/s^4).
     W, H, beta_hat, beta_min, beta_max, rho, eta : float
     y_box : ndarray, shape (4,)
         Operating region used for ``H``.
+    H_at : dict
+        Where ``|alpha_hat - alpha|`` is largest (``y`` and the parameters).
     """
 
     k_s: float
@@ -222,6 +219,7 @@ class Lemma1Gain:
     rho: float
     eta: float
     y_box: np.ndarray
+    H_at: dict
 
     def reaching_time_bound(self, s0: float, delta: float = 0.0) -> float:
         """Upper bound on the time for ``|s|`` to fall from ``|s0|`` to ``delta`` (s).
@@ -229,6 +227,42 @@ class Lemma1Gain:
         From ``s s' <= -(beta_hat / beta) eta |s| <= -(beta_hat / beta_max) eta |s|``.
         """
         return max(abs(s0) - delta, 0.0) * self.beta_max / (self.beta_hat * self.eta)
+
+
+def lemma1_on_box(model, p_nom, box, c, R, E, eta: float, points, *, beta_hat=None, refine: bool = False,
+                  seed: int = 0) -> Lemma1Gain:
+    """The one evaluation of Lemma 1: ``W``, ``H`` and the ``beta`` range on a region, then eq (16).
+
+    Parameters
+    ----------
+    model : Model
+        One joint.
+    p_nom : ndarray, shape (npar,)
+    box : dict name -> (lo, hi)
+        Validated parameter intervals with ``lo < hi``.
+    c : array_like, shape (3,)
+    R : ndarray, shape (5,)
+        Reference derivative bounds.
+    E : ndarray, shape (4,)
+        Error region.
+    eta : float
+        Reaching margin (rad/s^4).
+    points, refine, seed
+        As :func:`~fjm_runtime.analysis.certificates.mismatch.mismatch_supremum`.
+    beta_hat : float, optional
+        Default ``(beta_max + beta_min) / 2``.
+
+    Returns
+    -------
+    Lemma1Gain
+    """
+    W = surface_W(c, R, E)
+    y_box = R[:4] + E
+    mm = mismatch_supremum(model, p_nom, box, y_box[:, None], points, refine=refine, seed=seed)
+    bh = 0.5 * (mm.beta_min + mm.beta_max) if beta_hat is None else float(beta_hat)
+    k_s, k_s_tight, rho = lemma1_terms(W, mm.H, mm.beta_min, mm.beta_max, bh, eta)
+    return Lemma1Gain(k_s=k_s, k_s_tight=k_s_tight, W=W, H=mm.H, beta_hat=bh, beta_min=mm.beta_min,
+                      beta_max=mm.beta_max, rho=rho, eta=float(eta), y_box=y_box, H_at=mm.H_at)
 
 
 def lemma1_gain(c, reference_bounds, *, nominal=None, bounds=None, error_bounds=(0.0, 0.0, 0.0, 0.0),
@@ -250,6 +284,8 @@ def lemma1_gain(c, reference_bounds, *, nominal=None, bounds=None, error_bounds=
         (zeros: on the sliding surface itself; enlarge to cover the reaching phase).
     eta : float
         Reaching margin ``> 0`` (rad/s^4).
+    n_grid : int
+        Grid points along ``y1`` (the grid of :func:`alpha_mismatch_bound`, no local maximization).
 
     Returns
     -------
@@ -266,54 +302,22 @@ def lemma1_gain(c, reference_bounds, *, nominal=None, bounds=None, error_bounds=
         raise ValueError(f"error_bounds = {E.tolist()}: expected 4 finite values >= 0")
     if not (np.isfinite(eta) and eta > 0):
         raise ValueError(f"eta = {eta!r}: expected a finite value > 0")
-    nom = link1_params(nominal or {})
-    beta_min, beta_max, beta_hat, rho = beta_bounds_link1(nom, bounds)
-    W = surface_W(c, R, E)
-    y_box = R[:4] + E
-    H = alpha_mismatch_bound(y_box, nom, bounds, n_grid=n_grid)
-    k_s, k_s_tight, _ = lemma1_terms(W, H, beta_min, beta_max, beta_hat, eta)
-    return Lemma1Gain(k_s=k_s, k_s_tight=k_s_tight, W=W, H=H, beta_hat=beta_hat, beta_min=beta_min,
-                      beta_max=beta_max, rho=rho, eta=float(eta), y_box=y_box)
+    m, p_nom, box, points = _link1_box(nominal, bounds, n_grid, 5, None)
+    return lemma1_on_box(m, p_nom, box, c, R, E, eta, points)
 
 
 # ---------------------------------------------------------------------------------------------
-# any one-joint model: the bound on a box with vertices along affine coordinates
-@dataclass
-class PaperBound:
-    """Lemma 1 (eq 16 with ``rho``) in TRUE coordinates: ``k_s = rho W + H / beta_hat + eta``.
-
-    Attributes
-    ----------
-    k_s : float
-        ``rho W + H / beta_hat + eta``.
-    k_s_eq16 : float
-        ``W + H / beta_hat + eta`` (the paper's eq 16, ``rho`` replaced by 1).
-    rho, W, H, beta_hat, beta_min, beta_max, eta : float
-    H_at : dict
-        Where ``|alpha_hat - alpha|`` is largest (``y`` and the parameters).
-    """
-
-    k_s: float
-    k_s_eq16: float
-    rho: float
-    W: float
-    H: float
-    beta_hat: float
-    beta_min: float
-    beta_max: float
-    eta: float
-    H_at: dict
-
-
+# any one-joint model: the bound on a box with vertices along affine coordinates, refined
 def paper_bound(model, nominal_params=None, *, param_box, reference_bounds, error_bounds, lam=None, c=None,
-                eta: float = 10.0, beta_hat=None, n_grid: int = 41, seed: int = 0) -> PaperBound:
+                eta: float = 10.0, beta_hat=None, n_grid: int = 41, seed: int = 0) -> Lemma1Gain:
     """The paper's Lemma 1 gain evaluated on a box in TRUE coordinates (scalar models, e.g. link1).
 
     ``H = sup |alpha(x; p_nom) - alpha(x; p)|`` over ``x = T^{-1}(y; p)``, ``|y_k| <=
-    R_{k-1} + E_k`` and the parameter box (grid over the nonlinear coordinates,
-    vertices over the affine ones, then local maximization);
+    R_{k-1} + E_k`` and the parameter box (grid of ``n_grid`` points over the nonlinear
+    coordinates, vertices over the affine ones, then local maximization);
     ``beta_min/max`` over the same points; ``beta_hat = (beta_max + beta_min) / 2``
     unless given; ``rho = max |1 - beta / beta_hat|``; ``W = R_4 + c1 E2 + c2 E3 + c3 E4``.
+    The result's ``k_s_tight`` is eq (16) with ``rho``, ``k_s`` the paper's eq (16).
 
     This gain guarantees reaching for the sliding variable in TRUE coordinates,
     ``c . (T(x; p) - y_d)``, which is not the one the controller computes: see
@@ -327,53 +331,8 @@ def paper_bound(model, nominal_params=None, *, param_box, reference_bounds, erro
     cc = surface_coefficients(lam, c, False)
     R = per_joint(reference_bounds, 5, 1, "reference_bounds")[:, 0]
     E = per_joint(error_bounds, 4, 1, "error_bounds")[:, 0]
-    W = surface_W(cc, R, E)
-    Ybox = (R[:4] + E)[:, None]
-    ev = mismatch_evaluator(model, p_nom)
-    dims = box_dims(model, Ybox, p_nom, box)
-    rng = np.random.default_rng(seed)
-    classify_affine(dims, lambda Y, P: ev(Y, P)[:, :1], 1, p_nom, rng)
-    for d in dims:
-        if not d.affine:
-            d.points = n_grid
-    axes = [d.values() for d in dims]
-    pts = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, len(dims))
-    Y, P = assemble(dims, pts, 1, p_nom)
-    V = ev(Y, P)
-    dA = np.abs(V[:, 0])
-    free = [j for j, d in enumerate(dims) if not d.affine and d.lo < d.hi]
-    best, best_pt = float(np.max(dA)), pts[int(np.argmax(dA))]
-    if free:
-        lo = np.array([dims[j].lo for j in free]); hi = np.array([dims[j].hi for j in free])
-        for j0 in np.argsort(-dA)[:8]:
-            base = pts[j0].copy()
-
-            def obj(v, base=base, h=1e-7):
-                vs = np.repeat(v[None, :], 2 * len(free) + 1, axis=0)
-                for a in range(len(free)):
-                    vs[1 + 2 * a, a] = min(v[a] + h, 1.0)
-                    vs[2 + 2 * a, a] = max(v[a] - h, 0.0)
-                pt = np.repeat(base[None, :], vs.shape[0], axis=0)
-                pt[:, free] = lo + vs * (hi - lo)
-                Yv, Pv = assemble(dims, pt, 1, p_nom)
-                val = np.abs(ev(Yv, Pv)[:, 0])
-                grad = np.array([(val[1 + 2 * a] - val[2 + 2 * a]) / max(vs[1 + 2 * a, a] - vs[2 + 2 * a, a], 1e-300)
-                                 for a in range(len(free))])
-                return float(val[0]), grad
-
-            vb = box_maximize(obj, (base[free] - lo) / (hi - lo), maxiter=300, tol=1e-14)
-            val, _ = obj(vb)
-            if val > best:
-                best = val
-                best_pt = base.copy(); best_pt[free] = lo + vb * (hi - lo)
-    beta = V[:, 1]
-    b_min, b_max = float(np.min(beta)), float(np.max(beta))
-    bh = 0.5 * (b_min + b_max) if beta_hat is None else float(beta_hat)
-    k_eq16, k_tight, rho = lemma1_terms(W, best, b_min, b_max, bh, eta)
-    Yb, Pb = assemble(dims, best_pt[None, :], 1, p_nom)
-    at = {"y": Yb[0].tolist(), "params": {d.name: float(best_pt[j]) for j, d in enumerate(dims) if d.kind == "p"}}
-    return PaperBound(k_s=k_tight, k_s_eq16=k_eq16, rho=rho, W=W, H=best,
-                      beta_hat=bh, beta_min=b_min, beta_max=b_max, eta=float(eta), H_at=at)
+    return lemma1_on_box(model, p_nom, box, cc, R, E, eta, lambda dim: n_grid, beta_hat=beta_hat, refine=True,
+                         seed=seed)
 
 
 # ---------------------------------------------------------------------------------------------

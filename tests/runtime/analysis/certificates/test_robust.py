@@ -89,3 +89,19 @@ def test_closed_loop_eigenvalues_exact_parameters_give_designed_poles(link1):
     assert np.real(np.poly(ev)) == pytest.approx(np.poly([-8, -8, -8, -200]), rel=1e-5)
     # wrong stiffness moves the poles (and the chains can go unstable, see the demo)
     assert closed_loop_eigenvalues(link1, fl, {"K": 100.0})[0].real > -8.0 + 0.5
+
+
+def test_lemma1_gain_and_paper_bound_are_one_evaluation(link1):
+    """Both entry points give a Lemma1Gain from lemma1_on_box: k_s is eq (16), k_s_tight = k_s - (1 - rho) W.
+    On the tracking box the supremum sits at vertices, so link1's fixed grid and the refined grid agree."""
+    from fjm_runtime.analysis.certificates.lemma1 import paper_bound
+    c, R, E = coefficients_from_pole(8.0), [0.5, 0.5, 0.5, 0.5, 0.5], (0.05, 0.5, 0.5, 0.5)
+    g = lemma1_gain(c, R, nominal={"K": 150.0}, bounds={"K": (100.0, 200.0)}, error_bounds=E)
+    p = paper_bound(link1, {"K": 150.0}, param_box={"K": (100.0, 200.0)}, reference_bounds=R, error_bounds=E,
+                    lam=8.0)
+    for r in (g, p):
+        assert r.k_s == pytest.approx(r.W + r.H / r.beta_hat + r.eta, rel=1e-14)
+        assert r.k_s - r.k_s_tight == pytest.approx((1.0 - r.rho) * r.W, rel=1e-12)
+    assert (p.k_s, p.k_s_tight, p.H, p.beta_hat) == pytest.approx((g.k_s, g.k_s_tight, g.H, g.beta_hat), rel=1e-12)
+    # the largest mismatch is at the ends of the stiffness interval (affine in 1/K)
+    assert g.H_at["params"]["K"] in (100.0, 200.0)
