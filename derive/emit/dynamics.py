@@ -174,6 +174,61 @@ def _kernel(model, route: str) -> ca.Function:
                        ["q", "dq", "s", "ds", "p"], ["y3", "y4", "w"])
 
 
+#: Routes of :func:`inverse_dynamics_jets`, each checked against the others by the tests.
+JET_ROUTES = ("jets", "ad", "symbolic")
+
+
+def inverse_dynamics_jets(model, route: str = None) -> ca.Function:
+    """``<model>_id_jets(q, dq, a, da, dda, p) -> (tau, dtau, ddtau)``: the inverse dynamics and two time derivatives.
+
+    Along a joint trajectory whose derivatives at the instant are ``(q, dq, a, da, dda)``,
+    ``tau = D(q) a + h(q, dq)``, ``dtau = D' a + D da + h'``, ``ddtau = D'' a + 2 D' da + D dda + h''``
+    (all SX, CSE'd). The same three routes as :func:`build_kernel`, by what the model has
+    (``route`` forces one):
+
+    * ``"jets"`` (``model.bodies``): the RNEA's Taylor recursion (:func:`derive.emit.rnea_jets.rnea_jets`)
+      at ``a_rate = da``, whose second derivative takes ``dda = 0``; ``D dda`` is added by one RNEA at
+      zero velocity and gravity (the composite-inertia product, no ``D`` formed);
+    * ``"ad"``: forward-mode AD of the programme, :func:`time_derivatives` with ``v = [dq; a; da]``,
+      ``w = [a; da; dda]``, exact;
+    * ``"symbolic"``: the SymPy ``R1 = D' a + h'``, ``W = D'' a + 2 D' da + h''``
+      (:func:`derive.core.torque.inverse_dynamics_derivatives` at ``Y3 = a``, ``Y4 = da``) plus ``D da``,
+      ``D dda``.
+    """
+    route = route or ("jets" if model.bodies is not None else
+                      "ad" if model.inverse_dynamics is not None else "symbolic")
+    if route not in JET_ROUTES:
+        raise ValueError(f"route = {route!r}; expected one of {', '.join(JET_ROUTES)}")
+    n = model.n
+    q, dq, a, da, dda = (ca.SX.sym(nm, n) for nm in ("q", "dq", "a", "da", "dda"))
+    p = ca.SX.sym("p", len(model.params))
+    if route == "jets":
+        bodies = _body_numbers(model, _converter(model, q, dq, p))
+        g0 = p[list(model.param_names).index("g0")]
+        tau, dtau, ddtau = rnea_jets(bodies, q, dq, a, da, g0, 2)
+        ddtau = ddtau + rnea_jets(bodies, q, [0.0] * n, dda, None, 0.0, 0)[0]
+    elif route == "ad":
+        d1, d2 = time_derivatives(model)
+        z, v = ca.vertcat(q, dq, a), ca.vertcat(dq, a, da)
+        tau = programme(model)(q, dq, a, p)[2]
+        dtau, ddtau = d1(z, v, p), d2(z, v, ca.vertcat(a, da, dda), p)
+    else:
+        from ..core.torque import inverse_dynamics_derivatives
+        Y3 = tuple(sp.Symbol(f"y3_{i + 1}", real=True) for i in range(n))
+        Y4 = tuple(sp.Symbol(f"y4_{i + 1}", real=True) for i in range(n))
+        R1, W = inverse_dynamics_derivatives(model, Y3, Y4)
+        D, _, tau = programme(model)(q, dq, a, p)
+        conv = _converter(model, q, dq, p)
+        for i in range(n):
+            conv.bind(Y3[i], a[i])
+            conv.bind(Y4[i], da[i])
+        dtau = ca.vec(conv(R1)) + ca.mtimes(D, da)
+        ddtau = ca.vec(conv(W)) + ca.mtimes(D, dda)
+    outs = ca.cse([tau, dtau, ddtau])
+    return ca.Function(f"{model.name}_id_jets", [q, dq, a, da, dda, p], outs,
+                       ["q", "dq", "a", "da", "dda", "p"], ["tau", "dtau", "ddtau"])
+
+
 def elastic_diagonals(model, p) -> Tuple[object, object, object]:
     """``K``, ``J_m``, ``B_m`` (column vectors) as functions of ``p`` (SX or MX)."""
     sp_syms = list(model.param_symbols)

@@ -14,7 +14,8 @@ so ``fjm_runtime.load("link1_hd")`` gives the usual :class:`Model`:
   the same arithmetic around this model's cores). Not emitted: ``adaptive`` (it estimates a linear
   ``K``) and ``pdg`` (its motor set-point needs ``psi^-1(G(q_d))``);
 * ``spring(phi, p) -> (psi, dpsi, ddpsi)`` and ``spring_inverse(tau_J, p) -> phi_J`` (the inverse map
-  the torque laws use), listed under ``springs`` in the manifest.
+  the torque laws use), listed under ``springs`` in the manifest;
+* ``feedforward(r, p)``, the flatness feedforward through ``psi^-1`` (:mod:`derive.emit.feedforward`).
 
 No timestamps or paths: the bytes depend on the model and the tool versions only.
 """
@@ -40,7 +41,8 @@ from .spring_chain import (build_chain_functions, c_functions as chain_c_functio
                            inverse_sx_function, spring_sx_function)
 from .sx import SympyToSX
 from .torque import TORQUE_QUANTITIES
-from .writer import HEADER, argument_layout, argument_lines, comment_block, generate_c, tool_versions
+from .writer import (HEADER, argument_layout, argument_lines, comment_block, generate_c, tool_versions,
+                     write_feedforward)
 
 __all__ = ["EMITTED_KINDS", "build_spring_functions", "write_spring_model"]
 
@@ -182,11 +184,13 @@ def write_spring_model(lin: Linearization, outdir: Path,
         text = comment_block(lines + [f"operations: {ops[name]}"], "# ") + fn.serialize() + "\n"
         (outdir / f"{name}.casadi").write_text(text)
         sizes[name] = len(text.encode())
+    ff_fn, ops["feedforward"], ff_entry = write_feedforward(
+        m, outdir, argument_lines(lin), versions, {k: fns[k] for k in ("spring", "spring_inverse")})
     progress("C sources")
-    c_fns = everything
+    c_fns = {**everything, "feedforward": ff_fn}
     if chain:  # the C file's twins call the kernel, spring and friction Functions instead of inlining them
         c_fns = {**everything, **chain_c_functions(m, parts),
-                 **build_spring_laws(lin, fns, chain_cores(m, parts, ca.MX))}
+                 **build_spring_laws(lin, fns, chain_cores(m, parts, ca.MX)), "feedforward": ff_fn}
     sources = _write_c(lin, outdir, c_fns, ops, versions)
 
     def entry(name, inputs, **extra):
@@ -223,6 +227,7 @@ def write_spring_model(lin: Linearization, outdir: Path,
             "functions": {name: entry(name, inputs) for name, inputs in
                           (("spring", ["phi", "p"]), ("spring_inverse", ["tau_J", "p"]))},
         },
+        "feedforward": ff_entry,
         "c_sources": {fname: len((outdir / fname).read_bytes()) for fname in sorted(sources)},
         "tools": versions,
         "derivation_seconds": "not stored here (would break byte-identity); see build/derive-timings.json",

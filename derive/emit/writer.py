@@ -34,6 +34,7 @@ from ..core.linearize import Linearization
 from .chain_json import write_chain_json
 from .controls import ALL_KINDS, build_controls, layout_lines, manifest_entry
 from .complete import COMPLETE_QUANTITIES, build_complete_functions
+from .feedforward import FEEDFORWARD_MEANING, build_feedforward, manifest_entry as feedforward_entry
 from .brackets import bracket_twin
 from .dynamics import beta_twin, energy_twin, f_twin, mx_function, state_bodies
 from .functions import QUANTITIES, build_model_functions, operation_count
@@ -131,6 +132,25 @@ def _write_casadi_files(lin: Linearization, outdir: Path, functions, controls, o
         write_casadi(name, fn, control_meaning[name], argument_lines(lin) + layout_lines(m.n),
                      control_ops[name])
     return sizes
+
+
+def write_feedforward(model, outdir: Path, lines: List[str], versions: Dict[str, str],
+                      springs: Optional[Dict[str, ca.Function]] = None):
+    """Build ``<model>_feedforward`` (:mod:`derive.emit.feedforward`) and write ``feedforward.casadi``.
+
+    ``lines``: the argument comment lines of the model's other ``.casadi`` files; ``springs``: passed on
+    to :func:`derive.emit.feedforward.build_feedforward`. Returns ``(fn, operations, manifest entry)``.
+    """
+    fn = build_feedforward(model, springs)
+    n_ops = operation_count(fn)
+    text = comment_block(
+        [HEADER, f"model: {model.name}; function: {fn.name()} -- {FEEDFORWARD_MEANING}",
+         f"tools: casadi {versions['casadi']}, sympy {versions['sympy']}", *lines,
+         f"{fn.name()}(r, p) -> (tau_Jd, theta_d, dtheta_d, ddtheta_d, u_ff), each (n); p NOMINAL",
+         f"operations: {n_ops}"], "# ",
+    ) + fn.serialize() + "\n"
+    (outdir / "feedforward.casadi").write_text(text)
+    return fn, n_ops, feedforward_entry(model.name, fn, n_ops, len(text.encode()))
 
 
 def _build_laws(lin: Linearization, functions, kernel: ca.Function) -> Dict[str, ca.Function]:
@@ -285,8 +305,12 @@ def write_model(lin: Linearization, outdir: Path,
                    for name, fn in controls.items()}
     progress(".casadi files")
     sizes = _write_casadi_files(lin, outdir, functions, controls, ops, control_ops, versions, quantities)
+    ff = None if complete else write_feedforward(m, outdir, argument_lines(lin), versions)
     progress("C sources")
     c_fns = {**functions, **controls} if complete else c_functions(lin, functions, controls, kernel)
+    if ff is not None:
+        c_fns["feedforward"] = ff[0]
+        control_ops["feedforward"] = ff[1]
     sources = _write_c_sources(lin, outdir, c_fns, ops, control_ops, versions)
     drives = drive_table(m)
     manifest = {
@@ -314,13 +338,15 @@ def write_model(lin: Linearization, outdir: Path,
         },
         **({} if complete else _control_entries(m, controls, control_ops, sizes)),
         **({} if complete else _torque_entries(m, controls, control_ops, sizes)),
+        **({} if ff is None else {"feedforward": ff[2]}),
         "c_sources": {fname: len((outdir / fname).read_bytes()) for fname in sorted(sources)},
         "tools": versions,
         "derivation_seconds": "not stored here (would break byte-identity); see build/derive-timings.json",
     }
     progress("report")
     render = render_complete_report if complete else render_report
-    (outdir / "REPORT.md").write_text(render(lin, functions, ops, HEADER))
+    listed = functions if ff is None else {**functions, "feedforward": ff[0]}
+    (outdir / "REPORT.md").write_text(render(lin, listed, {**ops, **control_ops}, HEADER))
     write_chain_json(m, outdir)  # the rigid-body tree for exporters (MJCF), if the model has one
     # The header must be the first line of the file: join it to the opening brace.
     lines = json.dumps(manifest, indent=2).split("\n")

@@ -405,3 +405,21 @@ def test_control_laws_c_equals_casadi(c_builds, model, record_property):
     assert not bad, f"{model}: C control law differs from CasADi by more than {C_RTOL}: {bad}"
     bad = {q: d for q, d in worst_f.items() if not d <= FLOAT_RTOL}
     assert not bad, f"{model}: float control law deviates by more than {FLOAT_RTOL}: {bad}"
+
+
+@pytest.mark.parametrize("model", _params(CONTROL_MODELS))
+def test_feedforward_c_equals_casadi(c_builds, model, record_property):
+    """``<model>_feedforward(r, p)`` in C equals its CasADi Function (every output) on random references."""
+    m = fjm_runtime.load(model)
+    fn = m.feedforward_function
+    cf = CFunction(ctypes.CDLL(str(c_builds[(model, "double")].lib)), f"{model}_feedforward", ctypes.c_double)
+    assert (cf.n_in, cf.n_out) == (fn.n_in(), fn.n_out()) == (2, 5)
+    rng = np.random.default_rng(41 + MODELS.index(model))
+    worst = 0.0
+    for _, p in random_points(m, rng, N_STATES):
+        r = rng.uniform(-1, 1, 5 * m.n)
+        for ref, got in zip(fn(r, p), cf(r, p)):
+            assert np.all(np.isfinite(got))
+            worst = max(worst, rel_dev(got, ref.full()))
+    record_property("feedforward_c_vs_casadi_rel_dev", worst)
+    assert worst <= C_RTOL, f"{model}_feedforward: C differs from CasADi by {worst:.2e} (relative)"
