@@ -147,6 +147,9 @@ class FlexibleJointModel:
     robot_facts : dict or None
         The manifest entries ``limits`` and ``task`` a model file states (over its URDF's limits;
         :mod:`derive.model_file.robot_facts`). None: the model states neither.
+    urdf_file : str or None
+        URDF-built models: the URDF file read (absolute path, build time only: chain.json re-reads it;
+        never written). None: a built-in formula, or the URDF is found from ``source["urdf"]``.
     """
 
     name: str
@@ -174,6 +177,7 @@ class FlexibleJointModel:
     springs: Optional[Tuple[object, ...]] = None  # nonlinear springs: derive.core.spring.CubicSpring per joint
     frictions: Optional[Tuple[object, ...]] = None  # motor friction: derive.core.friction.MotorFriction per joint
     robot_facts: Optional[Dict[str, object]] = None
+    urdf_file: Optional[str] = None
 
     @property
     def state(self) -> Tuple[sp.Symbol, ...]:

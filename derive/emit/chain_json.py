@@ -29,7 +29,8 @@ in the runtime parameters (``param_names``), e.g. ``-l1`` or
 matrices of :mod:`derive.spatial.chain` (the same numbers the derivation baked).
 
 Models: URDF arms (their ``source`` URDF, re-read and checked against its
-sha256; payload ``m_load, x_load, y_load, z_load`` as a point-mass body on the
+sha256, wherever the model file is: ``urdf`` names it relative to the repository for a built-in model,
+else as the model file gives it, relative to the model file; payload ``m_load, x_load, y_load, z_load`` as a point-mass body on the
 tip link; links with symbolic inertials name their parameters), ``planar<n>``
 (every m, l, r, I is a parameter; gravity along -y, q = 0 hangs down) and
 ``link1`` (mass M at distance L, inertia ``J_l - M L^2`` about its centre,
@@ -141,12 +142,14 @@ def _urdf_bodies(desc: ChainDescription, symbolic: Sequence[str]) -> List[dict]:
     return bodies
 
 
-def _urdf(m: FlexibleJointModel) -> Optional[dict]:
+def _urdf(m: FlexibleJointModel) -> dict:
     from ..spatial.urdf import load_urdf  # build time only; the formula models do not need the URDF reader
     src = m.source
-    path = _REPO / str(src["urdf"])
+    # the URDF the model was built from (a model file anywhere), else the repository's (built-in models)
+    path = Path(m.urdf_file) if getattr(m, "urdf_file", None) else _REPO / str(src["urdf"])
     if not path.is_file() or hashlib.sha256(path.read_bytes()).hexdigest() != src.get("sha256"):
-        return None  # a model file outside the repository: its URDF is not at a known place
+        raise ValueError(f"model {m.name}: URDF {path} is missing or changed since it was read (sha256 "
+                         f"{src.get('sha256')}); expected the file the model was derived from")
     chain = load_urdf(path, str(src["base"]), src.get("tips") or str(src["tip"]), source=str(src["urdf"]))
     names = set(m.param_names)
     symbolic = sorted(p[2:] for p in names if p.startswith("m_") and p != "m_load" and f"izz_{p[2:]}" in names)

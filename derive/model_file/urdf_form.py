@@ -113,6 +113,7 @@ class UrdfModelSpec:
     springs: Optional[Tuple[SpringSpec, ...]] = None  # [spring.*] per joint (derive.model_file.drive_tables)
     frictions: Optional[Tuple[Optional[Dict[str, float]], ...]] = None  # [friction.*] per joint
     facts: Optional[Dict[str, object]] = None  # manifest "limits" and "task" (derive.model_file.robot_facts)
+    urdf_given: str = ""  # [model] urdf as the model file writes it (relative to the model file)
 
     def build(self) -> FlexibleJointModel:
         """The symbolic model (:func:`derive.spatial.spatial.make_spatial` of the URDF chain or tree)."""
@@ -137,12 +138,12 @@ class UrdfModelSpec:
             f"of {self.base}.")
         model = make_spatial(chain.description, self.name, params, description, symbolic=self.symbolic,
                              rotors=rotors, reduced_model=self.reduced_model)
-        src = {"urdf": _repo_relative(self.urdf), "sha256": chain.sha256, "base": self.base,
+        src = {"urdf": _urdf_label(self.urdf, self.urdf_given), "sha256": chain.sha256, "base": self.base,
                **({"tips": list(self.tips)} if self.tips else {"tip": self.tip}), "joints": list(chain.joints),
                "limits": urdf_limits(chain)}
         if chain.ignored:
             src["ignored_links"] = list(chain.ignored)
-        model = replace(model, source=src)
+        model = replace(model, source=src, urdf_file=str(self.urdf))
         if self.springs is not None or self.frictions is not None:
             from ..core.spring import with_drives
             springs = self.springs or tuple(SpringSpec("linear", {}, 3.141592653589793) for _ in range(n))
@@ -169,6 +170,16 @@ def urdf_limits(chain: UrdfChain) -> Dict[str, object]:
     out: Dict[str, object] = {key: [getattr(lim, key) for lim in chain.limits] for key in LIMIT_UNITS}
     out["unit"] = dict(LIMIT_UNITS)
     return out
+
+
+def _urdf_label(path: Path, given: str) -> str:
+    """How the manifest and chain.json name the URDF: relative to the repository root for a built-in
+    model, else as the model file gives it (relative to the model file; its file name if not given)."""
+    resolved = Path(path).resolve()
+    try:
+        return resolved.relative_to(REPO).as_posix()
+    except ValueError:
+        return given or resolved.name
 
 
 def _repo_relative(path: Path) -> str:
@@ -395,7 +406,7 @@ def parse_urdf_form(data: dict, chk: Checker, base_dir: Path, builtin: bool) -> 
                          tip=model.get("tip", ""), tips=tuple(model.get("tips", ())), joints=names,
                          K=tuple(per["K"]), Jm=tuple(per["Jm"]), Bm=tuple(per["Bm"]), g0=g0,
                          description=model.get("description"), notes=notes, source=chk.source,
-                         payload=payload, symbolic=symbolic,
+                         payload=payload, symbolic=symbolic, urdf_given=str(model["urdf"]),
                          springs=None if springs is None else tuple(springs),
                          frictions=None if frictions is None else tuple(frictions),
                          facts=robot_facts(data, chk, names, urdf_limits(chain)))

@@ -95,7 +95,7 @@ def load_chain(model) -> dict:
     if not path.is_file():
         raise FjmValueError(f"model {model.name}: no {CHAIN_FILE} in {model.directory} (expected a model "
                             "derived by this fjm with a rigid-body tree: link1, planar<n> or a URDF arm; "
-                            "re-run make derive)")
+                            "re-run make derive, or fjm derive --model-file FILE --out DIR for a model file)")
     return json.loads(path.read_text())
 
 
