@@ -60,7 +60,7 @@ def machine() -> dict:
     except OSError:
         info["cpu_model"] = platform.processor()
     try:
-        from fjm_runtime.batch.runner import vector_isa
+        from fjm_runtime.batch.simd import vector_isa
         info["simd_isa"] = vector_isa()[0]
     except Exception:  # noqa: BLE001 - informative only
         info["simd_isa"] = "unknown"

@@ -28,7 +28,8 @@ from fjm_runtime.control.laws import coefficients_from_pole
 from fjm_runtime.control.references import Sinusoid
 from fjm_runtime.sim.compiled import sampled_loop_runner
 from fjm_runtime.sim.metrics import metrics_from_sums
-from fjm_runtime.sim.sample_step import initial_step_state, make_layout
+from fjm_runtime.sim.sample_step import initial_step_state
+from fjm_runtime.sim.step_layout import make_layout
 from fjm_runtime.sim.sensor import SensorModel
 
 from .ccutil import compile_object, link_shared

@@ -89,7 +89,8 @@ def bench_closed_loop(work: Path, reps: int, slow_reps: int, checks: list) -> di
 
 def bench_batch(reps: int, slow_reps: int, checks: list, n_runs: int = 1000) -> dict:
     import warnings
-    from fjm_runtime.batch.runner import METRIC_NAMES, SimdFallbackWarning, simulate_batch, vector_isa
+    from fjm_runtime.batch.runner import METRIC_NAMES, SimdFallbackWarning, simulate_batch
+    from fjm_runtime.batch.simd import vector_isa
     from .closed_loop import link1_case, numpy_batch
     case = link1_case()
     from fjm_runtime.control.defaults import PAPER_K_RANGE

@@ -19,7 +19,7 @@ from fjm_runtime.batch.runner import simulate_batch
 from fjm_runtime.control.design import Design
 from fjm_runtime.control.factory import make_controller
 from fjm_runtime.experiments import panda as task
-from fjm_runtime.sim.sample_step import stiffness_indices
+from fjm_runtime.sim.step_layout import stiffness_indices
 from fjm_runtime.sim.sensor import SensorModel
 
 TARGETS = {"worst_rms": 2e-3, "worst_time_at_limit": 0.02, "worst_jitter_j1_4": 3.0}

@@ -51,8 +51,8 @@ def casadi_map_peer(m, ctrl, ref, P, sensor, subs, threads, duration, x0, seeds)
     the former peer): each run's parameters are repeated N times.
     """
     import casadi as ca
-    from fjm_runtime.sim.sample_step import initial_measurement, initial_step_state, make_layout, \
-        sample_step_function
+    from fjm_runtime.sim.sample_step import initial_measurement, initial_step_state, sample_step_function
+    from fjm_runtime.sim.step_layout import make_layout
     from fjm_runtime.sim.sensor import noise_array
     n, B = int(m.n), P.shape[0]
     L = make_layout(m, ctrl, DT, subs, sensor, DELAY, False)

@@ -40,7 +40,7 @@ def _panda(sensing: str = "state"):
 
 def _true(m, factor: float) -> np.ndarray:
     """The TRUE parameters: the defaults with every ``K_i`` times ``factor``, shape (n_params,)."""
-    from fjm_runtime.sim.sample_step import stiffness_indices
+    from fjm_runtime.sim.step_layout import stiffness_indices
     p = np.array(m.params_array({}), dtype=float)
     p[stiffness_indices(m)[0]] *= factor
     return p
@@ -49,7 +49,7 @@ def _true(m, factor: float) -> np.ndarray:
 def _x0(name: str, m, ref, p_true):
     if name != "panda":
         return None
-    from fjm_runtime.experiments.panda import rest_state
+    from fjm_runtime.sim.rest import rest_state
     return rest_state(m, np.asarray(ref(0.0))[0], p_true)
 
 

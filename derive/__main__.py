@@ -240,7 +240,7 @@ def _cost_options(ap: argparse.ArgumentParser) -> None:
 
 
 def _parser(prog: str) -> argparse.ArgumentParser:
-    from .registry import MODEL_NAMES
+    from .core.model_base import MODEL_NAMES
 
     ap = argparse.ArgumentParser(prog=prog, description=__doc__.split("\n\n")[0])
     ap.add_argument("--models", nargs="+", metavar="MODEL",
@@ -296,7 +296,8 @@ def _model_file_specs(ap: argparse.ArgumentParser, args) -> Optional[Dict[str, o
     if args.out is None:
         ap.error("--model-file needs --out DIR (user models are not written into generated/)")
     try:
-        from .model_file import ModelFileError, load_model_file
+        from .model_file import load_model_file
+        from .model_file.schema import ModelFileError
     except ModuleNotFoundError as exc:  # Python < 3.11 without tomli
         ap.error(f"--model-file needs a TOML parser ({exc.name} is missing): pip install '.[derive]'")
     for path in args.model_file:
@@ -383,7 +384,7 @@ def _write(out: Path, models: List[str], builders, timings_file: Optional[Path],
 
 def _resolve_models(ap: argparse.ArgumentParser, args, specs) -> List[str]:
     """The models to derive (``--models``, then the model files; default: all built-in) and ``args.out``."""
-    from .registry import MODEL_NAMES
+    from .core.model_base import MODEL_NAMES
 
     if specs:
         args.models = (args.models or []) + list(specs)

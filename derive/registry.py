@@ -14,11 +14,11 @@ from __future__ import annotations
 import re
 from pathlib import Path
 
-from .core.model_base import COMPLETE_NAMES, MODEL_NAMES, SPATIAL_NAMES, FlexibleJointModel
+from .core.model_base import MODEL_NAMES, SPATIAL_NAMES, FlexibleJointModel
 from .planar.planar import make_link1, make_link1_complete, make_planar
 from .core.rotors import Rotors
 
-__all__ = ["MODEL_NAMES", "SPATIAL_NAMES", "COMPLETE_NAMES", "ROBOTS", "build", "PLANAR2_COMPLETE_ROTORS"]
+__all__ = ["ROBOTS", "build", "PLANAR2_COMPLETE_ROTORS"]
 
 #: Rotors of ``planar2_complete``: gear ratio 10 (with planar2's J_m = 2 kg m^2: I_a = 0.02 kg m^2,
 #: S_12 = 0.2 kg m^2, next to link inertias ~1 kg m^2), massless, no transverse inertia (planar motion).

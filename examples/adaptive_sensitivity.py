@@ -23,7 +23,8 @@ import fjm_runtime as fjm
 from fjm_runtime.control.factory import make_controller
 from fjm_runtime.experiments.settings import Design, K_BOUNDS, K_NOM, LAM
 from fjm_runtime.control.references import Sinusoid
-from fjm_runtime.sim.simulate import SimulationDivergedError, simulate
+from fjm_runtime.sim.simulate import simulate
+from fjm_runtime.sim.step import SimulationDivergedError
 
 
 class NoisyMeasurements:

@@ -45,14 +45,11 @@ from .lie import DirectionalDerivative, ad_iterates, lie_bracket, lie_derivative
 from .linearize import Linearization
 from .model_base import FlexibleJointModel, Param, state_symbols
 from .program import Program
-from .spring_laws import (LAW_COEFFICIENTS, SPRING_KINDS, SPRING_PARAMETERS, CubicSpring, LinearSpring,
-                          SpringError, ThreeSegmentSpring, spring_functions)
+from .spring_laws import LAW_COEFFICIENTS, SPRING_KINDS, SPRING_PARAMETERS, CubicSpring, spring_functions
 from .torque import inverse_dynamics_derivatives
 
-__all__ = ["CubicSpring", "LinearSpring", "ThreeSegmentSpring", "SpringError", "spring_functions", "check_spring",
-           "make_link1_hd",
-           "with_drive", "with_drives", "drive_parameter",
-           "linearize_spring", "motor_friction", "newton_inverse", "NEWTON_STEPS", "LINK1_HD_RANGE"]
+__all__ = ["check_spring", "make_link1_hd", "with_drive", "with_drives", "drive_parameter", "linearize_spring",
+           "motor_friction", "newton_inverse", "NEWTON_STEPS", "LINK1_HD_RANGE"]
 
 #: Declared deflection range of ``link1_hd``, rad: ``|phi| <= LINK1_HD_RANGE``.
 LINK1_HD_RANGE = 0.25

@@ -60,13 +60,11 @@ if sys.version_info >= (3, 11):
 else:  # pragma: no cover - exercised on Python < 3.11 only
     import tomli as tomllib
 
-from .chain_form import MAX_LINKS, SI_UNITS, ModelSpec, parse_chain_form
+from .chain_form import parse_chain_form
 from .schema import Checker, ModelFileError
-from .toml_keys import locate_keys
-from .urdf_form import UrdfModelSpec, parse_urdf_form
+from .urdf_form import parse_urdf_form
 
-__all__ = ["ModelFileError", "ModelSpec", "load_model_file", "parse_model_text", "locate_keys",
-           "SI_UNITS", "MAX_LINKS", "UrdfModelSpec"]
+__all__ = ["load_model_file", "parse_model_text"]
 
 Path_ = Union[str, Path]
 

@@ -22,9 +22,8 @@ import numpy as np
 
 from ..sim.sample_step import check_loop_settings
 from .scalar import threads_arg
-from .simd import vector_isa
 
-__all__ = ["METRIC_NAMES", "PATHS", "BatchResult", "SimdFallbackWarning", "simulate_batch", "vector_isa"]
+__all__ = ["METRIC_NAMES", "PATHS", "BatchResult", "SimdFallbackWarning", "simulate_batch"]
 
 METRIC_NAMES = ("final_error", "rms_error", "rms_error_second_half", "max_abs_u",
                 "reaching_time", "total_variation_u")

@@ -29,7 +29,8 @@ import casadi as ca
 import numpy as np
 
 from ..control.laws import SlidingModeController
-from ..sim.sample_step import StepLayout, sample_step_function
+from ..sim.sample_step import sample_step_function
+from ..sim.step_layout import StepLayout
 
 __all__ = ["AccLayout", "GainInput", "jitter_half_width", "sampled_metric_step"]
 

@@ -13,7 +13,8 @@ import numpy as np
 from ..ccache import DEFAULT_FLAGS
 from ..control.laws import SlidingModeController
 from ..sim.metrics import metrics_from_sums
-from ..sim.sample_step import check_loop_settings, initial_measurement, initial_step_state, make_layout
+from ..sim.sample_step import check_loop_settings, initial_measurement, initial_step_state
+from ..sim.step_layout import make_layout
 from ..sim.sensor import SensorModel, noise_slots
 from ..sim.substeps import resolve_substeps
 from ..validation import FjmValueError

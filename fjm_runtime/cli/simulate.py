@@ -24,7 +24,8 @@ from ..control.references import REFERENCE_KINDS, make_reference
 from ..drives import linear_stiffness_indices
 from ..sim.metrics import peak_torque, rms_second_half, time_at_limit, time_at_rate_limit, torque_jitter
 from ..sim.sensor import PRESETS, SensorModel, sensor_from_spec
-from ..sim.simulate import SimulationDivergedError, simulate, stderr_progress
+from ..sim.simulate import simulate, stderr_progress
+from ..sim.step import SimulationDivergedError
 from ..validation import FjmValueError
 from .common import check_output_file, finite_or_note, parse_assignments
 from ..control.design import Design
@@ -129,7 +130,7 @@ def _scales(text: Optional[str], n: int, flag: str) -> Optional[np.ndarray]:
 
 
 def _true_params(m, args, nominal) -> Dict[str, float]:
-    from ..sim.sample_step import stiffness_indices
+    from ..sim.step_layout import stiffness_indices
     true = parse_assignments(args.param, "--param")
     if args.K is not None:
         for i in linear_stiffness_indices(m, "--K"):
@@ -379,7 +380,8 @@ def run(args) -> int:
 
 def _check_size(m, args, ctrl, ref, x0, true, sensor, dt) -> None:
     """Refuse, before allocating, a run whose substeps or memory are out of reach (:func:`check_run_size`)."""
-    from ..sim.sample_step import check_loop_settings, make_layout
+    from ..sim.sample_step import check_loop_settings
+    from ..sim.step_layout import make_layout
     from ..sim.substeps import SAFETY, STEP_PER_RADIAN, fastest_mode
     sensor, delay = check_loop_settings(sensor, args.delay_samples, args.predict)
     if args.substeps is not None and (isinstance(args.substeps, bool) or args.substeps < 1):

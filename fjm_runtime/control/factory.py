@@ -14,15 +14,11 @@ from dataclasses import dataclass, field
 from typing import Callable, Dict, Mapping, Tuple
 
 from .adaptive import make_adaptive
-from .defaults import (DEFAULT_DELTA, DEFAULT_FILTER_RATE, DEFAULT_LAYER_RATE, DEFAULT_LS_GAIN,  # noqa: F401
-                       default_delta, default_K_bounds)
 from .laws import SlidingModeController
 from .pdg import MotorPDGravityController
-from .sensing import SENSING_KINDS, torque_measurement, torque_measurement_symbolic  # noqa: F401
+from .sensing import SENSING_KINDS
 
-__all__ = ["CONTROLLER_KINDS", "LAWS", "Law", "REGULATION_KINDS", "SENSING_KINDS", "TORQUE_SENSED_KINDS",
-           "DEFAULT_DELTA", "DEFAULT_FILTER_RATE", "DEFAULT_LAYER_RATE", "DEFAULT_LS_GAIN", "default_K_bounds", "default_delta",
-           "make_controller", "torque_measurement", "torque_measurement_symbolic"]
+__all__ = ["CONTROLLER_KINDS", "LAWS", "Law", "REGULATION_KINDS", "TORQUE_SENSED_KINDS", "make_controller"]
 
 
 @dataclass(frozen=True)

@@ -28,7 +28,8 @@ from ..control.references import Reference
 from ..drives import role_names
 from ..sim.rest import rest_state
 from ..sim.sensor import SensorModel
-from ..sim.simulate import SimulationDivergedError, simulate
+from ..sim.simulate import simulate
+from ..sim.step import SimulationDivergedError
 from .report import diverged_marker
 
 #: The left arm's joints in q order (head_pan first, then the left arm, then the right).

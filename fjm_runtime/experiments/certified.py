@@ -24,7 +24,8 @@ from ..control.disturbance import with_motor_disturbance
 from ..control.factory import make_controller
 from ..control.laws import coefficients_from_pole
 from ..drives import role_names
-from ..sim.simulate import SimulationDivergedError, simulate
+from ..sim.simulate import simulate
+from ..sim.step import SimulationDivergedError
 from .report import METRIC_HEADER, diverged_marker, fmt_vec, result_row
 from .settings import ETA, K_NOM, LAM, LAYER_RATE, TASKS, DemoContext, chain_reference
 

@@ -11,7 +11,8 @@ from ..analysis.certificates.regulation import closed_loop_eigenvalues
 from ..control.defaults import DEFAULT_SWITCHING_GAIN, default_delta
 from ..control.factory import make_controller
 from ..drives import role_names
-from ..sim.simulate import SimulationDivergedError, SimulationResult, simulate
+from ..sim.simulate import SimulationResult, simulate
+from ..sim.step import SimulationDivergedError
 from .plots import plot_controller_comparison
 from .report import METRIC_HEADER, diverged_row, metrics_row
 from .settings import CTRL_LABELS, K_NOM, LAM, LAYER_RATE, DemoContext, chain_reference

@@ -25,7 +25,8 @@ from typing import Dict, List, Optional, Tuple
 import numpy as np
 
 from ..control.coupling import CouplingCompensatedController, complete_plant
-from ..sim.simulate import SimulationDivergedError, simulate
+from ..sim.simulate import simulate
+from ..sim.step import SimulationDivergedError
 from ..sim.substeps import resolve_substeps
 from . import panda as P
 from .report import diverged_marker

@@ -21,11 +21,13 @@ from typing import Callable, Dict, List, Optional
 import numpy as np
 
 from .. import load
-from ..control.factory import DEFAULT_LAYER_RATE, make_controller
+from ..control.factory import make_controller
+from ..control.defaults import DEFAULT_LAYER_RATE
 from ..control.references import Sinusoid
 from ..drives import drive_indices, role_names
 from ..sim.rest import rest_state
-from ..sim.simulate import SimulationDivergedError, SimulationResult, simulate
+from ..sim.simulate import SimulationResult, simulate
+from ..sim.step import SimulationDivergedError
 from .report import diverged_marker
 
 _PANDA = load("panda")  # the arm's own facts: its model's limits and task (derive/robots/panda/panda.toml)

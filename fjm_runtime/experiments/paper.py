@@ -19,7 +19,8 @@ from ..control.defaults import PAPER_K_RANGE
 from ..control.factory import make_controller
 from ..control.laws import coefficients_from_pole
 from ..control.references import SmoothStep
-from ..sim.simulate import SimulationDivergedError, SimulationResult, simulate
+from ..sim.simulate import SimulationResult, simulate
+from ..sim.step import SimulationDivergedError
 from .plots import (REACHED_DEFINITION, plot_controller_comparison, plot_monte_carlo, plot_paper_case,
                     plot_sat_vs_sign, plot_stiffness_estimates)
 from .report import METRIC_HEADER, fmt, log, metrics_row

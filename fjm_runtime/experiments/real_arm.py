@@ -26,7 +26,8 @@ from ..drives import role_names
 from ..sim.metrics import rms_second_half, time_at_limit, torque_jitter
 from ..sim.sensor import SensorModel
 from ..sim.rest import rest_state
-from ..sim.simulate import SimulationDivergedError, simulate
+from ..sim.simulate import simulate
+from ..sim.step import SimulationDivergedError
 from .panda import AMPLITUDE, DIVERGED_ERROR, PANDA_EFFORT, READY, reference
 
 RATE = 1000.0          # Hz, the Panda's control rate

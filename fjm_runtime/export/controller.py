@@ -33,7 +33,7 @@ import casadi as ca
 import numpy as np
 
 from ..control.design import Design
-from ..sim.sample_step import make_layout
+from ..sim.step_layout import make_layout
 from ..sim.sensor import SensorModel
 from ..sim.step_layout import StepLayout
 from ..sim.substeps import resolve_substeps

@@ -11,7 +11,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .sample_step import StepLayout, python_sample_step, sample_step_function
+from .sample_step import python_sample_step, sample_step_function
+from .step_layout import StepLayout
 from .step import check_divergence
 
 __all__ = ["BACKENDS", "run_casadi", "run_compiled", "run_python"]

@@ -36,11 +36,10 @@ import numpy as np
 from ..validation import FjmValueError
 from .sensor import SensorModel, offset_normals
 from .step import casadi_functions
-from .step_layout import StepLayout, controller_model, make_layout, stiffness_indices
+from .step_layout import StepLayout, controller_model, stiffness_indices
 
-__all__ = ["StepLayout", "casadi_sample_step", "check_loop_settings", "controller_model", "initial_measurement",
-           "initial_step_state", "make_layout", "python_sample_step", "sample_step_function",
-           "stiffness_indices"]
+__all__ = ["casadi_sample_step", "check_loop_settings", "initial_measurement", "initial_step_state",
+           "python_sample_step", "sample_step_function"]
 
 # -- the arithmetic, written once for numpy and CasADi ------------------------------------------
 

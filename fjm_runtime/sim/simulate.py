@@ -17,14 +17,14 @@ import numpy as np
 
 from ..sim.loops import BACKENDS
 from ..sim.metrics import Metrics, compute_metrics
-from ..sim.sample_step import check_loop_settings, initial_measurement, initial_step_state, make_layout
+from ..sim.sample_step import check_loop_settings, initial_measurement, initial_step_state
 from ..sim.sensor import SensorModel, noise_array
-from ..sim.step import SimulationDivergedError, casadi_functions
-from ..sim.substeps import CoarseIntegrationWarning, resolve_substeps
+from ..sim.step import casadi_functions
+from ..sim.step_layout import make_layout
+from ..sim.substeps import resolve_substeps
 from ..validation import FjmValueError
 
-__all__ = ["BACKENDS", "CoarseIntegrationWarning", "Metrics", "SensorModel", "SimulationDivergedError",
-           "SimulationResult", "simulate", "stderr_progress"]
+__all__ = ["SimulationResult", "simulate", "stderr_progress"]
 
 
 @dataclass

@@ -26,8 +26,8 @@ import fjm_runtime
 from derive.emit.spring import build_spring_functions
 from derive.core.lie import lie_derivative
 from derive.core.friction import FrictionError, MotorFriction, check_friction
-from derive.core.spring import (LINK1_HD_RANGE, CubicSpring, SpringError, check_spring, linearize_spring,
-                                make_link1_hd, spring_functions)
+from derive.core.spring import LINK1_HD_RANGE, check_spring, linearize_spring, make_link1_hd
+from derive.core.spring_laws import CubicSpring, SpringError, spring_functions
 
 REPO = Path(__file__).resolve().parents[2]
 NAMES = ("J_l", "J_m", "k1", "k3", "M", "g0", "L", "B_m", "F_c", "F_s", "v_s", "v_c")

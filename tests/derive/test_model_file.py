@@ -14,8 +14,9 @@ import numpy as np
 import pytest
 
 from derive.__main__ import derive_into, main as derive_main  # noqa: E402
-from derive.model_file import (ModelFileError, load_model_file, locate_keys,  # noqa: E402
-                               parse_model_text)
+from derive.model_file import load_model_file, parse_model_text
+from derive.model_file.schema import ModelFileError
+from derive.model_file.toml_keys import locate_keys
 from derive.planar.planar import make_planar  # noqa: E402
 from fjm_runtime.model import Model, load  # noqa: E402
 

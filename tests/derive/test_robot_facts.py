@@ -16,7 +16,8 @@ if sys.version_info >= (3, 11):
 else:  # pragma: no cover
     import tomli as tomllib
 
-from derive.model_file import ModelFileError, parse_model_text  # noqa: E402
+from derive.model_file import parse_model_text  # noqa: E402
+from derive.model_file.schema import ModelFileError
 from derive.registry import ROBOTS  # noqa: E402
 
 from support.paths import REPO  # noqa: E402

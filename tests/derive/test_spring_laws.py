@@ -17,7 +17,8 @@ import pytest
 import sympy as sp
 
 from derive.core.spring_laws import CubicSpring, LinearSpring, SpringError, ThreeSegmentSpring
-from derive.model_file import ModelFileError, parse_model_text
+from derive.model_file import parse_model_text
+from derive.model_file.schema import ModelFileError
 
 NAMES = ("K_1", "K_2", "K_3", "T_1", "T_2", "w_blend")
 VALUES = dict(zip(NAMES, (1.3e4, 1.7e4, 2.0e4, 14.0, 48.0, 2e-4)))

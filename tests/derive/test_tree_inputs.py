@@ -11,7 +11,8 @@ import textwrap
 import pytest
 
 from derive.spatial.chain import chain_numerics
-from derive.model_file import ModelFileError, load_model_file
+from derive.model_file import load_model_file
+from derive.model_file.schema import ModelFileError
 from derive.core.rotors import Rotors
 from derive.spatial.spatial import make_spatial
 from derive.spatial.spatial_params import elastic_params

@@ -15,7 +15,8 @@ import pytest
 from support.paths import REPO  # noqa: E402
 sys.path.insert(0, str(REPO))
 
-from derive.model_file import ModelFileError, load_model_file  # noqa: E402
+from derive.model_file import load_model_file  # noqa: E402
+from derive.model_file.schema import ModelFileError
 from derive.spatial.urdf import UrdfError, load_urdf  # noqa: E402
 
 INERTIAL = """<inertial><origin xyz="0 0 0.1"/><mass value="{mass}"/>

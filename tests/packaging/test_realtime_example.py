@@ -20,7 +20,8 @@ import fjm_runtime as fjm
 from fjm_runtime.control.defaults import PANDA_ISMC_TAU_START
 from fjm_runtime.control.factory import make_controller
 from fjm_runtime.control.sensing import torque_measurement
-from fjm_runtime.experiments.panda import PANDA_EFFORT, reference, rest_state
+from fjm_runtime.experiments.panda import PANDA_EFFORT, reference
+from fjm_runtime.sim.rest import rest_state
 from support.paths import REPO
 
 pytestmark = pytest.mark.slow

@@ -35,7 +35,8 @@ from typing import Optional, Sequence
 
 import numpy as np
 
-from ...sim.sample_step import initial_step_state, make_layout, sample_step_function, stiffness_indices
+from ...sim.sample_step import initial_step_state, sample_step_function
+from ...sim.step_layout import make_layout, stiffness_indices
 from ...sim.step_layout import spring_scale_groups
 from ...sim.sensor import SIGNALS, noise_slots
 from ...validation import FjmValueError

@@ -61,10 +61,9 @@ from .draws import PlantSpread, default_spread, draw_params
 from .runs import DesignLoops
 from .screen import SCREENED_COST, screen_costs
 from .settings import SearchSettings
-from .thresholds import DIVERGED_COST, PENALTY, Thresholds, describe_miss, find_misses, run_cost
+from .thresholds import PENALTY, Thresholds, describe_miss, find_misses, run_cost
 
-__all__ = ["DIVERGED_COST", "LIN_FLOOR", "PENALTY", "RECHECK_SEED_OFFSET", "combine_moves", "design",
-           "draw_params", "evaluate_gains", "move_gain", "run_cost"]
+__all__ = ["LIN_FLOOR", "RECHECK_SEED_OFFSET", "combine_moves", "design", "evaluate_gains", "move_gain"]
 
 #: ``k_lin / lam`` of the grid stage.
 LIN_RATIO = 5.0

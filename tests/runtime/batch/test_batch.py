@@ -13,7 +13,7 @@ from fjm_runtime.batch.sampled import GainInput, jitter_half_width, sampled_metr
 from fjm_runtime.ccache import DEFAULT_FLAGS, CompileError
 from fjm_runtime.control.factory import make_controller
 from fjm_runtime.control.references import Sinusoid, SmoothStep
-from fjm_runtime.sim.sample_step import make_layout
+from fjm_runtime.sim.step_layout import make_layout
 from fjm_runtime.sim.sensor import SensorModel
 from fjm_runtime.sim.simulate import simulate
 from fjm_runtime.validation import FjmValueError

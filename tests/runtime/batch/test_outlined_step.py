@@ -13,7 +13,8 @@ import pytest
 from fjm_runtime import make_controller, make_reference, simulate, simulate_batch
 from fjm_runtime.batch.sampled import GainInput, sampled_metric_step
 from fjm_runtime.batch.simd import soa_source
-from fjm_runtime.sim.sample_step import make_layout, sample_step_function
+from fjm_runtime.sim.sample_step import sample_step_function
+from fjm_runtime.sim.step_layout import make_layout
 from fjm_runtime.sim.sensor import SensorModel
 
 

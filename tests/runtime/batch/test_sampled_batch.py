@@ -12,7 +12,8 @@ from fjm_runtime.control.factory import make_controller
 from fjm_runtime.control.references import make_reference
 from fjm_runtime.sim import metrics as M
 from fjm_runtime.sim.sensor import SensorModel
-from fjm_runtime.sim.simulate import SimulationDivergedError, simulate
+from fjm_runtime.sim.simulate import simulate
+from fjm_runtime.sim.step import SimulationDivergedError
 from fjm_runtime.validation import FjmValueError
 
 pytestmark = pytest.mark.slow

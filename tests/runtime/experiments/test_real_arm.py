@@ -7,8 +7,9 @@ import pytest
 
 import fjm_runtime as fjm
 from fjm_runtime.experiments import real_arm as ra
-from fjm_runtime.experiments.panda import mismatch_ratio, rest_state
-from fjm_runtime.sim.simulate import SimulationDivergedError
+from fjm_runtime.experiments.panda import mismatch_ratio
+from fjm_runtime.sim.rest import rest_state
+from fjm_runtime.sim.step import SimulationDivergedError
 
 
 @pytest.fixture(scope="module")

@@ -18,7 +18,8 @@ import pytest
 import fjm_runtime
 from fjm_runtime.control.factory import make_controller
 from fjm_runtime.control.references import Sinusoid
-from fjm_runtime.sim.simulate import SimulationDivergedError, simulate
+from fjm_runtime.sim.simulate import simulate
+from fjm_runtime.sim.step import SimulationDivergedError
 
 K_S = 20000.0
 DESIGN = {"lam": 8.0, "k_s": K_S, "delta": K_S / 200.0}

@@ -11,7 +11,7 @@ import pytest
 import fjm_runtime
 from fjm_runtime.ccache import cache_dir
 from fjm_runtime.sim.compiled import sampled_loop_runner
-from fjm_runtime.sim.sample_step import make_layout
+from fjm_runtime.sim.step_layout import make_layout
 from fjm_runtime.sim.sensor import SensorModel
 from fjm_runtime.control.factory import make_controller
 from fjm_runtime.control.references import Sinusoid

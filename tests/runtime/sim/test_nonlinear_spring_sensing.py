@@ -16,7 +16,8 @@ import pytest
 
 import fjm_runtime
 from fjm_runtime import make_controller, make_reference, simulate
-from fjm_runtime.sim.sample_step import initial_step_state, make_layout, python_sample_step
+from fjm_runtime.sim.sample_step import initial_step_state, python_sample_step
+from fjm_runtime.sim.step_layout import make_layout
 from fjm_runtime.sim.sensor import SensorModel
 
 from support.numerics import rk4

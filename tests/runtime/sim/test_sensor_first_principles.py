@@ -22,7 +22,8 @@ import fjm_runtime
 from fjm_runtime import make_controller, make_reference, simulate
 from fjm_runtime.control.laws import ControlSample
 from fjm_runtime.sim.metrics import time_at_rate_limit
-from fjm_runtime.sim.sample_step import initial_step_state, make_layout, python_sample_step
+from fjm_runtime.sim.sample_step import initial_step_state, python_sample_step
+from fjm_runtime.sim.step_layout import make_layout
 from fjm_runtime.sim.sensor import SensorModel, noise_array, offset_normals, sensor_from_spec
 from fjm_runtime.validation import FjmValueError
 from support.numerics import rk4

@@ -7,7 +7,8 @@ from fjm_runtime.control.factory import make_controller
 from fjm_runtime.control.laws import SlidingModeController
 from fjm_runtime.control.references import Sinusoid, make_reference
 from fjm_runtime.analysis.certificates.lemma1 import lemma1_gain
-from fjm_runtime.sim.simulate import SimulationDivergedError, simulate
+from fjm_runtime.sim.simulate import simulate
+from fjm_runtime.sim.step import SimulationDivergedError
 
 
 @pytest.fixture(scope="module")

@@ -21,7 +21,8 @@ from fjm_runtime.control.references import Sinusoid
 from fjm_runtime.sim.metrics import torque_jitter
 from fjm_runtime.sim.rest import rest_state
 from fjm_runtime.sim.sensor import SensorModel
-from fjm_runtime.sim.simulate import SimulationDivergedError, simulate
+from fjm_runtime.sim.simulate import simulate
+from fjm_runtime.sim.step import SimulationDivergedError
 
 #: Small noise on every sensed signal (the linear regime), the real signal paths, no rate limit.
 SMALL = SensorModel(q=1e-6, q_m=1e-6, tau_J=2e-3, dtau_mode="filtered", velocity_mode="differentiated",

@@ -8,8 +8,10 @@ import pytest
 
 import fjm_runtime
 from fjm_runtime.analysis.search.settings import SearchSettings
-from fjm_runtime.analysis.search.search import DIVERGED_COST, PENALTY, design, draw_params, run_cost
-from fjm_runtime.sim.sample_step import stiffness_indices
+from fjm_runtime.analysis.search.search import design
+from fjm_runtime.analysis.search.thresholds import DIVERGED_COST, PENALTY, run_cost
+from fjm_runtime.analysis.search.draws import draw_params
+from fjm_runtime.sim.step_layout import stiffness_indices
 
 
 def _search(m, progress=None, **settings):

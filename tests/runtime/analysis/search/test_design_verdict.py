@@ -11,7 +11,7 @@ from fjm_runtime.analysis.search.search import RECHECK_SEED_OFFSET, design
 from fjm_runtime.analysis.search.draws import default_spread, draw_params, load_params_file
 from fjm_runtime.analysis.search.thresholds import (PENALTY, Thresholds, describe_miss, find_misses, parse_joints,
                                                     run_cost)
-from fjm_runtime.sim.sample_step import stiffness_indices
+from fjm_runtime.sim.step_layout import stiffness_indices
 from fjm_runtime.sim.sensor import SensorModel
 from fjm_runtime.validation import FjmValueError
 from types import SimpleNamespace
