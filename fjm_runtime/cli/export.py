@@ -114,14 +114,33 @@ def _run_controller(args) -> int:
     return 0
 
 
+#: MuJoCo RK4 step range, s: above 10 ms RK4 leaves its stability region on the elastic modes (|omega h| <= 2.8;
+#: the Panda's wrist mode is ~700 rad/s); below 0.1 us a second of simulation takes 1e7 steps.
+TIMESTEP_RANGE = (1e-7, 1e-2)
+
+
+def _check_mjcf_flags(args) -> None:
+    """``--timestep`` within :data:`TIMESTEP_RANGE` and ``--K`` a stiffness the export holds, in one line each."""
+    from ..export.controller_checks import check_c_values
+    lo, hi = TIMESTEP_RANGE
+    if args.timestep is not None and not (lo <= args.timestep <= hi):
+        raise FjmValueError(f"--timestep {args.timestep:g}: expected {lo:g} <= timestep <= {hi:g} s (MuJoCo's RK4 "
+                            "step; default 1e-4)")
+    if args.K is not None:
+        check_c_values(["--K"], [args.K], "")
+
+
 def run(args) -> int:
     """Run ``fjm export``; returns the exit status."""
     _refuse_foreign_flags(args)
     if args.format == "controller":
         return _run_controller(args)
     check_output_file(args.out, "--out")
+    _check_mjcf_flags(args)
     m = _model(args)
     params = parse_assignments(args.param, "--param")
+    from ..export.controller_checks import check_c_values
+    check_c_values(params, params.values(), "--param ")
     if args.K is not None:
         for i in linear_stiffness_indices(m, "--K"):
             params.setdefault(m.param_names[i], args.K)

@@ -188,7 +188,7 @@ def _fields(design: ControllerDesign, step, reset) -> dict:
             "FJM_VERSION": f"fjm {__version__}", "CASADI_VERSION": ca.__version__, "MODEL": model.name,
             "N": L.n, "KIND": ctrl.law_kind, "SENSING": L.sensing, "RATE": f"{1.0 / L.T:g}", "DELAY": L.delay,
             "PREDICT": "on" if L.predict else "off", "SUBSTEPS": L.substeps,
-            "VERIFIED": verification_text(design.design.meets),
+            "VERIFIED": verification_text(design.design.meets, dict(design.design.report)),
             "PREPROC": _preprocessing(L, design.sensor), "RATE_LIMIT": rate_limit, "READING": _reading_text(L),
             "NM": L.nm, "NR": 5 * L.n, "NP": len(model.param_names), "NG": int(np.asarray(ctrl.gains).size),
             "NC": CL.nc, "NC_ALLOC": max(CL.nc, 1), "PERIOD": f"{L.T:.17g}",

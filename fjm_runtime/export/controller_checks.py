@@ -95,8 +95,8 @@ def check_c_values(names: Iterable[str], values: Iterable[float], where: str, hi
     for name, v in zip(names, values):
         v = float(v)
         if not (math.isfinite(v) and (v == 0.0 or lo <= abs(v) <= hi)):
-            raise FjmValueError(f"{where}{name} = {v:g}: expected 0 or {lo:g} <= |value| <= {hi:g} (SI units; the "
-                                "double and float C hold it)")
+            raise FjmValueError(f"{where}{name} = {v:g}: expected 0 or {lo:g} <= |value| <= {hi:g} (SI units: no "
+                                "physical arm's value lies beyond, and float still holds the law's products)")
 
 
 def check_verified(meets: Optional[bool], where: str, unverified: bool) -> None:
@@ -106,11 +106,18 @@ def check_verified(meets: Optional[bool], where: str, unverified: bool) -> None:
                             "expected a design that meets them (--unverified exports it, labelled unverified)")
 
 
-def verification_text(meets: Optional[bool]) -> str:
-    """One line for the README and the header: what the design's search found."""
+def verification_text(meets: Optional[bool], report: Optional[dict] = None) -> str:
+    """One line for the README and the header: what the design's search found (``report``: the design
+    file's other keys, e.g. an older search's ``draws`` and ``worst_case``)."""
     if meets is True:
         return "verified: the design meets the thresholds of its search (fjm design, \"meets\": true)"
     if meets is False:
         return ("UNVERIFIED: the design MISSES the thresholds of its search (\"meets\": false); exported with "
                 "--unverified")
-    return "not verified: the design records no verdict (not from fjm design); check it with fjm analyze"
+    report = report or {}
+    worst = report.get("worst_case")
+    if isinstance(worst, dict) and isinstance(worst.get("rms_second_half"), list) and report.get("draws"):
+        return (f"searched by fjm design over {report['draws']} plant draws (worst second-half RMS "
+                f"{max(worst['rms_second_half']):.3g} rad, {worst.get('diverged', '?')} diverged); the file records "
+                "no \"meets\" verdict: compare its worst case with your thresholds")
+    return "not verified: the design records no search (not from fjm design); check it with fjm analyze"

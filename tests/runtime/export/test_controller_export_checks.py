@@ -154,3 +154,28 @@ def test_every_shipped_design_exports_and_its_step_is_the_simulators(tmp_path, f
         rel = relative(U, run.U)
         print(f"{file} predict {predict}: exported step vs simulator, 20 samples: {rel:.3g}")
         assert rel <= 1e-12
+
+
+@pytest.mark.parametrize("argv,expect", [
+    (["--K", "1e300"], "--K = 1e+300: expected 0 or 1e-12 <= |value| <= 1e+12"),
+    (["--param", "K=1e-300"], "--param K = 1e-300: expected 0 or 1e-12 <= |value| <= 1e+12"),
+    (["--timestep", "1e6"], "--timestep 1e+06: expected 1e-07 <= timestep <= 0.01 s"),
+    (["--timestep", "0"], "--timestep 0: expected 1e-07 <= timestep <= 0.01 s"),
+])
+def test_mjcf_values_out_of_range(tmp_path, capsys, argv, expect):
+    out = tmp_path / "out.xml"
+    assert fjm_main(["export", "mjcf", "link1", *argv, "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert expect in err and err.count("\n") == 0 and not out.exists(), err
+
+
+def test_label_of_a_searched_design_without_a_verdict():
+    """The shipped Panda design predates the "meets" key: its label states its search's draws and worst
+    RMS (the file's numbers), not "verified"."""
+    from fjm_runtime.export.controller_checks import verification_text
+    d = Design.shipped("panda", "ismc", "torque", 1000.0, 1)
+    rms = max(d.report["worst_case"]["rms_second_half"])
+    text = verification_text(d.meets, dict(d.report))
+    assert d.meets is None and d.report["draws"] == 200 and rms < 2e-3
+    assert text.startswith(f"searched by fjm design over 200 plant draws (worst second-half RMS {rms:.3g} rad, "
+                           f"{d.report['worst_case']['diverged']} diverged)"), text
