@@ -59,7 +59,7 @@ HEAVY_FIRST = (
     "tests/generated/test_c_sources.py",               # strict -O2 build of every model (~37 s CPU cold, cached warm)
     "tests/runtime/batch/test_sampled_batch.py",       # panda smoke: a 1.8 MB batch C source (~16 s gcc cold)
     "tests/derive/test_interrupted_derive.py",
-    "tests/runtime/analysis/certificates/test_tune.py",
+    "tests/runtime/analysis/certificates/test_certify.py",
     "tests/packaging/test_wheel.py",
     "tests/runtime/control/test_smc.py",
     "tests/runtime/sim/test_spatial_control.py",

@@ -52,7 +52,7 @@ def test_exact_parameters_follow_linear_error_dynamics(link1):
     assert abs(res.e1[-1, 0]) < 1e-5
 
 
-@pytest.mark.exhaustive  # 5 x 3 s runs at the Lemma 1 gain (~28 s); test_tune covers the bound in make test
+@pytest.mark.exhaustive  # 5 x 3 s runs at the Lemma 1 gain (~28 s); test_lemma1 covers the bound in make test
 def test_lemma1_gain_reaches_boundary_layer_for_seeded_sweep(link1):
     """K in [100, 200], J_l, J_m +-20 %: k_s at the Lemma 1 bound -> |s| <= delta in finite time, every sample."""
     bounds = {"K": (100.0, 200.0), "J_l": (0.8, 1.2), "J_m": (1.6, 2.4)}

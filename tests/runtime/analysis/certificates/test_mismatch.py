@@ -4,20 +4,17 @@ import pytest
 
 import fjm_runtime
 from fjm_runtime.analysis.certificates.mismatch import mismatch_supremum
+from support.link1_case import delta_alpha_closed_form
 
 
 def _closed_form_supremum(Y, K_box, K_nom=150.0, n=200001):
-    # K-only, B_m = 0 (link1 defaults): alpha_hat - alpha = J_m M g L sin y1 (y2^2 + g cos y1)(1/K - 1/K_nom)
-    #                                                      + (K_nom/K - 1)(J_l + J_m)(y3 + g sin y1)
-    # affine in 1/K, y2^2 and y3 (vertices carry the supremum); y1 scanned densely
+    # K-only, B_m = 0 (link1 defaults): affine in 1/K, y2^2 and y3 (vertices carry the supremum); y1 scanned densely
     y1 = np.linspace(-Y[0], Y[0], n)
     best = 0.0
     for K in K_box:
-        for y2sq in (0.0, Y[1] ** 2):
+        for y2 in (0.0, Y[1]):
             for y3 in (-Y[2], Y[2]):
-                val = 2 * 9.8 * np.sin(y1) * (y2sq + 9.8 * np.cos(y1)) * (1 / K - 1 / K_nom) \
-                    + (K_nom / K - 1) * 3.0 * (y3 + 9.8 * np.sin(y1))
-                best = max(best, float(np.max(np.abs(val))))
+                best = max(best, float(np.max(np.abs(delta_alpha_closed_form(y1, y2, y3, K, K_nom)))))
     return best
 
 

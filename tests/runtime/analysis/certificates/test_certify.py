@@ -1,4 +1,4 @@
-"""Reaching-gain synthesis (fjm_runtime.analysis.certificates.certify): certificates, the paper's bound, trajectories, CLI.
+"""Reaching-gain synthesis (fjm_runtime.analysis.certificates.certify, ``fjm tune``): certificates, trajectories, CLI.
 
 Robustness claims: controller on NOMINAL parameters, plant on TRUE ones. The
 checks of the certificate use independent evaluations (closed forms written
@@ -9,22 +9,17 @@ import json
 
 import numpy as np
 import pytest
-from scipy.optimize import minimize_scalar
 
 import fjm_runtime as fjm
 from fjm_runtime.cli.main import main
 from fjm_runtime.control.factory import make_controller
-from fjm_runtime.control.references import Sinusoid, SmoothStep
-from fjm_runtime.analysis.certificates.lemma1 import beta_hat_link1, lemma1_gain, paper_bound
-from fjm_runtime.analysis.certificates.link1 import link1_alpha, link1_T_inverse
+from fjm_runtime.control.references import Sinusoid
+from fjm_runtime.analysis.certificates.lemma1 import beta_hat_link1, lemma1_gain
+from fjm_runtime.analysis.certificates.link1 import link1_T_inverse
 from fjm_runtime.sim.simulate import simulate
 from fjm_runtime.analysis.certificates.certify import InfeasibleGainError, certificate, synthesize_gains
+from support.link1_case import K_BOX, K_NOM, REG
 from support.reaching import state_at, trajectory_check
-
-K_NOM = 150.0
-K_BOX = {"K": (100.0, 200.0)}
-REG = (SmoothStep(1.0, rise_time=2.0), (0.05, 0.1, 0.5, 1.0))     # regulation box of the demo
-TRK = (Sinusoid(0.5, 1.0), (0.05, 0.5, 0.5, 0.5))                 # tracking box of the demo
 
 
 @pytest.fixture(scope="module")
@@ -53,62 +48,6 @@ def _link1_kwargs(box=REG, lam=8.0):
     ref, E = box
     return dict(param_box=K_BOX, reference_bounds=ref.derivative_bounds()[:, 0], error_bounds=E, lam=lam,
                 beta_hat=beta_hat_link1({"K": K_NOM}, K_BOX))
-
-
-# -- the paper's Lemma 1 in TRUE coordinates, independent closed form -----------------------------
-def _delta_alpha_closed_form(y1, y2, y3, K, Kn, Jl=1.0, Jm=2.0, mgl=9.8):
-    """alpha(x; Kn) - alpha(x; K) at x = T^-1(y; K) for link1 with B_m = 0 (derived by hand)."""
-    G = mgl / Jl
-    d = 1.0 / K - 1.0 / Kn
-    return d * (Jl * Jm * G * np.sin(y1) * (y2 ** 2 + G * np.cos(y1)) + Kn * (Jl + Jm) * (y3 + G * np.sin(y1)))
-
-
-def test_closed_form_matches_link1_alpha():
-    rng = np.random.default_rng(3)
-    y = rng.uniform(-2, 2, size=(50, 4))
-    for K in (100.0, 200.0, 123.0):
-        x = link1_T_inverse(y, {"K": K})
-        direct = link1_alpha(x, {"K": K_NOM}) - link1_alpha(x, {"K": K})
-        np.testing.assert_allclose(_delta_alpha_closed_form(y[:, 0], y[:, 1], y[:, 2], K, K_NOM), direct,
-                                   rtol=1e-9, atol=1e-9)
-
-
-def _independent_paper_bound(ref, E, lam, eta=10.0):
-    R = ref.derivative_bounds()[:, 0]
-    Y = R[:4] + np.asarray(E)
-    c1, c2, c3 = lam ** 3, 3 * lam ** 2, 3 * lam
-    W = R[4] + c1 * E[1] + c2 * E[2] + c3 * E[3]
-    H = 0.0
-    # affine in 1/K, in y2^2 and in y3: vertices; y1: dense scan then bounded refinement
-    for K in (100.0, 200.0):
-        for y2 in (0.0, Y[1]):
-            for y3 in (-Y[2], Y[2]):
-                f = lambda y1: -abs(_delta_alpha_closed_form(y1, y2, y3, K, K_NOM))
-                grid = np.linspace(-Y[0], Y[0], 20001)
-                vals = -f(grid)
-                j = int(np.argmax(vals))
-                best = vals[j]
-                lo, hi = grid[max(j - 1, 0)], grid[min(j + 1, grid.size - 1)]
-                if hi > lo:
-                    r = minimize_scalar(f, bounds=(lo, hi), method="bounded", options={"xatol": 1e-13})
-                    best = max(best, -r.fun)
-                H = max(H, best)
-    b_min, b_max = 1.0 * 2.0 / 200.0, 1.0 * 2.0 / 100.0
-    b_hat = 0.5 * (b_min + b_max)
-    rho = (b_max - b_min) / (b_max + b_min)
-    return rho * W + H / b_hat + eta
-
-
-# the regulation box (~10 s) runs in the exhaustive pass; tracking stays in make test
-@pytest.mark.parametrize("box, published", [pytest.param(REG, 1240.0, marks=pytest.mark.exhaustive), (TRK, 765.0)],
-                         ids=["regulation", "tracking"])
-def test_paper_bound_in_true_coordinates(link1, box, published):
-    ref, E = box
-    expected = _independent_paper_bound(ref, E, 8.0)
-    assert abs(expected - published) < 1.0, "the independent closed form no longer gives the published bound"
-    got = paper_bound(link1, {"K": K_NOM}, param_box=K_BOX, reference_bounds=ref.derivative_bounds()[:, 0],
-                      error_bounds=E, lam=8.0)
-    assert got.k_s_tight == pytest.approx(expected, rel=1e-6)
 
 
 # -- certificates: negative for the synthesized gain, positive 20 % below ---------------------------
@@ -337,26 +276,6 @@ def test_torque_disturbance_bound_is_enforced(link1):
     wrapped = TorqueDisturbance(ctrl, lambda t: np.array([3.0 * np.sin(t)]), bound=1.0)
     with pytest.raises(ValueError, match="exceeds the stated bound"):
         simulate(link1, wrapped, Sinusoid(0.5, 1.0), duration=2.0, dt=1e-2)
-
-
-# -- adaptive law -----------------------------------------------------------------------------------
-def test_adaptive_gamma_and_frozen_gains(link1):
-    """d s / d K_hat on link1 (integral surface): (c3 (y3 + g sin y1) + y4 + g cos(y1) y2) / K_hat, largest at
-    the box corner y1 = Y1 (tan y1 < c3 / Y2 there) and K_hat = K_min; the gain covers every frozen estimate."""
-    from fjm_runtime.analysis.certificates.adaptive_gains import synthesize_adaptive_gains
-    ref, E = REG
-    R = ref.derivative_bounds()[:, 0]
-    res = synthesize_adaptive_gains(link1, {"K": K_NOM}, K_bounds=(100.0, 200.0), reference_bounds=R,
-                                    error_bounds=E, lam=8.0, n_estimates=2, n_grid=15, n_gamma=2000)
-    Y = R[:4] + np.asarray(E)
-    c3, g = 4 * 8.0, 9.8
-    assert np.arctan(c3 / Y[1]) > Y[0]
-    expected = (c3 * (Y[2] + g * np.sin(Y[0])) + Y[3] + g * np.cos(Y[0]) * Y[1]) / 100.0
-    assert res.Gamma[0, 0] == pytest.approx(expected, rel=1e-9)
-    assert res.tv_bound[0] == pytest.approx(50.0)
-    for est, r in res.per_estimate:
-        assert r.feasible and r.certificate[0] <= -r.eta[0] + 1e-9
-        assert res.k_s[0] >= r.k_s[0]
 
 
 def test_torque_disturbance_reaches_the_plant(link1):
