@@ -42,6 +42,13 @@ def link1():
 
 
 @pytest.fixture(scope="session")
+def planar2():
+    """The generated ``planar2`` model (``fjm_runtime.Model``), loaded once."""
+    import fjm_runtime
+    return fjm_runtime.load("planar2")
+
+
+@pytest.fixture(scope="session")
 def panda():
     """The generated ``panda`` model (``fjm_runtime.Model``), loaded once."""
     import fjm_runtime

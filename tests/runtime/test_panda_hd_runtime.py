@@ -30,11 +30,6 @@ def hd():
     return fjm_runtime.load("panda_hd")
 
 
-@pytest.fixture(scope="module")
-def panda():
-    return fjm_runtime.load("panda")
-
-
 def _friction(v, p, j):
     F_c, F_s, v_s, v_c = (p[f"{k}_{j}"] for k in ("F_c", "F_s", "v_s", "v_c"))
     return (F_c + (F_s - F_c) * np.exp(-(v / v_s) ** 2)) * np.tanh(v / v_c)

@@ -4,7 +4,6 @@ import json
 import numpy as np
 import pytest
 
-import fjm_runtime
 from fjm_runtime.control.adaptive import AdaptiveStiffnessController
 from fjm_runtime.control.factory import make_controller
 from fjm_runtime.control.references import Constant, Sinusoid, SmoothStep
@@ -14,11 +13,6 @@ from fjm_runtime.sim.simulate import simulate
 DESIGN = {"lam": 8.0, "k_s": 1000.0, "delta": 5.0}
 BOUNDS = (100.0, 200.0)
 T_S = 1e-3  # simulate's default control period: the estimator advances once per sample
-
-
-@pytest.fixture(scope="module")
-def link1():
-    return fjm_runtime.load("link1")
 
 
 def _adaptive(link1, **kw):

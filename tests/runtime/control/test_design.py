@@ -5,7 +5,6 @@ from importlib import resources
 import numpy as np
 import pytest
 
-import fjm_runtime
 from fjm_runtime.control.design import Design, task_start
 from fjm_runtime.control.factory import make_controller
 from fjm_runtime.sim.sensor import SensorModel
@@ -13,11 +12,6 @@ from fjm_runtime.validation import FjmValueError
 
 SHIPPED = sorted(p.name for p in resources.files("fjm_runtime.control").joinpath("designed").iterdir()
                  if p.name.endswith(".json"))
-
-
-@pytest.fixture(scope="module")
-def panda():
-    return fjm_runtime.load("panda")
 
 
 @pytest.mark.parametrize("name", SHIPPED)

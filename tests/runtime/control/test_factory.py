@@ -2,15 +2,9 @@
 import numpy as np
 import pytest
 
-import fjm_runtime
 from fjm_runtime.control.defaults import DEFAULT_LAM, DEFAULT_SWITCHING_GAIN, PAPER_K_RANGE, default_delta
 from fjm_runtime.control.factory import CONTROLLER_KINDS, LAWS, REGULATION_KINDS, make_controller
 from fjm_runtime.control.laws import SlidingModeController
-
-
-@pytest.fixture(scope="module")
-def planar2():
-    return fjm_runtime.load("planar2")
 
 
 def test_every_name_is_in_the_table():

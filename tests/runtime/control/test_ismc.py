@@ -2,7 +2,6 @@
 import numpy as np
 import pytest
 
-import fjm_runtime
 from fjm_runtime.control.factory import make_controller
 from fjm_runtime.control.laws import SlidingModeController
 from fjm_runtime.control.references import Sinusoid, SmoothStep
@@ -12,11 +11,6 @@ from fjm_runtime.sim.simulate import simulate
 
 K_BOUNDS = {"K": (100.0, 200.0)}
 DESIGN = {"lam": 8.0, "k_s": 1000.0, "delta": 5.0}
-
-
-@pytest.fixture(scope="module")
-def link1():
-    return fjm_runtime.load("link1")
 
 
 @pytest.mark.parametrize("K_nom, K_true, q_d, lam", [

@@ -14,11 +14,6 @@ LAM = 8.0
 K_BOUNDS = {"K": (100.0, 200.0)}
 
 
-@pytest.fixture(scope="module")
-def link1():
-    return fjm_runtime.load("link1")
-
-
 def linear_error_dynamics(e0, c, k_s, delta, t_end, dt=2.5e-4):
     """Exact-model error dynamics: e1'=e2, e2'=e3, e3'=e4, e4' = -(c1 e2+c2 e3+c3 e4) - k_s sat(s/delta)."""
     c1, c2, c3 = c

@@ -5,16 +5,10 @@ Short runs only (0.1 s, casadi backend); the documented numbers come from ``make
 import numpy as np
 import pytest
 
-import fjm_runtime as fjm
 from fjm_runtime.experiments import real_arm as ra
 from fjm_runtime.experiments.panda import mismatch_ratio
 from fjm_runtime.sim.rest import rest_state
 from fjm_runtime.sim.step import SimulationDivergedError
-
-
-@pytest.fixture(scope="module")
-def panda():
-    return fjm.load("panda")
 
 
 def test_draws_cover_the_box_and_the_corners(panda):

@@ -11,11 +11,6 @@ from fjm_runtime.ident.log import MIN_ROWS, Log, read_log, write_log
 from fjm_runtime.validation import FjmValueError
 
 
-@pytest.fixture(scope="module")
-def link1():
-    return fjm_runtime.load("link1")
-
-
 def _good(N=1000, n=1, dt=1e-3, tau=True) -> Log:
     t = dt * np.arange(N)
     q = 0.3 * np.sin(2 * t)[:, None] * np.ones(n)

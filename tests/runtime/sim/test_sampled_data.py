@@ -5,7 +5,6 @@ import warnings
 import numpy as np
 import pytest
 
-import fjm_runtime
 from fjm_runtime.control.factory import make_controller
 from fjm_runtime.control.references import Sinusoid
 from fjm_runtime.sim.sensor import SensorModel
@@ -13,16 +12,6 @@ from fjm_runtime.sim.simulate import simulate
 from fjm_runtime.sim.substeps import CoarseIntegrationWarning, fastest_mode, resolve_substeps
 from fjm_runtime.validation import FjmValueError
 from support.numerics import rk4
-
-
-@pytest.fixture(scope="module")
-def link1():
-    return fjm_runtime.load("link1")
-
-
-@pytest.fixture(scope="module")
-def planar2():
-    return fjm_runtime.load("planar2")
 
 
 def _ismc(m, **kw):

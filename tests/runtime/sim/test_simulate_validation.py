@@ -2,18 +2,12 @@
 import numpy as np
 import pytest
 
-import fjm_runtime
 from fjm_runtime.control.factory import make_controller
 from fjm_runtime.control.laws import SlidingModeController
 from fjm_runtime.control.references import Sinusoid, make_reference
 from fjm_runtime.analysis.certificates.lemma1 import lemma1_gain
 from fjm_runtime.sim.simulate import simulate
 from fjm_runtime.sim.step import SimulationDivergedError
-
-
-@pytest.fixture(scope="module")
-def link1():
-    return fjm_runtime.load("link1")
 
 
 @pytest.mark.parametrize("kwargs, field", [

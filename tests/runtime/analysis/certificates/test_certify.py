@@ -10,7 +10,6 @@ import json
 import numpy as np
 import pytest
 
-import fjm_runtime as fjm
 from fjm_runtime.cli.main import main
 from fjm_runtime.control.factory import make_controller
 from fjm_runtime.control.references import Sinusoid
@@ -20,16 +19,6 @@ from fjm_runtime.sim.simulate import simulate
 from fjm_runtime.analysis.certificates.certify import InfeasibleGainError, certificate, synthesize_gains
 from support.link1_case import K_BOX, K_NOM, REG
 from support.reaching import state_at, trajectory_check
-
-
-@pytest.fixture(scope="module")
-def link1():
-    return fjm.load("link1")
-
-
-@pytest.fixture(scope="module")
-def planar2():
-    return fjm.load("planar2")
 
 
 _SYNTH = {}

@@ -10,7 +10,6 @@ import json
 import numpy as np
 import pytest
 
-import fjm_runtime as fjm
 from fjm_runtime.analysis.certificates.certify import certificate
 from fjm_runtime.analysis.certificates.certify_tau import (TorqueEvaluator, gamma_tolerance, synthesize_torque_gains,
                                               torque_param_box)
@@ -21,11 +20,6 @@ from fjm_runtime.control.sensing import torque_measurement
 
 E_BOX = (0.05, 0.5, 0.5, 0.5)
 LAM = 8.0
-
-
-@pytest.fixture(scope="module")
-def planar2():
-    return fjm.load("planar2")
 
 
 @pytest.fixture(scope="module")
