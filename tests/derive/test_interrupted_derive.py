@@ -139,22 +139,25 @@ def test_interrupted_derive_leaves_tree_untouched(marked_copy, sig):
     assert not leftovers, f"left behind next to the output: {leftovers}"
 
 
-# exhaustive pass (.ci/run), to keep make test under 5 minutes on 2 cores: make check-generated derives
-# every model into a staging tree and swaps it in on every CI run
-@pytest.mark.exhaustive
-def test_uninterrupted_control_run_replaces_only_requested_models(marked_copy):
-    out = marked_copy
-    before = tree_bytes(out)
+def _derive_link1_replaces_only_link1(out, before):
+    """``derive --models link1`` into ``out`` succeeds; link1's files are rewritten (sentinel gone, content =
+    the committed file) and every other file of ``before`` is carried over untouched."""
     proc = _start(out, "--models", "link1")
     log, _ = proc.communicate(timeout=120)
     assert proc.returncode == 0, log.decode(errors="replace")
     after = tree_bytes(out)
     assert set(after) == set(before)
     for k in before:
-        if k.startswith("link1/"):  # rewritten: sentinel gone, content = the committed file
-            assert after[k] == (REPO / "generated" / k).read_bytes(), k
-        else:  # carried over untouched
-            assert after[k] == before[k], k
+        expected = (REPO / "generated" / k).read_bytes() if k.startswith("link1/") else before[k]
+        assert after[k] == expected, k
+
+
+# exhaustive pass (.ci/run), to keep make test under 5 minutes on 2 cores: make check-generated derives
+# every model into a staging tree and swaps it in on every CI run
+@pytest.mark.exhaustive
+def test_uninterrupted_control_run_replaces_only_requested_models(marked_copy):
+    out = marked_copy
+    _derive_link1_replaces_only_link1(out, tree_bytes(out))
     leftovers = sorted(p.name for p in out.parent.iterdir() if p.name != out.name)
     assert not leftovers, f"left behind next to the output: {leftovers}"
 
@@ -211,14 +214,7 @@ def test_sigkill_between_the_renames_is_recovered(marked_copy):
     assert tree_bytes(out) == before
 
     # the next derive starts from the recovered tree and completes normally
-    proc = _start(out, "--models", "link1")
-    log, _ = proc.communicate(timeout=120)
-    assert proc.returncode == 0, log.decode(errors="replace")
-    after = tree_bytes(out)
-    assert set(after) == set(before)
-    for k in before:
-        expected = (REPO / "generated" / k).read_bytes() if k.startswith("link1/") else before[k]
-        assert after[k] == expected, k
+    _derive_link1_replaces_only_link1(out, before)
     assert not old.exists()
 
 

@@ -7,7 +7,7 @@ import sympy as sp
 import fjm_runtime
 from derive.registry import build
 from support.independent_chain import PinocchioReference
-from support.numerics import ALL_MODELS, random_params, random_state, rk4
+from support.numerics import ALL_MODELS, energy_drifts, random_params, random_state, rk4
 
 QUANTITIES = ("f", "g", "ad", "T", "alpha", "beta", "energy", "inertia")
 
@@ -46,16 +46,7 @@ def test_energy_is_conserved_without_damping_or_input(name):
     RK4's energy drift is O(dt^4): halving dt must shrink it ~16x, which
     shows the residual is integration error, not a modelling error.
     """
-    m = fjm_runtime.load(name)
-    rng = np.random.default_rng(2)
-    p = random_params(m, rng, damping=False)
-    x0 = random_state(m, rng)
-    drifts = []
-    for dt in (2e-3, 1e-3):
-        steps = int(round(1.0 / dt))
-        xs = rk4(lambda x: m.f(x, p), x0, dt, steps)
-        E = np.array([m.energy(x, p) for x in xs[:: max(1, steps // 50)]])
-        drifts.append(np.max(np.abs(E - E[0])) / max(1.0, abs(E[0])))
+    drifts = energy_drifts(fjm_runtime.load(name), (2e-3, 1e-3), 1.0)
     assert drifts[1] < 1e-7, drifts
     assert drifts[0] / max(drifts[1], 1e-300) > 8 or drifts[1] < 1e-12, drifts
 

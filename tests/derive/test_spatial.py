@@ -20,7 +20,7 @@ from derive.planar.planar import make_planar
 from derive.spatial.spatial import make_spatial
 from derive.spatial.spatial_params import elastic_params
 from derive.spatial.urdf import load_urdf
-from support.numerics import random_params, random_state, rk4
+from support.numerics import energy_drifts, random_state
 
 from support.paths import REPO  # noqa: E402
 NAMES = [q for q, _ in QUANTITIES]
@@ -130,16 +130,7 @@ def test_general_axes_and_rotations_match_pinocchio(tmp_path):
 @pytest.mark.parametrize("name", ["elbow3"])
 def test_energy_is_conserved_without_damping_or_input(name):
     """B_m = 0, u = 0: energy drift of RK4 is O(dt^4) (halving dt: ~16x smaller)."""
-    m = fjm_runtime.load(name)
-    rng = np.random.default_rng(2)
-    p = random_params(m, rng, damping=False)
-    x0 = random_state(m, rng)
-    drifts = []
-    for dt in (1e-3, 5e-4):
-        steps = int(round(0.5 / dt))
-        xs = rk4(lambda x: m.f(x, p), x0, dt, steps)
-        E = np.array([m.energy(x, p) for x in xs[:: max(1, steps // 50)]])
-        drifts.append(np.max(np.abs(E - E[0])) / max(1.0, abs(E[0])))
+    drifts = energy_drifts(fjm_runtime.load(name), (1e-3, 5e-4), 0.5)
     assert drifts[1] < 1e-7, drifts
     assert drifts[0] / max(drifts[1], 1e-300) > 8 or drifts[1] < 1e-12, drifts
 

@@ -19,6 +19,7 @@ import sympy as sp
 from derive.core.spring_laws import CubicSpring, LinearSpring, SpringError, ThreeSegmentSpring
 from derive.model_file import parse_model_text
 from derive.model_file.schema import ModelFileError
+from support.model_files import THREE_SEGMENT_SPRING
 
 NAMES = ("K_1", "K_2", "K_3", "T_1", "T_2", "w_blend")
 VALUES = dict(zip(NAMES, (1.3e4, 1.7e4, 2.0e4, 14.0, 48.0, 2e-4)))
@@ -113,21 +114,13 @@ def test_linear_and_cubic_checks_and_bounds():
 
 # -- model files -------------------------------------------------------------------------------------------
 
-DRIVE = """\
+DRIVE = f"""\
 [model]
 name = "drive"
 links = 1
 
 [spring]
-law = "three_segment"
-range = 0.01
-K_1 = 1.3e4
-K_2 = 1.7e4
-K_3 = 2.0e4
-T_1 = 14.0
-T_2 = 48.0
-w_blend = 2e-4
-
+{THREE_SEGMENT_SPRING}
 [friction]
 F_c = 0.5
 """

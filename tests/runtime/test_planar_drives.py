@@ -18,9 +18,10 @@ import mujoco  # noqa: F401 - the dev extra, as in test_mjcf.py: a missing insta
 from derive.emit.spring import write_spring_model
 from derive.core.spring import linearize_spring
 from derive.model_file import parse_model_text
+from support.model_files import THREE_SEGMENT_SPRING
 from tests.runtime.test_arm1_hd_runtime import datasheet
 
-TEXT = """
+TEXT = f"""
 [model]
 name = "planar2_hd"
 links = 2
@@ -30,15 +31,7 @@ m1 = 4.0
 m2 = 2.0
 
 [spring.default]
-law = "three_segment"
-range = 0.01
-K_1 = 1.3e4
-K_2 = 1.7e4
-K_3 = 2.0e4
-T_1 = 14.0
-T_2 = 48.0
-w_blend = 2e-4
-
+{THREE_SEGMENT_SPRING}
 [spring.2]
 law = "cubic"
 range = 0.05

@@ -18,6 +18,12 @@ from fjm_runtime.export.controller import amalgamation, design_controller, expor
 from fjm_runtime.export.controller_step import raw_reading, rest_reading
 from fjm_runtime.sim.sensor import noise_array
 
+#: The gains file of a small design: link1, integral SMC on torque sensing at 1 kHz, one sample of delay
+#: with prediction, the franka_like sensor.
+LINK1_TORQUE_DESIGN = {"model": "link1", "kind": "ismc", "sensing": "torque", "rate": 1000.0, "delay": 1,
+                       "predict": True, "noise": "franka_like",
+                       "gains": {"lam": 10.0, "k_s": 20.0, "delta": 20.0, "u_max": 25.0}}
+
 STRICT = ("-O2", "-fPIC", "-shared", "-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic")
 OK, SATURATED, NOT_FINITE, BAD = 0, 1, 2, 3
 

@@ -63,3 +63,21 @@ def rk4(fun, x0, dt, steps):
         x = x + dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
         xs[k + 1] = x
     return xs
+
+
+def energy_drifts(model, steps_dt, duration, seed=2):
+    """Relative energy drift of an undamped, unforced run (RK4) per step size in ``steps_dt``.
+
+    From a random state and random parameters without damping (``seed``), ``duration`` s with each
+    step size; the drift is ``max |E - E_0| / max(1, |E_0|)`` over about 50 samples of the run.
+    """
+    rng = np.random.default_rng(seed)
+    p = random_params(model, rng, damping=False)
+    x0 = random_state(model, rng)
+    drifts = []
+    for dt in steps_dt:
+        steps = int(round(duration / dt))
+        xs = rk4(lambda x: model.f(x, p), x0, dt, steps)
+        E = np.array([model.energy(x, p) for x in xs[:: max(1, steps // 50)]])
+        drifts.append(np.max(np.abs(E - E[0])) / max(1.0, abs(E[0])))
+    return drifts

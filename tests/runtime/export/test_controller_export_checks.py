@@ -21,10 +21,7 @@ from fjm_runtime.export.controller import design_controller, export_controller
 from fjm_runtime.export.controller_checks import MAX_SUBSTEPS, default_c_name
 from fjm_runtime.export.controller_step import controller_functions
 
-from support.controller_runs import Run, relative
-
-LINK1 = {"model": "link1", "kind": "ismc", "sensing": "torque", "rate": 1000.0, "delay": 1, "predict": True,
-         "noise": "franka_like", "gains": {"lam": 10.0, "k_s": 20.0, "delta": 20.0, "u_max": 25.0}}
+from support.controller_runs import LINK1_TORQUE_DESIGN as LINK1, Run, relative
 
 
 def _file(tmp_path, spec, name="design.json"):

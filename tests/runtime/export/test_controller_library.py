@@ -19,8 +19,8 @@ import fjm_runtime
 from fjm_runtime.control.design import Design
 from fjm_runtime.export.controller import design_controller, export_controller
 
-from support.controller_runs import (BAD, FREE_SAMPLES, NOT_FINITE, OK, SATURATED, Run, free_running, library,
-                                     make_design, per_sample, relative, sine)
+from support.controller_runs import (BAD, FREE_SAMPLES, LINK1_TORQUE_DESIGN, NOT_FINITE, OK, SATURATED, Run,
+                                     free_running, library, make_design, per_sample, relative, sine)
 
 
 def _panda_design():
@@ -211,9 +211,7 @@ def test_cli_export_builds_strict_in_double_float_and_cxx(tmp_path):
     if shutil.which("make") is None or shutil.which("g++") is None:
         pytest.skip("make and g++ needed")
     gains = tmp_path / "design.json"
-    gains.write_text(json.dumps({"model": "link1", "kind": "ismc", "sensing": "torque", "rate": 1000.0, "delay": 1,
-                                 "predict": True, "noise": "franka_like",
-                                 "gains": {"lam": 10.0, "k_s": 20.0, "delta": 20.0, "u_max": 25.0}}))
+    gains.write_text(json.dumps(LINK1_TORQUE_DESIGN))
     out = tmp_path / "lib"
     assert main(["export", "controller", "link1", "--gains", str(gains), "--out", str(out)]) == 0
     proc = subprocess.run(["make", "-C", str(out)], capture_output=True, text=True)

@@ -2,6 +2,7 @@
 import json
 
 from fjm_runtime.cli.main import main as fjm_main
+from support.controller_runs import LINK1_TORQUE_DESIGN
 
 
 def test_simulate_params_sets_the_nominal_values_and_nominal_overrides_it(tmp_path, capsys):
@@ -27,9 +28,8 @@ def test_export_controller_params_are_the_embedded_nominal_values(tmp_path, caps
     p = tmp_path / "params.toml"
     p.write_text("[parameters]\nK = 171.25\n")
     gains = tmp_path / "gains.json"
-    gains.write_text(json.dumps({"model": "link1", "kind": "ismc", "sensing": "torque", "rate": 1000.0, "delay": 1,
-                                 "predict": True, "noise": "panda_white",
-                                 "gains": {"lam": 10.0, "k_s": 20.0, "delta": 20.0, "u_max": 50.0}}))
+    gains.write_text(json.dumps(dict(LINK1_TORQUE_DESIGN, noise="panda_white",
+                                     gains=dict(LINK1_TORQUE_DESIGN["gains"], u_max=50.0))))
     out = tmp_path / "lib"
     assert fjm_main(["export", "controller", "link1", "--gains", str(gains), "--params", str(p), "--out",
                      str(out)]) == 0
