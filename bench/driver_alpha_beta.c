@@ -13,15 +13,21 @@ int BETA(const double** arg, double** res, casadi_int* iw, double* w, int mem);
 int CAT(ALPHA, _work)(casadi_int*, casadi_int*, casadi_int*, casadi_int*);
 int CAT(BETA, _work)(casadi_int*, casadi_int*, casadi_int*, casadi_int*);
 
-/* One evaluation (for correctness checks): alpha (n) and beta (n*n, column-major). */
-int eval_alpha_beta(const double* x, const double* p, double* alpha, double* beta) {
+/* Work arrays large enough for both ALPHA and BETA (free both with free()). */
+static void alloc_work(double** w, casadi_int** iw) {
   casadi_int sa, sr, siw, sw, s2a, s2r, s2iw, s2w;
   CAT(ALPHA, _work)(&sa, &sr, &siw, &sw);
   CAT(BETA, _work)(&s2a, &s2r, &s2iw, &s2w);
   if (s2w > sw) sw = s2w;
   if (s2iw > siw) siw = s2iw;
-  double* w = malloc(sizeof(double) * (sw + 1));
-  casadi_int* iw = malloc(sizeof(casadi_int) * (siw + 1));
+  *w = malloc(sizeof(double) * (sw + 1));
+  *iw = malloc(sizeof(casadi_int) * (siw + 1));
+}
+
+/* One evaluation (for correctness checks): alpha (n) and beta (n*n, column-major). */
+int eval_alpha_beta(const double* x, const double* p, double* alpha, double* beta) {
+  double* w; casadi_int* iw;
+  alloc_work(&w, &iw);
   const double* arg[8] = {x, p}; double* res[4] = {alpha};
   int flag = ALPHA(arg, res, iw, w, 0);
   res[0] = beta;
@@ -32,13 +38,8 @@ int eval_alpha_beta(const double* x, const double* p, double* alpha, double* bet
 
 /* Seconds per (alpha + beta) pair over `iters` calls; `checksum` defeats dead-code elimination. */
 double time_alpha_beta(long iters, int nx, const double* x0, const double* p, double* checksum) {
-  casadi_int sa, sr, siw, sw, s2a, s2r, s2iw, s2w;
-  CAT(ALPHA, _work)(&sa, &sr, &siw, &sw);
-  CAT(BETA, _work)(&s2a, &s2r, &s2iw, &s2w);
-  if (s2w > sw) sw = s2w;
-  if (s2iw > siw) siw = s2iw;
-  double* w = malloc(sizeof(double) * (sw + 1));
-  casadi_int* iw = malloc(sizeof(casadi_int) * (siw + 1));
+  double* w; casadi_int* iw;
+  alloc_work(&w, &iw);
   double x[256], alpha[64], beta[4096];
   for (int i = 0; i < nx; ++i) x[i] = x0[i];
   const double* arg[8] = {x, p}; double* res[4] = {alpha};

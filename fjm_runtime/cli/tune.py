@@ -17,6 +17,7 @@ from ..analysis.certificates.certify import GUARANTEE, synthesize_gains
 from ..analysis.certificates.certify_tau import GUARANTEE_TAU, synthesize_torque_gains, torque_param_box
 from ..analysis.certificates.lemma1 import paper_beta_hat
 from ..control.defaults import DEFAULT_LAM, DEFAULT_LAYER_RATE
+from .common import parse_assignments
 
 DEFAULT_ERROR_BOX = {"sine": [0.05, 0.5, 0.5, 0.5], "step": [0.05, 0.1, 0.5, 1.0]}
 
@@ -122,19 +123,6 @@ def add_arguments(tp) -> None:
 
 
 
-def _assignments(items: List[str]) -> Dict[str, float]:
-    out = {}
-    for item in items:
-        name, sep, value = item.partition("=")
-        if not sep:
-            raise ValueError(f"--nominal {item!r}: expected NAME=VALUE, e.g. --nominal K=150")
-        try:
-            out[name.strip()] = float(value)
-        except ValueError:
-            raise ValueError(f"--nominal {item!r}: VALUE {value!r} is not a number") from None
-    return out
-
-
 def _intervals(items: List[str]) -> Dict[str, Tuple[float, float]]:
     out = {}
     for item in items:
@@ -215,7 +203,7 @@ def run(args) -> int:
     """
     from .. import load
     m = load(args.model)
-    nominal = _assignments(args.nominal)
+    nominal = parse_assignments(args.nominal, "--nominal")
     box = _box(m, args, nominal)
     R, ref_label = _reference(args, int(m.n))
     E = _floats(args.error_box, 4, "--error-box") if args.error_box is not None else DEFAULT_ERROR_BOX[args.reference]

@@ -31,6 +31,7 @@ from ..sim.sensor import SensorModel
 from ..sim.simulate import simulate
 from ..sim.step import SimulationDivergedError
 from .report import diverged_marker
+from .plots import write_figure
 
 #: The left arm's joints in q order (head_pan first, then the left arm, then the right).
 LEFT_ARM = slice(1, 8)
@@ -129,11 +130,7 @@ def plot(results, path: Path) -> Path:
         ax.set_ylim(1e-6, min(10.0, 3 * top))
     axes[0].set_ylabel("rad")
     axes[1].legend(fontsize=8, frameon=False)
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return write_figure(fig, path)
 
 
 def baxter_section(out: Path, duration: float = DURATION, progress: Optional[Callable[[str], None]] = None,

@@ -30,6 +30,7 @@ from ..sim.step import SimulationDivergedError
 from ..sim.substeps import resolve_substeps
 from . import panda as P
 from .report import diverged_marker
+from .plots import write_figure
 
 #: Plant gear-ratio cases: every joint at N, or only rotor 7 coupled (N = 1e9 elsewhere).
 GEAR_CASES = {"N = 100": (100.0,) * 7, "N = 300": (300.0,) * 7, "N = 1000": (1000.0,) * 7,
@@ -216,11 +217,7 @@ def plot(res, path: Path, case: str = "N = 100", mj=None) -> Path:
     ax.set_title(f"Panda, integral SMC at 5 kHz: complete plant ({case}; fjm and MuJoCo) vs reduced plant",
                  fontsize=10)
     ax.legend(fontsize=7, loc="lower right")
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return write_figure(fig, path)
 
 
 def mujoco_text(mj) -> str:

@@ -29,6 +29,7 @@ from ..sim.rest import rest_state
 from ..sim.simulate import SimulationResult, simulate
 from ..sim.step import SimulationDivergedError
 from .report import diverged_marker
+from .plots import write_figure
 
 _PANDA = load("panda")  # the arm's own facts: its model's limits and task (derive/robots/panda/panda.toml)
 #: Effort limits of panda_joint1..7 (N m): ``Model.limits.effort``, the URDF's ``<limit effort>``.
@@ -248,11 +249,7 @@ def plot(results, path: Path) -> Path:
     fig.legend(handles=handles, loc="outside lower center", ncol=min(4, len(cases)), fontsize=8.5, frameon=False,
                title="true stiffness = nominal x", title_fontsize=8.5)
     fig.suptitle("Panda, joint-space sines, nominal controller, every stiffness case", fontsize=10.5)
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return write_figure(fig, path)
 
 
 def panda_section(out: Path, duration: float = DURATION, progress: Optional[Callable[[str], None]] = None,

@@ -34,6 +34,7 @@ from typing import Dict, List, Optional, Tuple
 import numpy as np
 
 from ..drives import joint_coefficients, role_names
+from .plots import write_figure
 
 #: The compared laws: (label, model the law is built on, nominal edits of panda_hd's datasheet values, kind).
 LAWS = (("curve + friction FF", "panda_hd", {}, "ismc"),
@@ -207,10 +208,7 @@ def plot(runs: Dict[str, object], path: Path) -> Path:
             a.semilogy(r.t.ravel(), np.abs(r.e1[:, j]) + 1e-9, lw=0.7, label=f"joint {j + 1}")
         a.set(xlabel="t (s)", ylabel="|e1| (rad)", title=label, ylim=(1e-7, 1e-1))
         a.legend(fontsize=6, ncol=2)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return write_figure(fig, path, tight=True)
 
 
 def panda_drives_section(ctx) -> Tuple[List[str], list]:

@@ -38,12 +38,20 @@ def resolution(dpi: int):
         DPI["value"] = old
 
 
-def save(fig, path: Path, tight: bool = True) -> Path:
-    """Write ``fig`` to ``path`` (110 dpi, see :func:`resolution`), close it, log the path; returns ``path``."""
+def write_figure(fig, path, dpi: int = 110, tight: bool = False) -> Path:
+    """Write ``fig`` to ``path`` at ``dpi`` (its directory created when missing), close it; returns ``path``."""
+    path = Path(path)
     if tight:
         fig.tight_layout()
-    fig.savefig(path, dpi=DPI["value"])
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=dpi)
     pyplot().close(fig)
+    return path
+
+
+def save(fig, path: Path, tight: bool = True) -> Path:
+    """Write ``fig`` to ``path`` (110 dpi, see :func:`resolution`), close it, log the path; returns ``path``."""
+    write_figure(fig, path, DPI["value"], tight)
     log(f"  wrote {path}")
     return Path(path)
 

@@ -29,6 +29,7 @@ from ..sim.rest import rest_state
 from ..sim.simulate import simulate
 from ..sim.step import SimulationDivergedError
 from .panda import AMPLITUDE, DIVERGED_ERROR, PANDA_EFFORT, READY, reference
+from .plots import write_figure
 
 RATE = 1000.0          # Hz, the Panda's control rate
 DELAY = 1              # samples of computation delay
@@ -198,11 +199,7 @@ def plot(results: Dict[str, list], path: Path) -> Path:
         a.set_xlabel("t (s)")
     fig.suptitle(f"Panda at {RATE:g} Hz, {DELAY}-sample delay, sensor noise, K x U[0.7, 1.3], J_m x U[0.8, 1.2], "
                  "0-1 kg payload", fontsize=10)
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
-    return path
+    return write_figure(fig, path, dpi=100)
 
 
 def certificate_note(model) -> str:

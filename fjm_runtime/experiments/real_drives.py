@@ -16,6 +16,8 @@ from typing import Dict, List, Tuple
 
 import numpy as np
 
+from .plots import write_figure
+
 #: ismc gains of the comparison (a stiff drive: lambda 60), N m limit.
 GAINS = {"lam": 60.0, "k_s": 100.0, "delta": 5.0, "u_max": 100.0}
 
@@ -103,10 +105,7 @@ def _plot(arm, rows: Dict[str, dict], path: Path) -> Path:
         ax[1].semilogy(row["t"], np.abs(row["e1"]) + 1e-9, lw=0.8, label=key)
     ax[1].set(xlabel="t (s)", ylabel="|e1| (rad)", title="tracking error, first drive", ylim=(1e-6, 10))
     ax[1].legend(fontsize=7)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return write_figure(fig, path, tight=True)
 
 
 def real_drives_section(ctx) -> Tuple[List[str], list]:
