@@ -2,13 +2,7 @@
 import numpy as np
 import pytest
 
-import fjm_runtime as fjm
 from support.link1_case import K_NOM, REG
-
-
-@pytest.fixture(scope="module")
-def link1():
-    return fjm.load("link1")
 
 
 def test_adaptive_gamma_and_frozen_gains(link1):

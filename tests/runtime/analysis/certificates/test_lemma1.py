@@ -4,16 +4,10 @@ import numpy as np
 import pytest
 from scipy.optimize import minimize_scalar
 
-import fjm_runtime
 from fjm_runtime.control.laws import coefficients_from_pole
 from fjm_runtime.analysis.certificates.lemma1 import alpha_mismatch_bound, beta_bounds_link1, lemma1_gain, paper_bound
 from fjm_runtime.analysis.certificates.link1 import link1_alpha, link1_T_inverse
 from support.link1_case import K_BOX, K_NOM, REG, TRK, delta_alpha_closed_form
-
-
-@pytest.fixture(scope="module")
-def link1():
-    return fjm_runtime.load("link1")
 
 
 def test_beta_hat_is_midpoint_of_corrected_beta():

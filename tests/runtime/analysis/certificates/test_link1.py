@@ -2,13 +2,7 @@
 import numpy as np
 import pytest
 
-import fjm_runtime
 from fjm_runtime.analysis.certificates.link1 import link1_alpha, link1_T_inverse
-
-
-@pytest.fixture(scope="module")
-def link1():
-    return fjm_runtime.load("link1")
 
 
 def test_closed_forms_match_generated_model(link1):

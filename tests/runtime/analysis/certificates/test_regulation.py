@@ -2,12 +2,6 @@
 import numpy as np
 import pytest
 
-import fjm_runtime
-
-
-@pytest.fixture(scope="module")
-def link1():
-    return fjm_runtime.load("link1")
 
 
 def test_closed_loop_eigenvalues_exact_parameters_give_designed_poles(link1):

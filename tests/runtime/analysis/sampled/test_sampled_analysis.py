@@ -12,7 +12,6 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-import fjm_runtime
 from fjm_runtime.analysis.sampled.sampled_analysis import LinearAnalyzer
 from fjm_runtime.analysis.sampled.sampled_linear import Conditions, scaled_stiffness
 from fjm_runtime.control.references import Sinusoid
@@ -30,11 +29,6 @@ QUIET = {"lam": 15.0, "k_lin": [20.0, 20.0], "k_s": [200.0, 200.0], "delta": [5.
 #: Stiffer law whose boundaries lie inside the grids: unstable from 3 samples of delay and outside
 #: about K x [0.30, 1.33] (the analysis' numbers; the test checks them against simulation).
 STIFF = {"lam": 40.0, "k_lin": [100.0, 100.0], "k_s": [2000.0, 2000.0], "delta": [10.0, 10.0]}
-
-
-@pytest.fixture(scope="module")
-def planar2():
-    return fjm_runtime.load("planar2")
 
 
 def _setting(m, sensor=SMALL, delay=1):
