@@ -110,6 +110,30 @@ def _fmt(vals, spec="{:.3g}"):
     return " ".join("-" if v is None else spec.format(v) for v in vals)
 
 
+def _point_lines(name: str, f: dict):
+    """The report of one plant's point: the verdict and its method, then the figures when stable."""
+    d = f.get("first_unstable_delay", "n/a")
+    verdict = {True: "", False: " UNSTABLE", None: " NO VERDICT"}[f["stable"]]
+    method = f.get("method", "small-signal")
+    head = f"  {name:>8}  rho {f['rho']:.4f}{verdict} ({method}"
+    if method != "small-signal":
+        head += f"; small-signal rho {f['rho_small_signal']:.4g}"
+    lines = [head + f")  mode on joint {f['dominant_joint']}  first unstable delay {'> d+4' if d is None else d}"]
+    if f["stable"] is None:
+        lines.append(f"            no verdict: {f.get('reason', 'the linearization does not apply')}")
+    elif method == "small-signal" and max(f.get("s_over_delta", [0.0])) > 1.0:
+        lines.append(f"            the law is OUTSIDE its boundary layer here (|s|/delta up to "
+                     f"{max(f['s_over_delta']):.3g}): saturated, the linearization is not the loop's")
+    if f["stable"]:
+        lines.append(f"            jitter N m  {_fmt(f['torque_jitter'])}")
+        lines.append(f"            q std rad   {_fmt(f['q_error_std'])}")
+        if "layer_fraction" in f:
+            lines.append(f"            in layer    {_fmt(f['layer_fraction'], '{:.2f}')}")
+        if "dominant_noise" in f:
+            lines.append(f"            dominant noise  {' '.join(f['dominant_noise'])}")
+    return lines
+
+
 def table_lines(out: dict):
     """The readable report of an analysis record."""
     s = out["settings"]
@@ -118,30 +142,21 @@ def table_lines(out: dict):
     for row in out["plants"]:
         lines.append(f"{row['plant']}:")
         for name, f in row["points"].items():
-            d = f.get("first_unstable_delay", "n/a")
-            head = f"  {name:>8}  rho {f['rho']:.4f}{'' if f['stable'] else ' UNSTABLE'}  mode on joint " \
-                   f"{f['dominant_joint']}  first unstable delay {'> d+4' if d is None else d}"
-            lines.append(head)
-            if max(f.get("s_over_delta", [0.0])) > 1.0:
-                lines.append(f"            the law is OUTSIDE its boundary layer here (|s|/delta up to "
-                             f"{max(f['s_over_delta']):.3g}): saturated, the linearization is not the loop's")
-            if f["stable"]:
-                lines.append(f"            jitter N m  {_fmt(f['torque_jitter'])}")
-                lines.append(f"            q std rad   {_fmt(f['q_error_std'])}")
-                if "dominant_noise" in f:
-                    lines.append(f"            dominant noise  {' '.join(f['dominant_noise'])}")
+            lines.extend(_point_lines(name, f))
     for name, sc in out.get("stiffness_scale", {}).items():
         lo, hi = sc["range"]
         lines.append(f"stiffness scale (nominal plant, {name}): " + ("unstable at g = 1" if sc["unstable"] else
                      f"K x [{'< 1/16' if lo is None else f'{lo:.3g}'}, {'> 16' if hi is None else f'{hi:.3g}'}]"))
     sm = out["summary"]
     lines.append(f"worst: rho {sm['rho']}, jitter N m {_fmt(sm['torque_jitter'])}, q std rad {_fmt(sm['q_error_std'])}")
+    lines.extend(f"no verdict: {reason}" for reason in sm.get("no_verdict", []))
     lines.append(f"({out['seconds']:.1f} s)")
     return lines
 
 
 def run(args) -> int:
-    """Run ``fjm analyze``; 0 when the loop is stable at every plant and point, 1 otherwise."""
+    """Run ``fjm analyze``; 0 when the loop is stable at every plant and point, 1 otherwise (unstable or
+    no verdict somewhere)."""
     from .. import load
     from ..analysis.sampled.sampled_analysis import LinearAnalyzer, default_plants
     from .common import check_output_file
@@ -163,4 +178,4 @@ def run(args) -> int:
         print(text)
     else:
         print("\n".join(table_lines(out)))
-    return 0 if out["summary"]["stable_everywhere"] else 1
+    return 0 if out["summary"]["stable_everywhere"] is True else 1

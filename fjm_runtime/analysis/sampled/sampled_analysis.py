@@ -174,42 +174,77 @@ class LinearAnalyzer:
         return {"range": out, "unstable": False}
 
     # -- the whole analysis ------------------------------------------------------------------------
+    def _layer(self, ctrl, g, lin):
+        """``(k_s, delta, slope)`` of the law's boundary layer at ``lin`` (gains ``g``), or None (no layer)."""
+        blocks = self.model.manifest["controls"][ctrl.law_kind]["gains"]
+        off = {b["name"]: (int(b["offset"]), int(b["size"])) for b in blocks}
+        if "k_s" not in off or "delta" not in off:
+            return None
+        take = lambda name: np.broadcast_to(g[off[name][0]:off[name][0] + off[name][1]], (self.n,)).astype(float)
+        k_s, delta = take("k_s"), take("delta")
+        law_delta = np.broadcast_to(np.asarray(ctrl.delta, dtype=float), (self.n,))
+        slope = np.where(np.abs(lin.s) < delta, k_s / delta, 0.0)
+        return k_s, law_delta, slope
+
+    def equivalent_gains(self, ctrl, g, fig) -> np.ndarray:
+        """``g`` with each boundary layer widened to ``delta / P(|s| < delta)`` of ``fig`` (a point's
+        :func:`assess`): inside it the law's slope is the equivalent gain (the loop the trajectories and
+        margins are computed on). ``g`` itself when the point has no layer fraction."""
+        frac = fig.get("layer_fraction")
+        if frac is None or fig.get("method") != "equivalent gain":
+            return g
+        blocks = {b["name"]: b for b in self.model.manifest["controls"][ctrl.law_kind]["gains"]}
+        b = blocks["delta"]
+        out = np.asarray(g, dtype=float).copy()
+        delta = np.broadcast_to(np.asarray(ctrl.delta, dtype=float), (self.n,))
+        wide = delta / np.maximum(np.asarray(frac, dtype=float), 1e-9)
+        out[int(b["offset"]):int(b["offset"]) + int(b["size"])] = wide[:int(b["size"])]
+        return out
+
+    def figures(self, ctrl, g, point: int, p, run, attribution: bool) -> dict:
+        """:func:`assess` of one plant and point (gains ``g``), with ``|s| / delta`` at the point."""
+        S, w, r = self.operating_point(ctrl, g, point, p, self.cond.delay, run)
+        if not np.all(np.isfinite(w)):
+            return {"rho": float("inf"), "stable": False, "dominant_joint": None}
+        lin = S.linearize(w, r, p, g)
+        if point == 0:
+            self._chords.setdefault(self.cond.delay, lin)
+        fig = assess(lin, self.levels, self.h, self.names, attribution, self._layer(ctrl, g, lin))
+        fig["s_over_delta"] = (np.abs(lin.s) / np.asarray(ctrl.delta, dtype=float)).tolist()
+        return fig
+
     def analyze(self, gains: dict, margins: bool = True, attribution: bool = True,
                 points: Optional[Sequence[int]] = None) -> dict:
         """The analysis of ``gains`` (a law gains dict, or a controller) as a JSON-able dict.
 
-        ``points``: indices into :meth:`points` (default all). Margins: the delay margin for every
-        plant at rest and for the nominal plant (the first) at every point; the stiffness-scale range
-        for the nominal plant at every point.
+        ``points``: indices into :meth:`points` (default all). The nominal plant at rest is analysed
+        first: its equivalent gains (:meth:`equivalent_gains`) are the law the task run, the task points and
+        the margins use. Margins: the delay margin for every plant at rest and for the nominal plant (the
+        first) at every point; the stiffness-scale range for the nominal plant at every point.
         """
         t0 = time.perf_counter()
         ctrl = gains if hasattr(gains, "law_kind") else self.cond.controller(gains)
         g = np.asarray(ctrl.gains, dtype=float)
         self._chords = {}
         pts = list(range(len(self.task_k) + 1)) if points is None else list(points)
-        run = self._nominal_run(ctrl, g) if any(i > 0 for i in pts) else {}
+        rest0 = self.figures(ctrl, g, 0, self.plants[0][1], {}, attribution)
+        g_eq = self.equivalent_gains(ctrl, g, rest0)
+        run = self._nominal_run(ctrl, g_eq) if any(i > 0 for i in pts) else {}
         names = self.points()
         table = []
-        for name, p in self.plants:
+        for k, (name, p) in enumerate(self.plants):
             row = {"plant": name, "params": {k: float(v) for k, v in zip(self.model.param_names, p)}, "points": {}}
             for i in pts:
-                S, w, r = self.operating_point(ctrl, g, i, p, self.cond.delay, run)
-                lin = S.linearize(w, r, p, g) if np.all(np.isfinite(w)) else None
-                if i == 0 and lin is not None:
-                    self._chords.setdefault(self.cond.delay, lin)
-                fig = assess(lin, self.levels, self.h, self.names, attribution) if lin is not None else \
-                    {"rho": float("inf"), "stable": False, "dominant_joint": None}
-                if lin is not None:
-                    s_k = np.asarray(S.step(w, r, np.zeros(S.L.nm), p, g)[1]).ravel()[self.n:2 * self.n]
-                    fig["s_over_delta"] = (np.abs(s_k) / np.asarray(ctrl.delta, dtype=float)).tolist()
-                if margins and (i == 0 or name == self.plants[0][0]):
-                    fig["first_unstable_delay"] = self.cond.delay if not fig["stable"] else \
-                        self.delay_margin(ctrl, g, i, p, run)
+                fig = rest0 if (i == 0 and k == 0) else self.figures(ctrl, g if i == 0 else g_eq, i, p, run,
+                                                                     attribution)
+                if margins and (i == 0 or k == 0):
+                    fig["first_unstable_delay"] = self.cond.delay if fig["stable"] is False else \
+                        self.delay_margin(ctrl, g_eq, i, p, run)
                 row["points"][names[i]] = fig
             table.append(row)
         out = {"points": [names[i] for i in pts], "plants": table, "summary": _summary(table, self.n)}
         if margins:
-            out["stiffness_scale"] = {names[i]: self.scale_range(ctrl, g, i, run) for i in pts}
+            out["stiffness_scale"] = {names[i]: self.scale_range(ctrl, g_eq, i, run) for i in pts}
         out["settings"] = {"rate": 1.0 / self.T, "delay": self.cond.delay, "predict": self.cond.predict,
                            "sensing": self.cond.sensing, "sensor": self.cond.sensor.name, "substeps": self.substeps,
                            "jitter_window_samples": 2 * self.h + 1, "catch_up_samples": self.catch,
@@ -219,13 +254,16 @@ class LinearAnalyzer:
 
 
 def _summary(table, n):
-    """Worst over plants and points: radius, jitter and error std per joint, first unstable delay."""
+    """Worst over plants and points: radius, jitter and error std per joint, first unstable delay; the
+    verdict (``stable_everywhere`` True / False, or None when no point is unstable but some has none)."""
     figs = [f for row in table for f in row["points"].values()]
     rho = max(f["rho"] for f in figs)
     stable = [f for f in figs if f["stable"]]
     worst = lambda key: [finite(max(f[key][j] for f in stable)) for j in range(n)] if len(stable) == len(figs) \
         else [None] * n
     delays = [f.get("first_unstable_delay") for f in figs if "first_unstable_delay" in f]
-    return {"rho": finite(rho), "stable_everywhere": len(stable) == len(figs),
+    verdict = True if len(stable) == len(figs) else (False if any(f["stable"] is False for f in figs) else None)
+    return {"rho": finite(rho), "stable_everywhere": verdict,
+            "no_verdict": sorted({f["reason"] for f in figs if f["stable"] is None and "reason" in f}),
             "torque_jitter": worst("torque_jitter"), "q_error_std": worst("q_error_std"),
             "first_unstable_delay": (min((d for d in delays if d is not None), default=None) if delays else None)}

@@ -40,7 +40,6 @@ from ...sim.step_layout import make_layout, stiffness_indices
 from ...sim.step_layout import spring_scale_groups
 from ...sim.sensor import SIGNALS, noise_slots
 from ...validation import FjmValueError
-from .sampled_noise import channel_variances, stationary_covariance, torque_jitter_variance
 
 __all__ = ["LinearStep", "Linearization", "linear_step", "noise_levels", "assess", "spectral"]
 
@@ -62,7 +61,11 @@ def channel_names(sensor, sensing: str, n: int):
 class Linearization:
     """One linearization: ``A`` (nd, nd) on the dynamic states, ``B`` (nd, nm), ``C`` (n, nd), ``D`` (n, nm).
 
-    ``w`` is the operating point (core state, gains excluded), ``dyn`` the core indices kept.
+    ``w`` is the operating point (core state, gains excluded), ``dyn`` the core indices kept. The law's
+    sliding variable ``s_k = Cs w_k + Ds n_k`` (``Cs`` (n, nd), ``Ds`` (n, nm); ``s`` (n,) its value at
+    the point) and an additive input ``v`` on the law's ``nu`` (entering as the reference's fourth
+    derivative does): ``w_{k+1} += Bv v_k``, ``u_k += Dv v_k`` (``Bv`` (nd, n), ``Dv`` (n, n)); with them
+    :mod:`~fjm_runtime.analysis.sampled.sampled_equivalent` changes the boundary layer's slope.
     """
 
     A: np.ndarray
@@ -72,13 +75,19 @@ class Linearization:
     w: np.ndarray
     dyn: np.ndarray
     nx: int
+    Cs: Optional[np.ndarray] = None
+    Ds: Optional[np.ndarray] = None
+    Bv: Optional[np.ndarray] = None
+    Dv: Optional[np.ndarray] = None
+    s: Optional[np.ndarray] = None
 
 
 class LinearStep:
     """The sample step of one (model, law structure, layout) and its jacobians, gains as an input.
 
-    ``step(wc, r, noise, p, g) -> (wc_next, aux)`` and ``jac(...) -> (wc_next, aux, A, B, C, D)``
-    (CasADi Functions) on the CORE state ``wc`` (``w`` without the riding gains).
+    ``step(wc, r, noise, p, g) -> (wc_next, aux)`` and ``jac(v, r_low, p, g) -> (out, J)`` (CasADi
+    Functions) on the CORE state ``wc`` (``w`` without the riding gains): ``v = [wc; noise; nu input]``,
+    ``out = [wc_next; u; s]``, ``J = d out / d v`` (:meth:`linearize` slices it).
     """
 
     def __init__(self, model, controller, L):
@@ -94,11 +103,16 @@ class LinearStep:
         r, noise, p = ca.MX.sym("r", 5 * L.n), ca.MX.sym("noise", L.nm), ca.MX.sym("p", len(model.param_names))
         w_next, aux = F(ca.vertcat(wc[:a], g, wc[a:]), r, noise, p)
         wcn = ca.vertcat(w_next[:a], w_next[a + gi.n_gains:])
-        u = aux[:L.n]
         args = [wc, r, noise, p, g]
         self.step = ca.Function("fjm_lin_step", args, [wcn, aux])
-        self.jac = ca.Function("fjm_lin_jac", args, [wcn, aux, ca.jacobian(wcn, wc), ca.jacobian(wcn, noise),
-                                                     ca.jacobian(u, wc), ca.jacobian(u, noise)])
+        # one jacobian of (w_next, u, s) with respect to one symbol v = [w; noise; nu input] (the reference's
+        # fourth derivative, the only place it enters the law, is nu's additive input)
+        n, nm = L.n, L.nm
+        v, r_low = ca.MX.sym("v", nc + nm + n), ca.MX.sym("r_low", 4 * n)
+        w_next, aux = F(ca.vertcat(v[:a], g, v[a:nc]), ca.vertcat(r_low, v[nc + nm:]), v[nc:nc + nm], p)
+        out = ca.vertcat(w_next[:a], w_next[a + gi.n_gains:], aux[:2 * n])
+        self.jac = ca.Function("fjm_lin_jac", [v, r_low, p, g], [out, ca.jacobian(out, v)])
+        self._nc = nc
         self._runs: dict = {}
 
     def core_state(self, x0, z_law, p, sensor) -> np.ndarray:
@@ -128,14 +142,19 @@ class LinearStep:
         return np.asarray(W).T
 
     def linearize(self, wc, r, p, g) -> Linearization:
-        """``A, B, C, D`` at ``(wc, r)`` with the constant states dropped."""
-        _, _, A, B, C, D = (np.asarray(v) for v in self.jac(wc, r, np.zeros(self.L.nm), p, g))
-        A, B, C, D = (np.atleast_2d(np.asarray(v, dtype=float)) for v in (A, B, C, D))
-        eye = np.eye(A.shape[0])
+        """``A, B, C, D`` (and ``Cs, Ds, Bv, Dv``) at ``(wc, r)`` with the constant states dropped."""
+        n, nm, nc = self.n, self.L.nm, self._nc
+        r = np.asarray(r, dtype=float).ravel()
+        val, J = self.jac(np.r_[np.asarray(wc, dtype=float).ravel(), np.zeros(nm), r[4 * n:]], r[:4 * n], p, g)
+        val, J = np.asarray(val, dtype=float).ravel(), np.asarray(J, dtype=float)
+        A, B, Bv = J[:nc, :nc], J[:nc, nc:nc + nm], J[:nc, nc + nm:]
+        eye = np.eye(nc)
         const = np.all(A == eye, axis=1) & ~np.any(B, axis=1)
         dyn = np.flatnonzero(~const)
-        return Linearization(A[np.ix_(dyn, dyn)], B[dyn], C[:, dyn], D, np.asarray(wc, dtype=float), dyn,
-                             int(self.model.nx))
+        u_rows, s_rows = slice(nc, nc + n), slice(nc + n, nc + 2 * n)
+        return Linearization(A[np.ix_(dyn, dyn)], B[dyn], J[u_rows, dyn], J[u_rows, nc:nc + nm],
+                             np.asarray(wc, dtype=float), dyn, int(self.model.nx), Cs=J[s_rows, dyn],
+                             Ds=J[s_rows, nc:nc + nm], Bv=Bv[dyn], Dv=J[u_rows, nc + nm:], s=val[s_rows])
 
     def equilibrium(self, wc, r, p, g, chord: Optional[Linearization] = None, iterations: int = 40,
                     tol: float = 1e-11, _own: bool = True):
@@ -205,38 +224,84 @@ def spectral(lin: Linearization, n: int):
     return float(np.abs(vals[k])), joint
 
 
-def assess(lin: Linearization, levels, h: int, names: Sequence[str], attribution: bool = False) -> dict:
-    """Spectral radius and, when stable, the predicted jitter and link-angle error std per joint.
+def assess(lin: Linearization, levels, h: int, names: Sequence[str], attribution: bool = False,
+           layer: Optional[tuple] = None) -> dict:
+    """The verdict at one point, and when stable the predicted jitter and link-angle error std per joint.
+
+    ``layer = (k_s, delta, slope)`` (each (n,)): the law's switching gain, its boundary layer and the slope
+    ``lin`` carries. With it and sensor noise, the layer enters by its equivalent gain under that noise
+    (:mod:`~fjm_runtime.analysis.sampled.sampled_equivalent`) unless the noise keeps ``s`` inside it; without
+    noise, an equilibrium unstable inside the layer but stable outside it gets no verdict (the loop settles
+    in an oscillation of the layer's width).
 
     Returns
     -------
     dict
-        ``rho, stable, dominant_joint`` (1-based), ``torque_jitter`` (n,) N m, ``q_error_std`` (n,) rad;
-        with ``attribution``: ``noise_share`` {joint: {channel: share of the jitter variance}} (top 3)
-        and ``dominant_noise`` (n,) channel labels.
+        ``rho`` (of the loop judged), ``rho_small_signal``, ``stable`` (True, False, or None: no verdict,
+        with ``reason``), ``method`` ('small-signal' or 'equivalent gain'), ``dominant_joint`` (1-based);
+        when stable ``torque_jitter`` (n,) N m, ``q_error_std`` (n,) rad, with a layer ``layer_fraction``
+        (n,) (the time inside it) and ``s_std_over_delta`` (n,); with ``attribution``: ``noise_share``
+        {joint: {channel: share of the jitter variance}} (top 3) and ``dominant_noise`` (n,) labels.
     """
+    from .sampled_equivalent import equivalent_loop, loop_figures, noise_columns, with_slope
     n = lin.C.shape[0]
-    rho, joint = spectral(lin, n)
-    out = {"rho": rho, "stable": bool(rho < 1.0), "dominant_joint": None if joint is None else joint + 1}
-    if rho >= 1.0:
-        return out
     levels = np.asarray(levels, dtype=float)
-    BS, DS = lin.B * levels[None, :], lin.D * levels[None, :]
+    rho0, joint = spectral(lin, n)
+    out = {"rho": rho0, "rho_small_signal": rho0, "stable": bool(rho0 < 1.0), "method": "small-signal",
+           "dominant_joint": None if joint is None else joint + 1}
     qrows = [int(np.flatnonzero(lin.dyn == i)[0]) for i in range(n)]
-    if attribution:
-        jit_c, q_c = channel_variances(lin.A, BS, lin.C, DS, h, qrows)
-        jit, qv = jit_c.sum(axis=0), q_c.sum(axis=0)
-        share = jit_c / np.maximum(jit[None, :], 1e-300)
+    loop = (lin.A, lin.B, lin.C, lin.D)
+    zero = np.zeros(n)
+    if layer is not None:
+        k_s, delta, slope = (np.asarray(v, dtype=float) for v in layer)
+        quiet = not np.any(levels > 0)
+        small_ok = rho0 < 1.0 and (quiet or _inside(lin, loop, levels, qrows, h, delta))
+        if quiet and not small_ok:
+            rho_sat = spectral(replace(lin, A=with_slope(lin, -slope)[0]), n)[0]
+            if rho_sat < 1.0:
+                out.update(stable=None, rho_saturated=rho_sat, reason=(
+                    f"noise-free, the equilibrium is unstable inside the boundary layer (rho {rho0:.4g}) and stable "
+                    f"outside it (rho {rho_sat:.4g}): the loop settles in an oscillation of the layer's width, "
+                    "which no linearization judges"))
+            return out
+        if not small_ok:
+            eq = equivalent_loop(lin, levels, k_s, delta, slope, h, qrows)
+            out.update(rho=eq.rho, method="equivalent gain", layer_fraction=eq.p_in.tolist(),
+                       equivalent_gain=eq.gain.tolist(), iterations=eq.iterations)
+            if not eq.converged:
+                out.update(stable=False if eq.rho >= 1.0 else None, reason=eq.reason)
+                return out
+            out["stable"], loop, zero = True, (eq.A, eq.B, eq.C, eq.D), eq.residual
+    if not out["stable"]:
+        return out
+    BS, DS, DsS = noise_columns(lin, loop, levels, zero)
+    jit_c, q_c, s_c = loop_figures(loop[0], BS, loop[2], DS, lin.Cs, DsS, qrows, h, channels=True)
+    jit, qv = jit_c.sum(axis=0), q_c.sum(axis=0)
+    if layer is not None:
+        from .sampled_equivalent import sat_moments
+        s_std = np.sqrt(s_c.sum(axis=0))
+        out.setdefault("layer_fraction", sat_moments(lin.s, s_std, delta)[0].tolist())
+        out["s_std_over_delta"] = (s_std / delta).tolist()
+    if attribution and jit_c.shape[0] >= len(names):
+        share = jit_c[:len(names)] / np.maximum(jit[None, :], 1e-300)
         out["dominant_noise"] = [names[int(np.argmax(share[:, i]))] for i in range(n)]
         out["noise_share"] = {str(i + 1): {names[c]: float(share[c, i]) for c in np.argsort(-share[:, i])[:3]}
                               for i in range(n)}
-    else:
-        P = stationary_covariance(lin.A, BS)
-        jit = torque_jitter_variance(lin.A, BS, lin.C, DS, h, P)
-        qv = np.diag(P)[qrows]
     out["torque_jitter"] = np.sqrt(jit).tolist()
     out["q_error_std"] = np.sqrt(np.maximum(qv, 0.0)).tolist()
     return out
+
+
+#: The small-signal linearization stands when ``s`` stays inside the layer this fraction of the time.
+INSIDE_FRACTION = 0.999
+
+
+def _inside(lin, loop, levels, qrows, h, delta) -> bool:
+    """Does the small-signal loop's own noise keep every ``s`` inside its layer (``INSIDE_FRACTION``)?"""
+    from .sampled_equivalent import loop_figures, noise_columns, sat_moments
+    BS, DS, DsS = noise_columns(lin, loop, levels, np.zeros(len(qrows)))
+    s_var = loop_figures(loop[0], BS, loop[2], DS, lin.Cs, DsS, qrows, h)[2]
+    return bool(np.all(sat_moments(lin.s, np.sqrt(s_var), delta)[0] >= INSIDE_FRACTION))
 
 
 @dataclass(frozen=True)

@@ -105,3 +105,62 @@ def channel_variances(A, BS, C, DS, h: int, rows_q):
         jit[c] = torque_jitter_variance(A, BS[:, c:c + 1], C, DS[:, c:c + 1], h, P)
         q[c] = np.diag(P)[rows_q]
     return jit, q
+
+
+def modal_form(A, max_condition: float = 1e9):
+    """``(vals, V, W)``: the eigenvalues, eigenvectors and ``W = V^-1`` of ``A``; None when ``V`` is
+    ill-conditioned (a nearly defective ``A``: the modal sums below would lose accuracy)."""
+    vals, V = np.linalg.eig(np.asarray(A, dtype=float))
+    try:
+        W = np.linalg.inv(V)
+    except np.linalg.LinAlgError:
+        return None
+    if not np.all(np.isfinite(W)) or np.linalg.norm(V, 1) * np.linalg.norm(W, 1) > max_condition:
+        return None                       # 1-norm condition number: an SVD costs more than the rest
+    return vals, V, W
+
+
+def modal_channel_variances(modal, BS, outputs, h: int):
+    """Per noise channel, the stationary variance of outputs and the torque jitter variance, by modes.
+
+    With ``A = V diag(lambda) W`` the covariance a channel ``b`` adds is ``V ((W b)(W b)^H o M) V^H``,
+    ``M_kl = 1 / (1 - lambda_k conj(lambda_l))``, and ``sum_tau a(tau) A^tau`` is diagonal in the modes:
+    the same sums as :func:`torque_jitter_variance`, without a Lyapunov solve per channel.
+
+    Parameters
+    ----------
+    modal : tuple
+        :func:`modal_form` of a stable ``A`` (nw, nw).
+    BS : ndarray (nw, nm)
+        ``B`` with each noise column scaled by its standard deviation.
+    outputs : list of (C, DS, jitter)
+        Outputs ``y = C w + DS n`` (``C`` (no, nw), ``DS`` (no, nm)); ``jitter`` True: also the variance of
+        ``y_k`` minus its centred ``2h + 1`` mean (the torque jitter metric).
+    h : int
+        Half-width of the jitter window in samples.
+
+    Returns
+    -------
+    list of ndarray (nm, no)
+        Per output: the stationary variance per channel, then (for a jitter output) the jitter variance.
+    """
+    vals, V, W = modal
+    Bt = W @ np.asarray(BS, dtype=float)                        # (nw, nm) modal inputs
+    M = 1.0 / (1.0 - vals[:, None] * np.conj(vals)[None, :])
+    a = jitter_weights(h)
+    pw = vals[None, :] ** np.arange(a.size)[:, None]             # lambda^tau, tau = 0..2h
+    omega = a[1:] @ pw[1:]                                        # sum_{tau>=1} a(tau) lambda^tau
+    psi = a[1:] @ pw[:-1]                                         # sum_{tau>=1} a(tau) lambda^(tau-1)
+    res = []
+    for C, DS, jitter in outputs:
+        G = np.asarray(C, dtype=float) @ V
+        X = G[None, :, :] * Bt.T[:, None, :]                      # (nm, no, nw): G_ik Bt_kc
+        XM = X @ M
+        var = np.real(np.sum(XM * np.conj(X), axis=2))
+        DS2 = np.asarray(DS, dtype=float).T ** 2
+        res.append(np.maximum(var + DS2, 0.0))
+        if jitter:
+            lag = np.real(np.sum((X * omega[None, None, :]) @ M * np.conj(X), axis=2))
+            cross = np.real(np.sum(X * psi[None, None, :], axis=2)) * np.asarray(DS, dtype=float).T
+            res.append(np.maximum(a[0] * (var + DS2) + 2.0 * (lag + cross), 0.0))
+    return res

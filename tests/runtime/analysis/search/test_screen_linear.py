@@ -19,7 +19,9 @@ def test_linear_screen_verdicts_follow_the_analysis():
     noisy = LinearScreen(DesignLoops(m, "ismc", "torque", 1000.0, 1, SensorModel.panda_white(seed=5), None, None,
                                      True), default_spread(m))
     a, b = noisy.check([unstable, stable])
-    assert not a.ok and a.reason.startswith("spectral radius") and a.predicted["rho"] > 1.0
+    # small-signal unstable (radius > 1 inside the boundary layer), but under this noise s lives outside the
+    # layer: the equivalent-gain loop is stable (simulate holds it, 40 / 14 N m of jitter) and the jitter rejects it
+    assert not a.ok and a.reason.startswith("predicted jitter") and a.predicted["rho"] < 1.0
     jit = b.predicted["torque_jitter"]
     assert not b.ok and b.predicted["rho"] <= noisy.rho_max and max(jit) > JITTER_SLACK * 3.0
     assert b.reason == f"predicted jitter {max(jit):.3g} N m on joint {int(np.argmax(jit)) + 1} > 1.25 x 3 N m"
