@@ -45,17 +45,23 @@ def test_a_failed_design_says_which_threshold_joint_and_draw():
     json.dumps(a, allow_nan=False)
 
 
+def _local_and_on_two_workers(draws, recheck_draws, processes):
+    """The planar2 search run here and on a dask LocalCluster of 2 workers (threads or processes)."""
+    from dask.distributed import Client, LocalCluster
+    m = fjm_runtime.load("planar2")
+    kw = dict(TINY, draws=draws, recheck_draws=recheck_draws, sensor=SensorModel.panda_white(seed=5),
+              thresholds=Thresholds(max_rms=1.0, max_jitter=1e4, max_at_limit=1.0))
+    local = run_search(m, **kw)
+    with LocalCluster(n_workers=2, threads_per_worker=1, processes=processes, dashboard_address=None) as cluster, \
+            Client(cluster) as client:
+        remote = run_search(m, scheduler=client, **kw)
+    return local, remote
+
+
 @pytest.mark.slow  # builds the batch step (C) on a cold cache
 def test_design_on_a_two_worker_cluster_is_bit_identical():
     """The Monte Carlo stages on a dask LocalCluster (2 workers, threads) give the same record bit for bit."""
-    from dask.distributed import Client, LocalCluster
-    m = fjm_runtime.load("planar2")
-    kw = dict(TINY, draws=4, recheck_draws=3, sensor=SensorModel.panda_white(seed=5),
-              thresholds=Thresholds(max_rms=1.0, max_jitter=1e4, max_at_limit=1.0))
-    local = run_search(m, **kw)
-    with LocalCluster(n_workers=2, threads_per_worker=1, processes=False, dashboard_address=None) as cluster, \
-            Client(cluster) as client:
-        remote = run_search(m, scheduler=client, **kw)
+    local, remote = _local_and_on_two_workers(4, 3, processes=False)
     assert remote["scheduler"] != "local" and local["scheduler"] == "local"
     for key in ("gains", "worst_case", "margins", "misses", "recheck", "meets"):
         assert remote[key] == local[key], key
@@ -103,14 +109,7 @@ def test_a_screen_keeps_rejected_candidates_out_of_the_monte_carlo(monkeypatch):
 @pytest.mark.exhaustive
 def test_design_on_process_workers_is_bit_identical():
     """As the threaded-cluster test, on 2 worker PROCESSES (pickled specs, a library loaded per process)."""
-    from dask.distributed import Client, LocalCluster
-    m = fjm_runtime.load("planar2")
-    kw = dict(TINY, draws=6, recheck_draws=4, sensor=SensorModel.panda_white(seed=5),
-              thresholds=Thresholds(max_rms=1.0, max_jitter=1e4, max_at_limit=1.0))
-    local = run_search(m, **kw)
-    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster, \
-            Client(cluster) as client:
-        remote = run_search(m, scheduler=client, **kw)
+    local, remote = _local_and_on_two_workers(6, 4, processes=True)
     for key in ("gains", "worst_case", "margins", "misses", "recheck", "meets"):
         assert remote[key] == local[key], key
 
