@@ -22,16 +22,8 @@ from ..validation import FjmValueError
 __all__ = ["add_arguments", "run", "conditions_from_design"]
 
 
-#: The text of ``fjm analyze --help``.
-DESCRIPTION = ("Linearize the whole sampled loop (plant on its substeps, delay buffer, predictor, "
-               "sensor filters, the law in its boundary layer) at rest and along the task, for "
-               "the nominal plant and the corners of the parameter box; report the spectral "
-               "radius, delay margin, stiffness-scale range and the torque jitter and tracking "
-               "error predicted from the sensor noise (docs/design-command.md).")
-
-
 def add_arguments(p) -> None:
-    """The arguments of ``fjm analyze`` on its parser ``p`` (its name and help: ``cli.main.COMMANDS``)."""
+    """The arguments of ``fjm analyze`` on its parser ``p`` (name, help, description: commands.toml)."""
     p.add_argument("model")
     p.add_argument("--gains", type=Path, required=True, help="gains file (a fjm design output or {kind, gains})")
     p.add_argument("--rate", type=float, default=None, help="control rate, Hz (default: the file's, else 1000)")

@@ -13,16 +13,8 @@ from ..validation import FjmValueError
 __all__ = ["add_arguments", "run", "demo_task"]
 
 
-#: The text of ``fjm design --help``.
-DESCRIPTION = ("Search the integral sliding-mode gains (lam, k_lin, k_s, delta) for a model, "
-               "control rate, delay and sensor model over draws of the TRUE plant "
-               "(docs/design-command.md); writes the gains file fjm simulate --gains reads. "
-               "Exit status 1 when the gains miss a threshold (the file records "
-               "\"meets\": false and the misses).")
-
-
 def add_arguments(p) -> None:
-    """The arguments of ``fjm design`` on its parser ``p`` (its name and help: ``cli.main.COMMANDS``)."""
+    """The arguments of ``fjm design`` on its parser ``p`` (name, help, description: commands.toml)."""
     p.add_argument("model")
     p.add_argument("--controller", default="ismc", choices=("ismc",), help="law (default ismc)")
     p.add_argument("--sensing", default="torque", choices=("state", "torque"), help="default torque")

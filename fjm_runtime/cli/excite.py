@@ -11,17 +11,8 @@ from .common import check_output_file
 __all__ = ["add_arguments", "run"]
 
 
-#: The text of ``fjm excite --help``.
-DESCRIPTION = ("A finite Fourier series per joint for the link angles, periodic, from rest to rest "
-               "at a base posture, chosen (random draws, then a local search) to minimize the "
-               "condition number of the regressors fjm identify solves on the nominal model's "
-               "motion, within the position limits, half the velocity and 80 % of the effort "
-               "limits; checked in closed loop (motor PD + feedforward) on the nominal model. "
-               "Writes the CSV a robot plays and OUT.json (docs/identification.md).")
-
-
 def add_arguments(p) -> None:
-    """The arguments of ``fjm excite`` on its parser ``p`` (its name and help: ``cli.main.COMMANDS``)."""
+    """The arguments of ``fjm excite`` on its parser ``p`` (name, help, description: commands.toml)."""
     p.add_argument("model")
     p.add_argument("--duration", type=float, required=True, help="length, s: whole base periods (the base frequency is raised to fit)")
     p.add_argument("--out", type=Path, required=True, help="CSV t, q_d_<i>, dq_d_<i>, ddq_d_<i>, q_m_d_<i>, "

@@ -9,15 +9,8 @@ from ..validation import FjmValueError
 from .common import check_output_file, parse_assignments
 
 
-#: The text of ``fjm export --help``.
-DESCRIPTION = ("Write a generated model as an MJCF file that MuJoCo loads as it is: the "
-               "links, a rotor hinge <joint>_rotor per joint (angle N q_m), a tendon spring "
-               "<joint>_spring, a motor <joint>_motor (ctrl = u) and sensors <joint>_q, _dq, "
-               "_q_m, _dq_m, _tau_J. Parameters at full precision (see docs/mujoco.md).")
-
-
 def add_arguments(ex) -> None:
-    """The arguments of ``fjm export`` on its parser ``ex`` (its name and help: ``cli.main.COMMANDS``)."""
+    """The arguments of ``fjm export`` on its parser ``ex`` (name, help, description: commands.toml)."""
     ex.add_argument("format", choices=("mjcf", "controller"),
                     help="output format (mjcf: MuJoCo XML; controller: the designed sampled controller as a C99 "
                          "library directory, needs --gains)")

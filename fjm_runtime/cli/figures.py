@@ -6,15 +6,9 @@ from pathlib import Path
 from ..validation import FjmValueError
 from .common import check_output_dir
 
-DESCRIPTION = ("Reproduce the paper's Figs 1-4 on link1 (sliding-mode control with nominal parameters only) and "
-               "run the comparisons beyond the paper: sign vs sat, plain feedback linearization vs integral and "
-               "adaptive sliding modes, planar2/planar3, certified gains, Monte Carlo, the Panda arm. Writes PNGs, "
-               "CSVs and summary.md into --out and prints the summary path. About 5 minutes; --quick runs the "
-               "same pipeline in under a minute with numbers that are not the documented ones.")
-
 
 def add_arguments(fig) -> None:
-    """The arguments of ``fjm figures`` on its parser ``fig`` (its name and help: ``cli.main.COMMANDS``)."""
+    """The arguments of ``fjm figures`` on its parser ``fig`` (name, help, description: commands.toml)."""
     fig.add_argument("--out", type=Path, default=Path("out"),
                      help="output directory, created if its parent exists (default out)")
     fig.add_argument("--samples", type=int, default=40, help="Monte Carlo samples (default 40)")

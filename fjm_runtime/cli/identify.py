@@ -8,16 +8,8 @@ from .common import check_output_file
 __all__ = ["add_arguments", "run"]
 
 
-#: The text of ``fjm identify --help``.
-DESCRIPTION = ("Least squares on a log (t, q_<i>, q_m_<i>, u_<i>, tau_J_<i> when sensed; "
-               "docs/identification.md): per joint the spring law, J_m, B_m and friction, with "
-               "standard errors, condition numbers and residuals; writes a parameter file that "
-               "fjm design --params, fjm simulate --params and fjm export controller --params "
-               "read.")
-
-
 def add_arguments(p) -> None:
-    """The arguments of ``fjm identify`` on its parser ``p`` (its name and help: ``cli.main.COMMANDS``)."""
+    """The arguments of ``fjm identify`` on its parser ``p`` (name, help, description: commands.toml)."""
     p.add_argument("model", help="the reduced model the log is of (see `fjm models`)")
     p.add_argument("log", type=Path, help="the log: .csv (header t, q_1, q_m_1, u_1, [tau_J_1], ...) or .npz")
     p.add_argument("--out", type=Path, required=True, help="parameter file to write (TOML)")

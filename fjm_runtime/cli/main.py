@@ -18,28 +18,29 @@ import argparse
 import importlib
 import importlib.util
 import sys
+from pathlib import Path
 from typing import List, Optional
 
 from ..validation import FjmValueError
 
-#: The sub-commands, in ``fjm --help`` order: (name, module of ``fjm_runtime.cli``, one-line help).
-#: A module has ``run(args)`` and ``add_arguments(parser)`` (its ``DESCRIPTION`` is the text of
-#: ``fjm NAME --help``), or, without ``add_arguments``, ``run(argv)`` on the arguments as they are.
-#: A module missing from the install (``tune``) is left out.
-COMMANDS = (
-    ("simulate", "simulate", "simulate one closed loop and print its metrics"),
-    ("design", "design", "search gains over sampled closed loops (batch engine)"),
-    ("analyze", "analyze", "linear sampled-data analysis of gains (radius, margins, jitter)"),
-    ("derive", "derive", "derive and emit models (needs .[derive]); --out DIR (default generated/, only in a "
-                         "source checkout); see `fjm derive --help`"),
-    ("sweep", "sweep", "Monte Carlo sweep of the closed loop on Dask (chunks of compiled batches)"),
-    ("figures", "figures", "reproduce the paper's figures and the comparisons (make demo)"),
-    ("models", "models", "list the models: name, joints, parameters, source"),
-    ("export", "export", "write a model for another tool (mjcf: MuJoCo)"),
-    ("excite", "excite", "an excitation trajectory (rest-to-rest Fourier series) for fjm identify"),
-    ("identify", "identify", "identify joint stiffness, rotor inertia, damping, friction from a log"),
-    ("tune", "tune", "synthesize per-joint switching gains with a reaching certificate (JSON)"),
-)
+
+def _command_table():
+    """The rows of cli/commands.toml: ``name``, ``module``, ``help`` and (but derive) ``description``."""
+    try:
+        import tomllib
+    except ImportError:  # Python < 3.11
+        import tomli as tomllib
+    return tomllib.loads((Path(__file__).parent / "commands.toml").read_text(encoding="utf-8"))["command"]
+
+
+#: The sub-commands, in ``fjm --help`` order: (name, module of ``fjm_runtime.cli``, one-line help), from
+#: cli/commands.toml (the one table of the commands; it also holds each one's ``--help`` description).
+#: A module has ``run(args)`` and ``add_arguments(parser)``, or, without ``add_arguments``, ``run(argv)``
+#: on the arguments as they are. A module missing from the install (``tune``) is left out.
+_TABLE = _command_table()
+COMMANDS = tuple((row["name"], row["module"], row["help"]) for row in _TABLE)
+#: The description of ``fjm NAME --help`` by command name (None: derive prints its own help).
+DESCRIPTIONS = {row["name"]: row.get("description") for row in _TABLE}
 
 
 def command_module(name: str):
@@ -75,7 +76,7 @@ def build_parser() -> argparse.ArgumentParser:
         if module is None:
             continue
         own_args = hasattr(module, "add_arguments")
-        p = sub.add_parser(name, help=help_line, description=getattr(module, "DESCRIPTION", None), add_help=own_args)
+        p = sub.add_parser(name, help=help_line, description=DESCRIPTIONS[name], add_help=own_args)
         if own_args:
             module.add_arguments(p)
     return parser

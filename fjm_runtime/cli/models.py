@@ -4,14 +4,8 @@ from __future__ import annotations
 import json
 
 
-#: The text of ``fjm models --help``.
-DESCRIPTION = ("List every model `fjm_runtime.load` finds: name, joints n, number of "
-               "parameters, and the source (built-in, the URDF it was derived from, or the "
-               "FJM_GENERATED directory it was loaded from).")
-
-
 def add_arguments(p) -> None:
-    """The arguments of ``fjm models`` on its parser ``p`` (its name and help: ``cli.main.COMMANDS``)."""
+    """The arguments of ``fjm models`` on its parser ``p`` (name, help, description: commands.toml)."""
     p.add_argument("--json", action="store_true", help="one JSON list instead of a table")
 
 

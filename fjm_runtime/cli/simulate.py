@@ -33,15 +33,8 @@ from .simulate_checks import (DEFAULT_MAX_MEMORY_GB, check_pole, check_run_size,
                               gains_provenance, workspace_exit)
 
 
-
-#: The text of ``fjm simulate --help``.
-DESCRIPTION = ("Simulate one closed loop (true plant vs nominal controller) and print "
-               "metrics as JSON. Plant parameters: --K / --param; the controller uses "
-               "the model defaults unless --nominal is given.")
-
-
 def add_arguments(sim) -> None:
-    """The arguments of ``fjm simulate`` on its parser ``sim`` (its name and help: ``cli.main.COMMANDS``)."""
+    """The arguments of ``fjm simulate`` on its parser ``sim`` (name, help, description: commands.toml)."""
     sim.add_argument("model", help="model name, e.g. link1, planar2 (see `fjm models`)")
     sim.add_argument("--controller", default=None, choices=CONTROLLER_KINDS,
                      help="smc: paper's law with sat; sign: paper's discontinuous law; ismc: integral "

@@ -20,16 +20,8 @@ ABSOLUTE_K_RANGE = PAPER_K_RANGE
 RELATIVE_K_RANGE = (0.7, 1.3)
 
 
-#: The text of ``fjm sweep --help``.
-DESCRIPTION = ("Sample TRUE plants (stiffness uniform in [--k-min, --k-max] or relative to "
-               "each joint's nominal with --k-rel, link and motor inertias +-20 %), run "
-               "them in chunks of compiled batch simulations on Dask (a local cluster, or "
-               "--scheduler ADDRESS), and write one row per run (parameters and metrics) "
-               "as CSV.")
-
-
 def add_arguments(sw) -> None:
-    """The arguments of ``fjm sweep`` on its parser ``sw`` (its name and help: ``cli.main.COMMANDS``)."""
+    """The arguments of ``fjm sweep`` on its parser ``sw`` (name, help, description: commands.toml)."""
     sw.add_argument("model", help="model name, e.g. link1 (see `fjm models`)")
     sw.add_argument("--samples", type=int, default=1000, help="number of runs (default 1000)")
     sw.add_argument("--chunk", type=int, default=250, help="runs per Dask task (default 250)")

@@ -53,17 +53,8 @@ def _one_line_error(prog: str):
     return error
 
 
-#: The text of ``fjm tune --help``.
-DESCRIPTION = ("Per-joint switching gains k_s for the sliding-mode law as it is run (nominal "
-               "coordinates), such that sgn(s_i) s_i' <= -eta on a box of tracking errors, reference "
-               "derivatives and true parameters; prints gains, boundary layer, the certificate (worst "
-               "sgn(s) s' found and where) and the reaching-time bound as JSON. A numerical certificate on "
-               "a grid (vertices along affine coordinates), not a proof; the box is assumed invariant. "
-               "Exit status 1 when no admissible gain exists (the JSON says why).")
-
-
 def add_arguments(tp) -> None:
-    """The arguments of ``fjm tune`` on its parser ``tp`` (its name and help: ``cli.main.COMMANDS``)."""
+    """The arguments of ``fjm tune`` on its parser ``tp`` (name, help, description: commands.toml)."""
     tp.add_argument("model", help="model name, e.g. link1, planar2")
     tp.add_argument("--controller", choices=("smc", "sign", "ismc"), default=None,
                     help="law to certify: smc/sign = paper surface, ismc = integral surface (default smc; "
