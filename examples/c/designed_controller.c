@@ -33,58 +33,16 @@
 #include "design.h"   /* the library's header (aliases CTRL_*), the task, the sensor, the plant parameters */
 #include FJM_HEADER   /* the generated plant model: f, g, inertia */
 #include "sizes.h"    /* work sizes of the generated model functions (work_sizes.c) */
-
-#define CAT_(a, b) a##b
-#define CAT(a, b) CAT_(a, b)
-#define FN(suffix) CAT(FJM_MODEL, suffix)
+#include "plant.h"    /* work arrays, FN(), the TRUE plant on RK4 substeps, timing (shared with realtime.c) */
 
 #if CTRL_N != NU
 #error "design.h: the design's model is not FJM_MODEL"
 #endif
 #define N_BENCH_MAX 1000000L
 
-static const casadi_real* arg[MAX_SZ_ARG + 1];
-static casadi_real* res[MAX_SZ_RES + 1];
-static casadi_int iw[MAX_SZ_IW + 1];
-static casadi_real w[MAX_SZ_W + 1];
-static casadi_real p_true[NP] = P_TRUE;
 static const double K_TRUE[NU] = K_TRUE_VALUES, U_MAX_[NU] = U_MAX;
 static const double NOISE[CTRL_NM] = NOISE_LEVELS, TAU_OFFSET[NU] = TAU_OFFSET_SIGMA;
 static const double REF_C[NU] = REF_CENTER, REF_A[NU] = REF_AMPL, REF_W[NU] = REF_OMEGA;
-
-/* ---- the plant: the generated model at the TRUE parameters, RK4 (as realtime.c) ---- */
-static int plant_rhs(const casadi_real* x, const double* u, casadi_real* dx) {
-  casadi_real gv[NX * NU];
-  const casadi_int* sp = FN(_g_sparsity_out)(0);
-  casadi_int j, k, ncol = sp[1];
-  arg[0] = x; arg[1] = p_true; res[0] = dx;
-  if (FN(_f)(arg, res, iw, w, 0)) return 1;
-  res[0] = gv;
-  if (FN(_g)(arg, res, iw, w, 0)) return 1;
-  if (sp[2] == 1) {
-    for (j = 0; j < ncol; ++j)
-      for (k = 0; k < NX; ++k) dx[k] += gv[j * NX + k] * u[j];
-  } else {
-    const casadi_int *colind = sp + 2, *row = sp + 2 + ncol + 1;
-    for (j = 0; j < ncol; ++j)
-      for (k = colind[j]; k < colind[j + 1]; ++k) dx[row[k]] += gv[k] * u[j];
-  }
-  return 0;
-}
-
-static int plant_rk4(casadi_real* x, const double* u, double h) {
-  casadi_real k1[NX], k2[NX], k3[NX], k4[NX], xt[NX];
-  int i;
-  if (plant_rhs(x, u, k1)) return 1;
-  for (i = 0; i < NX; ++i) xt[i] = x[i] + 0.5 * h * k1[i];
-  if (plant_rhs(xt, u, k2)) return 1;
-  for (i = 0; i < NX; ++i) xt[i] = x[i] + 0.5 * h * k2[i];
-  if (plant_rhs(xt, u, k3)) return 1;
-  for (i = 0; i < NX; ++i) xt[i] = x[i] + h * k3[i];
-  if (plant_rhs(xt, u, k4)) return 1;
-  for (i = 0; i < NX; ++i) x[i] += (h / 6.0) * (k1[i] + 2 * k2[i] + 2 * k3[i] + k4[i]);
-  return 0;
-}
 
 static void reference(double t, double* r) {
   int i, d;
@@ -99,20 +57,11 @@ static void reference(double t, double* r) {
 /* At rest holding gravity on the TRUE plant at q = q_d(0): q_m = q + K^-1 G(q), G = -D ddq at q_m = q. */
 static void rest_state(casadi_real* x) {
   double r[5 * NU];
-  casadi_real dx[NX], D[NU * NU];
-  int i, j;
+  int i;
   memset(x, 0, sizeof(casadi_real) * NX);
   reference(0.0, r);
   for (i = 0; i < NU; ++i) x[i] = x[2 * NU + i] = r[i];
-  arg[0] = x; arg[1] = p_true; res[0] = dx;
-  (void)FN(_f)(arg, res, iw, w, 0);
-  res[0] = D;
-  (void)FN(_inertia)(arg, res, iw, w, 0);
-  for (i = 0; i < NU; ++i) {
-    double G = 0;
-    for (j = 0; j < NU; ++j) G -= D[j * NU + i] * dx[NU + j];
-    x[2 * NU + i] = x[i] + G / K_TRUE[i];
-  }
+  hold_gravity(x, K_TRUE);
 }
 
 /* ---- the sensor: white noise (xorshift64* + Box-Muller), quantization, tau_J offset ---- */
@@ -159,16 +108,6 @@ static void reading(const casadi_real* x, int noisy, CTRL_REAL* m) {
   for (i = 0; i < CTRL_NM; ++i) m[i] = (CTRL_REAL)v[i];
 }
 
-static double now_ns(void) {
-  struct timespec ts;
-  clock_gettime(CLOCK_MONOTONIC, &ts);
-  return 1e9 * (double)ts.tv_sec + (double)ts.tv_nsec;
-}
-static int cmp_double(const void* a, const void* b) {
-  const double x = *(const double*)a, y = *(const double*)b;
-  return (x > y) - (x < y);
-}
-
 static double U[N_RUN + 1][NU], E[N_RUN + 1][NU], step_ns[N_BENCH_MAX];
 static long n_status[4];
 
@@ -176,7 +115,8 @@ static long n_status[4];
 static int run_task(CTRL_T* ctrl, long samples, double* times) {
   casadi_real x[NX];
   CTRL_REAL m[CTRL_NM], rr[5 * NU], u[NU];
-  double r[5 * NU], t0 = 0, uu[NU];
+  double r[5 * NU], t0 = 0;
+  casadi_real uu[NU];
   long k;
   int i, j, st;
   rest_state(x);
