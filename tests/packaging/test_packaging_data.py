@@ -55,3 +55,17 @@ def test_license_is_an_spdx_string_with_its_file():
     req = " ".join(PYPROJECT["build-system"]["requires"])
     m = re.search(r"setuptools\s*>=\s*(\d+)", req)
     assert m and int(m.group(1)) >= 77, req
+
+
+def test_every_runtime_data_folder_is_a_listed_package():
+    """A folder of shipped files under fjm_runtime/ or derive/ without ``__init__.py`` (e.g. the shipped
+    designs, fjm_runtime/control/designed) is a package to setuptools: unlisted, it warns and may drop it."""
+    folders = []
+    for top in ("fjm_runtime", "derive"):
+        for d in sorted((REPO / top).rglob("*")):
+            files = [f for f in d.iterdir() if f.is_file() and f.suffix not in (".pyc",)] if d.is_dir() else []
+            if d.name != "__pycache__" and files and not (d / "__init__.py").is_file():
+                folders.append(".".join(d.relative_to(REPO).parts))
+    assert "fjm_runtime.control.designed" in folders
+    missing = [f for f in folders if f not in _packages()]
+    assert not missing, f"add to [tool.setuptools] packages in pyproject.toml: {', '.join(missing)}"

@@ -128,6 +128,10 @@ def test_wheel_contains_generated_models(wheel):
                 assert arc in names, f"wheel lacks {arc}"
                 assert z.read(arc) == (REPO / "generated" / model / f).read_bytes(), f"{arc} differs from generated/"
         assert "fjm_runtime/__init__.py" in names and "fjm_runtime/model.py" in names
+        shipped = sorted((REPO / "fjm_runtime" / "control" / "designed").glob("*.json"))
+        assert shipped
+        for f in shipped:  # the shipped designs (Design.shipped) travel with the wheel
+            assert f"fjm_runtime/control/designed/{f.name}" in names, f"wheel lacks the shipped design {f.name}"
         assert not [n for n in names if "__pycache__" in n or n.startswith("tests/")]
         meta = next(n for n in names if n.endswith(".dist-info/METADATA"))
         requires = [ln for ln in z.read(meta).decode().splitlines() if ln.startswith("Requires-Dist:")]
