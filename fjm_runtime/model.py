@@ -384,25 +384,80 @@ def _load_cached(directory: str) -> Model:
 
 
 def load(name: str) -> Model:
-    """Load a generated model by name (``"link1"``, ``"planar1"`` .. ``"planar7"``, or a user model).
+    """Load a generated model by name (``"link1"``, ``"planar1"`` .. ``"planar7"``, or a user model) or path.
 
     Names are looked up in ``$FJM_GENERATED`` first (user models; one there with a
     built-in name wins), then among the built-in models (:func:`model_roots`). A name
-    with a path separator is a model directory (``<dir>/manifest.json``).
+    with a path separator, or one that is no model's name but an existing directory, is a
+    path (:func:`model_path`): a model directory (``<dir>/manifest.json``), the output
+    directory of ``fjm derive --out DIR`` holding one model, or a model's manifest.json.
 
     Raises
     ------
     FjmValueError
         (a ``ValueError``) If no model of that name exists (the message lists the
-        available ones), the directory given does not hold a model (the message names
-        it), or ``$FJM_GENERATED`` is not a directory.
+        available ones and says that a path works), the path given does not hold a model
+        (the message names it and what it holds), or ``$FJM_GENERATED`` is not a directory.
     """
-    if isinstance(name, (str, os.PathLike)) and (isinstance(name, os.PathLike) or os.sep in name
-                                                 or (os.altsep and os.altsep in name)):
-        return _load_cached(str(Path(name).resolve()) if Path(name).is_dir() else str(name))
-    directory = model_directory(name) if isinstance(name, str) and name else None
+    is_path = isinstance(name, os.PathLike) or (isinstance(name, str) and (
+        os.sep in name or bool(os.altsep and os.altsep in name)))
+    directory = None if is_path else (model_directory(name) if isinstance(name, str) and name else None)
+    if directory is None and not is_path and isinstance(name, str) and name and Path(name).is_dir():
+        is_path = True  # e.g. `fjm simulate build` inside the folder derive wrote to
+    if is_path:
+        return _load_cached(model_path(name))
     if directory is None:
         models = available_models()
         raise FjmValueError(
-            f"unknown model {name!r}; available models: {', '.join(models) or '(none found)'}")
+            f"unknown model {name!r}; available models: {', '.join(models) or '(none found)'}; or give the path "
+            "of a derived model directory (`fjm derive --model-file FILE --out DIR` writes DIR/<name>)")
     return _load_cached(str(directory))
+
+
+def command_name(model) -> str:
+    """How ``model`` is named on the command line: its name where :func:`load` finds it by name (a built-in
+    or ``$FJM_GENERATED`` model), else the path of its directory (a user's derived model)."""
+    directory = getattr(model, "directory", None)
+    name = str(getattr(model, "name", "MODEL"))
+    if directory is None:
+        return name
+    try:
+        found = model_directory(name)
+    except FjmValueError:
+        found = None
+    if found is not None and Path(found).resolve() == Path(directory).resolve():
+        return name
+    return str(directory)
+
+
+def model_path(given) -> str:
+    """The model directory a path names, as a string for :class:`Model`.
+
+    ``given`` is a model directory (``manifest.json`` in it: returned resolved), a directory holding
+    exactly one model directory (``fjm derive --out DIR`` for one model file), or a ``manifest.json``
+    file (its directory). Anything else is returned as given, for :class:`Model` to refuse in one line.
+
+    Raises
+    ------
+    FjmValueError
+        A directory holding several models (the message lists them), or a model file (``.toml``: it is
+        derived first) or a ``.urdf`` given instead of a derived model.
+    """
+    path = Path(given)
+    if path.is_dir():
+        if (path / "manifest.json").is_file():
+            return str(path.resolve())
+        inside = _models_in(path)
+        if len(inside) == 1:
+            return str((path / inside[0]).resolve())
+        if inside:
+            raise FjmValueError(f"model directory {str(given)!r}: holds {len(inside)} models ({', '.join(inside)}); "
+                                f"expected one of them, e.g. {str(path / inside[0])!r}")
+    elif path.is_file() and path.name == "manifest.json":
+        return str(path.parent.resolve())
+    elif path.is_file() and path.suffix.lower() in (".toml", ".urdf"):
+        first = ("a model file, not a derived model; derive it first" if path.suffix.lower() == ".toml" else
+                 "a URDF, not a derived model; name it in a model file (docs/usage.md#model-files), derive that")
+        raise FjmValueError(f"model {str(given)!r}: {first} (`fjm derive --model-file FILE.toml --out DIR`), "
+                            "then give DIR/<name>")
+    return str(given)

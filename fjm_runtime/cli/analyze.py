@@ -17,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .models import MODEL_HELP
 from ..validation import FjmValueError
 
 __all__ = ["add_arguments", "run", "conditions_from_design"]
@@ -24,7 +25,7 @@ __all__ = ["add_arguments", "run", "conditions_from_design"]
 
 def add_arguments(p) -> None:
     """The arguments of ``fjm analyze`` on its parser ``p`` (name, help, description: commands.toml)."""
-    p.add_argument("model")
+    p.add_argument("model", help=MODEL_HELP)
     p.add_argument("--gains", type=Path, required=True, help="gains file (a fjm design output or {kind, gains})")
     p.add_argument("--rate", type=float, default=None, help="control rate, Hz (default: the file's, else 1000)")
     p.add_argument("--delay-samples", type=int, default=None, help="delay, samples (default: the file's, else 0)")

@@ -8,6 +8,7 @@ import sys
 import time
 from pathlib import Path
 
+from .models import MODEL_HELP
 from ..validation import FjmValueError
 
 __all__ = ["add_arguments", "run", "demo_task"]
@@ -15,7 +16,7 @@ __all__ = ["add_arguments", "run", "demo_task"]
 
 def add_arguments(p) -> None:
     """The arguments of ``fjm design`` on its parser ``p`` (name, help, description: commands.toml)."""
-    p.add_argument("model")
+    p.add_argument("model", help=MODEL_HELP)
     p.add_argument("--controller", default="ismc", choices=("ismc",), help="law (default ismc)")
     p.add_argument("--sensing", default="torque", choices=("state", "torque"), help="default torque")
     p.add_argument("--rate", type=float, default=1000.0, help="control rate, Hz (default 1000)")

@@ -5,6 +5,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .models import MODEL_HELP
 from ..validation import FjmValueError
 from .common import check_output_file
 
@@ -13,7 +14,7 @@ __all__ = ["add_arguments", "run"]
 
 def add_arguments(p) -> None:
     """The arguments of ``fjm excite`` on its parser ``p`` (name, help, description: commands.toml)."""
-    p.add_argument("model")
+    p.add_argument("model", help=MODEL_HELP)
     p.add_argument("--duration", type=float, required=True, help="length, s: whole base periods (the base frequency is raised to fit)")
     p.add_argument("--out", type=Path, required=True, help="CSV t, q_d_<i>, dq_d_<i>, ddq_d_<i>, q_m_d_<i>, "
                    "dq_m_d_<i>, tau_J_d_<i>, u_ff_<i> (and OUT.json: coefficients, conditions, limits' usage)")

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from .models import MODEL_HELP
 from ..drives import linear_stiffness_indices
 from ..export.mjcf import is_complete, write_mjcf
 from ..validation import FjmValueError
@@ -14,7 +15,7 @@ def add_arguments(ex) -> None:
     ex.add_argument("format", choices=("mjcf", "controller"),
                     help="output format (mjcf: MuJoCo XML; controller: the designed sampled controller as a C99 "
                          "library directory, needs --gains)")
-    ex.add_argument("model", help="model name, e.g. panda, elbow3, link1, planar2 (see `fjm models`)")
+    ex.add_argument("model", help=MODEL_HELP)
     ex.add_argument("--out", type=Path, required=True,
                     help="output file, e.g. panda.xml (its directory must exist); controller: a directory")
     ex.add_argument("--gains", type=Path, default=None,

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from .models import MODEL_HELP
 from .common import check_output_file
 
 __all__ = ["add_arguments", "run"]
@@ -10,7 +11,7 @@ __all__ = ["add_arguments", "run"]
 
 def add_arguments(p) -> None:
     """The arguments of ``fjm identify`` on its parser ``p`` (name, help, description: commands.toml)."""
-    p.add_argument("model", help="the reduced model the log is of (see `fjm models`)")
+    p.add_argument("model", help="the reduced model the log is of: " + MODEL_HELP)
     p.add_argument("log", type=Path, help="the log: .csv (header t, q_1, q_m_1, u_1, [tau_J_1], ...) or .npz")
     p.add_argument("--out", type=Path, required=True, help="parameter file to write (TOML)")
     p.add_argument("--spring", choices=("linear", "cubic"), default=None,
@@ -28,6 +29,7 @@ def add_arguments(p) -> None:
 def run(args) -> int:
     """Run ``fjm identify``; returns the exit status (0)."""
     from .. import load
+    from ..model import command_name
     from ..ident.identify import identify
     from ..ident.log import read_log
     from ..ident.report import table_lines
@@ -41,5 +43,5 @@ def run(args) -> int:
           f"{s['tau_J']}; filter {s['filter']}")
     print("\n".join(table_lines(ident)))
     ident.to_toml(args.out, m)
-    print(f"wrote {args.out} (fjm design {m.name} --params {args.out})")
+    print(f"wrote {args.out} (fjm design {command_name(m)} --params {args.out})")
     return 0

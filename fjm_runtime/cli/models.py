@@ -4,6 +4,11 @@ from __future__ import annotations
 import json
 
 
+#: The help of every command's model argument: a built-in name or the path of a derived model.
+MODEL_HELP = ("a built-in model name (see `fjm models`), or the path of a derived model: the directory "
+              "`fjm derive --model-file FILE --out DIR` wrote (DIR or DIR/<name>)")
+
+
 def add_arguments(p) -> None:
     """The arguments of ``fjm models`` on its parser ``p`` (name, help, description: commands.toml)."""
     p.add_argument("--json", action="store_true", help="one JSON list instead of a table")

@@ -16,6 +16,7 @@ from typing import Dict, Optional
 
 import numpy as np
 
+from .models import MODEL_HELP
 from ..analysis.certificates.lemma1 import (FALLBACK_SWITCHING_GAIN, default_error_bounds, default_switching_gain,
                                paper_beta_hat, paper_bound_applies)
 from ..control.defaults import DEFAULT_LAM, DEFAULT_LAYER_RATE, PAPER_K_RANGE, default_delta
@@ -35,7 +36,7 @@ from .simulate_checks import (DEFAULT_MAX_MEMORY_GB, check_pole, check_run_size,
 
 def add_arguments(sim) -> None:
     """The arguments of ``fjm simulate`` on its parser ``sim`` (name, help, description: commands.toml)."""
-    sim.add_argument("model", help="model name, e.g. link1, planar2 (see `fjm models`)")
+    sim.add_argument("model", help=MODEL_HELP)
     sim.add_argument("--controller", default=None, choices=CONTROLLER_KINDS,
                      help="smc: paper's law with sat; sign: paper's discontinuous law; ismc: integral "
                           "sliding surface; fl: plain feedback linearization; adaptive: integral surface "

@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .models import MODEL_HELP
 from ..control.defaults import DEFAULT_LAM, DEFAULT_LAYER_RATE, DEFAULT_SWITCHING_GAIN, PAPER_K_RANGE, default_delta
 from ..control.factory import CONTROLLER_KINDS
 from ..control.references import REFERENCE_KINDS
@@ -22,7 +23,7 @@ RELATIVE_K_RANGE = (0.7, 1.3)
 
 def add_arguments(sw) -> None:
     """The arguments of ``fjm sweep`` on its parser ``sw`` (name, help, description: commands.toml)."""
-    sw.add_argument("model", help="model name, e.g. link1 (see `fjm models`)")
+    sw.add_argument("model", help=MODEL_HELP)
     sw.add_argument("--samples", type=int, default=1000, help="number of runs (default 1000)")
     sw.add_argument("--chunk", type=int, default=250, help="runs per Dask task (default 250)")
     sw.add_argument("--seed", type=int, default=0, help="sampling seed (default 0)")

@@ -12,6 +12,7 @@ import json
 import sys
 from typing import Dict, List, Tuple
 
+from .models import MODEL_HELP
 from ..analysis.certificates.box import default_stiffness_box, param_box_from_ranges
 from ..analysis.certificates.certify import GUARANTEE, synthesize_gains
 from ..analysis.certificates.certify_tau import GUARANTEE_TAU, synthesize_torque_gains, torque_param_box
@@ -55,7 +56,7 @@ def _one_line_error(prog: str):
 
 def add_arguments(tp) -> None:
     """The arguments of ``fjm tune`` on its parser ``tp`` (name, help, description: commands.toml)."""
-    tp.add_argument("model", help="model name, e.g. link1, planar2")
+    tp.add_argument("model", help=MODEL_HELP)
     tp.add_argument("--controller", choices=("smc", "sign", "ismc"), default=None,
                     help="law to certify: smc/sign = paper surface, ismc = integral surface (default smc; "
                          "ismc with --sensing torque)")

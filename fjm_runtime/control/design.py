@@ -17,6 +17,7 @@ from typing import Any, Dict, List, Mapping, Optional, Tuple
 
 import numpy as np
 
+from ..model import command_name
 from ..validation import FjmValueError
 from .factory import CONTROLLER_KINDS, make_controller
 from .sensing import SENSING_KINDS
@@ -231,7 +232,7 @@ class Design:
         if joints is not None and joints != n:
             what = f"model {self.model!r} with {joints} joints" if self.model else f"{joints} joints"
             raise FjmValueError(f"{where}: the gains are for {what}; {name} has {n} joint{'s' * (n != 1)} "
-                                f"(expected gains designed for {name}, e.g. from `fjm design {name}`)")
+                                f"(expected gains designed for {name}, e.g. from `fjm design {command_name(model)}`)")
         for key, (rule, unit) in _GAIN_RULES.items():
             if key in self.gains:
                 _check_gain(where, key, self.gains[key], rule, unit, n, name)

@@ -24,6 +24,7 @@ import numpy as np
 
 from ..control.laws import ControlSample
 from ..control.references import Reference
+from ..model import command_name
 from ..validation import FjmValueError
 from .excite import Excitation, FourierReference, drive_parameters, limits_of, nominal_motion, usage
 
@@ -190,7 +191,7 @@ def read_excitation(path, model) -> dict:
         missing = [k for k in cols if k not in head]
         if missing or out["t"] is None:
             raise FjmValueError(f"excitation {p}: no column {(missing or ['t'])[0]}; expected t and "
-                                f"{', '.join(c + '_<i>' for c in COLUMNS)} for i = 1..{n} (`fjm excite {model.name}`)")
+                                f"{', '.join(c + '_<i>' for c in COLUMNS)} for i = 1..{n} (`fjm excite {command_name(model)}`)")
         out[c] = data[:, [head.index(k) for k in cols]]
     if not np.all(np.isfinite(data)):
         raise FjmValueError(f"excitation {p}: row {int(np.argmax(~np.isfinite(data).all(axis=1))) + 1}: not a "
