@@ -11,10 +11,17 @@ modelled here), with ``phi = q_m - q`` and the logged (or estimated) joint torqu
   of the models that carry one (``link1_hd``: ``F_c, F_s, v_s, v_c``): their names are used, their
   ``v_c, v_s`` are the default velocities, and a Coulomb-only fit sets ``F_s = F_c`` (no hump).
 
-Both are linear in the unknowns: ordinary least squares on column-scaled regressors, standard
-errors from the residual variance with the effective sample count of the correlated residuals
-(:func:`~fjm_runtime.ident.signals.effective_samples`). Signals are smoothed and differentiated
-offline by a zero-phase Savitzky-Golay filter (:mod:`fjm_runtime.ident.signals`).
+Every model gets the Coulomb column (``--friction coulomb``, the default): drives have dry friction
+whether or not the model carries it, and leaving it out biases ``J_m`` and ``B_m``. Windows around a
+velocity reversal (stiction, :func:`~fjm_runtime.ident.signals.moving_rows`) are left out of the motor
+equation, except for a Stribeck fit, which needs them.
+
+Both are linear in the unknowns: least squares on column-scaled regressors, errors in the
+regressors' columns (encoder noise through the filter) removed from the normal equations, standard
+errors by a Newey-West sandwich for the coloured residuals, plus a systematic term
+(:mod:`fjm_runtime.ident.uncertainty`). Signals are smoothed and differentiated offline by one
+zero-phase filter whose derivative kernels are its value kernel applied to differences, and the held
+torque is averaged over each sample (:mod:`fjm_runtime.ident.signals`).
 
 Without ``tau_J`` in the log, it is the link equation's: ``tau_J = D(q) ddq + h(q, dq)`` from the
 model's generated ``f`` and ``inertia`` at its NOMINAL link parameters (``f``'s link rows at
@@ -30,11 +37,13 @@ import numpy as np
 
 from ..drives import role_names, spring_laws
 from ..validation import FjmValueError
+from .checks import gear_ratio_warnings, nominal_warnings
 from .linkeq import link_torque
 from .log import Log
-from .signals import effective_samples, savgol_kernels, smooth_derivatives, window_half
+from .signals import consistent_kernels, held_torque, moving_rows, smooth_derivatives, white_noise, window_half
+from .uncertainty import INTERVAL_SIGMAS, combined, hac_covariance, systematic
 
-__all__ = ["Identification", "identify", "parameter_names", "SPRINGS", "FRICTIONS"]
+__all__ = ["Identification", "identify", "parameter_names", "friction_names", "SPRINGS", "FRICTIONS"]
 
 SPRINGS = ("linear", "cubic")
 FRICTIONS = ("viscous", "coulomb", "stribeck")
@@ -44,6 +53,14 @@ DEFAULT_V_C, DEFAULT_V_S = 0.01, 0.1
 NOT_EXCITED = 0.1
 #: A stiffness whose deflection signal is more than this share noise (variance) is reported as not excited.
 MAX_NOISE_SHARE = 0.25
+#: Motor-equation rows whose window sees ``|dq_m|`` below this share of its RMS are left out (stiction).
+REVERSAL_SHARE = 0.1
+#: Extra samples around each left-out stretch (a drive's friction settles within a few milliseconds).
+REVERSAL_MARGIN = 5
+#: Below this share of rows left, a joint barely moves: all rows are kept, and a warning says so.
+MIN_MOVING = 0.3
+#: Newey-West bandwidth, filter windows.
+HAC_WINDOWS = 4
 
 
 @dataclass
@@ -77,6 +94,9 @@ class Identification:
     fixed : dict
         Parameters of the model the fit held at a value instead of identifying (the friction's
         ``v_c``, ``v_s``; ``F_s = F_c`` of a Coulomb-only fit): written to the parameter file with them.
+    systematic : dict
+        Parameter name -> systematic standard uncertainty (:mod:`fjm_runtime.ident.uncertainty`);
+        :meth:`interval` combines it with ``stderr``.
     """
 
     values: Dict[str, float] = field(default_factory=dict)
@@ -87,6 +107,16 @@ class Identification:
     not_excited: List[str] = field(default_factory=list)
     settings: dict = field(default_factory=dict)
     fixed: Dict[str, float] = field(default_factory=dict)
+    systematic: Dict[str, float] = field(default_factory=dict)
+
+    def uncertainty(self, name: str) -> float:
+        """Standard uncertainty of ``name``: ``sqrt(stderr^2 + systematic^2)``, the parameter's unit."""
+        return combined(self.stderr[name], self.systematic.get(name, 0.0))
+
+    def interval(self, name: str, sigmas: float = INTERVAL_SIGMAS) -> Tuple[float, float]:
+        """The stated interval of ``name``: value -+ ``sigmas`` standard uncertainties."""
+        v, w = self.values[name], sigmas * self.uncertainty(name)
+        return v - w, v + w
 
     def model_values(self, model) -> Dict[str, float]:
         """The identified values that are parameters of ``model`` and that the log determines (excited)."""
@@ -120,7 +150,8 @@ def parameter_names(model, spring: str) -> Tuple[List[List[str]], List[str], Lis
 def _fit(A: np.ndarray, b: np.ndarray, names: List[str], max_lag: int, noise_var=None) -> JointFit:
     """Least squares ``A theta = b`` on scaled columns. ``noise_var`` (per column, or None): the variance
     of the noise IN the regressor's columns, removed from ``A^T A`` (the bias-corrected, errors-in-variables
-    estimate: noisy regressors otherwise shrink their coefficients)."""
+    estimate: noisy regressors otherwise shrink their coefficients). Standard errors: Newey-West over
+    ``HAC_WINDOWS`` windows of ``max_lag`` samples."""
     scale = np.linalg.norm(A, axis=0)
     if np.any(scale == 0):
         col = names[int(np.argmin(scale))]
@@ -132,23 +163,10 @@ def _fit(A: np.ndarray, b: np.ndarray, names: List[str], max_lag: int, noise_var
         G = G - np.diag(A.shape[0] * np.asarray(noise_var, dtype=float) / scale ** 2)
     sol = np.linalg.solve(G, As.T @ b)
     r = b - As @ sol
-    n_eff = effective_samples(r, max_lag)
-    dof = max(n_eff - A.shape[1], 1.0)
-    sigma2 = float(r @ r) / r.size * n_eff / dof
-    cov = np.linalg.inv(G) * sigma2 * r.size / n_eff
+    cov = hac_covariance(As, r, np.linalg.inv(G), int(HAC_WINDOWS * max_lag)) * r.size / max(r.size - A.shape[1], 1)
     svals = np.linalg.svd(As, compute_uv=False)
     return JointFit(names, sol / scale, np.sqrt(np.diag(cov)) / scale, float(svals[0] / svals[-1]),
                     float(np.sqrt(np.mean(r ** 2))))
-
-
-def deflection_noise(phi_raw: np.ndarray, phi_smooth: np.ndarray, k_center: float) -> float:
-    """Variance of the white noise left in the SMOOTHED deflection, from the raw-minus-smoothed one.
-
-    For white noise ``e`` and a Savitzky-Golay smoother (a projection: ``sum k^2 = k_c``, the kernel's
-    centre weight), ``var(e - K e) = s^2 (1 - k_c)`` and ``var(K e) = s^2 k_c``.
-    """
-    d = np.asarray(phi_raw) - np.asarray(phi_smooth)
-    return float(np.var(d)) * k_center / (1.0 - k_center)
 
 
 def _friction_columns(dqm: np.ndarray, friction: str, v_c: float, v_s: float):
@@ -163,7 +181,7 @@ def _friction_columns(dqm: np.ndarray, friction: str, v_c: float, v_s: float):
 
 def identify(model, log: Log, *, spring: Optional[str] = None, friction: str = "coulomb",
              v_c: Optional[float] = None, v_s: Optional[float] = None, window: float = 0.04,
-             nominal=None) -> Identification:
+             nominal=None, reversal_share: Optional[float] = None) -> Identification:
     """Identify the joints' spring, rotor inertia, damping and friction from ``log``.
 
     Parameters
@@ -179,9 +197,12 @@ def identify(model, log: Log, *, spring: Optional[str] = None, friction: str = "
         Coulomb regularization and Stribeck velocities, rad/s (link side), > 0. Default: the model's
         ``v_c``, ``v_s`` where it has motor friction, else 0.01 and 0.1.
     window : float
-        Savitzky-Golay window, s (the filter's cut-off is about ``1 / window`` Hz).
+        Filter window, s (the filter's cut-off is about ``1 / window`` Hz).
     nominal : dict, optional
         Link parameters for the link equation (default: the model's defaults).
+    reversal_share : float, optional
+        Motor-equation windows where ``|dq_m|`` drops below this share of its RMS are left out (dry
+        friction's stiction); 0 keeps every row. Default :data:`REVERSAL_SHARE`, 0 for ``stribeck``.
 
     Returns
     -------
@@ -201,16 +222,20 @@ def identify(model, log: Log, *, spring: Optional[str] = None, friction: str = "
     for nm, v in (("v_c", v_c), ("v_s", v_s), ("window", window)):
         if not (np.isfinite(v) and v > 0):
             raise FjmValueError(f"identify: {nm} = {v!r}; expected a finite value > 0")
+    reversal_share = (0.0 if friction == "stribeck" else REVERSAL_SHARE) if reversal_share is None else reversal_share
+    if not (np.isfinite(reversal_share) and 0.0 <= reversal_share < 1.0):
+        raise FjmValueError(f"identify: reversal_share = {reversal_share!r}; expected 0 <= value < 1")
     spring_names, jm, bm = parameter_names(model, spring)
     dt, h = log.dt, window_half(log.dt, window)
     if log.t.size < 10 * (2 * h + 1):
         raise FjmValueError(f"{log.source}: {log.t.size} samples for a {2 * h + 1}-sample filter window; expected "
                             "a log at least 10 windows long (a shorter --window, or a longer log)")
-    sig = np.concatenate([log.q, log.q_m, log.u] + ([log.tau_J] if log.tau_J is not None else []), axis=1)
-    S, dS, ddS = smooth_derivatives(sig, dt, h)
+    sig = np.concatenate([log.q, log.q_m, held_torque(log.u)] + ([log.tau_J] if log.tau_J is not None else []),
+                         axis=1)
+    kernels = consistent_kernels(h, dt)
+    S, dS, ddS = smooth_derivatives(sig, dt, h, kernels=kernels)
     n = log.n
-    raw_phi = (log.q_m - log.q)[h:log.t.size - h]
-    k_center = float(savgol_kernels(h, 3, dt)[0][h])
+    raw_phi, raw_qm = (log.q_m - log.q)[h:log.t.size - h], log.q_m[h:log.t.size - h]
     q, qm, u = S[:, :n], S[:, n:2 * n], S[:, 2 * n:3 * n]
     dqm, ddqm = dS[:, n:2 * n], ddS[:, n:2 * n]
     if log.tau_J is not None:
@@ -221,18 +246,18 @@ def identify(model, log: Log, *, spring: Optional[str] = None, friction: str = "
     out = Identification(settings={
         "model": model.name, "log": log.source, "duration_s": float(log.t[-1] - log.t[0]), "samples": int(log.t.size),
         "rate_hz": 1.0 / dt, "spring": spring, "friction": friction, "v_c": v_c, "v_s": v_s, "tau_J": source,
-        "filter": f"zero-phase Savitzky-Golay, degree 3, {2 * h + 1} samples ({(2 * h + 1) * dt:.3g} s), "
-                  f"{h} samples dropped at each end"})
+        "filter": f"zero-phase Blackman window on values and differences, {2 * h + 1} samples "
+                  f"({(2 * h + 1) * dt:.3g} s), {h} samples dropped at each end", "reversal_share": reversal_share})
+    out.warnings += gear_ratio_warnings(log.q, log.q_m)
+    gain = np.sum(kernels ** 2, axis=1)             # white noise's variance through value, rate, acceleration
     for i in range(n):
         fnames = friction_names(model, i)
-        noise = deflection_noise(raw_phi[:, i], qm[:, i] - q[:, i], k_center)
         _identify_joint(out, i, q[:, i], qm[:, i], dqm[:, i], ddqm[:, i], u[:, i], tau[:, i], spring_names[i],
                         jm[i], bm[i], friction, v_c, v_s, max_lag=2 * h + 1, offset=log.tau_J is not None,
-                        phi_noise=noise, friction_names=fnames)
-        if friction != "viscous" and fnames[0] in model.param_names:  # the model's friction law, these velocities
-            out.fixed.update({nm: v for nm, v in (("v_c", v_c), ("v_s", v_s)) if nm in model.param_names})
-            if friction == "coulomb" and fnames[1] in model.param_names and fnames[0] in out.values:
-                out.fixed[fnames[1]] = out.values[fnames[0]]  # Coulomb only: the static level is the same
+                        phi_noise=white_noise(raw_phi[:, i]) * gain[0], friction_names=fnames,
+                        reversal_share=reversal_share, motor_noise=white_noise(raw_qm[:, i]) * gain[[2, 1]])
+        _hold_friction(out, model, friction, fnames, v_c, v_s)
+    out.warnings += nominal_warnings({k: v for k, v in out.values.items() if k in model.parameter_info}, model)
     return out
 
 
@@ -247,31 +272,74 @@ def friction_names(model, i: int) -> Tuple[str, str]:
 
 def _identify_joint(out: Identification, i: int, q, qm, dqm, ddqm, u, tau, spring_names, jm, bm, friction, v_c,
                     v_s, max_lag: int, offset: bool, phi_noise: float = 0.0,
-                    friction_names: Tuple[str, str] = ("F_c", "F_s")) -> None:
+                    friction_names: Tuple[str, str] = ("F_c", "F_s"), reversal_share: float = 0.0,
+                    motor_noise=(0.0, 0.0)) -> None:
+    """Joint ``i``'s spring and motor fits into ``out``. ``phi_noise``: the noise variance in the filtered
+    deflection; ``motor_noise``: in the filtered ``ddq_m`` and ``dq_m`` columns."""
     phi = qm - q
     cols = [phi] + ([phi ** 3] if len(spring_names) == 2 else [])
     noise_var = [phi_noise] + [0.0] * (len(cols) - 1) + ([0.0] if offset else [])
-    snames = list(spring_names)
+    snames, kinds = list(spring_names), ["spring"] * len(cols)
     if offset:
         cols.append(np.ones_like(phi))
         snames.append(f"tau_J_offset{i + 1}")
+        kinds.append("offset")
     fit_s = _fit(np.column_stack(cols), tau, snames, max_lag, noise_var)
     o = fit_s.values[-1] if offset else 0.0
     fcols, fnames = _friction_columns(dqm, friction, v_c, v_s)
     fnames = list(friction_names[:len(fnames)])
-    fit_m = _fit(np.column_stack([ddqm, dqm] + fcols), u - (tau - o), [jm, bm] + fnames, max_lag)
+    rows = _motor_rows(out, i, dqm, max_lag // 2 + REVERSAL_MARGIN, reversal_share)
+    fit_m = _fit(np.column_stack([ddqm, dqm] + fcols)[rows], (u - (tau - o))[rows], [jm, bm] + fnames, max_lag,
+                 list(motor_noise) + [0.0] * len(fcols))
     noise_share = phi_noise / max(float(np.var(phi)), 1e-300)
     if noise_share > MAX_NOISE_SHARE:        # the correction itself is then the estimate: do not trust it
         out.not_excited.append(spring_names[0])
         out.warnings.append(f"{spring_names[0]}: encoder noise is {noise_share:.0%} of the deflection's variance "
                             f"(over {MAX_NOISE_SHARE:.0%}): the joint hardly deflects in this log; the parameter file "
                             "keeps the model's value")
+    kinds += ["rotor_inertia", "damping"] + ["friction"] * len(fcols)
     for tag, fit in ((f"spring {i + 1}", fit_s), (f"motor {i + 1}", fit_m)):
         out.condition[tag], out.residual[tag] = fit.condition, fit.residual
         for nm, v, se in zip(fit.names, fit.values, fit.stderr):
             out.values[nm], out.stderr[nm] = float(v), float(se)
-            if not nm.startswith("tau_J_offset") and nm not in out.not_excited and not se <= NOT_EXCITED * abs(v):
+            kind = kinds.pop(0)
+            out.systematic[nm] = systematic(kind, v)
+            if kind != "offset" and nm not in out.not_excited and not se <= NOT_EXCITED * abs(v):
                 out.not_excited.append(nm)
-                out.warnings.append(f"{nm} = {v:.4g} +- {se:.2g}: not excited (standard error over "
-                                    f"{NOT_EXCITED:.0%} of the value); the log does not determine it, the parameter "
-                                    "file keeps the model's value")
+                out.warnings.append(_not_excited(nm, kind, v, se, float(np.sqrt(np.mean(dqm ** 2)))))
+
+
+def _hold_friction(out: Identification, model, friction: str, fnames, v_c: float, v_s: float) -> None:
+    """Where the model has the friction law: the velocities the fit held (and ``F_s = F_c`` of a Coulomb-only
+    fit) go to ``out.fixed``."""
+    if friction != "viscous" and fnames[0] in model.param_names:
+        out.fixed.update({nm: v for nm, v in (("v_c", v_c), ("v_s", v_s)) if nm in model.param_names})
+        if friction == "coulomb" and fnames[1] in model.param_names and fnames[0] in out.values:
+            out.fixed[fnames[1]] = out.values[fnames[0]]  # Coulomb only: the static level is the same
+
+
+def _motor_rows(out: Identification, i: int, dqm, half: int, reversal_share: float) -> np.ndarray:
+    """The motor equation's rows of joint ``i`` (:func:`~fjm_runtime.ident.signals.moving_rows`), bool (N,)."""
+    if reversal_share <= 0:
+        return np.ones(dqm.size, dtype=bool)
+    rows = moving_rows(dqm, half, reversal_share * float(np.sqrt(np.mean(dqm ** 2))))
+    if rows.sum() < MIN_MOVING * rows.size:
+        out.warnings.append(f"joint {i + 1}: the motor turns slowly or reverses often ({rows.mean():.0%} of the log "
+                            f"away from its reversals, under {MIN_MOVING:.0%}): the motor equation keeps every "
+                            "sample, and dry friction near the reversals may bias J_m and B_m")
+        return np.ones(dqm.size, dtype=bool)
+    return rows
+
+
+def _not_excited(name: str, kind: str, value: float, se: float, rms_speed: float) -> str:
+    """The warning of a parameter the log does not determine (standard error over NOT_EXCITED of it)."""
+    keep = "the parameter file keeps the model's value"
+    if kind == "friction" and abs(value) <= INTERVAL_SIGMAS * se:
+        return (f"{name} = {value:.3g} +- {se:.2g}: no dry friction seen (within {INTERVAL_SIGMAS:g} standard "
+                "errors of 0)")
+    if kind in ("damping", "friction"):
+        return (f"{name} = {value:.4g} +- {se:.2g}: not excited (standard error over {NOT_EXCITED:.0%} of the "
+                f"value; the motor moves at {rms_speed:.3g} rad/s RMS, too slowly or too little to tell "
+                f"damping from friction); {keep}")
+    return (f"{name} = {value:.4g} +- {se:.2g}: not excited (standard error over {NOT_EXCITED:.0%} of the value); "
+            f"the log does not determine it, {keep}")

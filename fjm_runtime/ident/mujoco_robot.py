@@ -47,13 +47,22 @@ def true_params(model) -> dict:
     return p
 
 
-def with_rotor_friction(xml: str, friction: float) -> str:
-    """The MJCF with MuJoCo's dry friction ``frictionloss`` on every rotor hinge (gear ratio 1)."""
-    return re.sub(r'(<joint name="[^"]*_rotor" type="hinge")', rf'\1 frictionloss="{friction!r}"', xml)
+def with_rotor_friction(xml: str, friction) -> str:
+    """The MJCF with MuJoCo's dry friction ``frictionloss`` (N m) on the rotor hinges (gear ratio 1).
+
+    ``friction``: one value for every rotor, or a sequence of n values in joint order (0: none)."""
+    rotors = re.findall(r'<joint name="([^"]*_rotor)" type="hinge"', xml)
+    levels = np.broadcast_to(np.asarray(friction, dtype=float), (len(rotors),))
+    for name, f in zip(rotors, levels):
+        if f > 0:
+            xml = xml.replace(f'<joint name="{name}" type="hinge"',
+                              f'<joint name="{name}" type="hinge" frictionloss="{float(f)!r}"', 1)
+    return xml
 
 
-def mujoco_plant(model, p: dict, work: Path, substeps: int, friction: float = FRICTION):
-    """A :class:`~fjm_runtime.export.bridge.MujocoPlant` of ``model`` at ``p`` with rotor friction."""
+def mujoco_plant(model, p: dict, work: Path, substeps: int, friction=FRICTION):
+    """A :class:`~fjm_runtime.export.bridge.MujocoPlant` of ``model`` at ``p`` with rotor friction
+    (:func:`with_rotor_friction`)."""
     from ..export.bridge import MujocoPlant
     from ..export.mjcf import write_mjcf
     path = write_mjcf(model, Path(work) / f"{model.name}_true.xml", p, timestep=1.0 / RATE / substeps)
@@ -65,10 +74,14 @@ def _quantize(v, step: float):
     return v if step <= 0 else step * np.floor(v / step + 0.5)
 
 
-def mujoco_log(model, exc_ref, duration: float, work: Path, seed: int = 0, friction: float = FRICTION) -> Log:
+def mujoco_log(model, exc_ref, duration: float, work: Path, seed: int = 0, friction=FRICTION,
+               p_true=None) -> Log:
     """The TRUE plant in MuJoCo along ``exc_ref`` (a :class:`~fjm_runtime.ident.excite.FourierReference`),
-    logged at :data:`RATE` (module docstring)."""
-    p_true, n = true_params(model), model.n
+    logged at :data:`RATE` (module docstring).
+
+    ``p_true``: the true parameters (default :func:`true_params`); ``friction``: MuJoCo's
+    ``frictionloss``, N m, one value or one per joint (:func:`with_rotor_friction`)."""
+    p_true, n = (true_params(model) if p_true is None else dict(p_true)), model.n
     t = np.arange(0.0, duration, 1.0 / RATE)
     nom = nominal_motion(model, exc_ref, t, model.params_array())
     x0 = np.concatenate([nom["q"][0], nom["dq"][0], nom["qm"][0], nom["dqm"][0]])

@@ -2,8 +2,9 @@
 
 The parameter file is the format ``fjm design --params`` and ``fjm simulate --params`` read
 (docs/design-command.md): ``[parameters]`` the identified nominal values of the model's parameters,
-``[spread]`` the relative half-width of the design's draws, ``SPREAD_SIGMAS`` standard errors over
-the value (at least ``MIN_SPREAD``). A parameter the log does not determine (not excited) is left
+``[spread]`` the relative half-width of the design's draws, ``SPREAD_SIGMAS`` standard uncertainties
+(the statistical standard error and the systematic term combined,
+:meth:`~fjm_runtime.ident.identify.Identification.uncertainty`) over the value (at least ``MIN_SPREAD``). A parameter the log does not determine (not excited) is left
 out: the model's value and the default spread stay. What is not a parameter of the model (friction, the torque
 sensor's offset) is written as comments, with the fit's settings, residuals and conditions.
 """
@@ -11,9 +12,11 @@ from __future__ import annotations
 
 from typing import List
 
+from .uncertainty import INTERVAL_SIGMAS
+
 __all__ = ["params_toml", "table_lines", "SPREAD_SIGMAS", "MIN_SPREAD"]
 
-#: Standard errors per half-width of the draws' spread.
+#: Standard uncertainties per half-width of the draws' spread.
 SPREAD_SIGMAS = 3.0
 #: Smallest spread written (relative): an identification is never exact.
 MIN_SPREAD = 0.01
@@ -52,19 +55,22 @@ def params_toml(ident, model) -> str:
     lines += [f"{k} = {v!r}  # +- {ident.stderr[k]:.3g}" for k, v in mine.items()]
     lines += [f"{k} = {v!r}  # held by the fit, not identified" for k, v in ident.fixed.items()
               if k in names and k not in mine]
-    lines += ["", f"[spread]  # relative half-width of the design's draws: {SPREAD_SIGMAS:g} standard errors, "
+    lines += ["", f"[spread]  # relative half-width of the design's draws: {SPREAD_SIGMAS:g} standard uncertainties, "
               f"at least {MIN_SPREAD:g}"]
-    lines += [f"{k} = {_spread(v, ident.stderr[k])!r}" for k, v in mine.items()]
+    lines += [f"{k} = {_spread(v, ident.uncertainty(k))!r}" for k, v in mine.items()]
     return "\n".join(lines) + "\n"
 
 
 def table_lines(ident) -> List[str]:
-    """Human-readable result: one line per parameter, then conditions, residuals and warnings."""
-    out = [f"{'parameter':16s} {'value':>12s} {'std. error':>11s} {'rel.':>7s}"]
+    """Human-readable result: one line per parameter (value, statistical standard error, systematic
+    term, the stated interval), then conditions, residuals and warnings."""
+    out = [f"{'parameter':16s} {'value':>12s} {'std. error':>11s} {'systematic':>11s} {'rel.':>7s}   "
+           f"interval (+-{INTERVAL_SIGMAS:g} uncertainties)"]
     for k, v in ident.values.items():
-        se = ident.stderr[k]
-        rel = f"{100 * se / abs(v):6.2f}%" if v else "     -"
-        out.append(f"{k:16s} {v:12.5g} {se:11.3g} {rel}")
+        se, unc = ident.stderr[k], ident.uncertainty(k)
+        rel = f"{100 * unc / abs(v):6.2f}%" if v else "     -"
+        lo, hi = ident.interval(k)
+        out.append(f"{k:16s} {v:12.5g} {se:11.3g} {ident.systematic.get(k, 0.0):11.3g} {rel}   [{lo:.5g}, {hi:.5g}]")
     out.append("")
     for key in ident.condition:
         out.append(f"{key:10s} condition {ident.condition[key]:9.3g}   RMS residual {ident.residual[key]:.3g} N m")

@@ -171,3 +171,17 @@ def test_link1_hd_friction_by_the_models_own_law_and_names(tmp_path):
     m.params_array({**d, **written})  # physical: the runtime accepts the file's values
     coulomb = identify(m, log, friction="coulomb")  # one level: the static level set to it (no hump)
     assert coulomb.fixed["F_s"] == coulomb.values["F_c"] and "F_s" not in coulomb.values
+
+
+def test_motor_angle_not_divided_by_the_gear_ratio_is_named(link1):
+    """q_m logged on the rotor side (x N = 10): one line names the joint and the factor, one the stiffness
+    that lands far from the nominal value."""
+    m, true = link1
+    log = _sim_log(m, true, 3.0)
+    ident = identify(m, Log(log.t, log.q, 10.0 * log.q_m, log.u, log.tau_J), friction="viscous")
+    gear = [w for w in ident.warnings if w.startswith("joint 1: q_m_1 moves")]
+    assert len(gear) == 1, ident.warnings
+    assert float(gear[0].split(" moves ")[1].split(" times")[0]) == pytest.approx(10.0, rel=0.1)
+    assert ident.values["K"] < 0.1 * m.default_params["K"]
+    assert any(w.startswith("K = ") and "the model's nominal" in w for w in ident.warnings), ident.warnings
+    assert not any("moves" in w or "nominal" in w for w in identify(m, log, friction="viscous").warnings)
