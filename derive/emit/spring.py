@@ -10,7 +10,7 @@ so ``fjm_runtime.load("link1_hd")`` gives the usual :class:`Model`:
   ``dtau_J`` read directly, ``psi'`` and ``psi''`` at the implied deflection
   ``phi_J = psi^-1(tau_J)``, the law's Newton steps unrolled from its start
   (:func:`derive.core.spring.newton_inverse`; ``newton_start``, ``newton_steps`` of each law);
-* the laws ``control_{smc,ismc,fl}`` and ``control_{smc,ismc,fl}_tau`` (:mod:`derive.emit.controls`,
+* the laws ``control_{smc,ismc,fl}``, ``control_{smc,ismc,fl}_tau`` and ``control_impedance`` (:mod:`derive.emit.controls`,
   the same arithmetic around this model's cores). Not emitted: ``adaptive`` (it estimates a linear
   ``K``) and ``pdg`` (its motor set-point needs ``psi^-1(G(q_d))``);
 * ``spring(phi, p) -> (psi, dpsi, ddpsi)`` and ``spring_inverse(tau_J, p) -> phi_J`` (the inverse map
@@ -33,7 +33,8 @@ import sympy as sp
 
 from ..core.linearize import Linearization
 from .chain_json import write_chain_json
-from .controls import KINDS, TORQUE_KINDS, law_pair, build_core, manifest_entry
+from .controls import IMPEDANCE_KIND, KINDS, TORQUE_KINDS, build_core, impedance_pair, law_pair, manifest_entry
+from .feedforward import build_feedforward
 from .functions import QUANTITIES, operation_count
 from .parameters import drive_table, parameter_entries
 from .report import controllability_lines
@@ -47,9 +48,9 @@ from .writer import (HEADER, argument_layout, argument_lines, comment_block, gen
 __all__ = ["EMITTED_KINDS", "build_spring_functions", "write_spring_model"]
 
 #: The laws emitted for a nonlinear-spring model, in file order.
-EMITTED_KINDS = ("smc", "ismc", "fl", "smc_tau", "ismc_tau", "fl_tau")
+EMITTED_KINDS = ("smc", "ismc", "fl", "smc_tau", "ismc_tau", "fl_tau", "impedance")
 
-_MEANING = dict(KINDS + TORQUE_KINDS)
+_MEANING = dict(KINDS + TORQUE_KINDS + (IMPEDANCE_KIND,))
 
 #: Quantities with their meaning for this model (the spring in them).
 SPRING_QUANTITIES = (
@@ -106,9 +107,10 @@ def build_spring_functions(lin: Linearization) -> Dict[str, ca.Function]:
     return out
 
 
-def build_spring_laws(lin: Linearization, fns: Dict[str, ca.Function],
+def build_spring_laws(lin: Linearization, fns: Dict[str, ca.Function], feedforward: ca.Function,
                       cores: Optional[Dict[str, ca.Function]] = None) -> Dict[str, ca.Function]:
-    """``control_core``, ``control_core_tau`` and the laws of :data:`EMITTED_KINDS` (with ``_zdot``).
+    """``control_core``, ``control_core_tau`` and the laws of :data:`EMITTED_KINDS` (with ``_zdot``);
+    ``feedforward`` is the model's ``<model>_feedforward``, which the impedance law calls.
 
     ``cores``: the two cores, if the caller built them (several joints, :func:`derive.emit.spring_chain.cores`);
     else each is the model's Functions inlined and CSE'd together.
@@ -124,9 +126,10 @@ def build_spring_laws(lin: Linearization, fns: Dict[str, ca.Function],
                      ["m", "p_hat"], ["y_hat", "alpha", "beta"])}
     core, core_tau = cores["control_core"], cores["control_core_tau"]
     out = {"control_core": core, "control_core_tau": core_tau}
-    for kind in EMITTED_KINDS:
+    for kind in EMITTED_KINDS[:-1]:
         tau = kind.endswith("_tau")
         out.update(law_pair(m, kind, core_tau if tau else core, (5 if tau else 4) * n, "m" if tau else "x", None))
+    out.update(impedance_pair(m, feedforward))
     return out
 
 
@@ -155,6 +158,7 @@ def _law_lines() -> List[str]:
     return [
         "control laws: <model>_control_<kind>(x, z, r, p, gains) -> (u, s, z_dot, u_cmd, y_hat), kinds smc ismc fl;",
         "  <model>_control_<kind>_tau(m, z, r, p, gains), m = [q; dq; tau_J; dtau_J; dq_m] (5n), tau_J = psi(q_m - q);",
+        "  <model>_control_impedance(m, z, r, p, gains), m = [q; dq; q_m; dq_m; tau_J; dtau_J] (6n);",
         "  layouts of z and gains as link1's (manifest.json, controls); adaptive and pdg are not emitted.",
     ]
 
@@ -170,7 +174,8 @@ def write_spring_model(lin: Linearization, outdir: Path,
     fns = build_chain_functions(m) if chain else build_spring_functions(lin)
     parts = fns.pop("_parts", None)
     progress("control laws")
-    laws = build_spring_laws(lin, fns, chain_cores(m, parts, ca.SX) if chain else None)
+    ff_fn = build_feedforward(m, {k: fns[k] for k in ("spring", "spring_inverse")})
+    laws = build_spring_laws(lin, fns, ff_fn, chain_cores(m, parts, ca.SX) if chain else None)
     versions = tool_versions()
     everything = {**fns, **laws}
     ops = {name: _ops(fn) for name, fn in everything.items()}
@@ -184,13 +189,12 @@ def write_spring_model(lin: Linearization, outdir: Path,
         text = comment_block(lines + [f"operations: {ops[name]}"], "# ") + fn.serialize() + "\n"
         (outdir / f"{name}.casadi").write_text(text)
         sizes[name] = len(text.encode())
-    ff_fn, ops["feedforward"], ff_entry = write_feedforward(
-        m, outdir, argument_lines(lin), versions, {k: fns[k] for k in ("spring", "spring_inverse")})
+    ff_fn, ops["feedforward"], ff_entry = write_feedforward(m, outdir, argument_lines(lin), versions, ff_fn)
     progress("C sources")
     c_fns = {**everything, "feedforward": ff_fn}
     if chain:  # the C file's twins call the kernel, spring and friction Functions instead of inlining them
         c_fns = {**everything, **chain_c_functions(m, parts),
-                 **build_spring_laws(lin, fns, chain_cores(m, parts, ca.MX)), "feedforward": ff_fn}
+                 **build_spring_laws(lin, fns, ff_fn, chain_cores(m, parts, ca.MX)), "feedforward": ff_fn}
     sources = _write_c(lin, outdir, c_fns, ops, versions)
 
     def entry(name, inputs, **extra):
@@ -271,7 +275,7 @@ def _control_entries(m, laws, ops, entry) -> Dict[str, dict]:
     """The manifest's ``controls``: one entry per emitted law (its zdot Function when stateful)."""
     controls = {}
     for kind in EMITTED_KINDS:
-        first = "m" if kind.endswith("_tau") else "x"
+        first = "m" if kind.endswith("_tau") or kind == "impedance" else "x"
         e = entry(f"control_{kind}", [first, "z", "r", "p", "gains"], outputs=["u", "s", "z_dot", "u_cmd", "y_hat"])
         if f"control_{kind}_zdot" in laws:
             z = f"control_{kind}_zdot"

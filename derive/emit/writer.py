@@ -134,14 +134,12 @@ def _write_casadi_files(lin: Linearization, outdir: Path, functions, controls, o
     return sizes
 
 
-def write_feedforward(model, outdir: Path, lines: List[str], versions: Dict[str, str],
-                      springs: Optional[Dict[str, ca.Function]] = None):
-    """Build ``<model>_feedforward`` (:mod:`derive.emit.feedforward`) and write ``feedforward.casadi``.
+def write_feedforward(model, outdir: Path, lines: List[str], versions: Dict[str, str], fn: ca.Function):
+    """Write ``feedforward.casadi`` of ``fn``, the model's :func:`derive.emit.feedforward.build_feedforward`.
 
-    ``lines``: the argument comment lines of the model's other ``.casadi`` files; ``springs``: passed on
-    to :func:`derive.emit.feedforward.build_feedforward`. Returns ``(fn, operations, manifest entry)``.
+    ``lines``: the argument comment lines of the model's other ``.casadi`` files. Returns
+    ``(fn, operations, manifest entry)``.
     """
-    fn = build_feedforward(model, springs)
     n_ops = operation_count(fn)
     text = comment_block(
         [HEADER, f"model: {model.name}; function: {fn.name()} -- {FEEDFORWARD_MEANING}",
@@ -153,23 +151,26 @@ def write_feedforward(model, outdir: Path, lines: List[str], versions: Dict[str,
     return fn, n_ops, feedforward_entry(model.name, fn, n_ops, len(text.encode()))
 
 
-def _build_laws(lin: Linearization, functions, kernel: ca.Function) -> Dict[str, ca.Function]:
-    """Every control law (state, torque-sensed, pdg), their cores, and T_tau, alpha_tau, beta_tau."""
+def _build_laws(lin: Linearization, functions, kernel: ca.Function, feedforward: ca.Function) -> Dict[str, ca.Function]:
+    """Every control law (state, torque-sensed, pdg, impedance), their cores, and T_tau, alpha_tau, beta_tau."""
     torque = build_torque_functions(lin, kernel, functions["beta"])
     torque["control_pdg"] = build_pdg(lin.model)
-    controls = build_controls(lin.model, functions, torque, core_body=state_bodies(lin.model, kernel)["core"])
+    controls = build_controls(lin.model, functions, torque, core_body=state_bodies(lin.model, kernel)["core"],
+                              feedforward=feedforward)
     controls.update({name: torque[name] for name, _ in TORQUE_QUANTITIES})
     return controls
 
 
-def c_functions(lin: Linearization, functions, controls, kernel: ca.Function) -> Dict[str, ca.Function]:
+def c_functions(lin: Linearization, functions, controls, kernel: ca.Function,
+                feedforward: ca.Function) -> Dict[str, ca.Function]:
     """The Functions the C file is generated from: same names, signatures and values as the ``.casadi`` ones.
 
     The ``.casadi`` ``T``, ``alpha``, cores and torque functions are SX with the kernel inlined (fastest
     from Python, and counted in the manifest); here they are MX twins calling the one kernel
     (:mod:`derive.emit.dynamics`) and the cores also ``beta``, so that the C holds each model part once;
     the laws call the twin cores. ``f``, ``beta``, ``energy`` and ``ad`` call ``inertia`` (``ad`` maps one column's
-    arithmetic over the n columns, :func:`derive.emit.brackets.bracket_twin`).
+    arithmetic over the n columns, :func:`derive.emit.brackets.bracket_twin`). ``feedforward`` (SX) comes last; the
+    impedance law calls it.
     """
     m = lin.model
     n, n_p = m.n, len(m.params)
@@ -186,12 +187,12 @@ def c_functions(lin: Linearization, functions, controls, kernel: ca.Function) ->
                        ["y_hat", "alpha", "beta"], extra=lambda x, p: [beta(x, p)])
     torque = torque_twins(lin, kernel, beta)
     torque["control_pdg"] = controls["control_pdg"]
-    laws = build_controls(m, out, torque, core=core)
+    laws = build_controls(m, out, torque, core=core, feedforward=feedforward)
     laws.update({name: torque[name] for name, _ in TORQUE_QUANTITIES})
     for name, fn in controls.items():  # the SX parts with no model part (zdot) are the same objects
         if name.endswith("_zdot"):
             laws[name] = fn
-    return {**out, **{name: laws[name] for name in controls}}
+    return {**out, **{name: laws[name] for name in controls}, "feedforward": feedforward}
 
 
 def _torque_entries(m, controls, control_ops, sizes) -> Dict[str, object]:
@@ -232,8 +233,9 @@ def _write_c_sources(lin: Linearization, outdir: Path, c_fns, ops, control_ops,
 
 
 def _first(kind: str) -> str:
-    """Name of a law's first argument: ``m`` (torque measurement, 5n) for the ``_tau`` laws, else ``x``."""
-    return "m" if kind.endswith("_tau") else "x"
+    """Name of a law's first argument: ``m`` (a measurement: 5n for the ``_tau`` laws, 6n for ``impedance``),
+    else ``x``."""
+    return "m" if kind.endswith("_tau") or kind == "impedance" else "x"
 
 
 def _control_entries(m, controls, control_ops, sizes) -> Dict[str, object]:
@@ -297,7 +299,8 @@ def write_model(lin: Linearization, outdir: Path,
     progress("CasADi functions")
     functions, kernel = (build_complete_functions(lin), None) if complete else build_model_functions(lin)
     progress("control laws")
-    controls = {} if complete else _build_laws(lin, functions, kernel)
+    ff_fn = None if complete else build_feedforward(m)
+    controls = {} if complete else _build_laws(lin, functions, kernel, ff_fn)
     versions = tool_versions()
     ops = {name: operation_count(functions[name]) for name, _ in quantities}
     # MX laws: the scalar operations of one call (the core's and the law's own), counted inlined
@@ -305,11 +308,10 @@ def write_model(lin: Linearization, outdir: Path,
                    for name, fn in controls.items()}
     progress(".casadi files")
     sizes = _write_casadi_files(lin, outdir, functions, controls, ops, control_ops, versions, quantities)
-    ff = None if complete else write_feedforward(m, outdir, argument_lines(lin), versions)
+    ff = None if complete else write_feedforward(m, outdir, argument_lines(lin), versions, ff_fn)
     progress("C sources")
-    c_fns = {**functions, **controls} if complete else c_functions(lin, functions, controls, kernel)
+    c_fns = {**functions, **controls} if complete else c_functions(lin, functions, controls, kernel, ff_fn)
     if ff is not None:
-        c_fns["feedforward"] = ff[0]
         control_ops["feedforward"] = ff[1]
     sources = _write_c_sources(lin, outdir, c_fns, ops, control_ops, versions)
     drives = drive_table(m)

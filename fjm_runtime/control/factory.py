@@ -14,11 +14,13 @@ from dataclasses import dataclass, field
 from typing import Callable, Dict, Mapping, Tuple
 
 from .adaptive import make_adaptive
+from .impedance import ImpedanceController
 from .laws import SlidingModeController
 from .pdg import MotorPDGravityController
 from .sensing import SENSING_KINDS
 
-__all__ = ["CONTROLLER_KINDS", "LAWS", "Law", "REGULATION_KINDS", "TORQUE_SENSED_KINDS", "make_controller"]
+__all__ = ["CONTROLLER_KINDS", "FULL_SENSED_KINDS", "LAWS", "Law", "REGULATION_KINDS", "TORQUE_SENSED_KINDS",
+           "make_controller"]
 
 
 @dataclass(frozen=True)
@@ -44,13 +46,18 @@ LAWS: Dict[str, Law] = {
     "sign": Law(SlidingModeController, fixed={"mode": "sign"}),
     "adaptive": Law(make_adaptive),
     "pdg": Law(MotorPDGravityController),
+    "impedance": Law(ImpedanceController),
 }
 
 #: Regulation laws (set point ``r[0]`` only), also accepted by :func:`make_controller`.
 REGULATION_KINDS = ("pdg",)
 
-#: The names :func:`make_controller` accepts for tracking.
-CONTROLLER_KINDS = tuple(k for k in LAWS if k not in REGULATION_KINDS)
+#: Laws that read the full measurement ``[q; dq; q_m; dq_m; tau_J; dtau_J]`` (``sensing = 'full'``).
+FULL_SENSED_KINDS = ("impedance",)
+
+#: The names :func:`make_controller` accepts for tracking with the sliding-mode family's gains (the command
+#: line's ``--controller`` choices); ``make_controller`` also takes :data:`FULL_SENSED_KINDS`.
+CONTROLLER_KINDS = tuple(k for k in LAWS if k not in REGULATION_KINDS + FULL_SENSED_KINDS)
 
 #: The kinds that accept ``sensing='torque'`` (emitted as ``control_<kind>_tau``).
 TORQUE_SENSED_KINDS = ("smc", "ismc", "fl")
@@ -70,12 +77,16 @@ def make_controller(kind: str, model, nominal_params, sensing: str = "state", **
         ``K_bounds``, ``filter_rate``, ``ls_gain``, ``integral``); ``'pdg'``: motor PD +
         gravity compensation for regulation
         (:class:`fjm_runtime.control.pdg.MotorPDGravityController`; keywords ``k_p``,
-        ``k_d``, ``u_max``).
+        ``k_d``, ``u_max``); ``'impedance'``: motor-side impedance with torque feedback about the
+        flatness feedforward, reading ``[q; dq; q_m; dq_m; tau_J; dtau_J]``
+        (:class:`fjm_runtime.control.impedance.ImpedanceController`; keywords ``K_p``, ``K_d``, ``K_T``,
+        ``K_i``, ``u_max``, ``anti_windup``; ``sensing`` must be left at its default or be ``'full'``).
     model, nominal_params, **kwargs
         Passed to :class:`~fjm_runtime.control.laws.SlidingModeController`
         (gains not given take the defaults of :mod:`fjm_runtime.control.defaults`).
-    sensing : {'state', 'torque'}
-        ``'state'``: the controller reads the plant state ``x`` (4n). ``'torque'`` (smc,
+    sensing : {'state', 'torque', 'full'}
+        ``'full'``: the impedance law's measurement (its only one; the default ``'state'`` means it too
+        for that law). ``'state'``: the controller reads the plant state ``x`` (4n). ``'torque'`` (smc,
         ismc, fl): it reads the torque-sensed measurement ``m = [q; dq; tau_J; dtau_J; dq_m]``
         (5n, :func:`~fjm_runtime.control.sensing.torque_measurement`) and runs the emitted
         ``control_<kind>_tau``. Either way ``controller.sensing`` and
@@ -87,12 +98,16 @@ def make_controller(kind: str, model, nominal_params, sensing: str = "state", **
     """
     if sensing not in SENSING_KINDS:
         raise ValueError(f"sensing = {sensing!r}: expected one of {', '.join(SENSING_KINDS)}")
+    if (sensing == "full" and kind not in FULL_SENSED_KINDS) or (sensing == "torque" and kind in FULL_SENSED_KINDS):
+        raise ValueError(f"controller = {kind!r} with sensing = {sensing!r}: sensing = 'full' (the measurement "
+                         f"[q; dq; q_m; dq_m; tau_J; dtau_J]) is read by {', '.join(FULL_SENSED_KINDS)} and only by it")
     if sensing == "torque" and kind not in TORQUE_SENSED_KINDS:
         raise ValueError(f"controller = {kind!r} with sensing = 'torque': torque-sensed laws exist for "
                          f"{', '.join(TORQUE_SENSED_KINDS)} (use sensing = 'state')")
     law = LAWS.get(kind)
     if law is None:
-        raise ValueError(f"controller = {kind!r}: expected one of {', '.join(CONTROLLER_KINDS + REGULATION_KINDS)}")
+        raise ValueError(f"controller = {kind!r}: expected one of "
+                         f"{', '.join(CONTROLLER_KINDS + REGULATION_KINDS + FULL_SENSED_KINDS)}")
     if sensing == "torque":
         kwargs["sensing"] = "torque"
     return law(model, nominal_params, **kwargs)

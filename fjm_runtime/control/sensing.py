@@ -24,15 +24,17 @@ from ..validation import FjmValueError
 
 __all__ = ["SENSING_KINDS", "measurement_size", "torque_measurement", "torque_measurement_symbolic"]
 
-#: The ``sensing`` values a controller accepts.
-SENSING_KINDS = ("state", "torque")
+#: The ``sensing`` values a controller accepts: ``'full'`` is everything a torque-sensed arm reports,
+#: ``[q; dq; q_m; dq_m; tau_J; dtau_J]`` (6n, the signals of :data:`fjm_runtime.sim.sensor.SIGNALS` in order;
+#: the motor-side impedance law reads it).
+SENSING_KINDS = ("state", "torque", "full")
 
 
 def measurement_size(sensing: str, n: int) -> int:
-    """Length of what a controller with ``sensing`` reads: ``4n`` ('state') or ``5n`` ('torque')."""
+    """Length of what a controller with ``sensing`` reads: ``4n`` ('state'), ``5n`` ('torque'), ``6n`` ('full')."""
     if sensing not in SENSING_KINDS:
         raise FjmValueError(f"sensing = {sensing!r}: expected one of {', '.join(SENSING_KINDS)}")
-    return 4 * n if sensing == "state" else 5 * n
+    return {"state": 4, "torque": 5, "full": 6}[sensing] * n
 
 
 def _stiffness(K, n: int) -> np.ndarray:

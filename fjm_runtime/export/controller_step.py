@@ -162,7 +162,7 @@ def controller_functions(model, controller, L: StepLayout, name: str):
     K_nom = None
     # the predictor's q_m = q + K_nom^-1 tau_J (a nonlinear spring predicts through psi^-1 instead); no
     # prediction, no K_nom (a harmonic-drive model has no K_i)
-    if L.sensing == "torque" and L.predict and not L.nominal_spring:
+    if L.sensing != "state" and L.predict and not L.nominal_spring:
         K_nom = ops.take(p, stiffness_indices(model)[0])
     b = CL.split(c)
     m_k, filt_next, venc_next = ss._condition(ops, L, _blocks(m_raw, L), b["venc"], b["filt"])
@@ -200,15 +200,16 @@ def _reset_function(model, L: StepLayout, CL: ControllerLayout, name: str, ops):
     parts = _blocks(m0, L)
     zero = ca.MX.zeros(n, 1)
     qm = None
+    i_dqm = ss._slot(L, "dq_m")
     if L.differentiated:                      # computed velocities of an arm at rest: zero
-        qm = parts[2] if L.sensing == "state" else parts[4]
+        qm = parts[4] if L.sensing == "torque" else parts[2]
         parts[1] = zero
-        parts[3 if L.sensing == "state" else 4] = zero
+        parts[i_dqm] = zero
     if L.filtered:
-        parts[3] = zero
+        parts[ss._slot(L, "dtau_J")] = zero
     m_rest = ca.vertcat(*parts)
-    if L.sensing == "torque":
-        spring = parts[2]
+    if L.sensing != "state":                  # the measured tau_J holds the arm
+        spring = parts[ss._slot(L, "tau_J")]
     elif getattr(model, "spring_functions", None) is not None:
         spring = ops.spring(parts[2] - parts[0], p)[0]
     else:
@@ -218,9 +219,9 @@ def _reset_function(model, L: StepLayout, CL: ControllerLayout, name: str, ops):
     if L.delay:
         out += [ca.repmat(m_rest, L.delay, 1), ca.repmat(spring, L.delay, 1)]
     if L.filtered:
-        out.append(m_rest[2 * n:4 * n])
+        out.append(m_rest[ss._slot(L, "tau_J") * n:(ss._slot(L, "dtau_J") + 1) * n])
     if L.differentiated:
-        out.append(ca.vertcat(parts[0], parts[1], qm, parts[3 if L.sensing == "state" else 4]))
+        out.append(ca.vertcat(parts[0], parts[1], qm, parts[i_dqm]))
     if L.rate_step:
         out.append(spring)
     c0 = ca.vertcat(*out) if out else ca.MX(0, 1)

@@ -4,6 +4,7 @@ At sample ``k`` (``t_k = k T``), from the step state ``w_k`` (layout :class:`Ste
 
     m_true = x_k                          (state sensing, 4n)
            = [q; dq; K (q_m - q); K (dq_m - dq); dq_m]   (torque sensing, 5n, K TRUE)
+           = [q; dq; q_m; dq_m; K (q_m - q); K (dq_m - dq)]   (full sensing, 6n)
     m_k    = m_true + noise_k             (noise generated outside, sim/sensor.py)
              encoders: q (and q_m) -> step * floor(value / step + 0.5)
              tau_J + the run's constant offset (drawn from its seed, held in w)
@@ -34,7 +35,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..validation import FjmValueError
-from .sensor import SensorModel, offset_normals
+from .sensor import SensorModel, measurement_blocks, offset_normals
 from .step import casadi_functions
 from .step_layout import StepLayout, controller_model, stiffness_indices
 
@@ -124,11 +125,17 @@ class _CasadiOps:
         return self.fns["spring_inverse"](tau, p)
 
 
-def _measure(ops, L: StepLayout, x, K, p=None):
-    """The measurement of ``x`` (state: x; torque: [q; dq; K(q_m - q); K(dq_m - dq); dq_m]).
+def _slot(L: StepLayout, signal: str) -> int:
+    """The block of ``signal`` (a name of :data:`fjm_runtime.sim.sensor.SIGNALS`) in the measurement."""
+    return measurement_blocks(L.sensing).index(signal)
 
-    ``K`` None (torque sensing): the nonlinear spring of ``ops``'s model at parameters ``p``,
-    ``[q; dq; psi(q_m - q); psi'(q_m - q) (dq_m - dq); dq_m]``.
+
+def _measure(ops, L: StepLayout, x, K, p=None):
+    """The measurement of ``x`` (state: x; torque: [q; dq; K(q_m - q); K(dq_m - dq); dq_m];
+    full: [q; dq; q_m; dq_m; K(q_m - q); K(dq_m - dq)]).
+
+    ``K`` None (torque or full sensing): the nonlinear spring of ``ops``'s model at parameters ``p``,
+    ``psi(q_m - q)`` and ``psi'(q_m - q) (dq_m - dq)`` in the tau_J and dtau_J slots.
     """
     if L.sensing == "state":
         return x
@@ -136,13 +143,15 @@ def _measure(ops, L: StepLayout, x, K, p=None):
     q, dq, qm, dqm = x[0:n], x[n:2 * n], x[2 * n:3 * n], x[3 * n:4 * n]
     if K is None:
         psi, dpsi = ops.spring(qm - q, p)
-        return ops.cat([q, dq, psi, dpsi * (dqm - dq), dqm])
-    return ops.cat([q, dq, K * (qm - q), K * (dqm - dq), dqm])
+        tau, dtau = psi, dpsi * (dqm - dq)
+    else:
+        tau, dtau = K * (qm - q), K * (dqm - dq)
+    return ops.cat([q, dq, qm, dqm, tau, dtau] if L.sensing == "full" else [q, dq, tau, dtau, dqm])
 
 
 def _plant_K(ops, L: StepLayout, p):
     """The plant's ``K`` for :func:`_measure` (None: a nonlinear spring, or state sensing)."""
-    return ops.take(p, L.idx_K) if L.sensing == "torque" and not L.nonlinear_spring else None
+    return ops.take(p, L.idx_K) if L.sensing != "state" and not L.nonlinear_spring else None
 
 
 def _quantize(ops, v, step: float):
@@ -167,10 +176,10 @@ def _reading(ops, L: StepLayout, w, noise, p):
     m = _measure(ops, L, x, _plant_K(ops, L, p), p) + noise
     parts = [m[b * n:(b + 1) * n] for b in range(L.nm // n)]
     parts[0] = _quantize(ops, parts[0], L.q_quant)
-    if L.sensing == "state":
+    if L.sensing != "torque":  # the motor angle is read in its own slot
         parts[2] = _quantize(ops, parts[2], L.q_m_quant)
-    elif L.offset:
-        parts[2] = parts[2] + w[L.extra_slices()[1]]
+    if L.offset:
+        parts[_slot(L, "tau_J")] = parts[_slot(L, "tau_J")] + w[L.extra_slices()[1]]
     if L.differentiated and L.sensing == "torque":
         # the dq_m slot of a torque measurement carries the motor ANGLE's noise (sensor.noise_slots)
         parts[4] = _quantize(ops, x[2 * n:3 * n] + noise[4 * n:5 * n], L.q_m_quant)
@@ -184,18 +193,18 @@ def _condition(ops, L: StepLayout, parts, venc, filt):
     parts = list(parts)
     venc_next = venc
     if L.differentiated:
-        qm = parts[2] if L.sensing == "state" else parts[4]
+        qm = parts[2] if L.sensing != "torque" else parts[4]
         enc = venc_next
         dq = _difference(L, parts[0], enc[0:n], enc[n:2 * n])
         dqm = _difference(L, qm, enc[2 * n:3 * n], enc[3 * n:4 * n])
         parts[1] = dq
-        parts[3 if L.sensing == "state" else 4] = dqm
+        parts[_slot(L, "dq_m")] = dqm
         venc_next = ops.cat([parts[0], dq, qm, dqm])
     filt_next = filt
     if L.filtered:
-        tau, tau_prev, d_prev = parts[2], filt_next[0:n], filt_next[n:2 * n]
+        tau, tau_prev, d_prev = parts[_slot(L, "tau_J")], filt_next[0:n], filt_next[n:2 * n]
         d = d_prev + L.a_filter * ((tau - tau_prev) / L.T - d_prev)
-        parts[3] = d
+        parts[_slot(L, "dtau_J")] = d
         filt_next = ops.cat([tau, d])
     return ops.cat(parts), filt_next, venc_next
 
@@ -230,6 +239,10 @@ def _predict(nom_ops, L: StepLayout, m_old, u_buf, p_nom, K_nom=None):
     K = None
     if L.sensing == "state":
         x = m_old
+    elif L.sensing == "full":  # the state is read: only the prediction's own measurement needs K_nom (or psi)
+        x = m_old[0:4 * n]
+        if not L.nominal_spring:
+            K = nom_ops.const(L.K_nom) if K_nom is None else K_nom
     else:
         q, dq, tau, dqm = m_old[0:n], m_old[n:2 * n], m_old[2 * n:3 * n], m_old[4 * n:5 * n]
         if L.nominal_spring:
@@ -238,8 +251,13 @@ def _predict(nom_ops, L: StepLayout, m_old, u_buf, p_nom, K_nom=None):
             K = nom_ops.const(L.K_nom) if K_nom is None else K_nom
             phi = tau / K
         x = nom_ops.cat([q, dq, q + phi, dqm])
+    x_old = x
     for j in range(L.delay):
         x = _plant(nom_ops, L, x, u_buf[j * n:(j + 1) * n], p_nom)
+    if L.sensing == "full":
+        # the reading plus the nominal model's predicted CHANGE: the torque keeps the sensor's scale (a torque
+        # from K_nom (q_m - q) would scale the law's torque feedback by K_nom / K: -0.7 became -1 at K x0.7)
+        return m_old + _measure(nom_ops, L, x, K, p_nom) - _measure(nom_ops, L, x_old, K, p_nom)
     return _measure(nom_ops, L, x, K, p_nom)
 
 
@@ -401,7 +419,7 @@ def initial_step_state(model, L: StepLayout, x0, z0, p_true, seed: int = 0, sens
     if L.delay:
         parts += [np.tile(m0, L.delay), np.tile(spring, L.delay)]
     if L.filtered:
-        parts.append(m0[2 * n:4 * n])
+        parts.append(m0[_slot(L, "tau_J") * n:(_slot(L, "dtau_J") + 1) * n])
     if L.differentiated:
         parts.append(x0[:4 * n])
     if L.offset:

@@ -10,7 +10,8 @@ Channels: signal block ``b`` times ``n`` plus joint ``i`` (0-based), with the bl
 :data:`SIGNALS` = ``q, dq, q_m, dq_m, tau_J, dtau_J`` (b = 0..5). The noise row of a sample
 has the layout of the controller's measurement: ``[q; dq; q_m; dq_m]`` (4n) for state
 sensing (channels 0..4n-1) and ``[q; dq; tau_J; dtau_J; dq_m]`` (5n) for torque sensing
-(channel blocks 0, 1, 4, 5, 3), so a signal gets the same noise whichever sensing is used.
+(channel blocks 0, 1, 4, 5, 3), and ``[q; dq; q_m; dq_m; tau_J; dtau_J]`` (6n) for full sensing (channels
+0..6n-1), so a signal gets the same noise whichever sensing is used.
 With ``velocity_mode='differentiated'`` a velocity is not measured but computed from its angle, as a
 robot computes it: the dq slot carries no noise (dq is the filtered difference of the measured q),
 and the dq_m slot carries the noise of the MOTOR ANGLE (channel block 2, level ``q_m``), of which
@@ -61,12 +62,15 @@ Level = Union[float, Sequence[float]]
 
 
 def measurement_blocks(sensing: str) -> Tuple[str, ...]:
-    """Signal names of the measurement blocks (n entries each) for ``'state'`` or ``'torque'`` sensing."""
+    """Signal names of the measurement blocks (n entries each) for ``'state'``, ``'torque'`` or ``'full'``
+    sensing (``'full'``: every signal a torque-sensed arm reports, in :data:`SIGNALS` order)."""
     if sensing == "state":
         return ("q", "dq", "q_m", "dq_m")
     if sensing == "torque":
         return ("q", "dq", "tau_J", "dtau_J", "dq_m")
-    raise FjmValueError(f"sensing = {sensing!r}: expected 'state' or 'torque'")
+    if sensing == "full":
+        return SIGNALS
+    raise FjmValueError(f"sensing = {sensing!r}: expected 'state', 'torque' or 'full'")
 
 
 def splitmix64(x) -> np.ndarray:

@@ -62,7 +62,7 @@ class StepLayout:
     ----------
     n, nx, nz : int
         Joints, plant states (4n), controller states.
-    sensing : {'state', 'torque'}
+    sensing : {'state', 'torque', 'full'}
     nm : int
         Measurement size (4n or 5n).
     delay : int
@@ -156,9 +156,9 @@ def make_layout(model, controller, T: float, substeps: int, sensor: SensorModel,
     """The :class:`StepLayout` of a run (the controller's ``sensing`` decides the measurement)."""
     n = int(model.n)
     sensing = getattr(controller, "sensing", "state")
-    if sensing not in ("state", "torque"):
-        raise FjmValueError(f"controller.sensing = {sensing!r}: expected 'state' or 'torque'")
-    torque = sensing == "torque"
+    if sensing not in ("state", "torque", "full"):
+        raise FjmValueError(f"controller.sensing = {sensing!r}: expected 'state', 'torque' or 'full'")
+    torque = sensing != "state"  # torque or full: the sensor measures the spring
     predicting = bool(predict and delay > 0)
     nonlinear = torque and getattr(model, "spring_functions", None) is not None
     nominal_spring = torque and predicting and \
@@ -173,7 +173,7 @@ def make_layout(model, controller, T: float, substeps: int, sensor: SensorModel,
     rate_step = tuple(float(r * T) if np.isfinite(r) else _NO_LIMIT for r in rate) \
         if sensor.has_rate_limit() else ()
     return StepLayout(n=n, nx=int(model.nx), nz=int(getattr(controller, "n_states", 0)), sensing=sensing,
-                      nm=5 * n if torque else 4 * n, delay=int(delay), predict=predicting,
+                      nm={"state": 4, "torque": 5, "full": 6}[sensing] * n, delay=int(delay), predict=predicting,
                       filtered=torque and sensor.dtau_mode == "filtered", T=float(T), substeps=int(substeps),
                       a_filter=1.0 - math.exp(-sensor.dtau_cutoff * T), q_quant=sensor.q_quant,
                       q_m_quant=sensor.q_m_quant, idx_K=tuple(int(i) for i in idx_K), K_nom=K_nom,
@@ -185,9 +185,9 @@ def make_layout(model, controller, T: float, substeps: int, sensor: SensorModel,
                       nominal_spring=nominal_spring)
 
 
-#: Laws whose first ``n`` controller states integrate the tracking error ``e1 = q - q_d`` (their
-#: torque-sensed forms too: ``ismc_tau``).
-INTEGRAL_LAWS = ("ismc", "adaptive")
+#: Laws whose first ``n`` controller states integrate the tracking error (``e1 = q - q_d``; the impedance
+#: law's ``q_d - q``) and are frozen where the torque is held back (their torque-sensed forms too: ``ismc_tau``).
+INTEGRAL_LAWS = ("ismc", "adaptive", "impedance")
 
 
 def _law_kind(controller):

@@ -346,7 +346,9 @@ def random_control_inputs(model: fjm_runtime.Model, kind: str, rng: np.random.Ge
     entry = model.manifest["controls"][kind]
     nz = sum(b["size"] for b in entry["z"])
     for x, p in random_points(model, rng, count):
-        if "measurement" in entry:  # torque-sensed law: m = [q; dq; tau_J; dtau_J; dq_m] (5n)
+        if "measurement" in entry and entry["measurement"]["size"] == 6 * n:  # m = [x; tau_J; dtau_J] (6n)
+            x = np.concatenate([x, rng.uniform(-50, 50, 2 * n)])
+        elif "measurement" in entry:  # torque-sensed law: m = [q; dq; tau_J; dtau_J; dq_m] (5n)
             x = np.concatenate([x[:2 * n], rng.uniform(-50, 50, 2 * n), x[3 * n:]])
         z = rng.uniform(-1, 1, nz)
         if kind == "adaptive":  # positive K_hat and covariance
@@ -357,7 +359,9 @@ def random_control_inputs(model: fjm_runtime.Model, kind: str, rng: np.random.Ge
         values = {"k_s": rng.uniform(0, 50, n), "delta": rng.uniform(0.5, 5, n), "k_lin": rng.uniform(0, 5, n),
                   "u_max": rng.uniform(1, 50, n), "beta_hat": (np.eye(n) * rng.uniform(0.01, 0.1)).ravel(),
                   "K_min": np.full(n, 100.0), "K_max": np.full(n, 200.0), "filter_rate": rng.uniform(5, 30),
-                  "k_p": rng.uniform(10, 500, n), "k_d": rng.uniform(1, 20, n)}
+                  "k_p": rng.uniform(10, 500, n), "k_d": rng.uniform(1, 20, n),
+                  "K_p": rng.uniform(10, 2e3, n), "K_d": rng.uniform(1, 50, n), "K_T": rng.uniform(-0.9, 1, n),
+                  "K_i": rng.uniform(0, 1e4, n)}
         for b in entry["gains"]:
             if b["size"] == 1 and b["name"] not in values:
                 values[b["name"]] = float(rng.integers(0, 2))

@@ -3,13 +3,14 @@ import numpy as np
 import pytest
 
 from fjm_runtime.control.defaults import DEFAULT_LAM, DEFAULT_SWITCHING_GAIN, PAPER_K_RANGE, default_delta
-from fjm_runtime.control.factory import CONTROLLER_KINDS, LAWS, REGULATION_KINDS, make_controller
+from fjm_runtime.control.factory import CONTROLLER_KINDS, FULL_SENSED_KINDS, LAWS, REGULATION_KINDS, make_controller
 from fjm_runtime.control.laws import SlidingModeController
 
 
 def test_every_name_is_in_the_table():
     assert CONTROLLER_KINDS == ("smc", "ismc", "fl", "sign", "adaptive")
-    assert set(LAWS) == set(CONTROLLER_KINDS + REGULATION_KINDS)
+    assert FULL_SENSED_KINDS == ("impedance",)
+    assert set(LAWS) == set(CONTROLLER_KINDS + REGULATION_KINDS + FULL_SENSED_KINDS)
 
 
 @pytest.mark.parametrize("kind, direct", [("smc", {"mode": "sat"}), ("sign", {"mode": "sign"}),
