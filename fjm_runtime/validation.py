@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from typing import Mapping, Sequence, Tuple, Union
 
 import numpy as np
@@ -9,6 +10,22 @@ import numpy as np
 
 class FjmValueError(ValueError):
     """A bad input to fjm (subclass of ValueError so callers may catch either)."""
+
+
+#: Magnitude range of a parameter value fjm takes (SI units): a physical arm's values lie well inside
+#: (motor inertias ~1e-6 kg m^2, stiffnesses ~1e6 N m/rad); zero is allowed (no friction, no payload).
+PARAMETER_MAGNITUDE = (1e-12, 1e12)
+
+
+def check_magnitudes(names, values, where: str, hi: float = PARAMETER_MAGNITUDE[1],
+                     why: str = "SI units: no physical arm's value lies beyond") -> None:
+    """Refuse a value of magnitude outside ``0`` or ``[PARAMETER_MAGNITUDE[0], hi]``, in one line naming
+    ``where`` (a prefix of the name, e.g. ``"--params p.toml: "``), the name, the value and ``why``."""
+    lo = PARAMETER_MAGNITUDE[0]
+    for name, v in zip(names, values):
+        v = float(v)
+        if not (math.isfinite(v) and (v == 0.0 or lo <= abs(v) <= hi)):
+            raise FjmValueError(f"{where}{name} = {v:g}: expected 0 or {lo:g} <= |value| <= {hi:g} ({why})")
 
 
 ArrayLike = Union[Sequence[float], np.ndarray]

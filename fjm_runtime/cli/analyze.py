@@ -19,6 +19,7 @@ import numpy as np
 
 from .models import MODEL_HELP
 from ..validation import FjmValueError
+from .ranges import DELAY, RATE
 
 __all__ = ["add_arguments", "run", "conditions_from_design"]
 
@@ -27,8 +28,9 @@ def add_arguments(p) -> None:
     """The arguments of ``fjm analyze`` on its parser ``p`` (name, help, description: commands.toml)."""
     p.add_argument("model", help=MODEL_HELP)
     p.add_argument("--gains", type=Path, required=True, help="gains file (a fjm design output or {kind, gains})")
-    p.add_argument("--rate", type=float, default=None, help="control rate, Hz (default: the file's, else 1000)")
-    p.add_argument("--delay-samples", type=int, default=None, help="delay, samples (default: the file's, else 0)")
+    p.add_argument("--rate", type=RATE, default=None, help=f"control rate, {RATE} (default: the file's, else 1000)")
+    p.add_argument("--delay-samples", type=DELAY, default=None,
+                   help=f"delay, {DELAY} (default: the file's, else 0)")
     p.add_argument("--predict", action=argparse.BooleanOptionalAction, default=None,
                    help="delay compensation (default: the file's)")
     p.add_argument("--sensing", choices=("state", "torque"), default=None, help="default: the file's, else torque")

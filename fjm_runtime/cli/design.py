@@ -9,7 +9,8 @@ import time
 from pathlib import Path
 
 from .models import MODEL_HELP
-from ..validation import FjmValueError
+from ..validation import FjmValueError, check_magnitudes
+from .ranges import DELAY, DURATION, RATE, SEED, THREADS, TORQUE, Range
 
 __all__ = ["add_arguments", "run", "demo_task"]
 
@@ -19,8 +20,8 @@ def add_arguments(p) -> None:
     p.add_argument("model", help=MODEL_HELP)
     p.add_argument("--controller", default="ismc", choices=("ismc",), help="law (default ismc)")
     p.add_argument("--sensing", default="torque", choices=("state", "torque"), help="default torque")
-    p.add_argument("--rate", type=float, default=1000.0, help="control rate, Hz (default 1000)")
-    p.add_argument("--delay-samples", type=int, default=1, help="computation delay, samples (default 1)")
+    p.add_argument("--rate", type=RATE, default=1000.0, help=f"control rate, {RATE} (default 1000)")
+    p.add_argument("--delay-samples", type=DELAY, default=1, help=f"computation delay, {DELAY} (default 1)")
     p.add_argument("--noise", default="panda_white", metavar="PRESET|FILE",
                    help="sensor model: a preset (ideal, panda_white, franka_like; former names none, panda) or a "
                         "TOML sensor file (docs/simulation.md); default panda_white")
@@ -29,25 +30,26 @@ def add_arguments(p) -> None:
                         "the spread of the TRUE plant draws ([spread]); default K x U[0.7, 1.3], J_m x U[0.8, 1.2], "
                         "payload U[0, 1] kg (docs/design-command.md)")
     p.add_argument("--max-rms", type=float, default=2e-3,
-                   help="threshold: second-half RMS tracking error of every joint, rad (default 2e-3)")
+                   help=f"threshold: second-half RMS tracking error of every joint, {RMS} (default 2e-3)")
     p.add_argument("--max-jitter", type=float, default=3.0,
-                   help="threshold: torque jitter on the --jitter-joints, N m (default 3)")
+                   help=f"threshold: torque jitter on the --jitter-joints, {TORQUE} (default 3)")
     p.add_argument("--max-at-limit", type=float, default=2.0,
-                   help="threshold: time at a torque limit of every joint, percent (default 2)")
+                   help="threshold: time at a torque limit of every joint, percent, 0 < share <= 100 (default 2)")
     p.add_argument("--jitter-joints", default="1-4",
                    help="joints of the jitter threshold: '1-4', '1,2,3', '1-3,6' or 'all' (default 1-4, those the "
                         "model has)")
-    p.add_argument("--draws", type=int, default=200, help="plant draws of the final check (default 200)")
+    p.add_argument("--draws", type=DRAWS, default=200, help=f"plant draws of the final check, {DRAWS} (default 200)")
     p.add_argument("--recheck-draws", type=int, default=None,
-                   help="fresh plant draws and noise seeds on which passing gains are re-checked (default: --draws; "
-                        "0: no re-check)")
-    p.add_argument("--duration", type=float, default=10.0, help="final run length, s (default 10)")
-    p.add_argument("--screen-draws", type=int, default=12,
-                   help="plant draws of the search stages (the first are the box's corners; default 12)")
-    p.add_argument("--screen-duration", type=float, default=2.0, help="run length of the search stages, s (default 2)")
-    p.add_argument("--rounds", type=int, default=6, help="rounds of the pattern search (default 6)")
-    p.add_argument("--seed", type=int, default=0, help="draws and noise seed (default 0)")
-    p.add_argument("--threads", type=int, default=None, help="OpenMP threads (default all cores)")
+                   help="fresh plant draws and noise seeds on which passing gains are re-checked, 0..100000 (default: "
+                        "--draws; 0: no re-check)")
+    p.add_argument("--duration", type=float, default=10.0, help=f"final run length, {DURATION} (default 10)")
+    p.add_argument("--screen-draws", type=DRAWS, default=12,
+                   help=f"plant draws of the search stages, {DRAWS} (the first are the box's corners; default 12)")
+    p.add_argument("--screen-duration", type=DURATION, default=2.0,
+                   help=f"run length of the search stages, {DURATION} (default 2)")
+    p.add_argument("--rounds", type=ROUNDS, default=6, help=f"rounds of the pattern search, {ROUNDS} (default 6)")
+    p.add_argument("--seed", type=SEED, default=0, help=f"draws and noise seed, {SEED} (default 0)")
+    p.add_argument("--threads", type=THREADS, default=None, help=f"OpenMP threads, {THREADS} (default all cores)")
     p.add_argument("--simd", action=argparse.BooleanOptionalAction, default=True,
                    help="SIMD batch (default; its C build is cached, the first one takes minutes for the Panda); "
                         "--no-simd: the scalar batch")
@@ -84,6 +86,14 @@ def demo_task(m, nominal=None) -> dict:
 
 #: Largest reference table (samples x 5n doubles) a batch may hold, bytes.
 MAX_REFERENCE_BYTES = 2e9
+#: Plant draws of a stage.
+DRAWS = Range(1, 100_000, "", "draws", integer=True)
+#: Rounds of the pattern search.
+ROUNDS = Range(0, 100, "", "rounds", integer=True)
+#: Second-half RMS threshold, rad.
+RMS = Range(0, 2 * math.pi, "rad", "rms", lo_open=True)
+#: Most control samples of the final check and its re-check together (the batch runs ~1e6-1e7 samples/s).
+MAX_LOOP_SAMPLES = 1e10
 
 
 def check_samples(duration: float, rate: float, n: int, flags: str) -> None:
@@ -91,7 +101,7 @@ def check_samples(duration: float, rate: float, n: int, flags: str) -> None:
     :data:`MAX_REFERENCE_BYTES`, before any work (one-line FjmValueError)."""
     need = (duration * rate + 1) * 5 * n * 8
     if need > MAX_REFERENCE_BYTES:
-        raise FjmValueError(f"{flags}: {duration * rate:.3g} samples per run would hold {need / 1e9:.3g} GB of "
+        raise FjmValueError(f"{flags} {duration:g} s at {rate:g} Hz: {duration * rate:.3g} samples per run would hold {need / 1e9:.3g} GB of "
                             f"reference samples; expected at most {MAX_REFERENCE_BYTES / 1e9:g} GB (shorter "
                             "runs or a lower rate)")
 
@@ -106,12 +116,16 @@ def _settings(args, m):
                     ("--max-at-limit", args.max_at_limit)):
         if not (math.isfinite(v) and v > 0):
             raise FjmValueError(f"{flag} {v!r}: expected a finite threshold > 0")
+    RMS.check("--max-rms", args.max_rms)
+    TORQUE.check("--max-jitter", args.max_jitter)
     if args.max_at_limit > 100:
         raise FjmValueError(f"--max-at-limit {args.max_at_limit!r}: expected a percentage in (0, 100]")
     joints = None if args.jitter_joints.strip() == "1-4" else parse_joints(args.jitter_joints, int(m.n))
     thresholds = Thresholds(max_rms=args.max_rms, max_jitter=args.max_jitter, max_at_limit=args.max_at_limit / 100.0,
                             jitter_joints=joints)
     spread = default_spread(m) if args.params is None else load_params_file(args.params, m)
+    if args.params is not None:
+        check_magnitudes(spread.overrides, spread.overrides.values(), f"--params {args.params}: [parameters] ")
     return sensor, thresholds, spread
 
 
@@ -127,18 +141,21 @@ def run(args) -> int:
     from ..control.design import Design
     if args.out is not None and not args.out.parent.is_dir():
         raise FjmValueError(f"--out {args.out}: the directory {args.out.parent} does not exist")
-    if args.draws < 1 or args.duration <= 0 or args.delay_samples < 0 or args.rate <= 0:
-        raise FjmValueError("--draws/--duration/--delay-samples/--rate: expected >= 1, > 0 s, >= 0, > 0 Hz")
     if args.recheck_draws is not None and args.recheck_draws < 0:
         raise FjmValueError(f"--recheck-draws {args.recheck_draws}: expected >= 0 (0: no re-check)")
-    if not (math.isfinite(args.duration) and math.isfinite(args.rate)):
-        raise FjmValueError("--duration/--rate: expected finite values")
-    if args.screen_draws < 1 or not (math.isfinite(args.screen_duration) and args.screen_duration > 0) \
-            or args.rounds < 0:
-        raise FjmValueError(f"--screen-draws {args.screen_draws} / --screen-duration {args.screen_duration} / "
-                            f"--rounds {args.rounds}: expected >= 1, a finite duration > 0 s, >= 0")
+    if args.recheck_draws is not None:
+        Range(0, DRAWS.hi, "", "draws", integer=True).check("--recheck-draws", args.recheck_draws)
+    if not (math.isfinite(args.duration) and args.duration > 0):
+        raise FjmValueError(f"--duration {args.duration:g}: expected {DURATION}")
     m = load(args.model)
     check_samples(max(args.duration, args.screen_duration), args.rate, int(m.n), "--duration/--rate")
+    DURATION.check("--duration", args.duration)
+    runs = args.draws + (args.draws if args.recheck_draws is None else args.recheck_draws)
+    if runs * args.duration * args.rate > MAX_LOOP_SAMPLES:
+        raise FjmValueError(f"--draws {args.draws} (and as many re-check draws) x --duration {args.duration:g} s x "
+                            f"--rate {args.rate:g} Hz = {runs * args.duration * args.rate:.3g} control samples; "
+                            f"expected at most {MAX_LOOP_SAMPLES:g} (hours of batch runs): fewer draws, shorter runs "
+                            "or a lower rate")
     sensor, thresholds, spread = _settings(args, m)
     task = demo_task(m, spread.nominal) if args.task == "auto" else {}
     t0 = time.perf_counter()

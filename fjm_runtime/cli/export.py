@@ -7,6 +7,7 @@ from .models import MODEL_HELP
 from ..drives import linear_stiffness_indices
 from ..export.mjcf import is_complete, write_mjcf
 from ..validation import FjmValueError
+from .ranges import Range
 from .common import check_output_file, parse_assignments
 
 
@@ -38,11 +39,14 @@ def add_arguments(ex) -> None:
                     help="joint stiffness, N m/rad (link1: K; others: every K_i)")
     ex.add_argument("--param", action="append", default=[], metavar="NAME=VALUE",
                     help="parameter value (repeatable), e.g. --param Jm7=0.2 --param m_load=1.5 --param N7=300")
-    ex.add_argument("--gear-ratio", type=float, default=None,
-                    help="reduced model: rotor angle = GEAR_RATIO * q_m for every joint (default 1; complete "
+    ex.add_argument("--gear-ratio", type=GEAR_RATIO, default=None,
+                    help=f"reduced model: rotor angle = GEAR_RATIO * q_m for every joint, {GEAR_RATIO} (default 1; complete "
                          "models take N1..Nn via --param)")
     ex.add_argument("--timestep", type=float, default=None, help="MuJoCo step, s (integrator RK4; default 1e-4)")
 
+
+#: Gear ratios of a drive (harmonic drives reach 160, stacked gearboxes a few thousand).
+GEAR_RATIO = Range(0, 1e4, "", "N", lo_open=True)
 
 #: The flags each format reads; any other given flag is refused (not silently ignored).
 _FLAGS = {"controller": ("gains", "params", "substeps", "name", "unverified"),

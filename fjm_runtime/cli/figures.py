@@ -4,14 +4,18 @@ from __future__ import annotations
 from pathlib import Path
 
 from ..validation import FjmValueError
+from .ranges import Range
 from .common import check_output_dir
+
+#: Monte Carlo samples of the figures (each a 10 s run of every law compared).
+MC_SAMPLES = Range(1, 10_000, "", "samples", integer=True)
 
 
 def add_arguments(fig) -> None:
     """The arguments of ``fjm figures`` on its parser ``fig`` (name, help, description: commands.toml)."""
     fig.add_argument("--out", type=Path, default=Path("out"),
                      help="output directory, created if its parent exists (default out)")
-    fig.add_argument("--samples", type=int, default=40, help="Monte Carlo samples (default 40)")
+    fig.add_argument("--samples", type=MC_SAMPLES, default=40, help=f"Monte Carlo samples, {MC_SAMPLES} (default 40)")
     fig.add_argument("--quick", action="store_true",
                      help="smoke test: 1 s runs and at most 2 Monte Carlo samples; still writes every "
                           "figure and summary.md (not the documented numbers)")

@@ -5,8 +5,12 @@ from pathlib import Path
 
 from .models import MODEL_HELP
 from .common import check_output_file
+from .ranges import VELOCITY, Range
 
 __all__ = ["add_arguments", "run"]
+
+#: The smoothing window, s (the log must also hold it: checked on the log).
+WINDOW = Range(0, 60, "s", "window", lo_open=True)
 
 
 def add_arguments(p) -> None:
@@ -18,12 +22,12 @@ def add_arguments(p) -> None:
                    help="spring law (default: cubic for a model with k1, k3, else linear)")
     p.add_argument("--friction", choices=("viscous", "coulomb", "stribeck"), default="coulomb",
                    help="motor friction: B_m only, + Coulomb F_c tanh(dq_m/v_c) (default), + Stribeck F_s")
-    p.add_argument("--v-c", type=float, default=None,
-                   help="Coulomb regularization velocity, rad/s (default: the model's v_c where it has friction, else 0.01)")
-    p.add_argument("--v-s", type=float, default=None,
-                   help="Stribeck velocity, rad/s (default: the model's v_s where it has friction, else 0.1)")
-    p.add_argument("--window", type=float, default=0.04,
-                   help="zero-phase smoothing/differentiation window, s (default 0.04; shorter for fast, clean motors, longer for noisy encoders)")
+    p.add_argument("--v-c", type=VELOCITY, default=None,
+                   help=f"Coulomb regularization velocity, {VELOCITY} (default: the model's v_c where it has friction, else 0.01)")
+    p.add_argument("--v-s", type=VELOCITY, default=None,
+                   help=f"Stribeck velocity, {VELOCITY} (default: the model's v_s where it has friction, else 0.1)")
+    p.add_argument("--window", type=WINDOW, default=0.04,
+                   help=f"zero-phase smoothing/differentiation window, {WINDOW} (default 0.04; shorter for fast, clean motors, longer for noisy encoders)")
 
 
 def run(args) -> int:

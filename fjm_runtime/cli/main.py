@@ -22,6 +22,7 @@ from pathlib import Path
 from typing import List, Optional
 
 from ..validation import FjmValueError
+from .ranges import OneLineParser
 
 
 def _command_table():
@@ -67,7 +68,7 @@ def version() -> str:
 
 def build_parser() -> argparse.ArgumentParser:
     """The ``fjm`` parser with every sub-command."""
-    parser = argparse.ArgumentParser(
+    parser = OneLineParser(
         prog="fjm", description="Flexible-joint manipulators: feedback linearization + sliding-mode control.")
     parser.add_argument("--version", action="version", version=f"fjm {version()}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")

@@ -27,10 +27,11 @@ from ..sim.metrics import peak_torque, rms_second_half, time_at_limit, time_at_r
 from ..sim.sensor import PRESETS, SensorModel, sensor_from_spec
 from ..sim.simulate import simulate, stderr_progress
 from ..sim.step import SimulationDivergedError
-from ..validation import FjmValueError
+from ..validation import FjmValueError, check_magnitudes
 from .common import check_output_file, finite_or_note, parse_assignments
+from .ranges import ANGLE, DURATION, GAIN, LAYER, MASS, PERIOD, SEED, STIFFNESS, TORQUE
 from ..control.design import Design
-from .simulate_checks import (DEFAULT_MAX_MEMORY_GB, check_pole, check_run_size, check_substeps,
+from .simulate_checks import (DEFAULT_MAX_MEMORY_GB, MAX_SUBSTEPS, check_pole, check_run_size, check_substeps,
                               gains_provenance, workspace_exit)
 
 
@@ -45,32 +46,35 @@ def add_arguments(sim) -> None:
     sim.add_argument("--reference", default=None,
                      help=f"one of {', '.join(REFERENCE_KINDS)}, or 'task': the task the gains were designed on "
                           "(default: 'task' when the gains come from a design file that records one, else sine)")
-    sim.add_argument("--q-d", type=float, default=1.0, help="set point for step/constant, rad (default 1)")
-    sim.add_argument("--rise-time", type=float, default=2.0, help="smooth step duration, s (default 2)")
-    sim.add_argument("--amplitude", type=float, default=0.5, help="sine amplitude, rad (default 0.5)")
-    sim.add_argument("--omega", type=float, default=1.0, help="sine frequency, rad/s (default 1)")
-    sim.add_argument("--duration", type=float, default=10.0, help="simulated time, s (default 10)")
-    sim.add_argument("--dt", type=float, default=None, help="control period, s (default 1e-3; or --rate)")
+    sim.add_argument("--q-d", type=ANGLE, default=1.0, help=f"set point for step/constant, {ANGLE} (default 1)")
+    sim.add_argument("--rise-time", type=DURATION, default=2.0, help=f"smooth step duration, {DURATION} (default 2)")
+    sim.add_argument("--amplitude", type=float, default=0.5,
+                     help="sine amplitude, rad (default 0.5; a run beyond 4 pi rad leaves the workspace, exit 3)")
+    sim.add_argument("--omega", type=float, default=1.0, help="sine frequency, 0 <= omega <= pi x rate rad/s (default 1)")
+    sim.add_argument("--duration", type=float, default=10.0,
+                     help="simulated time, s > 0, with --rate bounded by --max-memory (default 10)")
+    sim.add_argument("--dt", type=PERIOD, default=None, help=f"control period, {PERIOD} (default 1e-3; or --rate)")
     sim.add_argument("--K", type=float, default=None,
-                     help="TRUE joint stiffness of the plant, N m/rad (link1: K; planar<n>: every K_i)")
+                     help="TRUE joint stiffness of the plant, N m/rad > 0, bounded by the RK4 substeps it needs "
+                          "(link1: K; planar<n>: every K_i)")
     sim.add_argument("--param", action="append", default=[], metavar="NAME=VALUE",
                      help="TRUE plant parameter (repeatable), e.g. --param J_l=1.2")
     sim.add_argument("--nominal", action="append", default=[], metavar="NAME=VALUE",
                      help="NOMINAL controller parameter (repeatable); default: model defaults")
     sim.add_argument("--lam", type=float, default=None,
                      help=f"pole magnitude lambda, 1/s, at most pi x rate (default {DEFAULT_LAM:g})")
-    sim.add_argument("--k-s", type=float, default=None,
-                     help="switching gain, rad/s^4 (default: Lemma 1 bound for link1 with K in "
+    sim.add_argument("--k-s", type=GAIN, default=None,
+                     help=f"switching gain, {GAIN} (default: Lemma 1 bound for link1 with K in "
                           f"[--k-min, --k-max]; {FALLBACK_SWITCHING_GAIN:g} otherwise)")
-    sim.add_argument("--delta", type=float, default=None,
-                     help=f"boundary layer (default max(k_s, 1) / {DEFAULT_LAYER_RATE:g})")
-    sim.add_argument("--k-min", type=float, default=PAPER_K_RANGE[0],
-                     help=f"stiffness lower bound for Lemma 1 (default {PAPER_K_RANGE[0]:g})")
-    sim.add_argument("--k-max", type=float, default=PAPER_K_RANGE[1],
-                     help=f"stiffness upper bound for Lemma 1 (default {PAPER_K_RANGE[1]:g})")
+    sim.add_argument("--delta", type=LAYER, default=None,
+                     help=f"boundary layer, {LAYER} (default max(k_s, 1) / {DEFAULT_LAYER_RATE:g})")
+    sim.add_argument("--k-min", type=STIFFNESS, default=PAPER_K_RANGE[0],
+                     help=f"stiffness lower bound for Lemma 1, {STIFFNESS} (default {PAPER_K_RANGE[0]:g})")
+    sim.add_argument("--k-max", type=STIFFNESS, default=PAPER_K_RANGE[1],
+                     help=f"stiffness upper bound for Lemma 1, {STIFFNESS} (default {PAPER_K_RANGE[1]:g})")
     sim.add_argument("--beta-hat", choices=("paper", "model"), default="paper",
                      help="link1: paper's constant (beta_max + beta_min)/2 or beta(x; nominal) (default paper)")
-    sim.add_argument("--u-max", type=float, default=None, help="torque limit, N m (default none)")
+    sim.add_argument("--u-max", type=TORQUE, default=None, help=f"torque limit, {TORQUE} (default none)")
     sim.add_argument("--plot", type=Path, default=None,
                      help="write a PNG of angles, error, torque and s (its directory must exist)")
     sim.add_argument("--quiet", action="store_true", help="no progress on stderr")
@@ -79,23 +83,25 @@ def add_arguments(sim) -> None:
 
 def _add_sampled_data_flags(sim) -> None:
     """The sampled-data and scripting flags (rate, substeps, sensing, noise, delay, scales, gains, --json)."""
-    sim.add_argument("--rate", type=float, default=None, help="control rate, Hz (same as --dt 1/HZ)")
+    sim.add_argument("--rate", type=float, default=None,
+                     help="control rate, Hz > 0, with --duration bounded by --max-memory (same as --dt 1/HZ)")
     sim.add_argument("--substeps", type=int, default=None,
-                     help="RK4 plant steps per control sample (default: the fastest-mode rule)")
+                     help=f"RK4 plant steps per control sample, 1..{MAX_SUBSTEPS} (default: the fastest-mode rule)")
     sim.add_argument("--sensing", choices=("state", "torque"), default="state",
                      help="what the controller measures: the state, or q, dq, tau_J, dtau_J, dq_m (default state)")
-    sim.add_argument("--delay-samples", type=int, default=0, help="computation delay in samples (default 0)")
+    sim.add_argument("--delay-samples", type=int, default=0,
+                     help="computation delay in samples, >= 0, bounded by --max-memory (default 0)")
     sim.add_argument("--predict", action="store_true", help="predict the delayed measurement with the nominal model")
     sim.add_argument("--noise", default="ideal",
                      help="sensor model: a preset (ideal, panda_white, franka_like) or a TOML sensor file "
                           "(docs/simulation.md; default ideal)")
-    sim.add_argument("--seed", type=int, default=0, help="noise seed (default 0)")
+    sim.add_argument("--seed", type=SEED, default=0, help=f"noise seed, {SEED} (default 0)")
     sim.add_argument("--k-scale", default=None, metavar="A[,B,..]",
                      help="TRUE stiffness = nominal x A (one value, or one per joint)")
     sim.add_argument("--jm-scale", default=None, metavar="A[,B,..]",
                      help="TRUE motor inertia = nominal x A (one value, or one per joint)")
-    sim.add_argument("--payload", type=float, default=None,
-                     help="TRUE payload mass, kg (models with an m_load parameter)")
+    sim.add_argument("--payload", type=MASS, default=None,
+                     help=f"TRUE payload mass, {MASS} (models with an m_load parameter)")
     sim.add_argument("--params", type=Path, default=None, metavar="FILE",
                      help="parameter file (TOML [parameters], e.g. from `fjm identify`): the controller's NOMINAL "
                           "values (over the gains file's; --nominal overrides them)")
@@ -104,7 +110,7 @@ def _add_sampled_data_flags(sim) -> None:
     sim.add_argument("--json", action="store_true",
                      help="print one JSON object for scripts (diverged, per-joint metrics, settings)")
     sim.add_argument("--max-memory", type=float, default=DEFAULT_MAX_MEMORY_GB, metavar="GB",
-                     help="refuse a run whose estimated peak memory exceeds this, GB "
+                     help="refuse a run whose estimated peak memory exceeds this, GB > 0 "
                           f"(default {DEFAULT_MAX_MEMORY_GB:g})")
 
 
@@ -126,6 +132,7 @@ def _scales(text: Optional[str], n: int, flag: str) -> Optional[np.ndarray]:
 def _true_params(m, args, nominal) -> Dict[str, float]:
     from ..sim.step_layout import stiffness_indices
     true = parse_assignments(args.param, "--param")
+    check_magnitudes(true, true.values(), "--param ")
     if args.K is not None:
         for i in linear_stiffness_indices(m, "--K"):
             true.setdefault(m.param_names[i], args.K)
@@ -326,8 +333,9 @@ def run(args) -> int:
     _check_flags(args, dt)
     sensor = _sensor(args)
     design, source = _gains_file(args, m, 1.0 / dt)
-    nominal = {**(design.nominal(m) if design else {}), **params_file_nominal(args.params, m),
-               **parse_assignments(args.nominal, "--nominal")}
+    from_file = params_file_nominal(args.params, m)
+    check_magnitudes(from_file, from_file.values(), f"--params {args.params}: [parameters] ")
+    nominal = {**(design.nominal(m) if design else {}), **from_file, **parse_assignments(args.nominal, "--nominal")}
     true = _true_params(m, args, nominal)
     kind = design.kind if design else (args.controller or "smc")
     ref, x0 = _reference(m, args, design)

@@ -14,13 +14,13 @@ angle or the tracking error is beyond :data:`WORKSPACE_BOUND` / :data:`ERROR_BOU
 from __future__ import annotations
 
 import math
-from pathlib import Path
 from typing import Optional, Tuple
 
 import numpy as np
 
 from ..control.design import is_real
 from ..validation import FjmValueError
+from .ranges import available_bytes
 
 __all__ = ["DEFAULT_MAX_MEMORY_GB", "ERROR_BOUND", "MAX_SUBSTEPS", "PEAK_FACTOR", "WORKSPACE_BOUND",
            "check_pole", "check_run_size", "check_substeps", "gains_provenance", "workspace_exit"]
@@ -47,17 +47,6 @@ def check_pole(lam, rate: float, where: str) -> float:
         raise FjmValueError(f"{where} {lam!r}: expected a pole magnitude 0 < lam <= pi x rate = {top:.4g} 1/s "
                             f"(the Nyquist frequency at {rate:g} Hz)")
     return float(lam)
-
-
-def _available_bytes() -> Optional[float]:
-    """``MemAvailable`` of /proc/meminfo in bytes (None where there is none)."""
-    try:
-        for line in Path("/proc/meminfo").read_text().splitlines():
-            if line.startswith("MemAvailable:"):
-                return float(line.split()[1]) * 1024.0
-    except (OSError, ValueError, IndexError):
-        return None
-    return None
 
 
 def check_substeps(substeps: float, omega: Optional[float] = None) -> None:
@@ -113,7 +102,7 @@ def check_run_size(layout_nw: int, n: int, nm: int, duration: float, dt: float, 
     stored = float(samples) * columns * 8.0
     peak = PEAK_FACTOR * stored
     limit = max_memory_gb * 1e9
-    avail = _available_bytes()
+    avail = available_bytes()
     what = (f"--duration {duration:g} s at {1.0 / dt:g} Hz: {samples:.4g} samples x {columns} stored columns x "
             f"8 bytes = {stored / 1e9:.3g} GB (about {peak / 1e9:.3g} GB at peak)")
     if peak > limit:

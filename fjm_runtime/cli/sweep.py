@@ -14,6 +14,12 @@ from ..control.factory import CONTROLLER_KINDS
 from ..control.references import REFERENCE_KINDS
 from ..validation import FjmValueError
 from .common import check_output_file, finite_or_note
+from .ranges import (DELAY, DURATION, FACTOR, GAIN, LAYER, PERIOD, POLE, RATE, SEED, STIFFNESS, THREADS,
+                     Range)
+
+#: Runs of a sweep, and runs per Dask task.
+SAMPLES = Range(1, 10_000_000, "", "samples", integer=True)
+CHUNK = Range(1, 100_000, "", "chunk", integer=True)
 
 #: The absolute stiffness range used when every nominal stiffness lies in it (link1, planar<n>).
 ABSOLUTE_K_RANGE = PAPER_K_RANGE
@@ -24,34 +30,34 @@ RELATIVE_K_RANGE = (0.7, 1.3)
 def add_arguments(sw) -> None:
     """The arguments of ``fjm sweep`` on its parser ``sw`` (name, help, description: commands.toml)."""
     sw.add_argument("model", help=MODEL_HELP)
-    sw.add_argument("--samples", type=int, default=1000, help="number of runs (default 1000)")
-    sw.add_argument("--chunk", type=int, default=250, help="runs per Dask task (default 250)")
-    sw.add_argument("--seed", type=int, default=0, help="sampling seed (default 0)")
+    sw.add_argument("--samples", type=SAMPLES, default=1000, help=f"number of runs, {SAMPLES} (default 1000)")
+    sw.add_argument("--chunk", type=CHUNK, default=250, help=f"runs per Dask task, {CHUNK} (default 250)")
+    sw.add_argument("--seed", type=SEED, default=0, help=f"sampling seed, {SEED} (default 0)")
     lo, hi = ABSOLUTE_K_RANGE
     rlo, rhi = RELATIVE_K_RANGE
-    sw.add_argument("--k-min", type=float, default=None,
-                    help=f"stiffness lower bound, N m/rad (default {lo:g} when every nominal stiffness lies in "
+    sw.add_argument("--k-min", type=STIFFNESS, default=None,
+                    help=f"stiffness lower bound, {STIFFNESS} (default {lo:g} when every nominal stiffness lies in "
                          f"[{lo:g}, {hi:g}], as on link1 and planar<n>; otherwise the default is --k-rel {rlo:g} {rhi:g})")
-    sw.add_argument("--k-max", type=float, default=None, help=f"stiffness upper bound, N m/rad (default {hi:g}, see --k-min)")
-    sw.add_argument("--k-rel", type=float, nargs=2, default=None, metavar=("LO", "HI"),
-                    help="instead of --k-min/--k-max: every stiffness = its nominal x U[LO, HI] "
+    sw.add_argument("--k-max", type=STIFFNESS, default=None, help=f"stiffness upper bound, N m/rad (default {hi:g}, see --k-min)")
+    sw.add_argument("--k-rel", type=FACTOR, nargs=2, default=None, metavar=("LO", "HI"),
+                    help=f"instead of --k-min/--k-max: every stiffness = its nominal x U[LO, HI], each {FACTOR} "
                          "(spatial arms, e.g. panda --k-rel 0.7 1.3)")
     sw.add_argument("--controller", default=None, choices=CONTROLLER_KINDS,
                     help="controller (default: the kind of --gains, else smc)")
-    sw.add_argument("--lam", type=float, default=DEFAULT_LAM, help=f"pole magnitude lambda, 1/s (default {DEFAULT_LAM:g})")
-    sw.add_argument("--k-s", type=float, default=DEFAULT_SWITCHING_GAIN,
-                    help=f"switching gain, rad/s^4 (default {DEFAULT_SWITCHING_GAIN:g})")
-    sw.add_argument("--delta", type=float, default=None,
-                    help=f"boundary layer (default max(k_s, 1) / {DEFAULT_LAYER_RATE:g})")
+    sw.add_argument("--lam", type=POLE, default=DEFAULT_LAM, help=f"pole magnitude lambda, {POLE} (default {DEFAULT_LAM:g})")
+    sw.add_argument("--k-s", type=GAIN, default=DEFAULT_SWITCHING_GAIN,
+                    help=f"switching gain, {GAIN} (default {DEFAULT_SWITCHING_GAIN:g})")
+    sw.add_argument("--delta", type=LAYER, default=None,
+                    help=f"boundary layer, {LAYER} (default max(k_s, 1) / {DEFAULT_LAYER_RATE:g})")
     sw.add_argument("--reference", default=None,
                     help=f"one of {', '.join(REFERENCE_KINDS)}, or 'task': the task a --gains design file records "
                          "(default: 'task' when the gains file records one, else sine)")
-    sw.add_argument("--duration", type=float, default=10.0, help="simulated time, s (default 10)")
-    sw.add_argument("--dt", type=float, default=None, help="control period, s (default 1e-3; or --rate)")
-    sw.add_argument("--rate", type=float, default=None, help="control rate, Hz (instead of --dt)")
+    sw.add_argument("--duration", type=float, default=10.0, help=f"simulated time, {DURATION} (default 10)")
+    sw.add_argument("--dt", type=PERIOD, default=None, help=f"control period, {PERIOD} (default 1e-3; or --rate)")
+    sw.add_argument("--rate", type=float, default=None, help=f"control rate, {RATE} (instead of --dt)")
     sw.add_argument("--sensing", default=None, choices=("state", "torque"),
                     help="what the controller measures (default: the gains file's sensing, else state)")
-    sw.add_argument("--delay-samples", type=int, default=0, help="computation delay, samples (default 0)")
+    sw.add_argument("--delay-samples", type=DELAY, default=0, help=f"computation delay, {DELAY} (default 0)")
     sw.add_argument("--predict", action="store_true",
                     help="delay compensation by the nominal-model predictor (on when the gains file was designed "
                          "with it)")
@@ -63,7 +69,7 @@ def add_arguments(sw) -> None:
                          "gains replace --controller/--lam/--k-s/--delta")
     sw.add_argument("--scheduler", default=None, metavar="ADDRESS",
                     help="existing dask.distributed scheduler, e.g. tcp://127.0.0.1:8786 (default: local cluster)")
-    sw.add_argument("--workers", type=int, default=2, help="workers of the local cluster (default 2)")
+    sw.add_argument("--workers", type=THREADS, default=2, help=f"workers of the local cluster, {THREADS} (default 2)")
     sw.add_argument("--out", type=Path, default=Path("out/sweep.csv"),
                     help="CSV output (default out/sweep.csv; out/ is created if missing, deeper folders are not)")
 
@@ -165,8 +171,15 @@ def _spec(m, args):
     if args.delay_samples < 0:
         raise FjmValueError(f"--delay-samples {args.delay_samples}: expected >= 0")
     dt = _period(args)
-    from .design import check_samples
+    from .design import MAX_LOOP_SAMPLES, check_samples
     check_samples(args.duration, 1.0 / dt, int(m.n), "--duration/--rate")
+    DURATION.check("--duration", args.duration)
+    if args.rate is not None:
+        RATE.check("--rate", args.rate)
+    if args.samples * args.duration / dt > MAX_LOOP_SAMPLES:
+        raise FjmValueError(f"--samples {args.samples} x --duration {args.duration:g} s at {1.0 / dt:g} Hz = "
+                            f"{args.samples * args.duration / dt:.3g} control samples; expected at most "
+                            f"{MAX_LOOP_SAMPLES:g} (hours of batch runs): fewer samples, shorter runs or a lower rate")
     sensor = sensor_from_spec(args.noise, seed=args.seed, what="--noise")
     file_spec = gains_file(args.gains, args.controller) if args.gains is not None else None
     if file_spec is not None:

@@ -18,7 +18,19 @@ from ..analysis.certificates.certify import GUARANTEE, synthesize_gains
 from ..analysis.certificates.certify_tau import GUARANTEE_TAU, synthesize_torque_gains, torque_param_box
 from ..analysis.certificates.lemma1 import paper_beta_hat
 from ..control.defaults import DEFAULT_LAM, DEFAULT_LAYER_RATE
+from ..validation import check_magnitudes
 from .common import parse_assignments
+from .ranges import AMPLITUDE, ANGLE, DURATION, FACTOR, FREQUENCY, MASS, POLE, STIFFNESS, Range
+
+#: Ranges of the certificate's own flags (the others: :mod:`fjm_runtime.cli.ranges`).
+INERTIA = Range(0, 1e4, "kg m^2", "J_m", lo_open=True)
+DAMPING = Range(0, 1e6, "N m s/rad", "B_m")
+LINK_MASS = Range(0, 1e4, "kg", "m", lo_open=True)
+ETA = Range(0, 1e20, "rad/s^4", "eta", lo_open=True)
+LAYER_RATE = Range(0, 1e6, "1/s", "rate", lo_open=True)
+#: Grid points of the certificate (its time grows with them; 60000 takes seconds).
+BUDGET = Range(1, 10_000_000, "", "budget", integer=True)
+DISTURBANCE = Range(0, 1e6, "N m", "D")
 
 DEFAULT_ERROR_BOX = {"sine": [0.05, 0.5, 0.5, 0.5], "step": [0.05, 0.1, 0.5, 1.0]}
 
@@ -31,20 +43,6 @@ def _floats(text: str, count: int, flag: str) -> List[float]:
     if len(vals) != count:
         raise ValueError(f"{flag} {text!r}: expected {count} numbers separated by commas, got {len(vals)}")
     return vals
-
-
-def _number(text: str) -> float:
-    try:
-        return float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a number (expected e.g. 8 or 1e-3)") from None
-
-
-def _integer(text: str) -> int:
-    try:
-        return int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not an integer (expected e.g. 60000)") from None
 
 
 def _one_line_error(prog: str):
@@ -64,33 +62,34 @@ def add_arguments(tp) -> None:
                     help="state: the law on x = [q; dq; q_m; dq_m]; torque: the torque-sensed law on "
                          "m = [q; dq; tau_J; dtau_J; dq_m] (control_<kind>_tau), certified on a box of the stiffness "
                          "ratio K/K_nom (--gamma-range), J_m (--jm-ratio) and payload (--payload) (default state)")
-    tp.add_argument("--gamma-range", type=_number, nargs=2, default=(0.7, 1.3), metavar=("LO", "HI"),
-                    help="--sensing torque: true stiffness ratio K/K_nom of every joint (default 0.7 1.3)")
-    tp.add_argument("--jm-ratio", type=_number, nargs=2, default=(0.8, 1.2), metavar=("LO", "HI"),
-                    help="--sensing torque: true motor inertia ratio J_m/J_m,nom of every joint (default 0.8 1.2)")
-    tp.add_argument("--payload", type=_number, default=1.0, metavar="KG",
-                    help="--sensing torque: unknown payload 0..KG kg (m_load; planar chains: added to the last "
+    tp.add_argument("--gamma-range", type=FACTOR, nargs=2, default=(0.7, 1.3), metavar=("LO", "HI"),
+                    help=f"--sensing torque: true stiffness ratio K/K_nom of every joint, each {FACTOR} (default 0.7 1.3)")
+    tp.add_argument("--jm-ratio", type=FACTOR, nargs=2, default=(0.8, 1.2), metavar=("LO", "HI"),
+                    help=f"--sensing torque: true motor inertia ratio J_m/J_m,nom of every joint, each {FACTOR} "
+                         "(default 0.8 1.2)")
+    tp.add_argument("--payload", type=MASS, default=1.0, metavar="KG",
+                    help=f"--sensing torque: unknown payload 0..KG kg, {MASS} (m_load; planar chains: added to the last "
                          "link's mass) (default 1)")
-    tp.add_argument("--lam", type=_number, default=DEFAULT_LAM, help=f"pole magnitude lambda, 1/s (default {DEFAULT_LAM:g})")
+    tp.add_argument("--lam", type=POLE, default=DEFAULT_LAM, help=f"pole magnitude lambda, {POLE} (default {DEFAULT_LAM:g})")
     tp.add_argument("--nominal", action="append", default=[], metavar="NAME=VALUE",
                     help="NOMINAL controller parameter (repeatable); default: model defaults")
-    tp.add_argument("--k-range", type=_number, nargs=2, default=None, metavar=("LO", "HI"),
-                    help="true stiffness of every joint, N m/rad (default: each joint's nominal stiffness "
+    tp.add_argument("--k-range", type=STIFFNESS, nargs=2, default=None, metavar=("LO", "HI"),
+                    help=f"true stiffness of every joint, each {STIFFNESS} (default: each joint's nominal stiffness "
                          "x [2/3, 4/3], i.e. 100 200 at 150)")
-    tp.add_argument("--jm-range", type=_number, nargs=2, default=None, metavar=("LO", "HI"),
-                    help="true motor inertia of every joint (default: nominal, exact)")
-    tp.add_argument("--bm-range", type=_number, nargs=2, default=None, metavar=("LO", "HI"),
-                    help="true motor damping of every joint (default: nominal, exact)")
-    tp.add_argument("--mass-range", type=_number, nargs=2, default=None, metavar=("LO", "HI"),
-                    help="true link (link1: tip) mass of every link, kg (default: nominal, exact)")
+    tp.add_argument("--jm-range", type=INERTIA, nargs=2, default=None, metavar=("LO", "HI"),
+                    help=f"true motor inertia of every joint, each {INERTIA} (default: nominal, exact)")
+    tp.add_argument("--bm-range", type=DAMPING, nargs=2, default=None, metavar=("LO", "HI"),
+                    help=f"true motor damping of every joint, each {DAMPING} (default: nominal, exact)")
+    tp.add_argument("--mass-range", type=LINK_MASS, nargs=2, default=None, metavar=("LO", "HI"),
+                    help=f"true link (link1: tip) mass of every link, each {LINK_MASS} (default: nominal, exact)")
     tp.add_argument("--param-box", action="append", default=[], metavar="NAME=LO:HI",
                     help="interval of any true parameter (repeatable), e.g. --param-box K2=120:180")
     tp.add_argument("--reference", choices=("sine", "step"), default="sine",
                     help="reference whose derivative bounds R_0..R_4 define the box (default sine)")
-    tp.add_argument("--amplitude", type=_number, default=0.5, help="sine amplitude, rad (default 0.5)")
-    tp.add_argument("--omega", type=_number, default=1.0, help="sine frequency, rad/s (default 1)")
-    tp.add_argument("--q-d", type=_number, default=1.0, help="step target, rad (default 1)")
-    tp.add_argument("--rise-time", type=_number, default=2.0, help="step duration, s (default 2)")
+    tp.add_argument("--amplitude", type=AMPLITUDE, default=0.5, help=f"sine amplitude, {AMPLITUDE} (default 0.5)")
+    tp.add_argument("--omega", type=FREQUENCY, default=1.0, help=f"sine frequency, {FREQUENCY} (default 1)")
+    tp.add_argument("--q-d", type=ANGLE, default=1.0, help=f"step target, {ANGLE} (default 1)")
+    tp.add_argument("--rise-time", type=DURATION, default=2.0, help=f"step duration, {DURATION} (default 2)")
     tp.add_argument("--reference-bounds", default=None, metavar="R0,R1,R2,R3,R4",
                     help="explicit bounds of |y_d^(k)|, k = 0..4 (overrides --reference)")
     tp.add_argument("--error-box", default=None, metavar="E1,E2,E3,E4",
@@ -98,15 +97,15 @@ def add_arguments(tp) -> None:
     tp.add_argument("--beta-hat", choices=("paper", "model"), default="paper",
                     help="link1: the paper's constant (beta_max + beta_min)/2 over --k-range, or beta(x; nominal); "
                          "chains always use beta(x; nominal) (default paper)")
-    tp.add_argument("--eta", type=_number, default=10.0, help="reaching margin, rad/s^4 (default 10)")
+    tp.add_argument("--eta", type=ETA, default=10.0, help=f"reaching margin, {ETA} (default 10)")
     tp.add_argument("--u-max", default=None, metavar="U[,U2,..]",
                     help="actuator limit, N m: one number for every joint or one per joint, e.g. "
                          "87,87,87,87,12,12,12 (default none)")
-    tp.add_argument("--layer-rate", type=_number, default=DEFAULT_LAYER_RATE,
-                    help="boundary layer delta = k_s / rate (default 200)")
-    tp.add_argument("--budget", type=_integer, default=60000, help="approximate grid size (default 60000)")
-    tp.add_argument("--disturbance-bound", type=_number, default=0.0, metavar="D",
-                    help="bound of a matched motor torque disturbance (Coulomb friction level + any bounded "
+    tp.add_argument("--layer-rate", type=LAYER_RATE, default=DEFAULT_LAYER_RATE,
+                    help=f"boundary layer delta = k_s / rate, {LAYER_RATE} (default 200)")
+    tp.add_argument("--budget", type=BUDGET, default=60000, help=f"approximate grid size, {BUDGET} (default 60000)")
+    tp.add_argument("--disturbance-bound", type=DISTURBANCE, default=0.0, metavar="D",
+                    help=f"{DISTURBANCE}: bound of a matched motor torque disturbance (Coulomb friction level + any bounded "
                          "torque), N m (default 0)")
     tp.add_argument("--no-margin", action="store_true",
                     help="do not make the grid's curvature margin part of the condition")
@@ -174,9 +173,11 @@ def _run_torque(m, args, nominal, R, E, u_max):
                          "laws are emitted for sat, integral and fl)")
     lo, hi = args.gamma_range
     jlo, jhi = args.jm_ratio
-    if not (0 < lo <= hi and 0 < jlo <= jhi and args.payload >= 0):
-        raise ValueError(f"--gamma-range {lo} {hi} / --jm-ratio {jlo} {jhi} / --payload {args.payload}: expected "
-                         "0 < LO <= HI and a payload >= 0 kg")
+    for flag, (a, b) in (("--gamma-range", (lo, hi)), ("--jm-ratio", (jlo, jhi))):
+        if not (0 < a <= b):
+            raise ValueError(f"{flag} {a:g} {b:g}: expected 0 < LO <= HI")
+    if not args.payload >= 0:
+        raise ValueError(f"--payload {args.payload:g}: expected a payload >= 0 kg")
     box = torque_param_box(m, nominal, (lo, hi), (jlo, jhi), args.payload)
     box.update(_intervals(args.param_box))
     return synthesize_torque_gains(m, nominal, param_box=box, reference_bounds=R, error_bounds=E, lam=args.lam,
@@ -196,6 +197,7 @@ def run(args) -> int:
     from .. import load
     m = load(args.model)
     nominal = parse_assignments(args.nominal, "--nominal")
+    check_magnitudes(nominal, nominal.values(), "--nominal ")
     box = _box(m, args, nominal)
     R, ref_label = _reference(args, int(m.n))
     E = _floats(args.error_box, 4, "--error-box") if args.error_box is not None else DEFAULT_ERROR_BOX[args.reference]

@@ -10,7 +10,7 @@ import math
 import re
 from typing import Iterable, Optional
 
-from ..validation import FjmValueError
+from ..validation import PARAMETER_MAGNITUDE, FjmValueError, check_magnitudes
 
 __all__ = ["C_VALUE_RANGE", "GAIN_MAX", "MAX_NAME_LENGTH", "MAX_SUBSTEPS", "c_name", "check_c_values",
            "check_rule_substeps", "check_substeps", "check_verified", "default_c_name", "verification_text"]
@@ -22,7 +22,7 @@ MAX_SUBSTEPS = 1000
 #: Magnitude range of every parameter and gain written into the C (SI units): a physical arm's values lie
 #: well inside, and the law's products of a few of them stay finite and normal in float (FLT_MAX 3.4e38,
 #: smallest normal 1.2e-38). Zero is allowed (no friction, no payload).
-C_VALUE_RANGE = (1e-12, 1e12)
+C_VALUE_RANGE = PARAMETER_MAGNITUDE
 #: Largest gain magnitude: the law's polynomial coefficients reach lam^4, with lam <= pi x rate (the
 #: Nyquist pole) that is 1e18 at 10 kHz; float holds 3.4e38.
 GAIN_MAX = 1e20
@@ -91,12 +91,8 @@ def check_rule_substeps(substeps: int, model_name: str) -> None:
 def check_c_values(names: Iterable[str], values: Iterable[float], where: str, hi: float = C_VALUE_RANGE[1]) -> None:
     """Refuse a value of magnitude outside ``0`` or ``[C_VALUE_RANGE[0], hi]``, naming ``where`` (a prefix of
     the name, e.g. ``"--params p.toml: "``), the name and the value."""
-    lo = C_VALUE_RANGE[0]
-    for name, v in zip(names, values):
-        v = float(v)
-        if not (math.isfinite(v) and (v == 0.0 or lo <= abs(v) <= hi)):
-            raise FjmValueError(f"{where}{name} = {v:g}: expected 0 or {lo:g} <= |value| <= {hi:g} (SI units: no "
-                                "physical arm's value lies beyond, and float still holds the law's products)")
+    check_magnitudes(names, values, where, hi, "SI units: no physical arm's value lies beyond, and float still "
+                                               "holds the law's products")
 
 
 def check_verified(meets: Optional[bool], where: str, unverified: bool) -> None:

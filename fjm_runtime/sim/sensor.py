@@ -335,8 +335,8 @@ class SensorModel:
                 kw[k] = tuple(v)
         try:
             return cls(**kw)
-        except FjmValueError as exc:
-            raise FjmValueError(f"{where}: {exc}") from None
+        except FjmValueError as exc:  # a file's key is its field's name, not the Python class's attribute
+            raise FjmValueError(f"{where}: {str(exc).replace(cls.__name__ + '.', '')}") from None
 
 
 #: Preset constructors by name (``fjm ... --noise NAME``).

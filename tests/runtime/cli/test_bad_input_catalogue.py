@@ -1,0 +1,181 @@
+"""The bad-input catalogue of the command line: each case is one nonsense value of one numeric flag.
+
+Every case must be refused before any work: exit status 2, exactly one line on stderr that names the
+flag and the value as typed (and the expected range), no traceback, no internal class name, nothing
+on stdout and nothing written. The cases that used to allocate terabytes (``excite --duration 1e9``,
+``--rate 1e12``) or run for minutes (``excite --harmonics 100000``) are here: they now return at
+once, refused from their flags alone. The model-file cases are in tests/derive/test_model_file_ranges.py.
+"""
+import re
+
+import pytest
+
+from fjm_runtime.cli.main import main
+from fjm_runtime.cli.ranges import DURATION, RATE, SEED, Range
+
+#: Internal names a user must never read in an error.
+INTERNAL = re.compile(r"Traceback|SensorModel|Namespace|FjmValueError|ArgumentTypeError|Error\b|\bargs\.")
+
+#: (command line, text that must appear besides the flag and the value). The value is the argument
+#: after the flag as typed; ``{out}`` is an output path in a fresh folder (it must stay empty).
+CASES = [
+    # excite: the allocations and the hang of the first user's report
+    ("excite link1 --duration 1e9 --out {out}", "3600 s"),
+    ("excite link1 --duration 10 --rate 1e12 --out {out}", "100000 Hz"),
+    ("excite link1 --duration 10 --harmonics 100000 --out {out}", "1000"),
+    ("excite link1 --duration 0 --out {out}", "0 < T"),
+    ("excite link1 --duration -5 --out {out}", "0 < T"),
+    ("excite link1 --duration nan --out {out}", "0 < T"),
+    ("excite link1 --duration inf --out {out}", "3600"),
+    ("excite link1 --duration 10 --rate 0 --out {out}", "1 <= rate"),
+    ("excite link1 --duration 10 --harmonics 2 --out {out}", "3 <= harmonics"),
+    ("excite link1 --duration 10 --harmonics 4.5 --out {out}", "integer"),
+    ("excite link1 --duration 10 --base-freq 0 --out {out}", "0 < f0"),
+    ("excite link1 --duration 10 --base-freq 1e9 --out {out}", "1000 Hz"),
+    ("excite link1 --duration 10 --amplitude 100 --out {out}", "rad"),
+    ("excite link1 --duration 10 --candidates 0 --out {out}", "1 <= candidates"),
+    ("excite link1 --duration 10 --iterations -1 --out {out}", "0 <= iterations"),
+    ("excite link1 --duration 10 --seed -1 --out {out}", "2^64-1"),
+    ("excite link1 --duration 10 --seed 1e30 --out {out}", "2^64-1"),
+    ("excite link1 --duration 10 --harmonics 500 --rate 100 --out {out}", "Nyquist"),
+    ("excite panda --duration 10 --harmonics 1000 --out {out}", "Fourier terms"),
+    ("excite link1 --duration 3600 --rate 100000 --out {out}", "GB"),
+    # simulate
+    ("simulate link1 --seed -1 --plot {out}", "0 <= seed"),
+    ("simulate link1 --k-s 1e300 --plot {out}", "1e+20"),
+    ("simulate link1 --k-s -1 --plot {out}", "0 <= k_s"),
+    ("simulate link1 --delta 0 --plot {out}", "0 < delta"),
+    ("simulate link1 --u-max 0 --plot {out}", "0 < u"),
+    ("simulate link1 --u-max 1e300 --plot {out}", "N m"),
+    ("simulate link1 --k-min -5 --plot {out}", "0 < K"),
+    ("simulate link1 --k-max 1e300 --plot {out}", "N m/rad"),
+    ("simulate link1 --q-d 1e6 --plot {out}", "rad"),
+    ("simulate link1 --rise-time 0 --plot {out}", "0 < T"),
+    ("simulate link1 --dt 5 --plot {out}", "0 < dt"),
+    ("simulate link1 --payload -1 --plot {out}", "kg"),
+    ("simulate link1 --param K=1e300 --plot {out}", "1e+12"),
+    ("simulate link1 --duration 1e9 --plot {out}", "GB"),
+    ("simulate link1 --rate 1e12 --plot {out}", "GB"),
+    ("simulate link1 --lam 1e300 --plot {out}", "Nyquist"),
+    ("simulate link1 --substeps 100000 --plot {out}", "10000"),
+    ("simulate link1 --omega 1e9 --plot {out}", "Nyquist"),
+    ("simulate link1 --max-memory 0 --plot {out}", "> 0 GB"),
+    # design
+    ("design planar2 --draws 0 --out {out}", "1 <= draws"),
+    ("design planar2 --draws 1e9 --out {out}", "100000"),
+    ("design planar2 --rate 1e12 --out {out}", "100000 Hz"),
+    ("design planar2 --delay-samples 1000 --out {out}", "100 samples"),
+    ("design planar2 --delay-samples -1 --out {out}", "0 <= delay"),
+    ("design planar2 --rounds 1000 --out {out}", "100"),
+    ("design planar2 --screen-draws 0 --out {out}", "1 <= draws"),
+    ("design planar2 --screen-duration 1e9 --out {out}", "3600 s"),
+    ("design planar2 --seed -3 --out {out}", "2^64-1"),
+    ("design planar2 --threads 0 --out {out}", "1 <= threads"),
+    ("design planar2 --max-rms 50 --out {out}", "rad"),
+    ("design planar2 --max-jitter 1e300 --out {out}", "N m"),
+    ("design planar2 --duration 5000 --out {out}", "3600 s"),
+    ("design planar2 --draws 100000 --duration 3000 --out {out}", "control samples"),
+    # sweep
+    ("sweep link1 --samples 0 --out {out}", "1 <= samples"),
+    ("sweep link1 --samples 1e12 --out {out}", "10000000"),
+    ("sweep link1 --chunk 0 --out {out}", "1 <= chunk"),
+    ("sweep link1 --workers 100000 --out {out}", "1024"),
+    ("sweep link1 --k-rel 0 2 --out {out}", "0 < factor"),
+    ("sweep link1 --lam -8 --out {out}", "0 < lam"),
+    ("sweep link1 --seed -1 --out {out}", "2^64-1"),
+    ("sweep link1 --duration 3000 --rate 20000 --out {out}", "GB"),
+    ("sweep link1 --samples 10000000 --duration 60 --out {out}", "control samples"),
+    # analyze
+    ("analyze link1 --gains fjm_runtime/control/designed/panda_ismc_tau_1000hz_d1.json --rate 1e9 --out {out}",
+     "100000 Hz"),
+    ("analyze link1 --gains fjm_runtime/control/designed/panda_ismc_tau_1000hz_d1.json --delay-samples 1e6 "
+     "--out {out}", "100 samples"),
+    # identify
+    ("identify link1 log.csv --window 0 --out {out}", "0 < window"),
+    ("identify link1 log.csv --window 1e9 --out {out}", "60 s"),
+    ("identify link1 log.csv --v-c -1 --out {out}", "0 < v"),
+    ("identify link1 log.csv --v-s 1e9 --out {out}", "rad/s"),
+    # export
+    ("export mjcf link1 --gear-ratio 0 --out {out}", "0 < N"),
+    ("export mjcf link1 --gear-ratio 1e300 --out {out}", "10000"),
+    ("export mjcf link1 --timestep 1e6 --out {out}", "0.01 s"),
+    ("export mjcf link1 --K 1e300 --out {out}", "1e+12"),
+    ("export controller panda --gains fjm_runtime/control/designed/panda_ismc_tau_1000hz_d1.json --substeps 1e8 "
+     "--out {out}", "1..1000"),
+    # figures
+    ("figures --samples 0 --out {out}", "1 <= samples"),
+    ("figures --samples 1e9 --out {out}", "10000"),
+    # tune
+    ("tune link1 --budget 1e12", "10000000"),
+    ("tune link1 --k-range 0 100", "0 < K"),
+    ("tune link1 --eta 0", "0 < eta"),
+    ("tune link1 --nominal K=1e300", "1e+12"),
+    ("tune link1 --sensing torque --payload -1", "kg"),
+    ("tune link1 --sensing torque --gamma-range 1.3 0.7", "LO <= HI"),
+    ("tune link1 --layer-rate 0", "0 < rate"),
+]
+
+
+def _flag_and_value(argv):
+    """The last flag given a numeric value and that value as typed (``--param K=1e300``: K and 1e300)."""
+    for i in range(len(argv) - 1, 0, -1):
+        if argv[i].startswith("--") and argv[i] not in ("--out", "--plot", "--gains") and i + 1 < len(argv):
+            if argv[i] in ("--param", "--nominal"):
+                name, _, value = argv[i + 1].partition("=")
+                return argv[i], name, value
+            return argv[i], argv[i], argv[i + 1]
+    raise AssertionError(argv)
+
+
+def _names_value(line: str, value: str) -> bool:
+    """The value as typed, or as Python prints it (1e300 -> 1e+300, 4.5 -> 4.5)."""
+    shown = {value}
+    try:
+        v = float(value)
+        shown |= {f"{v:g}", repr(v)}
+    except ValueError:
+        pass
+    return any(s in line for s in shown)
+
+
+@pytest.mark.parametrize("command, must", CASES, ids=[c for c, _ in CASES])
+def test_nonsense_is_one_line_naming_flag_value_and_range(command, must, tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(__import__("pathlib").Path(__file__).resolve().parents[3])  # the shipped designs' paths
+    out_dir = tmp_path / "out"
+    out_dir.mkdir()
+    argv = command.format(out=out_dir / "result").split()
+    try:
+        status = main(argv)
+    except SystemExit as exc:       # fjm tune's parser leaves through sys.exit (its own one-line error)
+        status = exc.code
+    got = capsys.readouterr()
+    lines = [ln for ln in got.err.splitlines() if ln.strip()]
+    assert status == 2 and got.out == "", (status, got.out, got.err)
+    assert len(lines) == 1 and lines[0].startswith(("fjm: error: ", "fjm tune: error: ")), got.err
+    flag, name, value = _flag_and_value(argv)
+    line = lines[0]
+    assert name in line and _names_value(line, value), (name, value, line)
+    assert must in line, (must, line)
+    assert not INTERNAL.search(line), line
+    assert list(out_dir.iterdir()) == [], list(out_dir.iterdir())
+
+
+def test_the_catalogue_has_at_least_sixty_cases():
+    assert len(CASES) >= 60 and len({c for c, _ in CASES}) == len(CASES)
+
+
+@pytest.mark.parametrize("rng, inside, outside", [
+    (DURATION, [1e-9, 1.0, 3600.0], [0.0, -1.0, 3600.0000001, float("nan"), float("inf")]),
+    (RATE, [1.0, 1000.0, 100000.0], [0.999, 100000.5, float("nan")]),
+    (SEED, [0, 2 ** 64 - 1], [-1, 2 ** 64, 0.5]),
+])
+def test_a_range_holds_its_bounds_and_nothing_beyond(rng, inside, outside):
+    assert all(rng.contains(v) for v in inside)
+    assert not any(rng.contains(v) for v in outside)
+
+
+def test_a_range_parses_what_it_accepts_exactly():
+    seed = Range(0, 2 ** 64 - 1, integer=True)
+    assert seed("18446744073709551615") == 2 ** 64 - 1       # exact: not rounded through a float
+    assert seed("1e3") == 1000 and isinstance(seed("1e3"), int)
+    assert RATE("1e3") == 1000.0
