@@ -132,7 +132,7 @@ class LinearAnalyzer:
         lin = S.linearize(w, r, p, g)
         if point == 0:
             self._chords.setdefault(delay, lin)
-        return spectral(lin, self.n)[0]
+        return float(np.max(np.abs(np.linalg.eigvals(lin.A))))     # the radius only: no eigenvectors
 
     # -- margins -----------------------------------------------------------------------------------
     def delay_margin(self, ctrl, g, point, p, run):
@@ -144,34 +144,44 @@ class LinearAnalyzer:
                 return dd
         return None
 
-    def scale_range(self, ctrl, g, point, run):
+    def scale_range(self, ctrl, g, point, run, hint=None):
         """``[g_lo, g_hi]``: the stiffness factors (all K x g, TRUE plant) at which the radius reaches 1.
 
         Bisection in log g to a ratio ``2^(1/64)``; None on a side that stays stable over the bracket
-        (``1/16 .. 16``). ``[None, None]`` with ``unstable`` when g = 1 itself is unstable.
+        (``1/16 .. 16``). ``[None, None]`` with ``unstable`` when g = 1 itself is unstable. ``hint``: another
+        point's range; a side whose boundary lies within that same ratio of it is taken in two evaluations.
         """
         d = self.cond.delay
         stable = lambda s: self.rho(ctrl, g, point, scaled_stiffness(self.model, self.p_nom, s), d, run) < 1.0
         if not stable(1.0):
             return {"range": [None, None], "unstable": True}
+        half = 2.0 ** (0.5 / 2 ** SCALE_BISECTIONS)          # half the final bracket, as a ratio
         out = []
-        for sign in (-1.0, 1.0):
-            ok, bad = 1.0, None
-            for b in SCALE_BRACKET:
-                s = b ** sign
-                if stable(s):
-                    ok = s
-                else:
-                    bad = s
-                    break
-            if bad is None:
-                out.append(None)
+        for k, sign in enumerate((-1.0, 1.0)):
+            v = None if hint is None else hint[k]
+            if v is not None and stable(v * half ** -sign) and not stable(v * half ** sign):
+                out.append(float(v))
                 continue
-            for _ in range(SCALE_BISECTIONS):
-                mid = float(np.sqrt(ok * bad))
-                ok, bad = (mid, bad) if stable(mid) else (ok, mid)
-            out.append(float(np.sqrt(ok * bad)))
+            out.append(self._scale_side(stable, sign))
         return {"range": out, "unstable": False}
+
+    @staticmethod
+    def _scale_side(stable, sign: float):
+        """One side of :meth:`scale_range` from scratch: bracket, then bisection."""
+        ok, bad = 1.0, None
+        for b in SCALE_BRACKET:
+            s = b ** sign
+            if stable(s):
+                ok = s
+            else:
+                bad = s
+                break
+        if bad is None:
+            return None
+        for _ in range(SCALE_BISECTIONS):
+            mid = float(np.sqrt(ok * bad))
+            ok, bad = (mid, bad) if stable(mid) else (ok, mid)
+        return float(np.sqrt(ok * bad))
 
     # -- the whole analysis ------------------------------------------------------------------------
     def _layer(self, ctrl, g, lin):
@@ -244,7 +254,10 @@ class LinearAnalyzer:
             table.append(row)
         out = {"points": [names[i] for i in pts], "plants": table, "summary": _summary(table, self.n)}
         if margins:
-            out["stiffness_scale"] = {names[i]: self.scale_range(ctrl, g_eq, i, run) for i in pts}
+            out["stiffness_scale"], hint = {}, None
+            for i in pts:
+                sc = out["stiffness_scale"][names[i]] = self.scale_range(ctrl, g_eq, i, run, hint)
+                hint = None if sc["unstable"] else sc["range"]
         out["settings"] = {"rate": 1.0 / self.T, "delay": self.cond.delay, "predict": self.cond.predict,
                            "sensing": self.cond.sensing, "sensor": self.cond.sensor.name, "substeps": self.substeps,
                            "jitter_window_samples": 2 * self.h + 1, "catch_up_samples": self.catch,

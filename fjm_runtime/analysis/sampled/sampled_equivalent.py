@@ -24,7 +24,8 @@ from typing import Optional
 
 import numpy as np
 
-from .sampled_noise import modal_channel_variances, modal_form, stationary_covariance, torque_jitter_variance
+from .sampled_noise import (impulse_channel_variances, modal_channel_variances, modal_form, stationary_covariance,
+                            torque_jitter_variance)
 
 __all__ = ["sat_moments", "with_slope", "EquivalentLoop", "equivalent_loop", "loop_figures", "noise_columns"]
 
@@ -69,16 +70,18 @@ def loop_figures(A, BS, C, DS, CsS, DsS, qrows, h: int, channels: bool = False, 
 
     Returns ``(jitter, q, s)``, each (n,) or, with ``channels``, (nm, n). Modal sums when ``A`` is
     diagonalizable with a well-conditioned basis (``modal``: its :func:`modal_form`, computed when not
-    given), else the Lyapunov doubling sum (one per channel with ``channels``).
+    given); else per channel the impulse-response sums, and for the totals the Lyapunov doubling sum.
     """
     modal = modal_form(A) if modal is None else modal
-    if modal:
-        Cq = np.zeros((len(qrows), A.shape[0]))
-        Cq[np.arange(len(qrows)), qrows] = 1.0
-        _u, jit, q_var, s_var = modal_channel_variances(
-            modal, BS, [(C, DS, True), (Cq, np.zeros((len(qrows), BS.shape[1])), False), (CsS, DsS, False)], h)
+    Cq = np.zeros((len(qrows), A.shape[0]))
+    Cq[np.arange(len(qrows)), qrows] = 1.0
+    outs = [(C, DS, True), (Cq, np.zeros((len(qrows), BS.shape[1])), False), (CsS, DsS, False)]
+    figs = modal_channel_variances(modal, BS, outs, h) if modal else \
+        (impulse_channel_variances(A, BS, outs, h) if channels else None)
+    if figs is not None:
+        _u, jit, q_var, s_var = figs
         return (jit, q_var, s_var) if channels else (jit.sum(0), q_var.sum(0), s_var.sum(0))
-    if channels:
+    if channels:                         # a radius too close to 1 for the impulse sums
         cols = [loop_figures(A, BS[:, c:c + 1], C, DS[:, c:c + 1], CsS, DsS[:, c:c + 1], qrows, h, modal=False)
                 for c in range(BS.shape[1])]
         return tuple(np.array([col[k] for col in cols]) for k in range(3))

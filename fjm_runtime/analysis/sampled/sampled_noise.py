@@ -164,3 +164,37 @@ def modal_channel_variances(modal, BS, outputs, h: int):
             cross = np.real(np.sum(X * psi[None, None, :], axis=2)) * np.asarray(DS, dtype=float).T
             res.append(np.maximum(a[0] * (var + DS2) + 2.0 * (lag + cross), 0.0))
     return res
+
+
+def impulse_channel_variances(A, BS, outputs, h: int, rel_tol: float = 1e-8, max_lags: int = 20000):
+    """The figures of :func:`modal_channel_variances` from the impulse responses, for any stable ``A``.
+
+    Channel ``c``'s response of ``y = C w + DS n`` is ``DS[:, c]`` at lag 0 and ``C A^(k-1) BS[:, c]`` at lag
+    ``k``; its variance is the sum of squares, and the jitter's the sum of squares of the response filtered by
+    ``u_k - mean(u_{k-h} .. u_{k+h})``. The lags run until ``|A^k BS|`` is below ``rel_tol`` of ``|BS|``
+    (a radius of 0.956: about 400 lags); None when that takes more than ``max_lags``.
+    """
+    A, BS = np.asarray(A, dtype=float), np.asarray(BS, dtype=float)
+    Call = np.vstack([np.asarray(C, dtype=float) for C, _d, _j in outputs])
+    Dall = np.vstack([np.asarray(D, dtype=float) for _c, D, _j in outputs])
+    X, stop = BS.copy(), rel_tol * max(np.max(np.abs(BS)), 1e-300)
+    lags = [Dall]
+    while np.max(np.abs(X)) > stop:
+        if len(lags) > max_lags:
+            return None
+        lags.append(Call @ X)
+        X = A @ X
+    G = np.stack(lags)                                      # (K, no, nm): lag, output, channel
+    width = 2 * h + 1
+    K, zeros = G.shape[0], lambda k: np.zeros((k,) + G.shape[1:])
+    csum = np.concatenate([zeros(1), np.cumsum(np.concatenate([zeros(2 * h), G, zeros(2 * h)]), axis=0)])
+    mean = (csum[width:K + 4 * h + 1] - csum[:K + 2 * h]) / width    # centred means for lags -h .. K-1+h
+    gz = np.concatenate([zeros(h), G, zeros(h)])
+    res, row = [], 0
+    for C, _d, jitter in outputs:
+        sl = slice(row, row + np.asarray(C).shape[0])
+        row = sl.stop
+        res.append(np.sum(G[:, sl] ** 2, axis=0).T)
+        if jitter:
+            res.append(np.sum((gz[:, sl] - mean[:, sl]) ** 2, axis=0).T)
+    return res

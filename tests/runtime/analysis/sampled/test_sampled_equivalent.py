@@ -112,3 +112,30 @@ def test_noise_free_limit_cycle_gets_no_verdict():
                    predict=True)
     du = np.abs(np.diff(res.u[-50:, 6]))
     assert np.min(du) > 1e-2 and np.max(np.abs(res.e1)) < 1e-3          # alternating torque, the links hold
+
+
+def test_channel_sums_equal_the_lyapunov_totals():
+    """Per-channel figures by impulse responses (a defective A: a nilpotent delay chain, as the loop's buffers
+    make) and by modes (a diagonalizable A) sum to the Lyapunov/autocovariance totals of sampled_noise."""
+    from fjm_runtime.analysis.sampled.sampled_noise import (impulse_channel_variances, modal_channel_variances,
+                                                            modal_form, stationary_covariance,
+                                                            torque_jitter_variance)
+    rng = np.random.default_rng(4)
+    V = rng.normal(size=(8, 8))
+    A_diag = V @ np.diag([0.95, -0.6, 0.3, 0.0, 0.5, -0.2, 0.8, 0.1]) @ np.linalg.inv(V)
+    A_def = np.diag([0.95, -0.6, 0.3, 0.5, 0.0, 0.0, 0.0, 0.0])
+    A_def[4, 5] = A_def[5, 6] = A_def[6, 7] = 1.0                               # a 4-sample shift register
+    A_def[0, 4] = A_def[7, 1] = 0.7
+    B, C, D = rng.normal(size=(8, 3)), rng.normal(size=(2, 8)), rng.normal(size=(2, 3))
+    for A in (A_diag, A_def):
+        P = stationary_covariance(A, B)
+        want_jit = torque_jitter_variance(A, B, C, D, 10, P)
+        want_var = np.einsum("ij,jk,ik->i", C, P, C) + np.sum(D * D, axis=1)
+        got = [impulse_channel_variances(A, B, [(C, D, True)], 10)]
+        modal = modal_form(A)
+        if A is A_diag:
+            got.append(modal_channel_variances(modal, B, [(C, D, True)], 10))
+        else:
+            assert modal is None                                               # defective: no modal sums
+        for var, jit in got:
+            assert np.allclose(var.sum(axis=0), want_var, rtol=1e-7) and np.allclose(jit.sum(axis=0), want_jit, rtol=1e-7)
