@@ -27,7 +27,10 @@ __all__ = ["add_arguments", "run", "conditions_from_design"]
 def add_arguments(p) -> None:
     """The arguments of ``fjm analyze`` on its parser ``p`` (name, help, description: commands.toml)."""
     p.add_argument("model", help=MODEL_HELP)
-    p.add_argument("--gains", type=Path, required=True, help="gains file (a fjm design output or {kind, gains})")
+    p.add_argument("--gains", type=Path, default=None,
+                   help="gains file (a fjm design output or {kind, gains}); default: the gains fjm simulate uses "
+                        "without one (smc, its default lam, k_s, delta and the model's effort limits; state "
+                        "sensing, 1000 Hz, no delay, ideal sensor, 0.5 rad sines at 1 rad/s)")
     p.add_argument("--rate", type=RATE, default=None, help=f"control rate, {RATE} (default: the file's, else 1000)")
     p.add_argument("--delay-samples", type=DELAY, default=None,
                    help=f"delay, {DELAY} (default: the file's, else 0)")
@@ -159,13 +162,23 @@ def run(args) -> int:
         check_output_file(args.out, "--out")
     m = load(args.model)
     from ..control.design import Design
-    design = Design.load(args.gains).check(m)
+    if args.gains is None:
+        from .simulate_conditions import default_design
+        design = default_design(m).check(m)
+        g = design.gains
+        limit = ", ".join(f"{v:g}" for v in g["u_max"]) + " N m" if "u_max" in g else "none"
+        print(f"fjm analyze: no --gains: the default gains of fjm simulate (smc, lam {g['lam']:g} 1/s, k_s "
+              f"{np.max(g['k_s']):g} rad/s^4, delta {np.max(g['delta']):g} rad/s^3, torque limit {limit}; "
+              "state sensing, 1000 Hz, delay 0, ideal sensor)", file=sys.stderr)
+    else:
+        design = Design.load(args.gains).check(m)
     cond = conditions_from_design(m, design, args)
     times = _times(args.task_times)
     plants = default_plants(m)
     analyzer = LinearAnalyzer(cond, plants=plants if args.plants == "corners" else plants[:1], task_times=times)
     out = analyzer.analyze(dict(design.law_gains(), u_max=cond.u_max), margins=not args.no_margins)
-    out.update({"model": m.name, "kind": design.kind, "gains_file": str(args.gains)})
+    out.update({"model": m.name, "kind": design.kind, "gains_file": None if args.gains is None else str(args.gains),
+                "gains_source": "defaults" if args.gains is None else f"--gains {args.gains}"})
     text = json.dumps(out, indent=2, allow_nan=False, default=lambda v: None)
     if args.out is not None:
         args.out.write_text(text + "\n")

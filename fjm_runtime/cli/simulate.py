@@ -8,6 +8,7 @@ large to hold and gains for another model are refused before any work
 """
 from __future__ import annotations
 
+import argparse
 import json
 import math
 import sys
@@ -17,8 +18,7 @@ from typing import Dict, Optional
 import numpy as np
 
 from .models import MODEL_HELP
-from ..analysis.certificates.lemma1 import (FALLBACK_SWITCHING_GAIN, default_error_bounds, default_switching_gain,
-                               paper_beta_hat, paper_bound_applies)
+from ..analysis.certificates.lemma1 import FALLBACK_SWITCHING_GAIN, paper_beta_hat, paper_bound_applies
 from ..control.defaults import DEFAULT_LAM, DEFAULT_LAYER_RATE, PAPER_K_RANGE, default_delta
 from ..control.factory import CONTROLLER_KINDS, make_controller
 from ..control.references import REFERENCE_KINDS, make_reference
@@ -33,6 +33,8 @@ from .ranges import ANGLE, DURATION, GAIN, LAYER, MASS, PERIOD, SEED, STIFFNESS,
 from ..control.design import Design
 from .simulate_checks import (DEFAULT_MAX_MEMORY_GB, MAX_SUBSTEPS, check_pole, check_run_size, check_substeps,
                               gains_provenance, workspace_exit)
+from .simulate_conditions import (default_gains, design_sensor, peak_text, peak_until, run_effort_limits,
+                                  say_conditions, take_design_conditions)
 
 
 def add_arguments(sim) -> None:
@@ -74,7 +76,10 @@ def add_arguments(sim) -> None:
                      help=f"stiffness upper bound for Lemma 1, {STIFFNESS} (default {PAPER_K_RANGE[1]:g})")
     sim.add_argument("--beta-hat", choices=("paper", "model"), default="paper",
                      help="link1: paper's constant (beta_max + beta_min)/2 or beta(x; nominal) (default paper)")
-    sim.add_argument("--u-max", type=TORQUE, default=None, help=f"torque limit, {TORQUE} (default none)")
+    sim.add_argument("--u-max", type=TORQUE, default=None,
+                     help=f"torque limit, {TORQUE}, every joint (default: the model's effort limits, Model.limits.effort)")
+    sim.add_argument("--no-effort-limits", action="store_true",
+                     help="apply no torque limit where the model states effort limits (a design's u_max stays)")
     sim.add_argument("--plot", type=Path, default=None,
                      help="write a PNG of angles, error, torque and s (its directory must exist)")
     sim.add_argument("--quiet", action="store_true", help="no progress on stderr")
@@ -84,17 +89,22 @@ def add_arguments(sim) -> None:
 def _add_sampled_data_flags(sim) -> None:
     """The sampled-data and scripting flags (rate, substeps, sensing, noise, delay, scales, gains, --json)."""
     sim.add_argument("--rate", type=float, default=None,
-                     help="control rate, Hz > 0, with --duration bounded by --max-memory (same as --dt 1/HZ)")
+                     help="control rate, Hz > 0, with --duration bounded by --max-memory (same as --dt 1/HZ; "
+                          "default: the --gains file's, else 1000)")
     sim.add_argument("--substeps", type=int, default=None,
                      help=f"RK4 plant steps per control sample, 1..{MAX_SUBSTEPS} (default: the fastest-mode rule)")
-    sim.add_argument("--sensing", choices=("state", "torque"), default="state",
-                     help="what the controller measures: the state, or q, dq, tau_J, dtau_J, dq_m (default state)")
-    sim.add_argument("--delay-samples", type=int, default=0,
-                     help="computation delay in samples, >= 0, bounded by --max-memory (default 0)")
-    sim.add_argument("--predict", action="store_true", help="predict the delayed measurement with the nominal model")
-    sim.add_argument("--noise", default="ideal",
+    sim.add_argument("--sensing", choices=("state", "torque"), default=None,
+                     help="what the controller measures: the state, or q, dq, tau_J, dtau_J, dq_m (default: the "
+                          "--gains file's, else state)")
+    sim.add_argument("--delay-samples", type=int, default=None,
+                     help="computation delay in samples, >= 0, bounded by --max-memory (default: the --gains "
+                          "file's, else 0)")
+    sim.add_argument("--predict", action=argparse.BooleanOptionalAction, default=None,
+                     help="predict the delayed measurement with the nominal model (default: the --gains file's, "
+                          "else off)")
+    sim.add_argument("--noise", default=None,
                      help="sensor model: a preset (ideal, panda_white, franka_like) or a TOML sensor file "
-                          "(docs/simulation.md; default ideal)")
+                          "(docs/simulation.md; default: the --gains file's sensor, else ideal)")
     sim.add_argument("--seed", type=SEED, default=0, help=f"noise seed, {SEED} (default 0)")
     sim.add_argument("--k-scale", default=None, metavar="A[,B,..]",
                      help="TRUE stiffness = nominal x A (one value, or one per joint)")
@@ -154,7 +164,11 @@ def _true_params(m, args, nominal) -> Dict[str, float]:
 
 def _sensor(args) -> SensorModel:
     """``--noise PRESET|FILE.toml`` (presets: ideal, panda_white, franka_like; ``none``, ``panda`` the former
-    names) with ``--seed``; a ``.json`` file of SensorModel fields is still read."""
+    names) with ``--seed``; a ``.json`` file of SensorModel fields is still read; the ``--gains`` file's
+    sensor when it was taken (:func:`take_design_conditions`)."""
+    taken = design_sensor(args)
+    if taken is not None:
+        return taken
     path = Path(args.noise)
     if path.suffix != ".json":
         return sensor_from_spec(args.noise, seed=args.seed, what="--noise")
@@ -171,23 +185,31 @@ def _sensor(args) -> SensorModel:
     return SensorModel.from_dict(fields, where=f"--noise {path}")
 
 
-def _gains_file(args, m, rate: float):
-    """``(design, source)``: ``--gains FILE`` (``{"kind": ..., "gains": {...}}``, the kind checked against
-    --controller), else the shipped design for this model, rate, delay and sensing (any kind unless
-    --controller names one) when no gain flag is given, else the flags (design None). Every design is
-    checked against the model before any work (:meth:`Design.check`)."""
+def _load_gains(args) -> Optional[Design]:
+    """The ``--gains FILE`` design (``{"kind": ..., "gains": {...}}`` or a fjm design output), its kind checked
+    against --controller; None without ``--gains``."""
     if args.gains is None:
-        flags_given = args.lam is not None or args.k_s is not None or args.delta is not None
-        shipped = None if flags_given else Design.shipped(m.name, args.controller, args.sensing, rate,
-                                                          args.delay_samples)
-        if shipped is None:
-            return None, "command line"
-        return shipped.check(m), shipped.source
+        return None
     design = Design.load(args.gains)
     if args.controller is not None and args.controller != design.kind:
         raise FjmValueError(f"--gains {args.gains}: holds gains for {design.kind!r}, not --controller "
                             f"{args.controller!r}")
-    return design.check(m), f"--gains {args.gains}"
+    return design
+
+
+def _gains_file(args, m, rate: float, design: Optional[Design]):
+    """``(design, source)``: the ``--gains`` design, else the shipped design for this model, rate, delay and
+    sensing (any kind unless --controller names one) when no gain flag is given, else the flags or the
+    defaults (design None; source ``"command line"`` or ``"defaults"``). Every design is checked against
+    the model before any work (:meth:`Design.check`)."""
+    if design is not None:
+        return design.check(m), f"--gains {args.gains}"
+    flags_given = args.lam is not None or args.k_s is not None or args.delta is not None
+    shipped = None if flags_given else Design.shipped(m.name, args.controller, args.sensing, rate,
+                                                      args.delay_samples)
+    if shipped is None:
+        return None, "command line" if flags_given else "defaults"
+    return shipped.check(m), shipped.source
 
 
 def _period(args) -> float:
@@ -236,9 +258,8 @@ def _build_controller(m, args, nominal, ref, kind, file_gains):
     else:
         lam = None
     if k_s is None:
-        gain = default_switching_gain(m, nominal, lam, ref.derivative_bounds(), k_bounds=k_bounds,
-                                      error_bounds=default_error_bounds(args.reference, args.amplitude, args.omega))
-        k_s = FALLBACK_SWITCHING_GAIN if gain is None else gain.k_s
+        _, k_s, _, gain = default_gains(m, nominal, ref, lam=lam, k_bounds=k_bounds, reference=args.reference,
+                                        amplitude=args.amplitude, omega=args.omega)
         if not np.all(np.isfinite(np.asarray(k_s, dtype=float))):
             raise FjmValueError(f"Lemma 1 switching gain {k_s!r} for the nominal parameters and --k-min/--k-max "
                                 f"{args.k_min:g}/{args.k_max:g}: not finite; expected parameters in a physical "
@@ -277,11 +298,14 @@ def _script_report(res, settings: dict, diverged: Optional[SimulationDivergedErr
     out: Dict[str, object] = {"diverged": diverged is not None or left is not None}
     if left is not None:
         out["divergence_time"], out["reason"] = float(left[0]), left[1]
+        out["peak_torque_until_divergence"] = peak_until(res.t[:-1], res.u[:-1], left[0])
     names = ("rms_second_half", "peak_torque", "time_at_limit", "torque_jitter", "time_at_rate_limit")
     if diverged is not None:
         out.update({k: None for k in names})
         out["reason"] = str(diverged)
         out["divergence_time"] = float(diverged.t)
+        if diverged.peak_torque is not None:
+            out["peak_torque_until_divergence"] = _per_joint(diverged.peak_torque)
     else:
         fns = (rms_second_half, peak_torque, time_at_limit, torque_jitter, time_at_rate_limit)
         for k, fn in zip(names, fns):
@@ -329,32 +353,33 @@ def run(args) -> int:
     if args.plot is not None:
         check_output_file(args.plot, "--plot")
     m = load(args.model)
+    file_design = _load_gains(args)
+    taken = take_design_conditions(args, file_design)
     dt = _period(args)
     _check_flags(args, dt)
     sensor = _sensor(args)
-    design, source = _gains_file(args, m, 1.0 / dt)
+    design, source = _gains_file(args, m, 1.0 / dt, file_design)
     from_file = params_file_nominal(args.params, m)
     check_magnitudes(from_file, from_file.values(), f"--params {args.params}: [parameters] ")
     nominal = {**(design.nominal(m) if design else {}), **from_file, **parse_assignments(args.nominal, "--nominal")}
     true = _true_params(m, args, nominal)
     kind = design.kind if design else (args.controller or "smc")
     ref, x0 = _reference(m, args, design)
+    limits = run_effort_limits(m, args, design)
     ctrl, gain, k_s, delta = _build_controller(m, args, nominal, ref, kind, design.gains if design else {})
-    args.predict = bool(args.predict or (design and design.predict))  # gains designed with prediction keep it
+    if file_design is None:  # a shipped design made with prediction keeps it
+        args.predict = bool(args.predict or (design and design.predict))
     _check_size(m, args, ctrl, ref, x0, true, sensor, dt)
     conditions = {"model": m.name, "kind": kind, "sensing": args.sensing, "rate": 1.0 / dt,
                   "delay": args.delay_samples, "predict": bool(args.predict), "sensor": sensor}
     provenance = gains_provenance(source, design, conditions,
                                   None if gain is None else f"K in [{args.k_min:g}, {args.k_max:g}]")
-    if not provenance["designed_for_these_conditions"]:
-        print(f"fjm: warning: the gains ({source}) were not designed for {m.name} under these conditions: "
-              f"{'; '.join(provenance['not_designed_because'])}", file=sys.stderr)
-    elif source.startswith("shipped"):
-        print(f"fjm: using the {source} (designed for these conditions)", file=sys.stderr)
+    say_conditions(m, args, ref, dt, taken, source, provenance, limits, (args.lam, k_s, delta))
     progress = None if (args.quiet or args.json) else stderr_progress(f"simulating {args.model} ({args.duration:g} s)")
     settings = {"model": m.name, "controller": kind, "rate": 1.0 / dt, "dt": dt, "substeps": args.substeps,
                 "delay_samples": args.delay_samples, "predict": bool(args.predict), "sensing": args.sensing,
                 "seed": args.seed, "noise": args.noise, "duration": args.duration,
+                "effort_limits": limits[0], "effort_limits_from": limits[1],
                 "true_params": dict(zip(m.param_names, m.params_array(true).tolist())),
                 "nominal_params": dict(zip(m.param_names, m.params_array(nominal).tolist())),
                 "gains": str(args.gains) if args.gains is not None else (design.file if design else None)}
@@ -365,7 +390,8 @@ def run(args) -> int:
     except SimulationDivergedError as exc:
         if args.json:
             print(json.dumps(_script_report(None, settings, exc, provenance), allow_nan=False))
-        print(f"fjm: diverged: {exc}", file=sys.stderr)
+        peak = "" if exc.peak_torque is None else f"; {peak_text(_per_joint(exc.peak_torque), limits)}"
+        print(f"fjm: diverged: {exc}{peak}", file=sys.stderr)
         return 3
     settings["substeps"] = res.settings["substeps"]
     left = workspace_exit(res.t, res.x[:, :m.n], res.e1)
@@ -373,9 +399,10 @@ def run(args) -> int:
         print(json.dumps(_script_report(res, settings, None, provenance, left), allow_nan=False))
         status = 0
     else:
-        status = _print_report(m, args, res, kind, true, nominal, k_s, delta, gain, ctrl, provenance, left)
+        status = _print_report(m, args, res, kind, true, nominal, k_s, delta, gain, ctrl, provenance, left, limits)
     if left is not None:
-        print(f"fjm: diverged: the run {left[1]}", file=sys.stderr)
+        peak = peak_until(res.t[:-1], res.u[:-1], left[0])
+        print(f"fjm: diverged: the run {left[1]}; {peak_text(peak, limits)}", file=sys.stderr)
         return 3
     return status
 
@@ -404,7 +431,7 @@ def _check_size(m, args, ctrl, ref, x0, true, sensor, dt) -> None:
     check_run_size(layout.nw, m.n, layout.nm, args.duration, dt, args.max_memory)
 
 
-def _print_report(m, args, res, kind, true, nominal, k_s, delta, gain, ctrl, provenance, left) -> int:
+def _print_report(m, args, res, kind, true, nominal, k_s, delta, gain, ctrl, provenance, left, limits) -> int:
     """The indented report (and the optional PNG) of ``fjm simulate`` without ``--json``."""
     metrics: Dict[str, object] = {}
     for k, v in res.metrics.as_dict().items():
@@ -415,10 +442,12 @@ def _print_report(m, args, res, kind, true, nominal, k_s, delta, gain, ctrl, pro
               "lam": args.lam, "k_s": k_s, "delta": delta,
               "lemma1": None if gain is None else {"k_s": gain.k_s, "k_s_tight": gain.k_s_tight, "W": gain.W,
                                                    "H": gain.H, "beta_hat": gain.beta_hat},
+              "effort_limits": limits[0], "effort_limits_from": limits[1],
               "settings": res.settings, "metrics": metrics, **provenance,
               "diverged": left is not None}
     if left is not None:
         report["divergence_time"], report["reason"] = float(left[0]), left[1]
+        report["peak_torque_until_divergence"] = peak_until(res.t[:-1], res.u[:-1], left[0])
     if hasattr(ctrl, "stiffness_estimate"):
         report["K_hat_final"] = ctrl.stiffness_estimate(res.z[-1]).tolist()
     print(json.dumps(report, indent=2, allow_nan=False))

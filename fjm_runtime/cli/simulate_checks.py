@@ -120,7 +120,7 @@ def gains_provenance(source: str, design, conditions: dict, lemma1: Optional[str
     Parameters
     ----------
     source : str
-        ``"shipped design FILE"``, ``"--gains FILE"``, or ``"command line"``.
+        ``"shipped design FILE"``, ``"--gains FILE"``, ``"command line"`` (a gain flag given) or ``"defaults"``.
     design : Design or None
         The design (None: gains from the flags and their defaults).
     conditions : dict
@@ -136,8 +136,9 @@ def gains_provenance(source: str, design, conditions: dict, lemma1: Optional[str
         ``not_designed_because`` (list of reasons).
     """
     if design is None:
-        reasons = ["the gains are the command line's or their generic defaults (--lam, --k-s, --delta); "
-                   "no design exists for these conditions (`fjm design` finds one)"]
+        whose = ("fjm's generic defaults (no --gains, --lam, --k-s, --delta given)" if source == "defaults" else
+                 "the command line's (--lam, --k-s, --delta; generic defaults for the others)")
+        reasons = [f"the gains are {whose}; no design exists for these conditions (`fjm design` finds one)"]
         if lemma1:
             reasons.append(f"k_s is the Lemma 1 bound ({lemma1}) for the continuous-time loop, not a design "
                            "for the sampled loop")

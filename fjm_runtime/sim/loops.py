@@ -32,7 +32,7 @@ def run_python(model, controller, L: StepLayout, p_true, w0, t, R, NOISE, progre
                                  np.asarray(sample.y_hat, dtype=float).reshape(-1)])
         if k == n_rows - 1:
             break
-        check_divergence(t[k + 1:k + 2], w_next[None], u[None], max_state)
+        check_divergence(t[k + 1:k + 2], w_next[None], u[None], max_state, AUX[:k, :n])
         w = w_next
         if progress is not None and (k + 1) % report_every == 0:
             progress((k + 1) / (n_rows - 1))
@@ -57,7 +57,7 @@ def run_casadi(model, controller, L: StepLayout, p_true, w0, t, R, NOISE, progre
         W[k + 1:k + m + 1], AUX[k:k + m] = np.asarray(w_out).T, np.asarray(a_out).T
         last = min(k + m, n_rows - 1)        # the state after the last sample is not checked
         if last > k:
-            check_divergence(t[k + 1:last + 1], W[k + 1:last + 1], AUX[k:last, :n], max_state)
+            check_divergence(t[k + 1:last + 1], W[k + 1:last + 1], AUX[k:last, :n], max_state, AUX[:k, :n])
         k += m
         if progress is not None:
             progress(k / n_rows)

@@ -135,8 +135,13 @@ def _json(capsys, argv, status=0):
 
 def test_generic_defaults_are_flagged_as_not_designed(capsys):
     rep, err = _json(capsys, ["simulate", "link1", "--duration", "0.05", "--json"])
-    assert rep["gains_source"] == "command line" and rep["designed_for_these_conditions"] is False
+    assert rep["gains_source"] == "defaults" and rep["designed_for_these_conditions"] is False
     assert any("generic defaults" in r for r in rep["not_designed_because"])
+    assert err.startswith("fjm: warning: the default gains (lam 8 1/s, k_s ") and "(command line)" not in err
+    assert "were not designed for link1" in err
+    # a gain flag given: the command line's gains
+    rep, err = _json(capsys, ["simulate", "link1", "--lam", "9", "--duration", "0.05", "--json"])
+    assert rep["gains_source"] == "command line" and "(--lam, --k-s, --delta" in rep["not_designed_because"][0]
     assert err.startswith("fjm: warning: the gains (command line) were not designed for link1")
 
 
