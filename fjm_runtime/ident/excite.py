@@ -367,7 +367,8 @@ def design_excitation(model, duration: float, *, q0=None, amplitude: float = 0.5
                             "positive values, harmonics >= 3 and iterations >= 0")
     pos = model.position_limits
     if q0 is None:
-        q0 = np.zeros(n) if pos is None else np.where(np.isfinite(pos).all(axis=1), pos.mean(axis=1), 0.0)
+        q0 = np.zeros(n) if pos is None else np.where(np.isfinite(pos).all(axis=1),   # a continuous joint: 0
+                                                  np.where(np.isfinite(pos), pos, 0.0).mean(axis=1), 0.0)
     q0 = np.asarray(q0, dtype=float).reshape(n)
     periods, f0, per = whole_periods(duration, base_freq, rate)
     cubic = ({"k1", "k3"} <= set(model.param_names)) if cubic is None else bool(cubic)

@@ -24,7 +24,7 @@ from .excite import nominal_motion
 from .log import Log
 
 __all__ = ["RATE", "K_FACTOR", "JM_FACTOR", "B_M", "FRICTION", "PD_OMEGA", "drive_names", "true_params",
-           "with_rotor_friction", "mujoco_plant", "mujoco_log"]
+           "with_rotor_friction", "mujoco_plant", "mujoco_log", "tau_J_offsets"]
 
 RATE = 1000.0
 K_FACTOR, JM_FACTOR, B_M, FRICTION = 1.15, 0.9, 0.3, 0.4
@@ -70,6 +70,12 @@ def mujoco_plant(model, p: dict, work: Path, substeps: int, friction=FRICTION):
     return MujocoPlant(model, path, p)
 
 
+def tau_J_offsets(n: int, seed: int = 0) -> np.ndarray:
+    """The torque sensors' constant offsets of :func:`mujoco_log`'s run ``seed``, N m, shape (n,) (the
+    ``franka_like`` level; the truth an identified ``tau_J_offset<i>`` is checked against)."""
+    return SensorModel.franka_like(seed=seed).offsets(n) * np.random.default_rng([seed, 1]).standard_normal(n)
+
+
 def _quantize(v, step: float):
     return v if step <= 0 else step * np.floor(v / step + 0.5)
 
@@ -92,7 +98,7 @@ def mujoco_log(model, exc_ref, duration: float, work: Path, seed: int = 0, frict
     K = np.array([p_true[k] for k in drive_names(model)[0]])
     Jm = np.array([model.default_params[j] for j in drive_names(model)[1]])
     kp, kd = Jm * PD_OMEGA ** 2, 2 * 0.7 * PD_OMEGA * Jm
-    offset = sensor.offsets(n) * rng.standard_normal(n)
+    offset = tau_J_offsets(n, seed)
     Q, QM, TAU, U = (np.zeros((t.size, n)) for _ in range(4))
     for k in range(t.size):
         x = plant.state()
