@@ -39,6 +39,7 @@ from .brackets import bracket_twin
 from .dynamics import beta_twin, energy_twin, f_twin, mx_function, state_bodies
 from .functions import QUANTITIES, build_model_functions, operation_count
 from .torque import TORQUE_QUANTITIES, build_pdg, build_torque_functions, torque_twins
+from .linear_spring import SPRING_MEANINGS, linear_spring_functions, linear_springs_entry
 from .parameters import drive_table, parameter_entries
 from .report import render_complete_report, render_report
 
@@ -110,8 +111,9 @@ def _control_meanings() -> Dict[str, str]:
 
 
 def _write_casadi_files(lin: Linearization, outdir: Path, functions, controls, ops, control_ops,
-                        versions: Dict[str, str], quantities=QUANTITIES) -> Dict[str, int]:
-    """Every ``<name>.casadi`` (model quantities, then the laws); returns their byte sizes."""
+                        versions: Dict[str, str], quantities=QUANTITIES, springs=None) -> Dict[str, int]:
+    """Every ``<name>.casadi`` (model quantities, the laws, then ``springs``: name -> Function of
+    :data:`SPRING_MEANINGS`); returns their byte sizes."""
     m = lin.model
     control_meaning = _control_meanings()
     sizes: Dict[str, int] = {}
@@ -131,6 +133,8 @@ def _write_casadi_files(lin: Linearization, outdir: Path, functions, controls, o
     for name, fn in controls.items():
         write_casadi(name, fn, control_meaning[name], argument_lines(lin) + layout_lines(m.n),
                      control_ops[name])
+    for name, fn in (springs or {}).items():
+        write_casadi(name, fn, SPRING_MEANINGS[name], argument_lines(lin), operation_count(fn))
     return sizes
 
 
@@ -307,14 +311,15 @@ def write_model(lin: Linearization, outdir: Path,
     control_ops = {name: operation_count(fn.expand() if fn.is_a("MXFunction") else fn)
                    for name, fn in controls.items()}
     progress(".casadi files")
-    sizes = _write_casadi_files(lin, outdir, functions, controls, ops, control_ops, versions, quantities)
+    drives = drive_table(m)
+    springs = linear_spring_functions(m, drives) if drives else {}
+    sizes = _write_casadi_files(lin, outdir, functions, controls, ops, control_ops, versions, quantities, springs)
     ff = None if complete else write_feedforward(m, outdir, argument_lines(lin), versions, ff_fn)
     progress("C sources")
     c_fns = {**functions, **controls} if complete else c_functions(lin, functions, controls, kernel, ff_fn)
     if ff is not None:
         control_ops["feedforward"] = ff[1]
     sources = _write_c_sources(lin, outdir, c_fns, ops, control_ops, versions)
-    drives = drive_table(m)
     manifest = {
         "header": HEADER,
         "model": m.name,
@@ -341,6 +346,10 @@ def write_model(lin: Linearization, outdir: Path,
         **({} if complete else _control_entries(m, controls, control_ops, sizes)),
         **({} if complete else _torque_entries(m, controls, control_ops, sizes)),
         **({} if ff is None else {"feedforward": ff[2]}),
+        **({"springs": linear_springs_entry(drives, {
+            name: {"casadi_file": f"{name}.casadi", "meaning": SPRING_MEANINGS[name], "inputs": [arg, "p"],
+                   "operations": operation_count(springs[name]), "casadi_bytes": sizes[name]}
+            for name, arg in (("spring", "phi"), ("spring_inverse", "tau_J"))})} if springs else {}),
         "c_sources": {fname: len((outdir / fname).read_bytes()) for fname in sorted(sources)},
         "tools": versions,
         "derivation_seconds": "not stored here (would break byte-identity); see build/derive-timings.json",

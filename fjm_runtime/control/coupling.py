@@ -98,6 +98,7 @@ class CompletePlant:
         self.form, self.reduced_model = complete.form, complete.reduced_model
         self.manifest = complete.manifest
         self.drives, self.parameter_info = complete.drives, complete.parameter_info
+        self.spring_functions = complete.spring_functions
         n_par, n_red = len(complete.param_names), len(reduced.param_names)
         self.functions: Dict[str, object] = dict(complete.functions)
         for q in ("T", "alpha", "beta"):

@@ -13,37 +13,16 @@ this module.
 
 from __future__ import annotations
 
-import math
 from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
 
+from ..drives import model_springs
 from ..validation import FjmValueError, as_vector
 from .mjcf import FRICTION_NUMERIC, SPRING_NUMERIC, gear_ratios, load_chain, resolve_params
 
-__all__ = ["MujocoPlant", "three_segment_torque"]
-
-
-def three_segment_torque(phi: float, K_1: float, K_2: float, K_3: float, T_1: float, T_2: float, w: float) -> float:
-    """The datasheet spring at deflection ``phi`` (rad), written here from the datasheet (not derived).
-
-    ``sign(phi) g(|phi|)``: ``g`` is the piecewise-linear curve through ``(phi_1, T_1)``, ``(phi_2, T_2)``
-    with slopes ``K_1, K_2, K_3``, each kink replaced on ``|a - phi_i| < w / 2`` by the integral of the
-    quintic smoothstep between the neighbouring slopes (docs/real-drives.md).
-    """
-    a = abs(phi)
-    phi_1 = T_1 / K_1
-    phi_2 = phi_1 + (T_2 - T_1) / K_2
-    g = K_1 * a
-    for step, at in ((K_2 - K_1, phi_1), (K_3 - K_2, phi_2)):
-        x = a - at
-        if x >= w / 2:
-            g += step * x
-        elif x > -w / 2:
-            t = (x + w / 2) / w
-            g += step * w * (t ** 6 - 3 * t ** 5 + 2.5 * t ** 4)
-    return math.copysign(g, phi)
+__all__ = ["MujocoPlant"]
 
 
 def _mujoco():
@@ -91,8 +70,10 @@ class MujocoPlant:
         self.ctrl = np.array([self.mj.actuator(f"{j}_motor").id for j in joints])
         self.scale = np.concatenate([np.ones(model.n), self.N])
         # (rotor dof, F_c, F_s, v_s, v_c, N) per rotor whose friction the file states, and
-        # (spring tendon, link dof, rotor dof, N, K_1, K_2, K_3, T_1, T_2, w) per three-segment spring
+        # (spring tendon, link dof, rotor dof, N, joint index) per spring the file states as numerics; their
+        # torque is the model's spring law at the file's coefficients (put into the parameter vector)
         self.friction, self.springs = [], []
+        self._p = np.array([p[k] for k in model.param_names], dtype=float)
         for i in range(self.mj.nnumeric):
             num = self.mj.numeric(i)
             if num.name.startswith(FRICTION_NUMERIC):
@@ -103,19 +84,25 @@ class MujocoPlant:
                 j = tendon[:-len("_spring")]
                 k = joints.index(j)
                 self.springs.append((self.mj.tendon(tendon).id, int(self.mj.joint(j).dofadr[0]),
-                                     int(self.mj.joint(f"{j}_rotor").dofadr[0]), float(self.N[k]),
-                                     *(float(v) for v in num.data)))
+                                     int(self.mj.joint(f"{j}_rotor").dofadr[0]), float(self.N[k]), k))
+                self._p[list(model.drives[k].spring)] = [float(v) for v in num.data]  # the law's order
+        self._spring = model_springs(model)["spring"] if self.springs else None
 
     def _passive(self, m, d) -> None:
         """MuJoCo's passive-force callback: ``qfrc_passive -= F(v) / N`` on each rotor, ``v = qvel / N``;
-        the three-segment springs' tendon force ``-psi(phi)`` at MuJoCo's tendon length ``phi``."""
+        the numerics springs' tendon force ``-psi(phi)`` (the model's law) at MuJoCo's tendon length ``phi``."""
         for dof, F_c, F_s, v_s, v_c, N in self.friction:
             v = d.qvel[dof] / N
             d.qfrc_passive[dof] -= (F_c + (F_s - F_c) * np.exp(-(v / v_s) ** 2)) * np.tanh(v / v_c) / N
-        for tendon, link, rotor, N, *curve in self.springs:
-            tau = three_segment_torque(float(d.ten_length[tendon]), *curve)
-            d.qfrc_passive[link] += tau       # tendon coefficient -1 on q
-            d.qfrc_passive[rotor] -= tau / N  # tendon coefficient 1/N on theta
+        if not self.springs:
+            return
+        phi = np.zeros(self.model.n)
+        for tendon, _, _, _, k in self.springs:
+            phi[k] = d.ten_length[tendon]
+        psi = np.asarray(self._spring(phi, self._p)[0], dtype=float).ravel()  # one call for every joint
+        for _, link, rotor, N, k in self.springs:
+            d.qfrc_passive[link] += psi[k]       # tendon coefficient -1 on q
+            d.qfrc_passive[rotor] -= psi[k] / N  # tendon coefficient 1/N on theta
 
     @contextmanager
     def _callbacks(self):

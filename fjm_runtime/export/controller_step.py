@@ -32,9 +32,10 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
+from ..drives import model_springs
 from ..sim import sample_step as ss
 from ..sim.step import casadi_functions
-from ..sim.step_layout import StepLayout, stiffness_indices
+from ..sim.step_layout import StepLayout
 from ..validation import FjmValueError
 
 __all__ = ["ControllerLayout", "controller_functions", "raw_reading", "rest_reading"]
@@ -101,7 +102,7 @@ def rest_reading(model, L: StepLayout, x0, p_true) -> np.ndarray:
     ops = ss._NumpyOps(model)
     x0 = np.asarray(x0, dtype=float)
     p_true = np.asarray(p_true, dtype=float)
-    m = np.array(ss._measure(ops, L, x0, ss._plant_K(ops, L, p_true), p_true), dtype=float)
+    m = np.array(ss._measure(ops, L, x0, p_true), dtype=float)
     if L.differentiated and L.sensing == "torque":
         m[4 * L.n:] = x0[2 * L.n:3 * L.n]
     return m
@@ -151,7 +152,7 @@ def controller_functions(model, controller, L: StepLayout, name: str):
     fns = casadi_functions(model)
     if fns is None:
         raise FjmValueError(f"model {model.name!r}: no CasADi Functions f, g to predict with")
-    fns = dict(fns, **(getattr(model, "spring_functions", None) or {}))  # a nonlinear spring's psi, psi^-1
+    fns = dict(fns, **model_springs(model))  # the spring law's psi, psi^-1 (prediction, rest torque)
     n, n_par = L.n, len(model.param_names)
     CL = ControllerLayout(L)
     n_gains = int(np.asarray(controller.gains).size)
@@ -159,14 +160,9 @@ def controller_functions(model, controller, L: StepLayout, name: str):
     ops = ss._CasadiOps(ss._expanded(fns), L.nx, n, h)
     c, m_raw = ca.MX.sym("c", CL.nc), ca.MX.sym("m", L.nm)
     r, p, gains = ca.MX.sym("r", 5 * n), ca.MX.sym("p", n_par), ca.MX.sym("gains", n_gains)
-    K_nom = None
-    # the predictor's q_m = q + K_nom^-1 tau_J (a nonlinear spring predicts through psi^-1 instead); no
-    # prediction, no K_nom (a harmonic-drive model has no K_i)
-    if L.sensing != "state" and L.predict and not L.nominal_spring:
-        K_nom = ops.take(p, stiffness_indices(model)[0])
     b = CL.split(c)
     m_k, filt_next, venc_next = ss._condition(ops, L, _blocks(m_raw, L), b["venc"], b["filt"])
-    m_used, m_buf_next = ss._delayed(ops, ops, L, m_k, b["m_buf"], b["u_buf"], p, K_nom)
+    m_used, m_buf_next = ss._delayed(ops, ops, L, m_k, b["m_buf"], b["u_buf"], p)
     law = _RuntimeLaw(controller, p, gains)
     out = law.evaluate(m_used, b["z"], r)
     u_law = out["u"]
@@ -208,13 +204,8 @@ def _reset_function(model, L: StepLayout, CL: ControllerLayout, name: str, ops):
     if L.filtered:
         parts[ss._slot(L, "dtau_J")] = zero
     m_rest = ca.vertcat(*parts)
-    if L.sensing != "state":                  # the measured tau_J holds the arm
-        spring = parts[ss._slot(L, "tau_J")]
-    elif getattr(model, "spring_functions", None) is not None:
-        spring = ops.spring(parts[2] - parts[0], p)[0]
-    else:
-        idx = stiffness_indices(model)[0]
-        spring = ops.take(p, idx) * (parts[2] - parts[0])
+    # the measured tau_J holds the arm; state sensing: the spring law at the read deflection
+    spring = parts[ss._slot(L, "tau_J")] if L.sensing != "state" else ops.spring(parts[2] - parts[0], p)[0]
     out = [ca.MX.zeros(L.nz, 1)] if L.nz else []
     if L.delay:
         out += [ca.repmat(m_rest, L.delay, 1), ca.repmat(spring, L.delay, 1)]

@@ -31,7 +31,7 @@ from typing import NamedTuple, Optional
 import numpy as np
 
 from ..control.references import Reference
-from ..drives import drive_indices, spring_laws
+from ..drives import drive_indices, model_springs, spring_laws
 from ..validation import FjmValueError
 
 __all__ = ["FourierReference", "Excitation", "Limits", "design_excitation", "joint_conditions", "limits_of",
@@ -176,33 +176,31 @@ def link_jets(model, R: np.ndarray, p) -> tuple:
 
 
 def drive_parameters(model, p) -> dict:
-    """The motor and spring values of ``p`` (``model.drives``): ``J_m``, ``B_m`` (n,), and ``K`` (n,) or,
-    for a one-joint cubic spring, ``k1``, ``k3`` (1,)."""
+    """The motor values of ``p`` (``model.drives``): ``J_m``, ``B_m``, each (n,).
+
+    Raises
+    ------
+    FjmValueError
+        A spring law the identification's regressors do not cover (linear or one-joint cubic).
+    """
     p = np.asarray(p, dtype=float)
-    out = {"J_m": p[drive_indices(model, "rotor_inertia")], "B_m": p[drive_indices(model, "damping")]}
     laws = spring_laws(model)
-    if laws == ("cubic",):
-        out["k1"], out["k3"] = (p[[i]] for i in model.drives[0].spring)
-    elif set(laws) == {"linear"}:
-        out["K"] = p[drive_indices(model, "stiffness")]
-    else:
+    if laws != ("cubic",) and set(laws) != {"linear"}:
         raise FjmValueError(f"excite: {model.name} has spring laws {sorted(set(laws))}; expected a reduced model "
                             "with a linear or cubic spring")
-    return out
+    return {"J_m": p[drive_indices(model, "rotor_inertia")], "B_m": p[drive_indices(model, "damping")]}
 
 
-def _deflection(drive: dict, tau, dtau, ddtau):
-    """``phi, phi', phi''`` with ``psi(phi) = tau``: linear ``K phi``, or cubic ``k1 phi + k3 phi^3``."""
-    if "K" in drive:
-        K = drive["K"]
-        return tau / K, dtau / K, ddtau / K
-    k1, k3 = drive["k1"], drive["k3"]
-    phi = tau / k1
-    for _ in range(40):                                 # psi' >= k1 > 0: monotone, Newton converges
-        phi = phi - (k1 * phi + k3 * phi ** 3 - tau) / (k1 + 3 * k3 * phi ** 2)
-    d1 = k1 + 3 * k3 * phi ** 2
+def _deflection(model, p, tau, dtau, ddtau):
+    """``phi, phi', phi''``, each (N, n), with ``psi(phi) = tau`` by the model's spring law: ``phi = psi^-1(tau)``,
+    ``phi' = tau' / psi'(phi)``, ``phi'' = (tau'' - psi''(phi) phi'^2) / psi'(phi)`` (``tau`` and its rates (N, n))."""
+    fns = model_springs(model)
+    N = tau.shape[0]
+    P = np.repeat(np.asarray(p, dtype=float)[:, None], N, axis=1)
+    phi = np.asarray(fns["spring_inverse"].map(N)(tau.T, P)).T
+    _, d1, d2 = (np.asarray(v).T for v in fns["spring"].map(N)(phi.T, P))
     dphi = dtau / d1
-    return phi, dphi, (ddtau - 6 * k3 * phi * dphi ** 2) / d1
+    return phi, dphi, (ddtau - d2 * dphi ** 2) / d1
 
 
 def nominal_motion(model, ref: FourierReference, t, p) -> dict:
@@ -211,7 +209,7 @@ def nominal_motion(model, ref: FourierReference, t, p) -> dict:
     R = ref.sample(t)
     tau, dtau, ddtau = link_jets(model, R, p)
     drive = drive_parameters(model, p)
-    phi, dphi, ddphi = _deflection(drive, tau, dtau, ddtau)
+    phi, dphi, ddphi = _deflection(model, p, tau, dtau, ddtau)
     q, dq, ddq = R[:, 0], R[:, 1], R[:, 2]
     qm, dqm, ddqm = q + phi, dq + dphi, ddq + ddphi
     u = drive["J_m"] * ddqm + drive["B_m"] * dqm + tau
@@ -352,7 +350,7 @@ def design_excitation(model, duration: float, *, q0=None, amplitude: float = 0.5
     rate : float
         Sample rate of the log, Hz.
     cubic : bool, optional
-        Rate the cubic spring column ``phi^3`` (default: the model has ``k1, k3``).
+        Rate the cubic spring column ``phi^3`` (default: the model's spring is cubic).
 
     Raises
     ------
@@ -371,7 +369,7 @@ def design_excitation(model, duration: float, *, q0=None, amplitude: float = 0.5
                                                   np.where(np.isfinite(pos), pos, 0.0).mean(axis=1), 0.0)
     q0 = np.asarray(q0, dtype=float).reshape(n)
     periods, f0, per = whole_periods(duration, base_freq, rate)
-    cubic = ({"k1", "k3"} <= set(model.param_names)) if cubic is None else bool(cubic)
+    cubic = (spring_laws(model) == ("cubic",)) if cubic is None else bool(cubic)
     search = _Search(model, q0, limits_of(model, q0, amplitude), 2 * np.pi * f0, min(per, SEARCH_SAMPLES), v_c, cubic)
     rng = np.random.default_rng(seed)
     decay = np.arange(1, harmonics + 1, dtype=float)

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .step_layout import stiffness_indices
+from ..drives import model_springs
 
 __all__ = ["rest_state"]
 
@@ -36,11 +36,7 @@ def rest_state(model, q, p) -> np.ndarray:
     # the reduced model's inertia is the links' D (n, n); a complete model's couples links and motors (2n, 2n)
     acc = f[n:2 * n] if M.shape[0] == n else np.concatenate([f[n:2 * n], f[3 * n:4 * n]])
     G = -(M @ acc)[:n]
-    springs = getattr(model, "spring_functions", None)
-    if springs is not None:  # a nonlinear spring: the deflection that carries G, psi^-1(G)
-        phi = springs["spring_inverse"](G, np.asarray(model.params_array(p), dtype=float))
-        x[2 * n:3 * n] = q + np.asarray(phi, dtype=float).ravel()
-        return x
-    K = np.asarray(model.params_array(p), dtype=float)[stiffness_indices(model)[0]]
-    x[2 * n:3 * n] = q + G / K
+    # the deflection that carries G: psi^-1(G) of the model's spring law (G / K for a linear one)
+    phi = model_springs(model)["spring_inverse"](G, np.asarray(model.params_array(p), dtype=float))
+    x[2 * n:3 * n] = q + np.asarray(phi, dtype=float).ravel()
     return x

@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..drives import model_springs
 from ..validation import FjmValueError
 from .sensor import SensorModel, measurement_blocks, offset_normals
 from .step import casadi_functions
@@ -64,13 +65,13 @@ class _NumpyOps:
     const = staticmethod(lambda a: np.asarray(a, dtype=float))
 
     def spring(self, phi, p):
-        """``(psi(phi), psi'(phi))`` of the model's nonlinear spring, each shape (n,)."""
-        out = self.model.spring_functions["spring"](np.asarray(phi, dtype=float), np.asarray(p, dtype=float))
+        """``(psi(phi), psi'(phi))`` of the model's spring law, each shape (n,)."""
+        out = model_springs(self.model)["spring"](np.asarray(phi, dtype=float), np.asarray(p, dtype=float))
         return tuple(np.asarray(v, dtype=float).reshape(-1) for v in out[:2])
 
     def spring_inverse(self, tau, p):
         """``phi_J = psi^-1(tau)``, shape (n,)."""
-        fn = self.model.spring_functions["spring_inverse"]
+        fn = model_springs(self.model)["spring_inverse"]
         return np.asarray(fn(np.asarray(tau, dtype=float), np.asarray(p, dtype=float)), dtype=float).reshape(-1)
 
 
@@ -130,28 +131,17 @@ def _slot(L: StepLayout, signal: str) -> int:
     return measurement_blocks(L.sensing).index(signal)
 
 
-def _measure(ops, L: StepLayout, x, K, p=None):
-    """The measurement of ``x`` (state: x; torque: [q; dq; K(q_m - q); K(dq_m - dq); dq_m];
-    full: [q; dq; q_m; dq_m; K(q_m - q); K(dq_m - dq)]).
-
-    ``K`` None (torque or full sensing): the nonlinear spring of ``ops``'s model at parameters ``p``,
-    ``psi(q_m - q)`` and ``psi'(q_m - q) (dq_m - dq)`` in the tau_J and dtau_J slots.
-    """
+def _measure(ops, L: StepLayout, x, p):
+    """The measurement of ``x`` with the spring law of ``ops``'s model at parameters ``p``: state sensing ``x``;
+    torque ``[q; dq; psi(q_m - q); psi'(q_m - q) (dq_m - dq); dq_m]``; full ``[q; dq; q_m; dq_m; psi; psi' (dq_m
+    - dq)]`` (``K (q_m - q)``, ``K (dq_m - dq)`` for a linear spring)."""
     if L.sensing == "state":
         return x
     n = L.n
     q, dq, qm, dqm = x[0:n], x[n:2 * n], x[2 * n:3 * n], x[3 * n:4 * n]
-    if K is None:
-        psi, dpsi = ops.spring(qm - q, p)
-        tau, dtau = psi, dpsi * (dqm - dq)
-    else:
-        tau, dtau = K * (qm - q), K * (dqm - dq)
+    psi, dpsi = ops.spring(qm - q, p)
+    tau, dtau = psi, dpsi * (dqm - dq)
     return ops.cat([q, dq, qm, dqm, tau, dtau] if L.sensing == "full" else [q, dq, tau, dtau, dqm])
-
-
-def _plant_K(ops, L: StepLayout, p):
-    """The plant's ``K`` for :func:`_measure` (None: a nonlinear spring, or state sensing)."""
-    return ops.take(p, L.idx_K) if L.sensing != "state" and not L.nonlinear_spring else None
 
 
 def _quantize(ops, v, step: float):
@@ -173,7 +163,7 @@ def _reading(ops, L: StepLayout, w, noise, p):
     """
     n = L.n
     x = w[0:L.nx]
-    m = _measure(ops, L, x, _plant_K(ops, L, p), p) + noise
+    m = _measure(ops, L, x, p) + noise
     parts = [m[b * n:(b + 1) * n] for b in range(L.nm // n)]
     parts[0] = _quantize(ops, parts[0], L.q_quant)
     if L.sensing != "torque":  # the motor angle is read in its own slot
@@ -230,44 +220,34 @@ def _plant(ops, L: StepLayout, x, u, p):
     return x
 
 
-def _predict(nom_ops, L: StepLayout, m_old, u_buf, p_nom, K_nom=None):
-    """The measurement predicted ``d`` samples ahead from ``m_old`` with the controller's NOMINAL model.
-
-    ``K_nom``: the nominal stiffnesses (torque sensing; default the layout's constants ``L.K_nom``).
-    """
+def _predict(nom_ops, L: StepLayout, m_old, u_buf, p_nom):
+    """The measurement predicted ``d`` samples ahead from ``m_old`` with the controller's NOMINAL model
+    (torque sensing: ``q_m = q + psi^-1(tau_J)`` by its spring law at ``p_nom``)."""
     n = L.n
-    K = None
     if L.sensing == "state":
         x = m_old
-    elif L.sensing == "full":  # the state is read: only the prediction's own measurement needs K_nom (or psi)
+    elif L.sensing == "full":  # the state is read: only the prediction's own measurement needs psi
         x = m_old[0:4 * n]
-        if not L.nominal_spring:
-            K = nom_ops.const(L.K_nom) if K_nom is None else K_nom
     else:
         q, dq, tau, dqm = m_old[0:n], m_old[n:2 * n], m_old[2 * n:3 * n], m_old[4 * n:5 * n]
-        if L.nominal_spring:
-            phi = nom_ops.spring_inverse(tau, p_nom)
-        else:
-            K = nom_ops.const(L.K_nom) if K_nom is None else K_nom
-            phi = tau / K
-        x = nom_ops.cat([q, dq, q + phi, dqm])
+        x = nom_ops.cat([q, dq, q + nom_ops.spring_inverse(tau, p_nom), dqm])
     x_old = x
     for j in range(L.delay):
         x = _plant(nom_ops, L, x, u_buf[j * n:(j + 1) * n], p_nom)
     if L.sensing == "full":
         # the reading plus the nominal model's predicted CHANGE: the torque keeps the sensor's scale (a torque
         # from K_nom (q_m - q) would scale the law's torque feedback by K_nom / K: -0.7 became -1 at K x0.7)
-        return m_old + _measure(nom_ops, L, x, K, p_nom) - _measure(nom_ops, L, x_old, K, p_nom)
-    return _measure(nom_ops, L, x, K, p_nom)
+        return m_old + _measure(nom_ops, L, x, p_nom) - _measure(nom_ops, L, x_old, p_nom)
+    return _measure(nom_ops, L, x, p_nom)
 
 
-def _delayed(ops, nom_ops, L: StepLayout, m_k, buf, u_buf, p_nom, K_nom=None):
+def _delayed(ops, nom_ops, L: StepLayout, m_k, buf, u_buf, p_nom):
     """The delay buffer and the prediction: ``(m_used, m_buf_next)`` (``buf``, ``u_buf`` the buffers)."""
     if L.delay == 0:
         return m_k, buf
     m_old = buf[0:L.nm]
     m_buf_next = ops.cat([buf[L.nm:], m_k]) if L.delay > 1 else m_k
-    m_used = _predict(nom_ops, L, m_old, u_buf, p_nom, K_nom) if L.predict else m_old
+    m_used = _predict(nom_ops, L, m_old, u_buf, p_nom) if L.predict else m_old
     return m_used, m_buf_next
 
 
@@ -385,8 +365,8 @@ def casadi_sample_step(fns, controller, L: StepLayout, n_par: int, nominal_fns=N
 
 
 def _expanded(fns):
-    """``f`` and ``g`` (and a nonlinear spring's ``spring``, ``spring_inverse``) as SX Functions (MX ones
-    expanded) so that each substep is one call."""
+    """``f``, ``g``, ``spring`` and ``spring_inverse`` as SX Functions (MX ones expanded) so that each substep
+    is one call."""
     out = {}
     for k in ("f", "g", "spring", "spring_inverse"):
         if k not in fns:
@@ -413,9 +393,10 @@ def initial_step_state(model, L: StepLayout, x0, z0, p_true, seed: int = 0, sens
     ops = _NumpyOps(model)
     n = L.n
     x0 = np.asarray(x0, dtype=float)
-    m0 = np.asarray(_measure(ops, L, x0, _plant_K(ops, L, p_true), p_true), dtype=float)
+    m0 = np.asarray(_measure(ops, L, x0, p_true), dtype=float)
     parts = [x0, z0]
-    spring = _spring_torque(model, x0, p_true)
+    # the spring torque that holds x0 (delay buffer, rate limit's last torque)
+    spring = ops.spring(x0[2 * n:3 * n] - x0[:n], p_true)[0] if (L.delay or L.rate_step) else None
     if L.delay:
         parts += [np.tile(m0, L.delay), np.tile(spring, L.delay)]
     if L.filtered:
@@ -431,23 +412,10 @@ def initial_step_state(model, L: StepLayout, x0, z0, p_true, seed: int = 0, sens
     return ops.cat(parts)
 
 
-def _spring_torque(model, x, p) -> np.ndarray:
-    """``K (q_m - q)`` (or ``psi(q_m - q)``) of the plant at ``x``, shape (n,) (zero for a model without
-    the K parameters and without a nonlinear spring)."""
-    n = int(model.n)
-    if getattr(model, "spring_functions", None) is not None:
-        return _NumpyOps(model).spring(x[2 * n:3 * n] - x[0:n], p)[0]
-    try:
-        idx = stiffness_indices(model)[0]
-    except FjmValueError:
-        return np.zeros(n)
-    return np.asarray(p, dtype=float)[idx] * (x[2 * n:3 * n] - x[0:n])
-
-
 def initial_measurement(model, L: StepLayout, x0, p_true) -> np.ndarray:
     """The noise-free measurement of ``x0`` (what the controller's ``initial_state`` is given)."""
     ops = _NumpyOps(model)
-    return np.asarray(_measure(ops, L, np.asarray(x0, dtype=float), _plant_K(ops, L, p_true), p_true), dtype=float)
+    return np.asarray(_measure(ops, L, np.asarray(x0, dtype=float), p_true), dtype=float)
 
 
 def sample_step_function(model, controller, L: StepLayout, outline: bool = False):
@@ -462,9 +430,10 @@ def sample_step_function(model, controller, L: StepLayout, outline: bool = False
     if L.predict and nominal is not model and nominal_fns is None:
         raise FjmValueError(f"predict: the controller's model {getattr(nominal, 'name', nominal)!r} has no CasADi "
                             "Functions to predict with")
-    if nominal_fns is not None:
-        nominal_fns.update(getattr(nominal, "spring_functions", None) or {})
-    fns = dict(casadi_functions(model), **(getattr(model, "spring_functions", None) or {}))
+    torque = L.sensing != "state"  # only a torque (or full) sensor and its predictor evaluate the spring law
+    if nominal_fns is not None and torque:
+        nominal_fns.update(model_springs(nominal))
+    fns = dict(casadi_functions(model), **(model_springs(model) if torque else {}))
     return casadi_sample_step(fns, controller, L, len(model.param_names), nominal_fns, outline=outline)
 
 

@@ -76,19 +76,6 @@ class StepLayout:
     a_filter : float
         ``1 - exp(-dtau_cutoff T)``.
     q_quant, q_m_quant : float
-    idx_K : tuple of int
-        Where ``K_i`` sit in the PLANT's parameter vector (the torque sensor measures the true spring).
-    K_nom : tuple of float
-        The controller's nominal ``K_i`` (the predictor's ``q_m = q + K_nom^-1 tau_J``).
-    nonlinear_spring : bool
-        Torque sensing of a PLANT with a nonlinear spring (``link1_hd``, ``arm1_hd``): the sensor
-        measures ``psi(q_m - q)`` and ``psi'(q_m - q) (dq_m - dq)`` with the plant's parameters (its
-        ``spring`` Function); ``idx_K`` is then empty.
-    nominal_spring : bool
-        Prediction with torque sensing by a controller whose model has a nonlinear spring: the
-        predictor reconstructs ``q_m = q + psi^-1(tau_J)`` and measures its prediction with the
-        controller's model and NOMINAL parameters (``spring_inverse``, ``spring``); ``K_nom`` is then
-        empty. A controller built on a linear model keeps ``q_m = q + K_nom^-1 tau_J`` on any plant.
     differentiated : bool
         Velocities as filtered differences of the measured angles; ``venc = [q_prev; dq; q_m_prev;
         dq_m]`` (4n), else empty.
@@ -118,15 +105,11 @@ class StepLayout:
     a_filter: float
     q_quant: float
     q_m_quant: float
-    idx_K: tuple
-    K_nom: tuple
     differentiated: bool = False
     a_velocity: float = 0.0
     offset: bool = False
     rate_step: tuple = ()
     integral: bool = False
-    nonlinear_spring: bool = False
-    nominal_spring: bool = False
 
     @property
     def n_venc(self) -> int:
@@ -160,15 +143,6 @@ def make_layout(model, controller, T: float, substeps: int, sensor: SensorModel,
         raise FjmValueError(f"controller.sensing = {sensing!r}: expected 'state', 'torque' or 'full'")
     torque = sensing != "state"  # torque or full: the sensor measures the spring
     predicting = bool(predict and delay > 0)
-    nonlinear = torque and getattr(model, "spring_functions", None) is not None
-    nominal_spring = torque and predicting and \
-        getattr(controller_model(controller, model), "spring_functions", None) is not None
-    idx_K = stiffness_indices(model)[0] if torque and not nonlinear else np.zeros(0, dtype=int)
-    K_nom = ()
-    if torque and predicting and not nominal_spring:
-        nominal = controller_model(controller, model)
-        p_nom = np.asarray(getattr(controller, "p_nom", nominal.params_array({})), dtype=float)
-        K_nom = tuple(float(v) for v in p_nom[stiffness_indices(nominal)[0]])
     rate = sensor.rate_limits(n)
     rate_step = tuple(float(r * T) if np.isfinite(r) else _NO_LIMIT for r in rate) \
         if sensor.has_rate_limit() else ()
@@ -176,13 +150,12 @@ def make_layout(model, controller, T: float, substeps: int, sensor: SensorModel,
                       nm={"state": 4, "torque": 5, "full": 6}[sensing] * n, delay=int(delay), predict=predicting,
                       filtered=torque and sensor.dtau_mode == "filtered", T=float(T), substeps=int(substeps),
                       a_filter=1.0 - math.exp(-sensor.dtau_cutoff * T), q_quant=sensor.q_quant,
-                      q_m_quant=sensor.q_m_quant, idx_K=tuple(int(i) for i in idx_K), K_nom=K_nom,
+                      q_m_quant=sensor.q_m_quant,
                       differentiated=sensor.velocity_mode == "differentiated",
                       a_velocity=1.0 - math.exp(-sensor.velocity_cutoff * T),
                       offset=torque and bool(np.any(sensor.offsets(n) > 0)), rate_step=rate_step,
                       integral=bool(rate_step) and str(_law_kind(controller)).split("_")[0] in INTEGRAL_LAWS
-                      and int(getattr(controller, "n_states", 0)) >= n, nonlinear_spring=nonlinear,
-                      nominal_spring=nominal_spring)
+                      and int(getattr(controller, "n_states", 0)) >= n)
 
 
 #: Laws whose first ``n`` controller states integrate the tracking error (``e1 = q - q_d``; the impedance

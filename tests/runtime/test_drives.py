@@ -89,3 +89,26 @@ def test_a_manifest_without_drives_loads_and_says_what_to_do(tmp_path):
     assert m.params_array()[m.param_names.index("K")] == 150.0
     with pytest.raises(FjmValueError, match="re-run make derive"):
         m.drives
+
+
+@pytest.mark.parametrize("name", ("link1", "panda", "panda_complete", "link1_hd", "arm1_hd", "panda_hd"))
+def test_every_model_emits_its_spring_law(name):
+    """spring(phi, p) -> (psi, psi', psi''): psi' and psi'' are psi's central differences, spring_inverse
+    undoes psi, and a linear spring is psi = K phi with K at the drive table's index."""
+    from fjm_runtime.drives import model_springs
+    m = fjm_runtime.load(name)
+    fns = model_springs(m)
+    p = m.params_array()
+    phi = np.linspace(-4e-3, 5e-3, m.n) if m.n > 1 else np.array([2e-3])
+    psi, d1, d2 = (np.asarray(v, dtype=float).ravel() for v in fns["spring"](phi, p))
+    h = 1e-7
+    up, dn = (np.asarray(fns["spring"](phi + s * h, p)[0], dtype=float).ravel() for s in (1, -1))
+    np.testing.assert_allclose(d1, (up - dn) / (2 * h), rtol=1e-6)
+    h2 = 1e-9  # the three-segment blends are narrow: psi'' changes over micro-radians
+    d1_up, d1_dn = (np.asarray(fns["spring"](phi + s * h2, p)[1], dtype=float).ravel() for s in (1, -1))
+    np.testing.assert_allclose(d2, (d1_up - d1_dn) / (2 * h2), rtol=1e-3, atol=1e-3 * np.max(np.abs(d1)))
+    np.testing.assert_allclose(np.asarray(fns["spring_inverse"](psi, p), dtype=float).ravel(), phi, rtol=1e-12,
+                               atol=1e-15)
+    if all(d.spring_law == "linear" for d in m.drives):
+        K = p[drive_indices(m, "stiffness")]
+        assert np.array_equal(psi, K * phi) and np.array_equal(d1, K) and not d2.any()

@@ -22,6 +22,8 @@ from typing import Dict, Optional, Tuple
 
 import numpy as np
 
+from ...drives import model_springs
+
 __all__ = ["stiffness_interval"]
 
 
@@ -56,10 +58,10 @@ def stiffness_interval(model, box: Dict[str, Tuple[float, float]], p_nom: np.nda
         per joint, and ``outside``: a one-line reason when a deflection leaves the declared range or
         ``psi' <= 0`` somewhere on the box (empty otherwise).
     """
-    fns = getattr(model, "spring_functions", None)
-    if fns is None:
+    drives = getattr(model, "drives", None)
+    if drives is None or all(d.spring_law == "linear" for d in drives):  # a constant K: no interval to report
         return None
-    spring = fns["spring"]
+    spring = model_springs(model)["spring"]
     declared = _declared_ranges(model)
     names = list(model.param_names)
     spring_names = sorted({p for j in (model.manifest["springs"]["joints"]) for p in j["parameters"]})

@@ -35,8 +35,9 @@ from typing import Optional, Sequence
 
 import numpy as np
 
+from ...drives import model_springs
 from ...sim.sample_step import initial_step_state, sample_step_function
-from ...sim.step_layout import make_layout, stiffness_indices
+from ...sim.step_layout import make_layout
 from ...sim.step_layout import spring_scale_groups
 from ...sim.sensor import SIGNALS, noise_slots
 from ...validation import FjmValueError
@@ -375,14 +376,9 @@ def respring(model, x, p_from, p_to) -> np.ndarray:
     same under ``p_to`` as under ``p_from``."""
     n = int(model.n)
     x = np.asarray(x, dtype=float).copy()
-    springs = getattr(model, "spring_functions", None)
-    if springs is not None:
-        tau = np.asarray(springs["spring"](x[2 * n:3 * n] - x[0:n], np.asarray(p_from, dtype=float))[0]).ravel()
-        x[2 * n:3 * n] = x[0:n] + np.asarray(springs["spring_inverse"](tau, np.asarray(p_to, dtype=float))).ravel()
-        return x
-    iK = stiffness_indices(model)[0]
-    ratio = np.asarray(p_from, dtype=float)[iK] / np.asarray(p_to, dtype=float)[iK]
-    x[2 * n:3 * n] = x[0:n] + (x[2 * n:3 * n] - x[0:n]) * ratio
+    springs = model_springs(model)
+    tau = np.asarray(springs["spring"](x[2 * n:3 * n] - x[0:n], np.asarray(p_from, dtype=float))[0]).ravel()
+    x[2 * n:3 * n] = x[0:n] + np.asarray(springs["spring_inverse"](tau, np.asarray(p_to, dtype=float))).ravel()
     return x
 
 

@@ -48,7 +48,7 @@ def test_torque_sensor_measures_the_true_nonlinear_spring(hd):
     p_true = hd.params_array(true)
     spy = Spy(_law(hd))                                          # nominal k1 = 75, k3 = 2500
     L = make_layout(hd, spy, 1e-3, 4, SensorModel.ideal(), 0, False)
-    assert L.nonlinear_spring and L.idx_K == ()
+    assert L.nm == 5                                             # torque sensing: [q; dq; tau_J; dtau_J; dq_m]
     x = np.array([0.3, -0.2, 0.5, 0.7])                          # phi = 0.2: the cubic term matters
     w = initial_step_state(hd, L, x, np.zeros(L.nz), p_true)
     python_sample_step(hd, spy, L, w, 0.0, np.zeros(5), np.zeros(L.nm), p_true)
@@ -68,7 +68,6 @@ def test_predictor_uses_the_controllers_spring_with_nominal_parameters(hd, nomin
     spy = Spy(_law(ctrl_model))
     T, subs = 1e-3, 3
     L = make_layout(hd, spy, T, subs, SensorModel.ideal(), 1, True)
-    assert L.nominal_spring == (nominal_model == "link1_hd")
     x0 = np.array([0.1, 0.4, 0.25, -0.3])
     w = initial_step_state(hd, L, x0, np.zeros(L.nz), p_true)
     u_prev = np.array([4.0])
