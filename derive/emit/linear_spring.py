@@ -17,6 +17,7 @@ from typing import Dict, List
 import casadi as ca
 
 from ..core.model_base import FlexibleJointModel
+from .functions import operation_count
 
 __all__ = ["linear_spring_functions", "linear_springs_entry", "SPRING_MEANINGS"]
 
@@ -40,9 +41,13 @@ def linear_spring_functions(m: FlexibleJointModel, drives: List[dict]) -> Dict[s
                                           ["phi_J"])}
 
 
-def linear_springs_entry(drives: List[dict], files: Dict[str, dict]) -> dict:
+def linear_springs_entry(drives: List[dict], springs: Dict[str, ca.Function], sizes: Dict[str, int]) -> dict:
     """The manifest's ``springs`` of a linear model: per joint its law and parameter, the inverse's
-    method, and ``files`` (name -> ``casadi_file``, ``meaning``, ``inputs``, ``operations``, ``casadi_bytes``)."""
+    method, and per Function of ``springs`` its ``casadi_file``, ``meaning``, ``inputs``, ``operations`` and
+    ``casadi_bytes`` (``sizes``: the written files' byte sizes by name)."""
+    files = {name: {"casadi_file": f"{name}.casadi", "meaning": SPRING_MEANINGS[name], "inputs": [arg, "p"],
+                    "operations": operation_count(springs[name]), "casadi_bytes": sizes[name]}
+             for name, arg in (("spring", "phi"), ("spring_inverse", "tau_J"))}
     return {"joints": [{"joint": d["joint"], "law": "linear", "psi": f"{d['spring']['parameters'][0]} phi",
                         "phi": "q_m - q", "parameters": list(d["spring"]["parameters"])} for d in drives],
             "inverse": {"method": "exact"},

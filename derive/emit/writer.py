@@ -327,10 +327,8 @@ def write_model(lin: Linearization, outdir: Path,
         **({"source": m.source} if m.source is not None else {}),  # URDF-built models only
         **(m.robot_facts or {}),  # "limits" and "task" of the robot's files
         **({"form": "complete", "reduced_model": m.reduced_model} if complete else {}),
-        "n": m.n,
-        "nx": 4 * m.n,
-        "parameters": parameter_entries(m, drives),
-        "drives": drives,
+        "n": m.n, "nx": 4 * m.n,
+        "parameters": parameter_entries(m, drives), "drives": drives,
         "arguments": argument_layout(lin),
         "functions": {
             name: {
@@ -346,10 +344,7 @@ def write_model(lin: Linearization, outdir: Path,
         **({} if complete else _control_entries(m, controls, control_ops, sizes)),
         **({} if complete else _torque_entries(m, controls, control_ops, sizes)),
         **({} if ff is None else {"feedforward": ff[2]}),
-        **({"springs": linear_springs_entry(drives, {
-            name: {"casadi_file": f"{name}.casadi", "meaning": SPRING_MEANINGS[name], "inputs": [arg, "p"],
-                   "operations": operation_count(springs[name]), "casadi_bytes": sizes[name]}
-            for name, arg in (("spring", "phi"), ("spring_inverse", "tau_J"))})} if springs else {}),
+        **({"springs": linear_springs_entry(drives, springs, sizes)} if springs else {}),
         "c_sources": {fname: len((outdir / fname).read_bytes()) for fname in sorted(sources)},
         "tools": versions,
         "derivation_seconds": "not stored here (would break byte-identity); see build/derive-timings.json",
