@@ -29,6 +29,7 @@ law's own check (``psi' > 0`` on the range, breakpoints in order) is reported at
 
 from __future__ import annotations
 
+import math
 from typing import Dict, List, Optional, Sequence, Tuple
 
 from ..core.domains import FRICTION_DOMAINS, SPRING_DOMAINS
@@ -40,6 +41,8 @@ __all__ = ["DRIVE_TABLES", "SpringSpec", "parse_spring_table", "parse_friction_t
            "SPRING_COEFFICIENTS", "FRICTION_COEFFICIENTS"]
 
 DRIVE_TABLES = ("spring", "friction")
+#: Largest declared deflection range of a spring, rad (the linear law's default).
+MAX_DEFLECTION = math.pi
 
 #: The bound each coefficient must meet in a file (``number``'s kinds; ``"any"``: none).
 _BOUNDS = {**SPRING_DOMAINS, **FRICTION_DOMAINS}
@@ -105,7 +108,9 @@ def _spring_spec(table: dict, chk: Checker, where, line_path) -> SpringSpec:
     if "range" not in table and law != "linear":
         raise chk.fail(where("range"), "missing required key: the declared deflection range in rad "
                                        "(|q_m - q| <= range; psi' > 0 is checked on it)", line_path=line_path)
-    rng = number(chk, where("range"), table.get("range", 3.141592653589793), "rad", ">0", "the deflection range")
+    rng = number(chk, where("range"), table.get("range", math.pi), "rad", ">0", "the deflection range",
+                 top=(MAX_DEFLECTION, "pi: a spring deflected half a turn is broken; a harmonic drive deflects "
+                                      "~0.01 rad"))
     values = {}
     for key, (unit, bound, meaning) in coefficients.items():
         if key not in table:
@@ -132,6 +137,10 @@ def _friction(table: dict, chk: Checker, where, line_path) -> Dict[str, float]:
     for key, (unit, bound, meaning, default) in FRICTION_COEFFICIENTS.items():
         default = out["F_c"] if key == "F_s" else default
         out[key] = number(chk, where(key), table.get(key, default), unit, bound, meaning)
+    if out["F_s"] < out["F_c"]:
+        raise chk.fail(where("F_s"), f"{show(out['F_s'])} N m is below F_c = {show(out['F_c'])} N m: expected "
+                                     "F_s >= F_c (static friction at least the Coulomb level; F_s = F_c: no "
+                                     "Stribeck hump)")
     return out
 
 

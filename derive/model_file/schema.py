@@ -12,7 +12,7 @@ import difflib
 import json
 import math
 import re
-from typing import Optional
+from typing import Optional, Tuple
 
 from ..core.model_base import MODEL_NAMES
 from .toml_keys import BARE_KEY, KeyPath, locate_keys
@@ -151,8 +151,24 @@ def check_description(chk: Checker, description, path: KeyPath = ("model", "desc
                        f"{len(description)} characters; at most {MAX_DESCRIPTION} allowed")
 
 
-def number(chk: Checker, path: KeyPath, value, unit: str, kind: str, meaning: str) -> float:
-    """A finite number in ``unit``; ``kind`` ``">0"`` or ``">=0"`` bounds it (any other: no bound)."""
+#: Smallest non-zero magnitude of any value (a motor inertia of 1e-7 kg m^2 is small; below 1e-12 the
+#: derivation's products underflow the conditioning its checks need).
+SMALLEST = 1e-12
+#: Largest magnitude of a value by its SI unit, and why: beyond it no arm exists (and the derivation's
+#: numeric checks, an SVD among them, lose every digit: F_c = 1e300 ended in "SVD did not converge").
+PHYSICAL_MAX = {
+    "kg": (1e4, "10 t"), "m": (100.0, "100 m"), "kg m^2": (1e4, "a 10 t mass 1 m out"),
+    "N m/rad": (1e9, "stiffer than any drive by 100x"), "N m/rad^3": (1e12, "a cubic spring term"),
+    "N m s/rad": (1e6, "damping"), "N m": (1e6, "torque of the largest joints x 20"),
+    "N m/s": (1e9, "torque rate"), "m/s^2": (100.0, "10 g"), "rad": (4 * math.pi, "two turns"),
+    "rad/s": (1e4, "100000 rpm"), "1": (1e4, "gear ratio"), "s": (3600.0, "an hour"),
+}
+
+
+def number(chk: Checker, path: KeyPath, value, unit: str, kind: str, meaning: str,
+           top: Optional[Tuple[float, str]] = None) -> float:
+    """A finite number in ``unit``; ``kind`` ``">0"`` or ``">=0"`` bounds it below (any other: no bound), and
+    its magnitude lies in ``0`` or ``SMALLEST .. PHYSICAL_MAX[unit]`` (``top``: this key's own bound and why)."""
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise chk.fail(path, f"expected a number in {unit}, {got(value)}")
     value = float(value)
@@ -162,4 +178,9 @@ def number(chk: Checker, path: KeyPath, value, unit: str, kind: str, meaning: st
         raise chk.fail(path, f"{show(value)} {unit} is not physical: {meaning} must be > 0")
     if kind == ">=0" and not value >= 0:
         raise chk.fail(path, f"{show(value)} {unit} is not physical: {meaning} must be >= 0")
+    top, why = top or PHYSICAL_MAX.get(unit, (1e12, "SI units"))
+    if value != 0 and not SMALLEST <= abs(value) <= top:
+        zero, size = ("", meaning) if kind == ">0" else ("0 or ", meaning if kind == ">=0" else f"|{meaning}|")
+        raise chk.fail(path, f"{show(value)} {unit} is not physical: expected {zero}{SMALLEST:g} <= {size} <= "
+                             f"{top:.6g} {unit} ({why})")
     return value
