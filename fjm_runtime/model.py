@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 import os
+import shlex
 from functools import lru_cache
 from pathlib import Path
 from typing import Dict, List, Optional, Tuple
@@ -417,7 +418,8 @@ def load(name: str) -> Model:
 
 def command_name(model) -> str:
     """How ``model`` is named on the command line: its name where :func:`load` finds it by name (a built-in
-    or ``$FJM_GENERATED`` model), else the path of its directory (a user's derived model)."""
+    or ``$FJM_GENERATED`` model), else the path of its directory (a user's derived model), quoted for a
+    POSIX shell where it needs it (a space in the path)."""
     directory = getattr(model, "directory", None)
     name = str(getattr(model, "name", "MODEL"))
     if directory is None:
@@ -428,7 +430,7 @@ def command_name(model) -> str:
         found = None
     if found is not None and Path(found).resolve() == Path(directory).resolve():
         return name
-    return str(directory)
+    return shlex.quote(str(directory))
 
 
 def model_path(given) -> str:

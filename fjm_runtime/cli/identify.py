@@ -1,6 +1,7 @@
 """``fjm identify MODEL LOG --out params.toml``: the drives' parameters from a robot log (docs/identification.md)."""
 from __future__ import annotations
 
+import shlex
 from pathlib import Path
 
 from .models import MODEL_HELP
@@ -47,5 +48,5 @@ def run(args) -> int:
           f"{s['tau_J']}; filter {s['filter']}")
     print("\n".join(table_lines(ident)))
     ident.to_toml(args.out, m)
-    print(f"wrote {args.out} (fjm design {command_name(m)} --params {args.out})")
+    print(f"wrote {args.out} (fjm design {command_name(m)} --params {shlex.quote(str(args.out))})")
     return 0
