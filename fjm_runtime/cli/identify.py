@@ -12,6 +12,8 @@ __all__ = ["add_arguments", "run"]
 
 #: The smoothing window, s (the log must also hold it: checked on the log).
 WINDOW = Range(0, 60, "s", "window", lo_open=True)
+#: Share of a motor's RMS speed below which its windows are left out of the motor equation (stiction).
+REVERSAL = Range(0, 0.9, "", "share")
 
 
 def add_arguments(p) -> None:
@@ -29,6 +31,9 @@ def add_arguments(p) -> None:
                    help=f"Stribeck velocity, {VELOCITY} (default: the model's v_s where it has friction, else 0.1)")
     p.add_argument("--window", type=WINDOW, default=0.04,
                    help=f"zero-phase smoothing/differentiation window, {WINDOW} (default 0.04; shorter for fast, clean motors, longer for noisy encoders)")
+    p.add_argument("--reversal-share", type=REVERSAL, default=None,
+                   help=f"leave the motor equation's windows where |dq_m| drops below this share of its RMS out (dry "
+                        f"friction's stiction near a reversal), {REVERSAL}; 0 keeps all (default 0.1, 0 for stribeck)")
 
 
 def run(args) -> int:
@@ -42,7 +47,7 @@ def run(args) -> int:
     m = load(args.model)
     log = read_log(args.log, m)
     ident = identify(m, log, spring=args.spring, friction=args.friction, v_c=args.v_c, v_s=args.v_s,
-                     window=args.window)
+                     window=args.window, reversal_share=args.reversal_share)
     s = ident.settings
     print(f"{m.name}: {s['samples']} samples, {s['duration_s']:.3g} s at {s['rate_hz']:.4g} Hz; tau_J from the "
           f"{s['tau_J']}; filter {s['filter']}")

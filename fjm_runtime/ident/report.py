@@ -37,7 +37,8 @@ def params_toml(ident, model) -> str:
              f"{s['rate_hz']:.4g} Hz",
              f"# spring {s['spring']}, friction {s['friction']} (v_c {s['v_c']:g}, v_s {s['v_s']:g} rad/s), "
              f"tau_J from the {s['tau_J']}",
-             f"# filter: {s['filter']}"]
+             f"# filter: {s['filter']}; motor equation without the windows where |dq_m| < "
+             f"{s.get('reversal_share', 0):g} x its RMS (stiction)"]
     for key in ident.condition:
         lines.append(f"# {key}: condition {ident.condition[key]:.3g}, RMS residual {ident.residual[key]:.3g} N m")
     names = set(model.param_names)

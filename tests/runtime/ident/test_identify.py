@@ -185,3 +185,20 @@ def test_motor_angle_not_divided_by_the_gear_ratio_is_named(link1):
     assert ident.values["K"] < 0.1 * m.default_params["K"]
     assert any(w.startswith("K = ") and "the model's nominal" in w for w in ident.warnings), ident.warnings
     assert not any("moves" in w or "nominal" in w for w in identify(m, log, friction="viscous").warnings)
+
+
+def test_cli_reversal_share_keeps_every_row_at_0_and_is_refused_out_of_range(link1, tmp_path, capsys):
+    """fjm identify --reversal-share 0 fits the motor equation on every sample (the viscous-only, no-friction
+    link1 log: within 5 % as with the default); 1.5 is one line naming the flag and the range."""
+    from fjm_runtime.cli.main import main as fjm_main
+    from fjm_runtime.ident.log import write_log
+    m, true = link1
+    path = write_log(tmp_path / "log.csv", _sim_log(m, true, 4.0))
+    out = tmp_path / "p.toml"
+    assert fjm_main(["identify", "link1", str(path), "--out", str(out), "--reversal-share", "0"]) == 0
+    from fjm_runtime.analysis.search.draws import load_params_file
+    assert abs(load_params_file(out, m).overrides["J_m"] / true["J_m"] - 1) < 0.05
+    capsys.readouterr()
+    assert fjm_main(["identify", "link1", str(path), "--out", str(out), "--reversal-share", "1.5"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "--reversal-share" in err and "0.9" in err and "\n" not in err
