@@ -40,7 +40,8 @@ from ..validation import FjmValueError
 from .checks import gear_ratio_warnings, nominal_warnings
 from .linkeq import link_torque
 from .log import Log
-from .signals import consistent_kernels, held_torque, moving_rows, smooth_derivatives, white_noise, window_half
+from .signals import (consistent_kernels, held_torque, moving_rows, sample_velocity, smooth_derivatives, white_noise,
+                      window_half)
 from .uncertainty import INTERVAL_SIGMAS, combined, hac_covariance, systematic
 
 __all__ = ["Identification", "identify", "parameter_names", "friction_names", "SPRINGS", "FRICTIONS"]
@@ -222,18 +223,15 @@ def identify(model, log: Log, *, spring: Optional[str] = None, friction: str = "
     for nm, v in (("v_c", v_c), ("v_s", v_s), ("window", window)):
         if not (np.isfinite(v) and v > 0):
             raise FjmValueError(f"identify: {nm} = {v!r}; expected a finite value > 0")
-    reversal_share = (0.0 if friction == "stribeck" else REVERSAL_SHARE) if reversal_share is None else reversal_share
-    if not (np.isfinite(reversal_share) and 0.0 <= reversal_share < 1.0):
-        raise FjmValueError(f"identify: reversal_share = {reversal_share!r}; expected 0 <= value < 1")
+    reversal_share = _reversal_share(reversal_share, friction)
     spring_names, jm, bm = parameter_names(model, spring)
     dt, h = log.dt, window_half(log.dt, window)
     if log.t.size < 10 * (2 * h + 1):
         raise FjmValueError(f"{log.source}: {log.t.size} samples for a {2 * h + 1}-sample filter window; expected "
                             "a log at least 10 windows long (a shorter --window, or a longer log)")
-    sig = np.concatenate([log.q, log.q_m, held_torque(log.u)] + ([log.tau_J] if log.tau_J is not None else []),
-                         axis=1)
     kernels = consistent_kernels(h, dt)
-    S, dS, ddS = smooth_derivatives(sig, dt, h, kernels=kernels)
+    S, dS, ddS = smooth_derivatives(np.concatenate([log.q, log.q_m, held_torque(log.u)] + (
+        [log.tau_J] if log.tau_J is not None else []), axis=1), dt, h, kernels=kernels)
     n = log.n
     raw_phi, raw_qm = (log.q_m - log.q)[h:log.t.size - h], log.q_m[h:log.t.size - h]
     q, qm, u = S[:, :n], S[:, n:2 * n], S[:, 2 * n:3 * n]
@@ -250,15 +248,26 @@ def identify(model, log: Log, *, spring: Optional[str] = None, friction: str = "
                   f"({(2 * h + 1) * dt:.3g} s), {h} samples dropped at each end", "reversal_share": reversal_share})
     out.warnings += gear_ratio_warnings(log.q, log.q_m)
     gain = np.sum(kernels ** 2, axis=1)             # white noise's variance through value, rate, acceleration
+    v_sample = sample_velocity(log.q_m, dt)             # friction per sample, then filtered like the rest
     for i in range(n):
         fnames = friction_names(model, i)
+        fcols = [smooth_derivatives(c[:, None], dt, h, kernels=kernels)[0][:, 0]
+                 for c in _friction_columns(v_sample[:, i], friction, v_c, v_s)[0]]
         _identify_joint(out, i, q[:, i], qm[:, i], dqm[:, i], ddqm[:, i], u[:, i], tau[:, i], spring_names[i],
-                        jm[i], bm[i], friction, v_c, v_s, max_lag=2 * h + 1, offset=log.tau_J is not None,
+                        jm[i], bm[i], fcols, max_lag=2 * h + 1, offset=log.tau_J is not None,
                         phi_noise=white_noise(raw_phi[:, i]) * gain[0], friction_names=fnames,
                         reversal_share=reversal_share, motor_noise=white_noise(raw_qm[:, i]) * gain[[2, 1]])
         _hold_friction(out, model, friction, fnames, v_c, v_s)
     out.warnings += nominal_warnings({k: v for k, v in out.values.items() if k in model.parameter_info}, model)
     return out
+
+
+def _reversal_share(share: Optional[float], friction: str) -> float:
+    """``share``, checked (0 <= share < 1); None: :data:`REVERSAL_SHARE`, 0 for a Stribeck fit."""
+    share = (0.0 if friction == "stribeck" else REVERSAL_SHARE) if share is None else share
+    if not (np.isfinite(share) and 0.0 <= share < 1.0):
+        raise FjmValueError(f"identify: reversal_share = {share!r}; expected 0 <= value < 1")
+    return float(share)
 
 
 def friction_names(model, i: int) -> Tuple[str, str]:
@@ -270,12 +279,13 @@ def friction_names(model, i: int) -> Tuple[str, str]:
     return f"F_c{i + 1}", f"F_s{i + 1}"
 
 
-def _identify_joint(out: Identification, i: int, q, qm, dqm, ddqm, u, tau, spring_names, jm, bm, friction, v_c,
-                    v_s, max_lag: int, offset: bool, phi_noise: float = 0.0,
+def _identify_joint(out: Identification, i: int, q, qm, dqm, ddqm, u, tau, spring_names, jm, bm, fcols,
+                    max_lag: int, offset: bool, phi_noise: float = 0.0,
                     friction_names: Tuple[str, str] = ("F_c", "F_s"), reversal_share: float = 0.0,
                     motor_noise=(0.0, 0.0)) -> None:
-    """Joint ``i``'s spring and motor fits into ``out``. ``phi_noise``: the noise variance in the filtered
-    deflection; ``motor_noise``: in the filtered ``ddq_m`` and ``dq_m`` columns."""
+    """Joint ``i``'s spring and motor fits into ``out``. ``fcols``: the filtered friction columns (0, 1 or 2,
+    named by ``friction_names``); ``phi_noise``: the noise variance in the filtered deflection;
+    ``motor_noise``: in the filtered ``ddq_m`` and ``dq_m`` columns."""
     phi = qm - q
     cols = [phi] + ([phi ** 3] if len(spring_names) == 2 else [])
     noise_var = [phi_noise] + [0.0] * (len(cols) - 1) + ([0.0] if offset else [])
@@ -286,8 +296,7 @@ def _identify_joint(out: Identification, i: int, q, qm, dqm, ddqm, u, tau, sprin
         kinds.append("offset")
     fit_s = _fit(np.column_stack(cols), tau, snames, max_lag, noise_var)
     o = fit_s.values[-1] if offset else 0.0
-    fcols, fnames = _friction_columns(dqm, friction, v_c, v_s)
-    fnames = list(friction_names[:len(fnames)])
+    fnames = list(friction_names[:len(fcols)])
     rows = _motor_rows(out, i, dqm, max_lag // 2 + REVERSAL_MARGIN, reversal_share)
     fit_m = _fit(np.column_stack([ddqm, dqm] + fcols)[rows], (u - (tau - o))[rows], [jm, bm] + fnames, max_lag,
                  list(motor_noise) + [0.0] * len(fcols))

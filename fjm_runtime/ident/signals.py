@@ -17,7 +17,8 @@ import math
 
 import numpy as np
 
-__all__ = ["savgol_kernels", "consistent_kernels", "smooth_derivatives", "held_torque", "white_noise", "moving_rows",
+__all__ = ["savgol_kernels", "consistent_kernels", "smooth_derivatives", "held_torque", "sample_velocity",
+           "white_noise", "moving_rows",
            "window_half"]
 
 
@@ -76,6 +77,17 @@ def held_torque(u: np.ndarray) -> np.ndarray:
     """
     u = np.asarray(u, dtype=float)
     return np.concatenate([u[:1], 0.5 * (u[1:] + u[:-1])], axis=0)
+
+
+def sample_velocity(x: np.ndarray, dt: float, half: int = 5) -> np.ndarray:
+    """A lightly smoothed velocity at EVERY sample of the columns of ``x`` (N, m), shape (N, m).
+
+    :func:`consistent_kernels` over ``2 half + 1`` samples, the first and last ``half`` repeated. For a
+    nonlinear function of the velocity (friction) evaluated per sample and THEN filtered like every other
+    column: filtering ``sign(v)`` is not ``sign`` of the filtered ``v`` within a window of a reversal.
+    """
+    v = smooth_derivatives(x, dt, half, kernels=consistent_kernels(half, dt))[1]
+    return np.concatenate([np.repeat(v[:1], half, axis=0), v, np.repeat(v[-1:], half, axis=0)], axis=0)
 
 
 def white_noise(raw: np.ndarray) -> float:
