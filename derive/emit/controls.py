@@ -43,6 +43,8 @@ from typing import Dict, List, Tuple
 
 import casadi as ca
 
+from .impedance import (FULL_MEASUREMENT, IMPEDANCE_KINDS, build_impedance_laws, impedance_gains_layout,
+                        impedance_manifest, impedance_state_layout, split_blocks)
 from .torque import pdg_gains_layout
 
 #: Emitted laws, in file order, with their meaning.
@@ -66,27 +68,11 @@ PDG_KIND: Tuple[str, str] = (
     "pdg", "motor PD + gravity compensation (regulation to q_d = r[0:n]): "
            "u = k_p (q_d + K^-1 G(q_d) - q_m) - k_d dq_m + G(q_d); reads only q_m, dq_m of x")
 
-#: The motor-side impedance law (:func:`impedance_pair`): it reads the full measurement of a torque-sensed arm.
-IMPEDANCE_KIND: Tuple[str, str] = (
-    "impedance", "motor-side impedance with torque feedback about the flatness feedforward: u = u_ff + K_p (theta_d "
-                 "- q_m) + K_d (dtheta_d - dq_m) + K_T (tau_Jd - tau_J) + K_i z, z' = q_d - q; reads m_full (6n)")
+#: Every emitted law, in file order: ``(kind, meaning)`` (the impedance laws: :mod:`derive.emit.impedance`).
+ALL_KINDS: Tuple[Tuple[str, str], ...] = KINDS + TORQUE_KINDS + (PDG_KIND,) + IMPEDANCE_KINDS
 
-#: Every emitted law, in file order: ``(kind, meaning)``.
-ALL_KINDS: Tuple[Tuple[str, str], ...] = KINDS + TORQUE_KINDS + (PDG_KIND, IMPEDANCE_KIND)
-
-#: Layout of the full measurement ``m_full`` the impedance law reads: everything a torque-sensed arm reports.
-FULL_MEASUREMENT = "[q; dq; q_m; dq_m; tau_J; dtau_J]"
-
-#: The impedance law's gains: ``(name, per joint?, meaning)``.
-IMPEDANCE_GAINS = (
-    ("K_p", True, "motor position gain per joint on theta_d - q_m (N m/rad), >= 0"),
-    ("K_d", True, "motor rate gain per joint on dtheta_d - dq_m (N m s/rad), >= 0"),
-    ("K_T", True, "joint-torque feedback per joint on tau_Jd - tau_J (1), > -1 (-0.7: the motor seems 3.3x heavier)"),
-    ("K_i", True, "link-error integral gain per joint (N m/(rad s)), >= 0"),
-    ("u_max", True, "torque limit per joint (N m), > 0 (used when limit = 1)"),
-    ("limit", False, "1: u = clip(u_cmd, -u_max, u_max); 0: u = u_cmd"),
-    ("anti_windup", False, "1: freeze z_i while u_cmd_i is beyond u_max_i and q_d_i - q_i pushes further"),
-)
+#: The kinds whose first argument is the full measurement ``[q; dq; q_m; dq_m; tau_J; dtau_J]`` (6n).
+FULL_SENSED_KINDS = tuple(kind for kind, _ in IMPEDANCE_KINDS)
 
 
 def base_kind(kind: str) -> str:
@@ -114,8 +100,8 @@ def gains_layout(kind: str, n: int) -> List[Tuple[str, int, str]]:
     """
     if kind == "pdg":
         return pdg_gains_layout(n)
-    if kind == "impedance":
-        return [(name, n if joint else 1, meaning) for name, joint, meaning in IMPEDANCE_GAINS]
+    if kind in FULL_SENSED_KINDS:
+        return impedance_gains_layout(kind, n)
     kind = base_kind(kind)
     integral = kind in ("ismc", "adaptive")
     out = [("c", 4 if integral else 3,
@@ -141,11 +127,11 @@ def gains_layout(kind: str, n: int) -> List[Tuple[str, int, str]]:
 
 def state_layout(kind: str, n: int) -> List[Tuple[str, int, str]]:
     """Blocks of the controller state ``z`` of ``control_<kind>``: ``(name, size, meaning)``."""
+    if kind in FULL_SENSED_KINDS:
+        return impedance_state_layout(kind, n)
     kind = base_kind(kind)
     if kind == "ismc":
         return [("z_int", n, "integral of e1 = q - y_d (rad s)")]
-    if kind == "impedance":
-        return [("z_int", n, "integral of q_d - q (rad s)")]
     if kind == "adaptive":
         return [("z_int", n, "integral of e1 = q - y_d (rad s)"),
                 ("K_hat", n, "stiffness estimate (N m/rad)"),
@@ -154,14 +140,6 @@ def state_layout(kind: str, n: int) -> List[Tuple[str, int, str]]:
                 ("w_f", n, "filtered motor rate dq_m"),
                 ("P", n, "least-squares covariance")]
     return []
-
-
-def _blocks(v: ca.SX, layout) -> Dict[str, ca.SX]:
-    out, k = {}, 0
-    for name, size, _ in layout:
-        out[name] = v[k:k + size]
-        k += size
-    return out
 
 
 def _stiffness_indices(model) -> Tuple[List[int], List[int], List[int]]:
@@ -194,7 +172,7 @@ def _zdot(kind, n, x, z, r, p, g, u_cmd, u, idx) -> ca.SX:
     dz_int = ca.if_else(winding, T.zeros(n), e1)
     if kind == "ismc":
         return dz_int
-    zb = _blocks(z, state_layout(kind, n))
+    zb = split_blocks(z, state_layout(kind, n))
     iK, iJ, iB = idx
     J_m = ca.vertcat(*[p[i] for i in iJ])
     B_m = ca.vertcat(*[p[i] for i in iB])
@@ -218,7 +196,7 @@ def _law(kind, n, core, x, z, r, p, g, idx):
     integral = kind in ("ismc", "adaptive")
     blk = lambda v, i: v[i * n:(i + 1) * n]  # noqa: E731
     if kind == "adaptive":
-        zb = _blocks(z, state_layout(kind, n))
+        zb = split_blocks(z, state_layout(kind, n))
         K_use = ca.fmin(ca.fmax(zb["K_hat"], g["K_min"]), g["K_max"])
         entries = [p[j] for j in range(p.shape[0])]
         for i, j in enumerate(idx[0]):
@@ -279,7 +257,7 @@ def law_pair(model, kind: str, core: ca.Function, n_meas: int, first: str, idx) 
     nz, ng = sum(b[1] for b in zlay), sum(b[1] for b in glay)
     x, z, r = ca.MX.sym(first, n_meas), ca.MX.sym("z", nz), ca.MX.sym("r", 5 * n)
     p, gains = ca.MX.sym("p", n_par), ca.MX.sym("gains", ng)
-    g = _blocks(gains, glay)
+    g = split_blocks(gains, glay)
     u, s, u_cmd, y_hat = _law(base, n, core, x, z, r, p, g, idx)
     z_dot = _zdot(base, n, x, z, r, p, g, u_cmd, u, idx)
     out = {f"control_{kind}": ca.Function(
@@ -289,61 +267,10 @@ def law_pair(model, kind: str, core: ca.Function, n_meas: int, first: str, idx) 
         xs, zs, rs = ca.SX.sym(first, n_meas), ca.SX.sym("z", nz), ca.SX.sym("r", 5 * n)
         ps, gs = ca.SX.sym("p", n_par), ca.SX.sym("gains", ng)
         uc, uu = ca.SX.sym("u_cmd", n), ca.SX.sym("u", n)
-        zd = ca.cse(_zdot(base, n, xs, zs, rs, ps, _blocks(gs, glay), uc, uu, idx))
+        zd = ca.cse(_zdot(base, n, xs, zs, rs, ps, split_blocks(gs, glay), uc, uu, idx))
         out[f"control_{kind}_zdot"] = ca.Function(
             f"{model.name}_control_{kind}_zdot", [xs, zs, rs, ps, gs, uc, uu], [zd],
             [first, "z", "r", "p", "gains", "u_cmd", "u"], ["z_dot"])
-    return out
-
-
-def _impedance_zdot(n, m, r, g, u_cmd):
-    """``z' = q_d - q``, frozen on a joint whose ``u_cmd`` is beyond ``u_max`` the way the error pushes it."""
-    e = r[:n] - m[:n]
-    um = g["u_max"]
-    winding = g["limit"] * g["anti_windup"] * ((u_cmd > um) * (e > 0) + (u_cmd < -um) * (e < 0))
-    return ca.if_else(winding, type(m).zeros(n), e)
-
-
-def impedance_pair(model, feedforward: ca.Function) -> Dict[str, ca.Function]:
-    """``control_impedance(m, z, r, p, gains) -> (u, s, z_dot, u_cmd, y_hat)`` (MX, calling ``feedforward`` once)
-    and ``control_impedance_zdot(m, z, r, p, gains, u_cmd, u) -> z_dot`` (SX).
-
-    ``m = [q; dq; q_m; dq_m; tau_J; dtau_J]`` (6n, :data:`FULL_MEASUREMENT`); with ``(tau_Jd, theta_d,
-    dtheta_d, _, u_ff) = feedforward(r, p)`` (:mod:`derive.emit.feedforward`, NOMINAL ``p``)::
-
-        u_cmd = u_ff + K_p (theta_d - q_m) + K_d (dtheta_d - dq_m) + K_T (tau_Jd - tau_J) + K_i z
-        u     = clip(u_cmd, -u_max, u_max) if limit else u_cmd,      z' = q_d - q  (conditional integration)
-
-    ``s = theta_d - q_m`` (the motor-position error, rad); ``y_hat = [q; dq; 0; 0]`` (a placeholder for the
-    linearizing coordinates, as ``pdg``'s: ``y_hat - r`` starts with the link error).
-    """
-    n, n_par = model.n, len(model.params)
-    glay, zlay = gains_layout("impedance", n), state_layout("impedance", n)
-    ng = sum(b[1] for b in glay)
-
-    def law(m, z, r, p, gains):
-        g = _blocks(gains, glay)
-        tau_d, theta, dtheta, _, u_ff = feedforward(r, p)
-        qm, dqm, tau = m[2 * n:3 * n], m[3 * n:4 * n], m[4 * n:5 * n]
-        u_cmd = (u_ff + g["K_p"] * (theta - qm) + g["K_d"] * (dtheta - dqm) + g["K_T"] * (tau_d - tau)
-                 + g["K_i"] * z)
-        um = g["u_max"]
-        u = ca.if_else(g["limit"], ca.fmin(ca.fmax(u_cmd, -um), um), u_cmd)
-        y_hat = ca.vertcat(m[:2 * n], type(m).zeros(2 * n))
-        return u, theta - qm, _impedance_zdot(n, m, r, g, u_cmd), u_cmd, y_hat
-
-    m, z, r = ca.MX.sym("m", 6 * n), ca.MX.sym("z", n), ca.MX.sym("r", 5 * n)
-    p, gains = ca.MX.sym("p", n_par), ca.MX.sym("gains", ng)
-    out = {"control_impedance": ca.Function(
-        f"{model.name}_control_impedance", [m, z, r, p, gains], list(law(m, z, r, p, gains)),
-        ["m", "z", "r", "p", "gains"], ["u", "s", "z_dot", "u_cmd", "y_hat"])}
-    ms, zs, rs = ca.SX.sym("m", 6 * n), ca.SX.sym("z", n), ca.SX.sym("r", 5 * n)
-    ps, gs, uc, uu = ca.SX.sym("p", n_par), ca.SX.sym("gains", ng), ca.SX.sym("u_cmd", n), ca.SX.sym("u", n)
-    zd = ca.cse(_impedance_zdot(n, ms, rs, _blocks(gs, glay), uc))
-    out["control_impedance_zdot"] = ca.Function(
-        f"{model.name}_control_impedance_zdot", [ms, zs, rs, ps, gs, uc, uu], [zd],
-        ["m", "z", "r", "p", "gains", "u_cmd", "u"], ["z_dot"])
-    assert sum(b[1] for b in zlay) == n
     return out
 
 
@@ -378,8 +305,9 @@ def build_controls(model, functions: Dict[str, ca.Function],
     core_body : callable, optional
         ``body`` of :func:`build_core`.
     feedforward : casadi.Function, optional
-        The model's ``<model>_feedforward``: with it, ``"control_impedance"`` and its ``_zdot``
-        (:func:`impedance_pair`).
+        The model's ``<model>_feedforward``: with it, the laws of
+        :data:`~derive.emit.impedance.IMPEDANCE_KINDS` and their ``_zdot``
+        (:func:`derive.emit.impedance.build_impedance_laws`).
     """
     n = model.n
     idx = _stiffness_indices(model)
@@ -393,7 +321,7 @@ def build_controls(model, functions: Dict[str, ca.Function],
             out.update(law_pair(model, kind, torque["control_core_tau"], 5 * n, "m", idx))
         out["control_pdg"] = torque["control_pdg"]
     if feedforward is not None:
-        out.update(impedance_pair(model, feedforward))
+        out.update(build_impedance_laws(model, feedforward))
     return out
 
 
@@ -416,8 +344,9 @@ def layout_lines(n: int) -> List[str]:
         "  they call <model>_control_core_tau(m, p_hat) -> (y_hat (4n), alpha (n), beta (n, n)).",
         "  <model>_control_pdg(x, z, r, p, gains): regulation to q_d = r[0:n]; z empty; s = q_md - q_m",
         "  (motor set-point error); y_hat = [q; dq; 0; 0] (placeholder); u reads only q_m, dq_m.",
-        f"  <model>_control_impedance(m, z, r, p, gains): m = {FULL_MEASUREMENT} (6n); calls",
-        "  <model>_feedforward(r, p); s = theta_d - q_m; y_hat = [q; dq; 0; 0] (placeholder).",
+        f"  <model>_control_impedance, _joint_impedance(m, z, r, p, gains): m = {FULL_MEASUREMENT} (6n);",
+        "  impedance calls <model>_feedforward(r, p), s = theta_d - q_m; joint_impedance outputs the link-side",
+        "  torque without gravity, s = q_d - q; y_hat = [q; dq; 0; 0] (placeholder).",
     ]
     for kind, meaning in ALL_KINDS:
         lines.append(f"  control_{kind}: {meaning}")
@@ -449,13 +378,8 @@ def manifest_entry(kind: str, n: int) -> Dict[str, object]:
                                 "meaning": "first argument is the torque measurement m (5n), not the state x; "
                                            "tau_J = K (q_m - q), dtau_J its rate, both measured",
                                 "state_law": base_kind(kind)}
-    if kind == "impedance":
-        entry["measurement"] = {"argument": "m", "size": 6 * n, "layout": FULL_MEASUREMENT,
-                                "meaning": "first argument is everything a torque-sensed arm reports (6n): link "
-                                           "and motor positions and rates, the joint torque and its rate",
-                                "feedforward": "feedforward(r, p): tau_Jd, theta_d, dtheta_d, u_ff"}
-        entry["y_hat"] = "[q; dq; 0; 0], a placeholder for the linearizing coordinates"
-        entry["s"] = "theta_d - q_m, motor-position error (rad)"
+    if kind in FULL_SENSED_KINDS:
+        entry.update(impedance_manifest(kind, n))
     if kind == "pdg":
         entry["regulation"] = {"reads": "q_m, dq_m of x (motor side only)", "set_point": "r[0:n]",
                                "s": "q_md - q_m, motor set-point error (rad)",

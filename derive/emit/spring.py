@@ -10,7 +10,8 @@ so ``fjm_runtime.load("link1_hd")`` gives the usual :class:`Model`:
   ``dtau_J`` read directly, ``psi'`` and ``psi''`` at the implied deflection
   ``phi_J = psi^-1(tau_J)``, the law's Newton steps unrolled from its start
   (:func:`derive.core.spring.newton_inverse`; ``newton_start``, ``newton_steps`` of each law);
-* the laws ``control_{smc,ismc,fl}``, ``control_{smc,ismc,fl}_tau`` and ``control_impedance`` (:mod:`derive.emit.controls`,
+* the laws ``control_{smc,ismc,fl}``, ``control_{smc,ismc,fl}_tau``, ``control_impedance`` and
+  ``control_joint_impedance`` (:mod:`derive.emit.controls`,
   the same arithmetic around this model's cores). Not emitted: ``adaptive`` (it estimates a linear
   ``K``) and ``pdg`` (its motor set-point needs ``psi^-1(G(q_d))``);
 * ``spring(phi, p) -> (psi, dpsi, ddpsi)`` and ``spring_inverse(tau_J, p) -> phi_J`` (the inverse map
@@ -33,7 +34,8 @@ import sympy as sp
 
 from ..core.linearize import Linearization
 from .chain_json import write_chain_json
-from .controls import IMPEDANCE_KIND, KINDS, TORQUE_KINDS, build_core, impedance_pair, law_pair, manifest_entry
+from .controls import FULL_SENSED_KINDS, KINDS, TORQUE_KINDS, build_core, law_pair, manifest_entry
+from .impedance import IMPEDANCE_KINDS, build_impedance_laws
 from .feedforward import build_feedforward
 from .functions import QUANTITIES, operation_count
 from .parameters import drive_table, parameter_entries
@@ -48,9 +50,9 @@ from .writer import (HEADER, argument_layout, argument_lines, comment_block, gen
 __all__ = ["EMITTED_KINDS", "build_spring_functions", "write_spring_model"]
 
 #: The laws emitted for a nonlinear-spring model, in file order.
-EMITTED_KINDS = ("smc", "ismc", "fl", "smc_tau", "ismc_tau", "fl_tau", "impedance")
+EMITTED_KINDS = ("smc", "ismc", "fl", "smc_tau", "ismc_tau", "fl_tau") + FULL_SENSED_KINDS
 
-_MEANING = dict(KINDS + TORQUE_KINDS + (IMPEDANCE_KIND,))
+_MEANING = dict(KINDS + TORQUE_KINDS + IMPEDANCE_KINDS)
 
 #: Quantities with their meaning for this model (the spring in them).
 SPRING_QUANTITIES = (
@@ -126,10 +128,10 @@ def build_spring_laws(lin: Linearization, fns: Dict[str, ca.Function], feedforwa
                      ["m", "p_hat"], ["y_hat", "alpha", "beta"])}
     core, core_tau = cores["control_core"], cores["control_core_tau"]
     out = {"control_core": core, "control_core_tau": core_tau}
-    for kind in EMITTED_KINDS[:-1]:
+    for kind in EMITTED_KINDS[:-len(FULL_SENSED_KINDS)]:
         tau = kind.endswith("_tau")
         out.update(law_pair(m, kind, core_tau if tau else core, (5 if tau else 4) * n, "m" if tau else "x", None))
-    out.update(impedance_pair(m, feedforward))
+    out.update(build_impedance_laws(m, feedforward))
     return out
 
 
@@ -158,7 +160,7 @@ def _law_lines() -> List[str]:
     return [
         "control laws: <model>_control_<kind>(x, z, r, p, gains) -> (u, s, z_dot, u_cmd, y_hat), kinds smc ismc fl;",
         "  <model>_control_<kind>_tau(m, z, r, p, gains), m = [q; dq; tau_J; dtau_J; dq_m] (5n), tau_J = psi(q_m - q);",
-        "  <model>_control_impedance(m, z, r, p, gains), m = [q; dq; q_m; dq_m; tau_J; dtau_J] (6n);",
+        "  <model>_control_impedance, _joint_impedance(m, z, r, p, gains), m = [q; dq; q_m; dq_m; tau_J; dtau_J] (6n);",
         "  layouts of z and gains as link1's (manifest.json, controls); adaptive and pdg are not emitted.",
     ]
 
@@ -275,7 +277,7 @@ def _control_entries(m, laws, ops, entry) -> Dict[str, dict]:
     """The manifest's ``controls``: one entry per emitted law (its zdot Function when stateful)."""
     controls = {}
     for kind in EMITTED_KINDS:
-        first = "m" if kind.endswith("_tau") or kind == "impedance" else "x"
+        first = "m" if kind.endswith("_tau") or kind in FULL_SENSED_KINDS else "x"
         e = entry(f"control_{kind}", [first, "z", "r", "p", "gains"], outputs=["u", "s", "z_dot", "u_cmd", "y_hat"])
         if f"control_{kind}_zdot" in laws:
             z = f"control_{kind}_zdot"

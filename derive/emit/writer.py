@@ -32,7 +32,7 @@ import sympy as sp
 
 from ..core.linearize import Linearization
 from .chain_json import write_chain_json
-from .controls import ALL_KINDS, build_controls, layout_lines, manifest_entry
+from .controls import ALL_KINDS, FULL_SENSED_KINDS, build_controls, layout_lines, manifest_entry
 from .complete import COMPLETE_QUANTITIES, build_complete_functions
 from .feedforward import FEEDFORWARD_MEANING, build_feedforward, manifest_entry as feedforward_entry
 from .brackets import bracket_twin
@@ -237,9 +237,9 @@ def _write_c_sources(lin: Linearization, outdir: Path, c_fns, ops, control_ops,
 
 
 def _first(kind: str) -> str:
-    """Name of a law's first argument: ``m`` (a measurement: 5n for the ``_tau`` laws, 6n for ``impedance``),
-    else ``x``."""
-    return "m" if kind.endswith("_tau") or kind == "impedance" else "x"
+    """Name of a law's first argument: ``m`` (a measurement: 5n for the ``_tau`` laws, 6n for the impedance
+    laws), else ``x``."""
+    return "m" if kind.endswith("_tau") or kind in FULL_SENSED_KINDS else "x"
 
 
 def _control_entries(m, controls, control_ops, sizes) -> Dict[str, object]:

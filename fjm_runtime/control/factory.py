@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 from typing import Callable, Dict, Mapping, Tuple
 
 from .adaptive import make_adaptive
-from .impedance import ImpedanceController
+from .impedance import ImpedanceController, JointImpedanceController
 from .laws import SlidingModeController
 from .pdg import MotorPDGravityController
 from .sensing import SENSING_KINDS
@@ -47,13 +47,14 @@ LAWS: Dict[str, Law] = {
     "adaptive": Law(make_adaptive),
     "pdg": Law(MotorPDGravityController),
     "impedance": Law(ImpedanceController),
+    "joint_impedance": Law(JointImpedanceController),
 }
 
 #: Regulation laws (set point ``r[0]`` only), also accepted by :func:`make_controller`.
 REGULATION_KINDS = ("pdg",)
 
 #: Laws that read the full measurement ``[q; dq; q_m; dq_m; tau_J; dtau_J]`` (``sensing = 'full'``).
-FULL_SENSED_KINDS = ("impedance",)
+FULL_SENSED_KINDS = ("impedance", "joint_impedance")
 
 #: The names :func:`make_controller` accepts for tracking with the sliding-mode family's gains (the command
 #: line's ``--controller`` choices); ``make_controller`` also takes :data:`FULL_SENSED_KINDS`.
@@ -80,7 +81,11 @@ def make_controller(kind: str, model, nominal_params, sensing: str = "state", **
         ``k_d``, ``u_max``); ``'impedance'``: motor-side impedance with torque feedback about the
         flatness feedforward, reading ``[q; dq; q_m; dq_m; tau_J; dtau_J]``
         (:class:`fjm_runtime.control.impedance.ImpedanceController`; keywords ``K_p``, ``K_d``, ``K_T``,
-        ``K_i``, ``u_max``, ``anti_windup``; ``sensing`` must be left at its default or be ``'full'``).
+        ``K_i``, ``u_max``, ``anti_windup``; ``sensing`` must be left at its default or be ``'full'``);
+        ``'joint_impedance'``: link-side joint impedance for a joint-torque interface, its output the
+        desired link torque without gravity
+        (:class:`fjm_runtime.control.impedance.JointImpedanceController`; keywords ``K_q``, ``D_q``,
+        ``K_i``, ``u_max``, ``anti_windup``).
     model, nominal_params, **kwargs
         Passed to :class:`~fjm_runtime.control.laws.SlidingModeController`
         (gains not given take the defaults of :mod:`fjm_runtime.control.defaults`).
@@ -100,7 +105,7 @@ def make_controller(kind: str, model, nominal_params, sensing: str = "state", **
         raise ValueError(f"sensing = {sensing!r}: expected one of {', '.join(SENSING_KINDS)}")
     if (sensing == "full" and kind not in FULL_SENSED_KINDS) or (sensing == "torque" and kind in FULL_SENSED_KINDS):
         raise ValueError(f"controller = {kind!r} with sensing = {sensing!r}: sensing = 'full' (the measurement "
-                         f"[q; dq; q_m; dq_m; tau_J; dtau_J]) is read by {', '.join(FULL_SENSED_KINDS)} and only by it")
+                         f"[q; dq; q_m; dq_m; tau_J; dtau_J]) is read by {', '.join(FULL_SENSED_KINDS)} and only by them")
     if sensing == "torque" and kind not in TORQUE_SENSED_KINDS:
         raise ValueError(f"controller = {kind!r} with sensing = 'torque': torque-sensed laws exist for "
                          f"{', '.join(TORQUE_SENSED_KINDS)} (use sensing = 'state')")

@@ -361,7 +361,7 @@ def random_control_inputs(model: fjm_runtime.Model, kind: str, rng: np.random.Ge
                   "K_min": np.full(n, 100.0), "K_max": np.full(n, 200.0), "filter_rate": rng.uniform(5, 30),
                   "k_p": rng.uniform(10, 500, n), "k_d": rng.uniform(1, 20, n),
                   "K_p": rng.uniform(10, 2e3, n), "K_d": rng.uniform(1, 50, n), "K_T": rng.uniform(-0.9, 1, n),
-                  "K_i": rng.uniform(0, 1e4, n)}
+                  "K_i": rng.uniform(0, 1e4, n), "K_q": rng.uniform(0, 2e3, n), "D_q": rng.uniform(0, 80, n)}
         for b in entry["gains"]:
             if b["size"] == 1 and b["name"] not in values:
                 values[b["name"]] = float(rng.integers(0, 2))

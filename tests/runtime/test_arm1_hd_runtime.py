@@ -69,7 +69,8 @@ def test_contract_and_dynamics_written_out(model):
     names = ("m1", "l1", "r1", "I1", "K_1", "K_2", "K_3", "T_1", "T_2", "w_blend", "Jm1", "Bm1", "g0",
              "F_c", "F_s", "v_s", "v_c")
     assert model.param_names == names
-    assert set(model.manifest["controls"]) == {"smc", "ismc", "fl", "smc_tau", "ismc_tau", "fl_tau", "impedance"}
+    assert set(model.manifest["controls"]) == {"smc", "ismc", "fl", "smc_tau", "ismc_tau", "fl_tau", "impedance",
+                                              "joint_impedance"}
     assert model.manifest["springs"]["joints"][0]["law"] == "three_segment"
     rng = np.random.default_rng(1)
     for _ in range(3):

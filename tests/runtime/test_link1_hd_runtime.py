@@ -31,7 +31,8 @@ def test_contract(model):
     assert model.f(x).shape == (4,) and model.T(x).shape == (4,) and model.alpha(x).shape == (1,)
     assert model.beta(x)[0, 0] == pytest.approx(1.0 * 2.0 / 150.0, rel=1e-14)  # J_l J_m / psi'(0.1)
     assert model.f(x)[1] == pytest.approx(75 * 0.1 + 2500 * 0.1 ** 3 - 9.8 * np.sin(0.3), rel=1e-14)
-    assert set(model.manifest["controls"]) == {"smc", "ismc", "fl", "smc_tau", "ismc_tau", "fl_tau", "impedance"}
+    assert set(model.manifest["controls"]) == {"smc", "ismc", "fl", "smc_tau", "ismc_tau", "fl_tau", "impedance",
+                                              "joint_impedance"}
 
 
 @pytest.mark.parametrize("name, value, expected", [("F_c", -0.5, ">= 0"), ("F_s", float("nan"), "finite"),

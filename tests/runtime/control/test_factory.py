@@ -9,7 +9,7 @@ from fjm_runtime.control.laws import SlidingModeController
 
 def test_every_name_is_in_the_table():
     assert CONTROLLER_KINDS == ("smc", "ismc", "fl", "sign", "adaptive")
-    assert FULL_SENSED_KINDS == ("impedance",)
+    assert FULL_SENSED_KINDS == ("impedance", "joint_impedance")
     assert set(LAWS) == set(CONTROLLER_KINDS + REGULATION_KINDS + FULL_SENSED_KINDS)
 
 

@@ -1,7 +1,10 @@
 """The motor-side impedance law (``control_impedance``, :class:`ImpedanceController`) and the full measurement.
 
 * The emitted law equals its formula written here in NumPy around the emitted feedforward: u_cmd, the
-  clamp, the integral with conditional integration at the torque limit (link1, panda_hd).
+  clamp, the integral with conditional integration at the torque limit (link1, panda_hd). The joint
+  impedance (``control_joint_impedance``, the joint-torque interface's law) likewise, its rigid feedforward
+  ``D(q_d) q_d'' + C(q_d, q_d') q_d'`` being the feedforward's ``tau_Jd`` less its value at rest (gravity),
+  and ``D(q_d) q_d''`` at ``q_d' = 0``.
 * The default gains place the motor's mode with the link held (``J_m s^2 + K_d s + K_p + (1 + K_T) K``) at
   damping 0.7; on the Panda K_p = 1000 / 300 N m/rad.
 * ``sensing = 'full'``: the measurement is ``[q; dq; q_m; dq_m; tau_J; dtau_J]`` of the plant state (the true
@@ -20,7 +23,8 @@ import pytest
 import fjm_runtime
 from fjm_runtime.control.design import task_start
 from fjm_runtime.control.factory import make_controller
-from fjm_runtime.control.impedance import ImpedanceController, default_impedance_gains
+from fjm_runtime.control.impedance import (ImpedanceController, JointImpedanceController, default_impedance_gains,
+                                           default_joint_impedance_gains)
 from fjm_runtime.sim.sample_step import initial_measurement
 from fjm_runtime.sim.step_layout import make_layout
 from fjm_runtime.sim.sensor import SIGNALS, SensorModel, noise_slots
@@ -191,3 +195,51 @@ def test_exported_step_is_the_simulators():
     rel = relative(U, run.U)
     print(f"panda impedance: exported step vs simulator, 20 samples: {rel:.3g}")
     assert rel <= 1e-12
+
+
+@pytest.mark.parametrize("name", ["planar2", "panda_hd"])
+def test_emitted_joint_impedance_is_its_formula(name):
+    model = fjm_runtime.load(name)
+    n = model.n
+    rng = np.random.default_rng(8)
+    p = model.params_array(None)
+    seen_frozen = 0
+    for k in range(12):
+        g = {"K_q": rng.uniform(0, 2e3, n), "D_q": rng.uniform(0, 80, n), "K_i": rng.uniform(0, 6e3, n)}
+        ctrl = JointImpedanceController(model, p, u_max=20.0, **g)
+        fn, zdot = ctrl.law_functions()
+        m = rng.uniform(-0.3, 0.3, 6 * n)
+        z, r = rng.uniform(-1e-2, 1e-2, n), rng.uniform(-0.5, 0.5, 5 * n)
+        if k == 0:
+            r[n:2 * n] = 0.0  # at rest: the rigid feedforward is D(q_d) q_d'' alone
+        rest = np.r_[r[:n], np.zeros(4 * n)]
+        rigid = model.feedforward(r, p)[0] - model.feedforward(rest, p)[0]
+        if k == 0:
+            x_d = np.r_[r[:n], np.zeros(3 * n)]
+            assert np.allclose(rigid, model.inertia(x_d, p) @ r[2 * n:3 * n], rtol=1e-12, atol=1e-12)
+        e = r[:n] - m[:n]
+        u_cmd_ref = rigid + g["K_q"] * e + g["D_q"] * (r[n:2 * n] - m[n:2 * n]) + g["K_i"] * z
+        u, s, z_dot, u_cmd, y_hat = (np.asarray(v).ravel() for v in fn(m, z, r, p, ctrl.gains))
+        scale = max(1.0, np.max(np.abs(u_cmd_ref)))
+        assert np.max(np.abs(u_cmd - u_cmd_ref)) <= 1e-12 * scale
+        assert np.max(np.abs(u - np.clip(u_cmd_ref, -20.0, 20.0))) <= 1e-12 * scale
+        frozen = ((u_cmd_ref > 20.0) & (e > 0)) | ((u_cmd_ref < -20.0) & (e < 0))
+        assert np.array_equal(z_dot, np.where(frozen, 0.0, e))
+        assert np.array_equal(np.asarray(zdot(m, z, r, p, ctrl.gains, u_cmd, u)).ravel(), z_dot)
+        assert np.array_equal(s, e) and np.array_equal(y_hat, np.r_[m[:2 * n], np.zeros(2 * n)])
+        seen_frozen += int(np.sum(frozen))
+    assert seen_frozen
+
+
+def test_joint_impedance_default_gains():
+    model = fjm_runtime.load("panda")
+    p = model.params_array(None)
+    g = default_joint_impedance_gains(model, p)
+    D0 = np.diag(model.inertia(np.zeros(model.nx), p))
+    assert np.allclose(g["K_q"], np.r_[[1e4 / 6] * 4, [3e3 / 6] * 3]) and np.allclose(g["K_i"], 3 * g["K_q"])
+    for i in range(7):  # D_ii(0) s^2 + D_q s + K_q: damping ratio 0.7
+        roots = np.roots([D0[i], g["D_q"][i], g["K_q"][i]])
+        assert -roots[0].real / abs(roots[0]) == pytest.approx(0.7, rel=1e-12)
+    ctrl = make_controller("joint_impedance", model, p, u_max=model.limits.effort)
+    assert (ctrl.law_kind, ctrl.sensing, ctrl.n_states) == ("joint_impedance", "full", 7)
+    assert np.array_equal(ctrl.gain_values()["K_q"], g["K_q"])
