@@ -13,7 +13,7 @@ from typing import Dict, Optional, Tuple
 
 import numpy as np
 
-from .validation import FjmValueError
+from .validation import REDERIVE, FjmValueError
 
 __all__ = ["JointLimits", "Task", "joint_limits", "task_from_manifest", "START_TEXT"]
 
@@ -58,7 +58,7 @@ def _values(entry, key: str, n: int, name: str, fill: float) -> np.ndarray:
         return np.full(n, fill)
     if len(values) != n:
         raise FjmValueError(f"model {name}: manifest limits {key} has {len(values)} entries, expected n = {n}; "
-                            "re-run make derive")
+                            f"{REDERIVE}")
     return np.array([fill if v is None else float(v) for v in values])
 
 
@@ -152,8 +152,7 @@ def task_from_manifest(manifest: dict, n: int) -> Optional[Task]:
     kind = entry.get("kind")
     if kind not in ("sines", "poses") or entry.get("start", "rest") not in START_TEXT:
         raise FjmValueError(f"model {manifest.get('model', '?')}: manifest task kind {kind!r} / start "
-                            f"{entry.get('start')!r}: expected 'sines' or 'poses' starting at 'rest'; re-run "
-                            "make derive")
+                            f"{entry.get('start')!r}: expected 'sines' or 'poses' starting at 'rest'; {REDERIVE}")
 
     def arr(key):
         return None if key not in entry else _frozen(np.array(entry[key], dtype=float))
@@ -163,6 +162,6 @@ def task_from_manifest(manifest: dict, n: int) -> Optional[Task]:
            or (k not in ("durations",) and v.shape[-1] != n)]
     if bad:
         raise FjmValueError(f"model {manifest.get('model', '?')}: manifest task {bad[0]} missing, not finite or "
-                            f"not of n = {n} per joint; re-run make derive")
+                            f"not of n = {n} per joint; {REDERIVE}")
     return Task(kind=kind, n=n, description=entry.get("description") or f"{kind} of the model file",
                 start=entry.get("start", "rest"), **fields)

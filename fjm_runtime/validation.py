@@ -8,6 +8,10 @@ from typing import Mapping, Sequence, Tuple, Union
 import numpy as np
 
 
+#: What a stale generated model directory asks for, for a built-in model and for a user's model file.
+REDERIVE = "re-run make derive (a built-in model) or fjm derive --model-file FILE --out DIR (your model file)"
+
+
 class FjmValueError(ValueError):
     """A bad input to fjm (subclass of ValueError so callers may catch either)."""
 

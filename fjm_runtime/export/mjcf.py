@@ -58,7 +58,7 @@ from typing import Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
-from ..validation import FjmValueError
+from ..validation import REDERIVE, FjmValueError
 
 __all__ = ["ROTOR_INERTIA", "ROTOR_MASS", "CHAIN_FILE", "FRICTION_NUMERIC", "SPRING_NUMERIC", "load_chain", "resolve_params", "gear_ratios",
            "mjcf_text", "write_mjcf", "is_complete", "value"]
@@ -95,7 +95,7 @@ def load_chain(model) -> dict:
     if not path.is_file():
         raise FjmValueError(f"model {model.name}: no {CHAIN_FILE} in {model.directory} (expected a model "
                             "derived by this fjm with a rigid-body tree: link1, planar<n> or a URDF arm; "
-                            "re-run make derive, or fjm derive --model-file FILE --out DIR for a model file)")
+                            f"{REDERIVE})")
     return json.loads(path.read_text())
 
 
