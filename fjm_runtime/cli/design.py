@@ -84,6 +84,18 @@ def demo_task(m, nominal=None) -> dict:
     return {"reference": ref, "x0": task_start(m, ref, record["start"], nominal), "task": record}
 
 
+def _warn_position_limits(m, task: dict, duration: float, dt: float) -> None:
+    """One stderr line when the task the search runs on (the model's, else 0.5 rad sines at 1 rad/s about
+    q = 0) leaves the model's position limits."""
+    from ..control.references import make_reference
+    from .simulate_conditions import position_limit_warning
+    ref = task.get("reference") or make_reference("sine", int(m.n), amplitude=0.5, omega=1.0)
+    warn = position_limit_warning(m, ref, duration, dt, "the search goes on (a [task] in the model file gives "
+                                  "the design a task within them)")
+    if warn:
+        print(f"fjm design: warning: {warn}", file=sys.stderr)
+
+
 #: Largest reference table (samples x 5n doubles) a batch may hold, bytes.
 MAX_REFERENCE_BYTES = 2e9
 #: Plant draws of a stage.
@@ -158,6 +170,7 @@ def run(args) -> int:
                             "or a lower rate")
     sensor, thresholds, spread = _settings(args, m)
     task = demo_task(m, spread.nominal) if args.task == "auto" else {}
+    _warn_position_limits(m, task, max(args.duration, args.screen_duration), 1.0 / args.rate)
     t0 = time.perf_counter()
     settings = SearchSettings(kind=args.controller, sensing=args.sensing, rate=args.rate, delay=args.delay_samples,
                               sensor=sensor, draws=args.draws, duration=args.duration, seed=args.seed,

@@ -204,10 +204,15 @@ def effort_limits(m, u_max_flag, off: bool) -> Tuple[Optional[Tuple[float, ...]]
     return None, "the model states no effort limits"
 
 
-def position_limit_warning(m, ref, duration: float, dt: float) -> Optional[str]:
+#: What :func:`position_limit_warning` suggests by default (``fjm simulate``'s flags).
+SIMULATE_REMEDY = "the run goes on (a real arm would stop there: --amplitude, --q-d or another task)"
+
+
+def position_limit_warning(m, ref, duration: float, dt: float, remedy: str = SIMULATE_REMEDY) -> Optional[str]:
     """One line naming the joints whose reference leaves the model's position limits, or None.
 
-    The reference is sampled on the control grid (at most 20001 evenly spaced times over the run).
+    The reference is sampled on the control grid (at most 20001 evenly spaced times over the run);
+    ``remedy`` ends the line (what the command does and what the user can change).
     """
     pos = np.asarray(m.limits.position, dtype=float)
     if not np.any(np.isfinite(pos)):
@@ -219,8 +224,7 @@ def position_limit_warning(m, ref, duration: float, dt: float) -> Optional[str]:
            for j in range(int(m.n)) if lo[j] < pos[j, 0] or hi[j] > pos[j, 1]]
     if not out:
         return None
-    return (f"the reference leaves the position limits of {m.name} on {'; '.join(out)}; the run goes on "
-            "(a real arm would stop there: --amplitude, --q-d or another task)")
+    return f"the reference leaves the position limits of {m.name} on {'; '.join(out)}; {remedy}"
 
 
 def peak_until(t: np.ndarray, u: np.ndarray, t_end: float) -> List[Optional[float]]:

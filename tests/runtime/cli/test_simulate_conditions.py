@@ -174,3 +174,13 @@ def test_check_divergence_peak_covers_the_rows_up_to_the_bad_state_only():
     with pytest.raises(SimulationDivergedError) as e:
         check_divergence(t, W, U, 1e6, before)
     assert e.value.t == 0.3 and e.value.peak_torque.tolist() == [6.0, 7.0]
+
+
+def test_design_warns_when_its_task_leaves_the_position_limits(arm, tmp_path, capsys):
+    status, out, err = _run(capsys, ["design", str(arm), "--draws", "1", "--recheck-draws", "0", "--duration", "0.5",
+                                     "--screen-draws", "1", "--screen-duration", "0.3", "--rounds", "0",
+                                     "--threads", "1", "--out", str(tmp_path / "d.json")])
+    assert status in (0, 1)
+    lines = [ln for ln in err.splitlines() if "position limits" in ln]
+    assert len(lines) == 1 and lines[0].startswith("fjm design: warning:") and "joint 2" in lines[0]
+    assert f"[0, {0.5 * math.sin(0.5):.3g}] rad" in lines[0]
