@@ -220,14 +220,27 @@ def diff_trees(expected: Path, actual: Path, start: Path = Path(".")) -> List[st
     return problems
 
 
+#: Largest ``--max-cost``, s: a week (the costliest built-in derives in under a minute).
+MAX_COST_SECONDS = 7 * 24 * 3600.0
+
+
 def _positive_seconds(text: str) -> float:
     try:
         value = float(text)
     except ValueError:
         value = float("nan")
-    if not value > 0 or value == float("inf"):
-        raise argparse.ArgumentTypeError(f"{text!r}: expected a positive number of seconds, e.g. --max-cost 600")
+    if not 0 < value <= MAX_COST_SECONDS:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected 0 < SECONDS <= {MAX_COST_SECONDS:g} (a week), e.g. "
+                                         "--max-cost 600")
     return value
+
+
+class _OneLineParser(argparse.ArgumentParser):
+    """Usage errors in one line naming the flag, as every other error of derive (exit status 2)."""
+
+    def error(self, message: str):
+        print(f"{self.prog}: error: {' '.join(message.split())} (see {self.prog} --help)", file=sys.stderr)
+        sys.exit(2)
 
 
 def _cost_options(ap: argparse.ArgumentParser) -> None:
@@ -242,7 +255,7 @@ def _cost_options(ap: argparse.ArgumentParser) -> None:
 def _parser(prog: str) -> argparse.ArgumentParser:
     from .core.model_base import MODEL_NAMES
 
-    ap = argparse.ArgumentParser(prog=prog, description=__doc__.split("\n\n")[0])
+    ap = _OneLineParser(prog=prog, description=__doc__.split("\n\n")[0])
     ap.add_argument("--models", nargs="+", metavar="MODEL",
                     help=f"models to derive (default: all): {' '.join(MODEL_NAMES)}")
     ap.add_argument("--model-file", action="append", type=Path, default=[], metavar="FILE.toml",

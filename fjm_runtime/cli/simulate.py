@@ -29,10 +29,13 @@ from ..sim.simulate import simulate, stderr_progress
 from ..sim.step import SimulationDivergedError
 from ..validation import FjmValueError, check_magnitudes
 from .common import check_output_file, finite_or_note, parse_assignments
-from .ranges import ANGLE, DURATION, GAIN, LAYER, MASS, PERIOD, SEED, STIFFNESS, TORQUE
+from .ranges import ANGLE, DELAY, DURATION, GAIN, LAYER, MASS, PERIOD, RATE, SEED, STIFFNESS, TORQUE, Range
 from ..control.design import Design
 from .simulate_checks import (DEFAULT_MAX_MEMORY_GB, MAX_SUBSTEPS, check_pole, check_run_size, check_substeps,
                               gains_provenance, workspace_exit)
+
+#: ``--max-memory``, GB.
+MEMORY_GB = Range(0, 1e4, "GB", "memory", lo_open=True)
 from .simulate_conditions import (default_gains, design_sensor, peak_text, peak_until, run_effort_limits,
                                   say_conditions, take_design_conditions)
 
@@ -54,10 +57,10 @@ def add_arguments(sim) -> None:
                      help="sine amplitude, rad (default 0.5; a run beyond 4 pi rad leaves the workspace, exit 3)")
     sim.add_argument("--omega", type=float, default=1.0, help="sine frequency, 0 <= omega <= pi x rate rad/s (default 1)")
     sim.add_argument("--duration", type=float, default=10.0,
-                     help="simulated time, s > 0, with --rate bounded by --max-memory (default 10)")
+                     help=f"simulated time, {DURATION}, and duration x rate within --max-memory (default 10)")
     sim.add_argument("--dt", type=PERIOD, default=None, help=f"control period, {PERIOD} (default 1e-3; or --rate)")
     sim.add_argument("--K", type=float, default=None,
-                     help="TRUE joint stiffness of the plant, N m/rad > 0, bounded by the RK4 substeps it needs "
+                     help=f"TRUE joint stiffness of the plant, {STIFFNESS}, and at most {MAX_SUBSTEPS} RK4 substeps per sample "
                           "(link1: K; planar<n>: every K_i)")
     sim.add_argument("--param", action="append", default=[], metavar="NAME=VALUE",
                      help="TRUE plant parameter (repeatable), e.g. --param J_l=1.2")
@@ -89,7 +92,7 @@ def add_arguments(sim) -> None:
 def _add_sampled_data_flags(sim) -> None:
     """The sampled-data and scripting flags (rate, substeps, sensing, noise, delay, scales, gains, --json)."""
     sim.add_argument("--rate", type=float, default=None,
-                     help="control rate, Hz > 0, with --duration bounded by --max-memory (same as --dt 1/HZ; "
+                     help=f"control rate, {RATE}, and duration x rate within --max-memory (same as --dt 1/HZ; "
                           "default: the --gains file's, else 1000)")
     sim.add_argument("--substeps", type=int, default=None,
                      help=f"RK4 plant steps per control sample, 1..{MAX_SUBSTEPS} (default: the fastest-mode rule)")
@@ -97,7 +100,7 @@ def _add_sampled_data_flags(sim) -> None:
                      help="what the controller measures: the state, or q, dq, tau_J, dtau_J, dq_m (default: the "
                           "--gains file's, else state)")
     sim.add_argument("--delay-samples", type=int, default=None,
-                     help="computation delay in samples, >= 0, bounded by --max-memory (default: the --gains "
+                     help=f"computation delay in samples, {DELAY} (default: the --gains "
                           "file's, else 0)")
     sim.add_argument("--predict", action=argparse.BooleanOptionalAction, default=None,
                      help="predict the delayed measurement with the nominal model (default: the --gains file's, "
@@ -120,7 +123,7 @@ def _add_sampled_data_flags(sim) -> None:
     sim.add_argument("--json", action="store_true",
                      help="print one JSON object for scripts (diverged, per-joint metrics, settings)")
     sim.add_argument("--max-memory", type=float, default=DEFAULT_MAX_MEMORY_GB, metavar="GB",
-                     help="refuse a run whose estimated peak memory exceeds this, GB > 0 "
+                     help=f"refuse a run whose estimated peak memory exceeds this, {MEMORY_GB} "
                           f"(default {DEFAULT_MAX_MEMORY_GB:g})")
 
 
@@ -429,6 +432,21 @@ def _check_size(m, args, ctrl, ref, x0, true, sensor, dt) -> None:
     subs = int(math.ceil(subs - 1e-12))
     layout = make_layout(m, ctrl, dt, subs, sensor, delay, args.predict)
     check_run_size(layout.nw, m.n, layout.nm, args.duration, dt, args.max_memory)
+    _check_ranges(args)
+
+
+def _check_ranges(args) -> None:
+    """The flags' physical ranges beyond what the memory and substeps checks (first: they state the size) let by."""
+    DURATION.check("--duration", args.duration)
+    if args.rate is not None:
+        RATE.check("--rate", args.rate)
+    if args.dt is not None and args.dt < 1.0 / RATE.hi:
+        raise FjmValueError(f"--dt {args.dt:g}: expected {1.0 / RATE.hi:g} <= dt <= 1 s (rates up to {RATE.hi:g} Hz)")
+    if args.delay_samples is not None:
+        DELAY.check("--delay-samples", args.delay_samples)
+    if args.K is not None:
+        STIFFNESS.check("--K", args.K)
+    MEMORY_GB.check("--max-memory", args.max_memory)
 
 
 def _print_report(m, args, res, kind, true, nominal, k_s, delta, gain, ctrl, provenance, left, limits) -> int:

@@ -60,6 +60,15 @@ CASES = [
     ("simulate link1 --substeps 100000 --plot {out}", "10000"),
     ("simulate link1 --omega 1e9 --plot {out}", "Nyquist"),
     ("simulate link1 --max-memory 0 --plot {out}", "> 0 GB"),
+    ("simulate link1 --max-memory 1e9 --plot {out}", "10000 GB"),
+    ("simulate link1 --lam 1 --rate 1 --duration 3601 --plot {out}", "3600 s"),
+    ("simulate link1 --duration 0.001 --rate 200000 --plot {out}", "100000 Hz"),
+    ("simulate link1 --duration 0.0001 --dt 1e-7 --plot {out}", "1e-05 <= dt"),
+    ("simulate link1 --delay-samples 101 --plot {out}", "100 samples"),
+    ("simulate link1 --noise {noise} --plot {out}", "seed"),
+    # derive (python -m derive in a subprocess)
+    ("derive --models link1 --max-cost -1 --out {out}", "a week"),
+    ("derive --models link1 --max-cost 1e300 --out {out}", "604800"),
     # design
     ("design planar2 --draws 0 --out {out}", "1 <= draws"),
     ("design planar2 --draws 1e9 --out {out}", "100000"),
@@ -119,7 +128,7 @@ CASES = [
 def _flag_and_value(argv):
     """The last flag given a numeric value and that value as typed (``--param K=1e300``: K and 1e300)."""
     for i in range(len(argv) - 1, 0, -1):
-        if argv[i].startswith("--") and argv[i] not in ("--out", "--plot", "--gains") and i + 1 < len(argv):
+        if argv[i].startswith("--") and argv[i] not in ("--out", "--plot", "--gains", "--models") and i + 1 < len(argv):
             if argv[i] in ("--param", "--nominal"):
                 name, _, value = argv[i + 1].partition("=")
                 return argv[i], name, value
@@ -139,20 +148,22 @@ def _names_value(line: str, value: str) -> bool:
 
 
 @pytest.mark.parametrize("command, must", CASES, ids=[c for c, _ in CASES])
-def test_nonsense_is_one_line_naming_flag_value_and_range(command, must, tmp_path, capsys, monkeypatch):
+def test_nonsense_is_one_line_naming_flag_value_and_range(command, must, tmp_path, capfd, monkeypatch):
     monkeypatch.chdir(__import__("pathlib").Path(__file__).resolve().parents[3])  # the shipped designs' paths
     out_dir = tmp_path / "out"
     out_dir.mkdir()
-    argv = command.format(out=out_dir / "result").split()
+    noise = tmp_path / "sensor.toml"         # a sensor file whose seed is out of range
+    noise.write_text("seed = -1\n")
+    argv = command.format(out=out_dir / "result", noise=noise).split()
     try:
         status = main(argv)
     except SystemExit as exc:       # fjm tune's parser leaves through sys.exit (its own one-line error)
         status = exc.code
-    got = capsys.readouterr()
+    got = capfd.readouterr()
     lines = [ln for ln in got.err.splitlines() if ln.strip()]
     assert status == 2 and got.out == "", (status, got.out, got.err)
-    assert len(lines) == 1 and lines[0].startswith(("fjm: error: ", "fjm tune: error: ")), got.err
-    flag, name, value = _flag_and_value(argv)
+    assert len(lines) == 1 and lines[0].startswith(("fjm: error: ", "fjm tune: error: ", "fjm derive: error: ")), got.err
+    flag, name, value = _flag_and_value(argv) if "--noise" not in argv else ("--noise", "seed", "-1")
     line = lines[0]
     assert name in line and _names_value(line, value), (name, value, line)
     assert must in line, (must, line)
