@@ -38,6 +38,9 @@ class Drive:
         ``"linear"`` (``psi = K phi``), ``"cubic"`` or ``"three_segment"``.
     spring : tuple of int
         The law's coefficients in its coefficient order (``(K,)`` for linear).
+    spring_scale : tuple of int
+        The coefficients that scale ``psi`` together (``K``; ``k1, k3``; ``K_1, K_2, K_3, T_1, T_2``), the
+        small-deflection stiffness first.
     rotor_inertia, damping : int
         ``J_m`` (kg m^2) and ``B_m`` (N m s/rad), link side.
     friction_law : str or None
@@ -51,6 +54,7 @@ class Drive:
     name: Optional[str]
     spring_law: str
     spring: Tuple[int, ...]
+    spring_scale: Tuple[int, ...]
     rotor_inertia: int
     damping: int
     friction_law: Optional[str] = None
@@ -92,7 +96,8 @@ def read_drives(manifest: Mapping, param_names: Sequence[str]) -> Tuple[Drive, .
         return None if names is None else tuple(index[k] for k in names)
 
     return tuple(Drive(joint=int(e["joint"]) - 1, name=e.get("name"), spring_law=e["spring"]["law"],
-                       spring=at(e["spring"]["parameters"]), rotor_inertia=index[e["rotor_inertia"]],
+                       spring=at(e["spring"]["parameters"]), spring_scale=at(e["spring"]["torque_scale"]),
+                       rotor_inertia=index[e["rotor_inertia"]],
                        damping=index[e["damping"]],
                        friction_law=None if e.get("friction") is None else e["friction"]["law"],
                        friction=at(None if e.get("friction") is None else e["friction"]["parameters"]),

@@ -32,7 +32,7 @@ import sympy as sp
 from .abstract import derivative_chain, law_derivative, substitute_chain
 
 __all__ = ["SpringError", "LinearSpring", "CubicSpring", "ThreeSegmentSpring", "spring_functions",
-           "smooth_ramp", "SPRING_KINDS", "SPRING_PARAMETERS", "LAW_COEFFICIENTS"]
+           "smooth_ramp", "SPRING_KINDS", "SPRING_PARAMETERS", "LAW_COEFFICIENTS", "TORQUE_SCALE_COEFFICIENTS"]
 
 #: Highest derivative of psi the derivation may ask for (the involutivity brackets reach psi''').
 _ORDERS = 5
@@ -352,3 +352,9 @@ SPRING_PARAMETERS: Dict[str, Tuple[str, str]] = {
 #: Law name -> the runtime-parameter names of its coefficients, in the law's field order.
 LAW_COEFFICIENTS: Dict[str, Tuple[str, ...]] = {
     "linear": (), "cubic": ("k1", "k3"), "three_segment": ("K_1", "K_2", "K_3", "T_1", "T_2", "w_blend")}
+
+#: Law name -> the coefficients that scale its torque together: multiplying them by ``g`` multiplies
+#: ``psi`` by ``g`` exactly (``K`` of the linear law; the three-segment curve's breakpoints ``T / K`` and
+#: blend width stay). The first is the small-deflection stiffness ``psi'(0)``.
+TORQUE_SCALE_COEFFICIENTS: Dict[str, Tuple[str, ...]] = {
+    "linear": ("K",), "cubic": ("k1", "k3"), "three_segment": ("K_1", "K_2", "K_3", "T_1", "T_2")}

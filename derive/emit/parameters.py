@@ -12,7 +12,8 @@ entry per elastic joint, in q order::
 
     {"joint": 1-based number, "name": joint name (URDF or chain.json),
      "spring": {"law": "linear" | "cubic" | "three_segment", "parameters": [names in the law's coefficient
-                order: ("K",) for linear, derive.core.spring_laws.LAW_COEFFICIENTS otherwise]},
+                order: ("K",) for linear, derive.core.spring_laws.LAW_COEFFICIENTS otherwise],
+                "torque_scale": [the names that scale psi together, TORQUE_SCALE_COEFFICIENTS]},
      "rotor_inertia": name, "damping": name,
      "friction": null or {"law": "coulomb_stribeck_tanh", "parameters": [F_c, F_s, v_s, v_c names]},
      "gear_ratio": null or name (complete models)}
@@ -28,7 +29,7 @@ from typing import Dict, List, Optional, Tuple
 from ..core.domains import parameter_domain
 from ..core.friction import FRICTION_PARAMETERS
 from ..core.model_base import FlexibleJointModel
-from ..core.spring_laws import LAW_COEFFICIENTS
+from ..core.spring_laws import LAW_COEFFICIENTS, TORQUE_SCALE_COEFFICIENTS
 from .chain_json import chain_document
 
 __all__ = ["drive_table", "parameter_entries"]
@@ -42,11 +43,11 @@ def drive_table(m: FlexibleJointModel) -> List[dict]:
     gears = {r["joint"]: r["gear_ratio"] for r in doc.get("rotors", ())}
     out = []
     for j, e in enumerate(doc["elastic"], start=1):
-        if "spring" in e:
-            law = e["spring"]["law"]
-            spring = {"law": law, "parameters": [e["spring"][c] for c in _spring_roles(e["spring"], law)]}
-        else:
-            spring = {"law": "linear", "parameters": [e["K"]]}
+        law = e["spring"]["law"] if "spring" in e else "linear"
+        names = [e["spring"][c] for c in _spring_roles(e["spring"], law)] if "spring" in e else [e["K"]]
+        by_coefficient = dict(zip(("K",) if law == "linear" else LAW_COEFFICIENTS[law], names))
+        spring = {"law": law, "parameters": names,
+                  "torque_scale": [by_coefficient[c] for c in TORQUE_SCALE_COEFFICIENTS[law]]}
         fr = e.get("friction")
         friction = None if fr is None else {
             "law": fr["law"], "parameters": [fr[name] for name, _, _ in FRICTION_PARAMETERS]}

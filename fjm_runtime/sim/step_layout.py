@@ -36,7 +36,7 @@ def spring_scale_groups(model):
     ``K_1, K_2, K_3, T_1, T_2`` (its breakpoints ``T / K`` stay). The first index of a group is the joint's
     stiffness at small deflection (``K``, ``k1``, ``K_1``).
     """
-    return [np.array(d.spring[:5] if d.spring_law == "three_segment" else d.spring, dtype=int) for d in model.drives]
+    return [np.array(d.spring_scale, dtype=int) for d in model.drives]
 
 
 def stiffness_scale_indices(model):

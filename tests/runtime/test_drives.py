@@ -35,14 +35,15 @@ def test_motor_row_of_the_equations_uses_the_drive_indices(name):
 
 
 def test_nonlinear_drive_coefficients_are_the_spring_functions_inputs():
-    """panda_hd: doubling joint 4's K_1, K_2, K_3, T_1, T_2 (Drive.spring[:5]) doubles its psi, leaves the others."""
+    """panda_hd: doubling joint 4's K_1, K_2, K_3, T_1, T_2 (Drive.spring_scale) doubles its psi, leaves the others."""
     m = fjm_runtime.load("panda_hd")
     p = m.params_array()
     phi = np.full(m.n, 2e-3)
     psi0 = np.asarray(m.spring_functions["spring"](phi, p)[0]).ravel()
     d = m.drives[3]
     q = p.copy()
-    q[list(d.spring[:5])] *= 2.0
+    assert d.spring_scale == d.spring[:5]
+    q[list(d.spring_scale)] *= 2.0
     psi1 = np.asarray(m.spring_functions["spring"](phi, q)[0]).ravel()
     np.testing.assert_allclose(psi1[3], 2.0 * psi0[3], rtol=1e-9)
     np.testing.assert_allclose(np.delete(psi1, 3), np.delete(psi0, 3), rtol=0, atol=0)
