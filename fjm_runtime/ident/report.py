@@ -12,6 +12,7 @@ from __future__ import annotations
 
 from typing import List
 
+from ..model import command_name
 from .uncertainty import INTERVAL_SIGMAS
 
 __all__ = ["params_toml", "table_lines", "SPREAD_SIGMAS", "MIN_SPREAD"]
@@ -33,7 +34,7 @@ def params_toml(ident, model) -> str:
     """The parameter file's text (see the module docstring)."""
     s = ident.settings
     mine = ident.model_values(model)
-    lines = [f"# fjm identify {s['model']} {s['log']}: {s['samples']} samples, {s['duration_s']:.3g} s at "
+    lines = [f"# fjm identify {command_name(model)} {s['log']}: {s['samples']} samples, {s['duration_s']:.3g} s at "
              f"{s['rate_hz']:.4g} Hz",
              f"# spring {s['spring']}, friction {s['friction']} (v_c {s['v_c']:g}, v_s {s['v_s']:g} rad/s), "
              f"tau_J from the {s['tau_J']}",

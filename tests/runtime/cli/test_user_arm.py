@@ -185,6 +185,7 @@ def test_a_users_urdf_arm_goes_through_every_command(tmp_path, capfd):
     params = work / "params.toml"
     _, o, e = fjm("identify", out, log, "--out", params)
     assert f"fjm design {shlex.quote(str(m.directory))} --params {shlex.quote(str(params))}" in o
+    assert params.read_text().startswith(f"# fjm identify {shlex.quote(str(m.directory))} {log}:")
     identified = tomllib.loads(params.read_text())
     true = {**true_params(m), "F_c1": FRICTION, "F_c2": FRICTION}
     for k in ("K1", "K2", "Jm1", "Jm2", "Bm1", "Bm2"):    # the truth inside the interval the file states
