@@ -9,7 +9,7 @@ import numpy as np
 from .models import MODEL_HELP
 from ..validation import FjmValueError
 from .common import check_output_file
-from .ranges import AMPLITUDE, DURATION, RATE, SEED, Range, check_stored_size
+from .ranges import AMPLITUDE, ANGLE, DURATION, RATE, SEED, Range, check_stored_size
 
 __all__ = ["add_arguments", "run"]
 
@@ -61,8 +61,8 @@ def _posture(text, n: int):
         q = np.array([float(v) for v in str(text).split(",")])
     except ValueError:
         q = np.array([np.nan])
-    if q.size != n or not np.all(np.isfinite(q)):
-        raise FjmValueError(f"--posture {text!r}: expected {n} comma-separated angles in rad")
+    if q.size != n or not all(ANGLE.contains(v) for v in q):
+        raise FjmValueError(f"--posture {text!r}: expected {n} comma-separated angles, each {ANGLE}")
     return q
 
 

@@ -29,7 +29,7 @@ from ..sim.simulate import simulate, stderr_progress
 from ..sim.step import SimulationDivergedError
 from ..validation import FjmValueError, check_magnitudes
 from .common import check_output_file, finite_or_note, parse_assignments
-from .ranges import ANGLE, DELAY, DURATION, GAIN, LAYER, MASS, PERIOD, RATE, SEED, STIFFNESS, TORQUE, Range
+from .ranges import ANGLE, DELAY, DURATION, FACTOR, GAIN, LAYER, MASS, PERIOD, RATE, SEED, STIFFNESS, TORQUE, Range
 from ..control.design import Design
 from .simulate_checks import (DEFAULT_MAX_MEMORY_GB, MAX_SUBSTEPS, check_pole, check_run_size, check_substeps,
                               gains_provenance, workspace_exit)
@@ -137,8 +137,8 @@ def _scales(text: Optional[str], n: int, flag: str) -> Optional[np.ndarray]:
         raise FjmValueError(f"{flag} {text!r}: expected numbers separated by commas, e.g. {flag} 0.7,1.3") from None
     if vals.size == 1:
         vals = np.full(n, vals[0])
-    if vals.size != n or not np.all(np.isfinite(vals)) or np.any(vals <= 0):
-        raise FjmValueError(f"{flag} {text!r}: expected one or {n} finite factors > 0")
+    if vals.size != n or not all(FACTOR.contains(v) for v in vals):
+        raise FjmValueError(f"{flag} {text!r}: expected one or {n} factors {FACTOR}")
     return vals
 
 

@@ -20,7 +20,7 @@ from ..analysis.certificates.lemma1 import paper_beta_hat
 from ..control.defaults import DEFAULT_LAM, DEFAULT_LAYER_RATE
 from ..validation import check_magnitudes
 from .common import parse_assignments
-from .ranges import AMPLITUDE, ANGLE, DURATION, FACTOR, FREQUENCY, MASS, POLE, STIFFNESS, Range
+from .ranges import AMPLITUDE, ANGLE, DURATION, FACTOR, FREQUENCY, MASS, POLE, STIFFNESS, TORQUE, Range
 
 #: Ranges of the certificate's own flags (the others: :mod:`fjm_runtime.cli.ranges`).
 INERTIA = Range(0, 1e4, "kg m^2", "J_m", lo_open=True)
@@ -31,6 +31,8 @@ LAYER_RATE = Range(0, 1e6, "1/s", "rate", lo_open=True)
 #: Grid points of the certificate (its time grows with them; 60000 takes seconds).
 BUDGET = Range(1, 10_000_000, "", "budget", integer=True)
 DISTURBANCE = Range(0, 1e6, "N m", "D")
+#: A bound of the reference's derivatives or of the tracking errors (SI units of each derivative).
+BOUND = Range(0, 1e12, "", "bound")
 
 DEFAULT_ERROR_BOX = {"sine": [0.05, 0.5, 0.5, 0.5], "step": [0.05, 0.1, 0.5, 1.0]}
 
@@ -42,6 +44,8 @@ def _floats(text: str, count: int, flag: str) -> List[float]:
         raise ValueError(f"{flag} {text!r}: expected {count} numbers separated by commas") from None
     if len(vals) != count:
         raise ValueError(f"{flag} {text!r}: expected {count} numbers separated by commas, got {len(vals)}")
+    if not all(BOUND.contains(v) for v in vals):
+        raise ValueError(f"{flag} {text!r}: expected {count} bounds, each {BOUND}")
     return vals
 
 
@@ -161,8 +165,8 @@ def _u_max(args, n: int):
         vals = [float(v) for v in str(args.u_max).replace(",", " ").split()]
     except ValueError:
         vals = []
-    if len(vals) not in (1, n) or not all(v > 0 for v in vals):
-        raise ValueError(f"--u-max {args.u_max!r}: expected one limit > 0 (N m) or {n} separated by commas")
+    if len(vals) not in (1, n) or not all(TORQUE.contains(v) for v in vals):
+        raise ValueError(f"--u-max {args.u_max!r}: expected one limit {TORQUE} or {n} separated by commas")
     return vals[0] if len(vals) == 1 else vals
 
 

@@ -122,6 +122,11 @@ CASES = [
     ("tune link1 --sensing torque --payload -1", "kg"),
     ("tune link1 --sensing torque --gamma-range 1.3 0.7", "LO <= HI"),
     ("tune link1 --layer-rate 0", "0 < rate"),
+    ("tune link1 --u-max 1e300", "N m"),
+    ("tune link1 --error-box 0.05,0.5,nan,0.5", "0 <= bound"),
+    ("simulate planar2 --k-scale 1e9 --plot {out}", "0 < factor <= 1000"),
+    ("simulate planar2 --jm-scale 0,1 --plot {out}", "0 < factor"),
+    ("excite link1 --duration 10 --posture 1e9 --out {out}", "rad"),
 ]
 
 
