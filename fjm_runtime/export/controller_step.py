@@ -19,7 +19,8 @@ Two Functions, both of plain vectors (``nc`` = controller-state size, :class:`Co
 ``<name>_ctrl_reset(m0, p) -> (c0, u0)``
     The rest state of :func:`fjm_runtime.sim.sample_step.initial_step_state` from a reading of the
     arm at rest: buffers full of ``m0``, the torques that hold it (torque sensing: the measured
-    tau_J; state sensing: ``K_nom (q_m - q)``), filters at the reading, zero integral.
+    tau_J; state sensing: the spring law ``psi_nom(q_m - q)``, ``K_nom (q_m - q)`` for a linear spring), filters at
+    the reading, zero integral.
 
 The arithmetic is the sample step's own helpers (``_condition``, ``_delayed``, ``_rate_limited``,
 ``_rate_windup``), so the library and the simulator cannot drift apart; only ``p`` and ``gains``

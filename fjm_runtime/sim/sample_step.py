@@ -12,7 +12,7 @@ At sample ``k`` (``t_k = k T``), from the step state ``w_k`` (layout :class:`Ste
              MEASURED angle (the same for dq_m from the measured motor angle), a_v = 1 - exp(-w_v T)
              dtau_J 'filtered': d_k = d_{k-1} + a ((tau_k - tau_{k-1}) / T - d_{k-1}), a = 1 - exp(-w_c T)
     m_used = m_{k-d}                      (ring buffer of the d last measurements; d = 0: m_k)
-             predict: x_hat from m_{k-d} (torque sensing: q_m = q + K_nom^-1 tau_J), integrated
+             predict: x_hat from m_{k-d} (torque sensing: q_m = q + psi_nom^-1(tau_J)), integrated
              over d samples of the CONTROLLER'S NOMINAL model (its own f, g and p_nom, whatever
              the plant is) under u_{k-d} .. u_{k-1}, m_used = its measurement
     u_law, s_k, y_hat_k = law(m_used, z_k, r_k)          (NOMINAL parameters; saturation and
