@@ -9,7 +9,8 @@ Python, no ctypes): median, 99.9th percentile and worst case. One step is the wh
 controller: the dtau_J filter, the delay buffer, the prediction over one sample with the nominal
 model (RK4 substeps), the torque-sensed ismc law with saturation and anti-windup, the state update.
 
-Variants: the design's predictor (its substeps rule: 11 RK4 substeps per 1 ms) and a predictor on
+Variants: the design's predictor (its recorded ``predict_substeps``, chosen by accuracy: 3 RK4 substeps
+per 1 ms; the plant's rule gives 11) and a predictor on
 :data:`FEW_SUBSTEPS` substeps (the plant keeps the design's), with the accuracy that costs: the
 10 s task's figures (``make designed``: worst-joint second-half RMS, torque jitter of joints 1-4)
 of each variant. The issue's target: the 99.9th percentile under 100 us (a third of the 1 kHz

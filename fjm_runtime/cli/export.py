@@ -107,7 +107,7 @@ def _run_controller(args) -> int:
                                unverified=args.unverified)
     files = export_controller(design, args.out)
     print(f"wrote {len(files)} files to {args.out} ({design.name}: {m.name}, {design.controller.law_kind}, "
-          f"{1.0 / design.layout.T:g} Hz, delay {design.layout.delay}, {design.layout.substeps} substeps); "
+          f"{1.0 / design.layout.T:g} Hz, delay {design.layout.delay}, {design.layout.predictor_substeps} substeps); "
           f"build with `make -C {args.out}`{'; UNVERIFIED design (meets: false)' if gains.meets is False else ''}")
     return 0
 

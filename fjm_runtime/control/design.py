@@ -37,8 +37,8 @@ _REQUIRED = {"smc": (("lam", "c"), ("k_s",), ("delta",)), "ismc": (("lam", "c"),
              "fl": (("lam", "c"),)}
 # JSON keys held by typed fields (the field name where it differs from the key)
 _FIELD_OF_KEY = {"reference": "task"}
-_TYPED_KEYS = ("model", "kind", "sensing", "rate", "delay", "predict", "sensor", "noise", "interface",
-               "reference", "gains", "params", "meets")
+_TYPED_KEYS = ("model", "kind", "sensing", "rate", "delay", "predict", "predict_substeps", "sensor", "noise",
+               "interface", "reference", "gains", "params", "meets")
 _SHIPPED = "fjm_runtime/control/designed"
 
 
@@ -87,6 +87,10 @@ def _check_conditions(d: dict, where: str) -> None:
     delay = d.get("delay")
     if delay is not None and (isinstance(delay, bool) or not isinstance(delay, int) or delay < 0):
         raise FjmValueError(f"{where}: delay = {delay!r}; expected an integer >= 0 (samples)")
+    subs = d.get("predict_substeps")
+    if subs is not None and (isinstance(subs, bool) or not isinstance(subs, int) or subs < 1):
+        raise FjmValueError(f"{where}: predict_substeps = {subs!r}; expected an integer >= 1 (RK4 substeps per "
+                            "sample of the predictor)")
     if d.get("sensing") is not None and d["sensing"] not in SENSING_KINDS:
         raise FjmValueError(f"{where}: sensing = {d['sensing']!r}; expected one of {', '.join(SENSING_KINDS)}")
     for key in ("reference", "params", "sensor"):
@@ -108,6 +112,9 @@ class Design:
     model, sensing, rate, delay, predict : optional
         The conditions (model name; ``'state'``/``'torque'``; control rate, Hz; computation delay,
         samples; delay compensation). ``None``: not recorded (a hand-written file).
+    predict_substeps : int, optional
+        RK4 substeps per sample of the predictor, chosen by accuracy (:mod:`fjm_runtime.sim.predictor`);
+        ``None`` (a file from before the choice): the plant's substeps rule.
     sensor : dict, optional
         The sensor model's fields (:class:`~fjm_runtime.sim.sensor.SensorModel`); ``noise``: its preset name.
     interface : str, optional
@@ -134,6 +141,7 @@ class Design:
     rate: Optional[float] = None
     delay: Optional[int] = None
     predict: Optional[bool] = None
+    predict_substeps: Optional[int] = None
     sensor: Optional[Mapping[str, Any]] = None
     noise: Optional[str] = None
     interface: Optional[str] = None

@@ -39,8 +39,8 @@ from ..sim.step_layout import StepLayout
 from ..sim.substeps import resolve_substeps
 from ..validation import FjmValueError
 from .controller_c import c_array, class_text, header_text, makefile_text, silence_unused, source_text
-from .controller_checks import (GAIN_MAX, c_name, check_c_values, check_rule_substeps, check_substeps, check_verified,
-                                default_c_name, verification_text)
+from .controller_checks import (GAIN_MAX, MAX_SUBSTEPS, c_name, check_c_values, check_rule_substeps, check_substeps,
+                                check_verified, default_c_name, verification_text)
 from .controller_step import ControllerLayout, controller_functions
 
 __all__ = ["ControllerDesign", "amalgamation", "design_controller", "export_controller"]
@@ -91,7 +91,9 @@ def design_controller(model, design: Design, nominal=None, substeps: Optional[in
     nominal : dict, optional
         Nominal parameters (default: the design's ``params.nominal`` over the model's defaults).
     substeps : int, optional
-        RK4 substeps of the predictor (default: the substeps rule at the design's start).
+        RK4 substeps of the predictor and of the layout's plant (default: the design's recorded
+        ``predict_substeps`` for the predictor, the plant on the substeps rule at the design's start;
+        a design that records none: the rule for both).
     name : str, optional
         C prefix (default ``<model>_<kind>[_tau]``).
     unverified : bool
@@ -120,9 +122,14 @@ def design_controller(model, design: Design, nominal=None, substeps: Optional[in
     if x0 is None:  # no task: at rest at q = 0
         x0 = np.zeros(4 * int(model.n))
     subs = resolve_substeps(substeps, model, x0, ctrl.p_nom, T)
-    if substeps is None and predicting:
+    recorded = design.predict_substeps if (substeps is None and predicting) else None
+    if recorded is not None and recorded > MAX_SUBSTEPS:
+        raise FjmValueError(f"{design.source}: predict_substeps = {recorded}; expected 1..{MAX_SUBSTEPS} (straight-line "
+                            "C grows with the substeps)")
+    if substeps is None and predicting and recorded is None:
         check_rule_substeps(subs, model.name)
-    L = make_layout(model, ctrl, T, subs, sensor, int(design.delay or 0), bool(design.predict))
+    L = make_layout(model, ctrl, T, subs, sensor, int(design.delay or 0), bool(design.predict),
+                    predict_substeps=recorded)
     sensing = design.sensing or "state"
     default_name = f"{model.name}_{design.kind}{'_tau' if sensing == 'torque' else ''}"
     return ControllerDesign(model, ctrl, L, sensor, cname or default_c_name(default_name), design)
@@ -187,7 +194,7 @@ def _fields(design: ControllerDesign, step, reset) -> dict:
             "DESIGN": str(design.design.file or design.design.report.get("source", "(given)")),
             "FJM_VERSION": f"fjm {__version__}", "CASADI_VERSION": ca.__version__, "MODEL": model.name,
             "N": L.n, "KIND": ctrl.law_kind, "SENSING": L.sensing, "RATE": f"{1.0 / L.T:g}", "DELAY": L.delay,
-            "PREDICT": "on" if L.predict else "off", "SUBSTEPS": L.substeps,
+            "PREDICT": "on" if L.predict else "off", "SUBSTEPS": L.predictor_substeps,
             "VERIFIED": verification_text(design.design.meets, dict(design.design.report)),
             "PREPROC": _preprocessing(L, design.sensor), "RATE_LIMIT": rate_limit, "READING": _reading_text(L),
             "NM": L.nm, "NR": 5 * L.n, "NP": len(model.param_names), "NG": int(np.asarray(ctrl.gains).size),

@@ -157,7 +157,7 @@ def controller_functions(model, controller, L: StepLayout, name: str):
     n, n_par = L.n, len(model.param_names)
     CL = ControllerLayout(L)
     n_gains = int(np.asarray(controller.gains).size)
-    h = L.T / L.substeps
+    h = L.T / L.predictor_substeps  # the ops integrate only the predictor here
     ops = ss._CasadiOps(ss._expanded(fns), L.nx, n, h)
     c, m_raw = ca.MX.sym("c", CL.nc), ca.MX.sym("m", L.nm)
     r, p, gains = ca.MX.sym("r", 5 * n), ca.MX.sym("p", n_par), ca.MX.sym("gains", n_gains)

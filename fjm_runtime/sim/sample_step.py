@@ -31,6 +31,7 @@ through the models' ``f``/``g`` and the controller's ``evaluate``/``state_deriva
 """
 from __future__ import annotations
 
+from dataclasses import replace
 
 import numpy as np
 
@@ -41,7 +42,7 @@ from .step import casadi_functions
 from .step_layout import StepLayout, controller_model, stiffness_indices
 
 __all__ = ["casadi_sample_step", "check_loop_settings", "initial_measurement", "initial_step_state",
-           "python_sample_step", "sample_step_function"]
+           "predicted_measurement", "python_sample_step", "sample_step_function"]
 
 # -- the arithmetic, written once for numpy and CasADi ------------------------------------------
 
@@ -222,8 +223,10 @@ def _plant(ops, L: StepLayout, x, u, p):
 
 def _predict(nom_ops, L: StepLayout, m_old, u_buf, p_nom):
     """The measurement predicted ``d`` samples ahead from ``m_old`` with the controller's NOMINAL model
-    (torque sensing: ``q_m = q + psi^-1(tau_J)`` by its spring law at ``p_nom``)."""
+    (torque sensing: ``q_m = q + psi^-1(tau_J)`` by its spring law at ``p_nom``), each sample on
+    ``L.predictor_substeps`` RK4 substeps (an outlined ``nom_ops`` holds the substep of that count)."""
     n = L.n
+    steps = L if L.predictor_substeps == L.substeps else replace(L, substeps=L.predictor_substeps)
     if L.sensing == "state":
         x = m_old
     elif L.sensing == "full":  # the state is read: only the prediction's own measurement needs psi
@@ -233,12 +236,19 @@ def _predict(nom_ops, L: StepLayout, m_old, u_buf, p_nom):
         x = nom_ops.cat([q, dq, q + nom_ops.spring_inverse(tau, p_nom), dqm])
     x_old = x
     for j in range(L.delay):
-        x = _plant(nom_ops, L, x, u_buf[j * n:(j + 1) * n], p_nom)
+        x = _plant(nom_ops, steps, x, u_buf[j * n:(j + 1) * n], p_nom)
     if L.sensing == "full":
         # the reading plus the nominal model's predicted CHANGE: the torque keeps the sensor's scale (a torque
         # from K_nom (q_m - q) would scale the law's torque feedback by K_nom / K: -0.7 became -1 at K x0.7)
         return m_old + _measure(nom_ops, L, x, p_nom) - _measure(nom_ops, L, x_old, p_nom)
     return _measure(nom_ops, L, x, p_nom)
+
+
+def predicted_measurement(model, L: StepLayout, m_old, u_buf, p_nom) -> np.ndarray:
+    """The predictor of the sample step in numpy: ``m_old`` (nm,) predicted ``L.delay`` samples ahead under
+    the torques ``u_buf`` (delay * n,) with ``model`` (the controller's) at ``p_nom``, shape (nm,)."""
+    return np.asarray(_predict(_NumpyOps(model), L, np.asarray(m_old, dtype=float), np.asarray(u_buf, dtype=float),
+                               np.asarray(p_nom, dtype=float)), dtype=float)
 
 
 def _delayed(ops, nom_ops, L: StepLayout, m_k, buf, u_buf, p_nom):
@@ -346,8 +356,10 @@ def casadi_sample_step(fns, controller, L: StepLayout, n_par: int, nominal_fns=N
     """
     import casadi as ca
     h = L.T / L.substeps if outline else None
+    h_pred = L.T / L.predictor_substeps if outline else None
     ops = _CasadiOps(_expanded(fns), L.nx, L.n, h)
-    nom_ops = ops if nominal_fns is None else _CasadiOps(_expanded(nominal_fns), L.nx, L.n, h)
+    nom_ops = ops if (nominal_fns is None and h_pred == h) else \
+        _CasadiOps(_expanded(fns if nominal_fns is None else nominal_fns), L.nx, L.n, h_pred)
     w, r = ca.MX.sym("w", L.nw), ca.MX.sym("r", 5 * L.n)
     noise, p = ca.MX.sym("noise", L.nm), ca.MX.sym("p", n_par)
     p_nom = ca.DM(np.asarray(controller.p_nom, dtype=float)) if L.predict else None

@@ -124,7 +124,8 @@ def simulate(model, controller, reference, *, duration: float, dt: float = 1e-3,
              true_params=None, x0=None, progress: Optional[Callable[[float], None]] = None,
              max_state: float = 1e6, backend: str = "auto", substeps: Optional[int] = None,
              sensor: Optional[SensorModel] = None, delay_samples: int = 0,
-             predict: bool = False, loop: str = "sampled") -> SimulationResult:
+             predict: bool = False, loop: str = "sampled",
+             predict_substeps: Optional[int] = None) -> SimulationResult:
     """Simulate the sampled-data closed loop: TRUE plant, controller with its NOMINAL model.
 
     Parameters
@@ -166,6 +167,9 @@ def simulate(model, controller, reference, *, duration: float, dt: float = 1e-3,
         under the torques already sent (see :mod:`fjm_runtime.sim.sample_step`).
     loop : {'sampled'}
         The one loop (any other name raises :class:`FjmValueError`).
+    predict_substeps : int, optional
+        RK4 substeps per sample of the predictor (default: the plant's ``substeps``; a design's
+        recorded choice, :mod:`fjm_runtime.sim.predictor`).
 
     Returns
     -------
@@ -181,7 +185,7 @@ def simulate(model, controller, reference, *, duration: float, dt: float = 1e-3,
     p_true, x, n_steps = _initial_conditions(model, controller, reference, duration, dt, true_params, x0)
     sensor, delay = check_loop_settings(sensor, delay_samples, predict, loop)
     subs = resolve_substeps(substeps, model, x, p_true, float(dt))
-    L = make_layout(model, controller, float(dt), subs, sensor, delay, predict)
+    L = make_layout(model, controller, float(dt), subs, sensor, delay, predict, predict_substeps)
     t = dt * np.arange(n_steps + 1)
     r0 = np.asarray(reference(0.0), dtype=float)
     z = np.asarray(controller.initial_state(0.0, initial_measurement(model, L, x, p_true), r0), dtype=float)
@@ -191,7 +195,8 @@ def simulate(model, controller, reference, *, duration: float, dt: float = 1e-3,
     name = _choose_backend(backend, model, controller)
     W, AUX = BACKENDS[name](model, controller, L, p_true, w0, t, R, NOISE, progress, max_state)
     settings = {"rate": 1.0 / float(dt), "dt": float(dt), "substeps": subs, "delay_samples": delay,
-                "predict": bool(predict), "sensing": L.sensing, "seed": int(sensor.seed), "backend": name,
+                "predict": bool(predict), "predict_substeps": L.predictor_substeps if L.predict else None,
+                "sensing": L.sensing, "seed": int(sensor.seed), "backend": name,
                 "sensor": sensor.name, "torque_rate_limit": sensor.as_dict()["torque_rate_limit"]}
     return _finish(model, controller, p_true, L, t, W, AUX, R.reshape(-1, 5, L.n), settings)
 

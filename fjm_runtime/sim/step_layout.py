@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Optional
 
 import numpy as np
 
@@ -73,6 +74,10 @@ class StepLayout:
     T : float
         Control period, s.
     substeps : int
+        RK4 substeps per sample of the plant.
+    predict_substeps : int
+        RK4 substeps per sample of the predictor (:mod:`fjm_runtime.sim.predictor` chooses them by
+        accuracy); 0: the plant's ``substeps`` (:attr:`predictor_substeps` resolves it).
     a_filter : float
         ``1 - exp(-dtau_cutoff T)``.
     q_quant, q_m_quant : float
@@ -110,6 +115,12 @@ class StepLayout:
     offset: bool = False
     rate_step: tuple = ()
     integral: bool = False
+    predict_substeps: int = 0
+
+    @property
+    def predictor_substeps(self) -> int:
+        """RK4 substeps per sample of the predictor: ``predict_substeps``, else the plant's ``substeps``."""
+        return int(self.predict_substeps) or int(self.substeps)
 
     @property
     def n_venc(self) -> int:
@@ -135,14 +146,22 @@ class StepLayout:
 
 
 def make_layout(model, controller, T: float, substeps: int, sensor: SensorModel, delay: int,
-                predict: bool) -> StepLayout:
-    """The :class:`StepLayout` of a run (the controller's ``sensing`` decides the measurement)."""
+                predict: bool, predict_substeps: Optional[int] = None) -> StepLayout:
+    """The :class:`StepLayout` of a run (the controller's ``sensing`` decides the measurement).
+
+    ``predict_substeps``: the predictor's RK4 substeps per sample (None: the plant's ``substeps``);
+    an integer >= 1, else FjmValueError.
+    """
     n = int(model.n)
     sensing = getattr(controller, "sensing", "state")
     if sensing not in ("state", "torque", "full"):
         raise FjmValueError(f"controller.sensing = {sensing!r}: expected 'state', 'torque' or 'full'")
     torque = sensing != "state"  # torque or full: the sensor measures the spring
     predicting = bool(predict and delay > 0)
+    if predict_substeps is not None and (isinstance(predict_substeps, bool) or
+                                         not isinstance(predict_substeps, (int, np.integer)) or predict_substeps < 1):
+        raise FjmValueError(f"predict_substeps = {predict_substeps!r}: expected an integer >= 1 (RK4 substeps per "
+                            "sample of the predictor)")
     rate = sensor.rate_limits(n)
     rate_step = tuple(float(r * T) if np.isfinite(r) else _NO_LIMIT for r in rate) \
         if sensor.has_rate_limit() else ()
@@ -155,7 +174,8 @@ def make_layout(model, controller, T: float, substeps: int, sensor: SensorModel,
                       a_velocity=1.0 - math.exp(-sensor.velocity_cutoff * T),
                       offset=torque and bool(np.any(sensor.offsets(n) > 0)), rate_step=rate_step,
                       integral=bool(rate_step) and str(_law_kind(controller)).split("_")[0] in INTEGRAL_LAWS
-                      and int(getattr(controller, "n_states", 0)) >= n)
+                      and int(getattr(controller, "n_states", 0)) >= n,
+                      predict_substeps=int(predict_substeps) if (predicting and predict_substeps) else 0)
 
 
 #: Laws whose first ``n`` controller states integrate the tracking error (``e1 = q - q_d``; the impedance

@@ -5,6 +5,8 @@ from typing import List
 
 import numpy as np
 
+from ...sim.predictor import loop_predict_substeps
+
 __all__ = ["binding_miss", "report", "summary_lines", "worst_case"]
 
 
@@ -37,9 +39,12 @@ def report(model, prob, best, worst, b, margins, draws, seed, duration) -> dict:
     gains = dict(best)
     if prob.u_max is not None:
         gains["u_max"] = [float(v) for v in np.broadcast_to(prob.u_max, (int(model.n),))]
-    return {"model": model.name, "kind": prob.kind, "sensing": prob.sensing, "rate": 1.0 / prob.dt,
-            "delay": prob.delay, "sensor": prob.sensor.as_dict(), "reference": prob.task, "predict": prob.predict,
-            "gains": gains, "worst_case": worst_case(b, worst), "margins": margins, "draws": int(draws),
+    rec = {"model": model.name, "kind": prob.kind, "sensing": prob.sensing, "rate": 1.0 / prob.dt,
+           "delay": prob.delay, "sensor": prob.sensor.as_dict(), "reference": prob.task, "predict": prob.predict}
+    if prob.predict and prob.delay > 0:  # the predictor's substeps by accuracy, for the exported controller
+        rec["predict_substeps"] = loop_predict_substeps(model, prob.controller(best), prob.sensor, prob.dt,
+                                                        prob.delay, prob.reference, prob.x0)
+    return {**rec, "gains": gains, "worst_case": worst_case(b, worst), "margins": margins, "draws": int(draws),
             "seed": int(seed), "duration": float(duration), "fjm_version": __version__}
 
 
