@@ -195,3 +195,31 @@ def test_a_range_parses_what_it_accepts_exactly():
     assert seed("18446744073709551615") == 2 ** 64 - 1       # exact: not rounded through a float
     assert seed("1e3") == 1000 and isinstance(seed("1e3"), int)
     assert RATE("1e3") == 1000.0
+
+
+def _error(argv, capfd):
+    assert main(argv) == 2
+    return capfd.readouterr().err.strip()
+
+
+def test_excite_states_the_size_it_refuses(tmp_path, capfd):
+    """link1, 3600 s at 100 kHz: 3.6e8 + 1 rows x (1 + 7 x 1 CSV + 20 x 1 check) columns x 8 bytes x 2 copies."""
+    from fjm_runtime.cli.excite import CHECK_COLUMNS_PER_JOINT
+    rows, columns = 3600 * 100_000 + 1, 1 + 7 + CHECK_COLUMNS_PER_JOINT
+    err = _error(["excite", "link1", "--duration", "3600", "--rate", "100000", "--out", str(tmp_path / "x.csv")], capfd)
+    assert f"{rows:.4g} rows x {columns} columns x 8 bytes x 2 = {rows * columns * 16 / 1e9:.3g} GB" in err, err
+
+
+def test_excite_states_the_fourier_terms_it_refuses(tmp_path, capfd):
+    """The Panda, 10 s at 1 kHz from 0.2 Hz: 2 periods of 5000 samples; (20 + 40) series rated up to 12 times on
+    400 samples, the chosen one up to 20 times on 5000, each sample 1000 harmonics x 7 joints."""
+    terms = ((20 + 40) * 12 * 400 + 20 * 5000) * 1000 * 7
+    err = _error(["excite", "panda", "--duration", "10", "--harmonics", "1000", "--out", str(tmp_path / "x.csv")], capfd)
+    assert f"{terms:.3g} Fourier terms" in err and "5000 samples per period" in err, err
+
+
+def test_design_states_the_control_samples_it_refuses(tmp_path, capfd):
+    """(draws + as many re-check draws) x duration x rate."""
+    err = _error(["design", "planar2", "--draws", "100000", "--duration", "3000", "--out", str(tmp_path / "g.json")],
+                 capfd)
+    assert f"{2 * 100000 * 3000 * 1000:.3g} control samples" in err, err
