@@ -90,6 +90,8 @@ def read_drives(manifest: Mapping, param_names: Sequence[str]) -> Tuple[Drive, .
     entries = manifest.get("drives")
     if entries is None:
         raise _stale(manifest.get("model", "?"), "drives table")
+    if any("torque_scale" not in (e.get("spring") or {}) for e in entries):
+        raise _stale(manifest.get("model", "?"), "spring torque_scale in its drives table")
     index = {name: i for i, name in enumerate(param_names)}
 
     def at(names):

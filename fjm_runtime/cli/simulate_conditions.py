@@ -34,7 +34,7 @@ def _recorded(design) -> dict:
     """The conditions a design file records (a hand-written ``{kind, gains}`` records none of them)."""
     out = {"rate": design.rate, "sensing": design.sensing, "delay_samples": design.delay, "predict": design.predict}
     if isinstance(design.sensor, dict) or design.noise is not None:
-        out["noise"] = str(design.noise or design.sensor.get("name", "the design's sensor"))
+        out["noise"] = design.same_sensor(design.sensor_model())[1]   # its preset's current name ('panda' -> panda_white)
     return {k: v for k, v in out.items() if v is not None}
 
 
