@@ -73,6 +73,7 @@ class LinearAnalyzer:
         self.q0, self.r_rest = q0, np.concatenate([q0, np.zeros(4 * self.n)])
         self._R = None
         self._chords: dict = {}      # delay -> the nominal plant's rest linearization (this candidate's)
+        self._sigma0 = None          # the std of s at the nominal plant's rest (this candidate's)
 
     # -- operating points --------------------------------------------------------------------------
     def points(self):
@@ -219,7 +220,7 @@ class LinearAnalyzer:
         lin = S.linearize(w, r, p, g)
         if point == 0:
             self._chords.setdefault(self.cond.delay, lin)
-        fig = assess(lin, self.levels, self.h, self.names, attribution, self._layer(ctrl, g, lin))
+        fig = assess(lin, self.levels, self.h, self.names, attribution, self._layer(ctrl, g, lin), self._sigma0)
         fig["s_over_delta"] = (np.abs(lin.s) / np.asarray(ctrl.delta, dtype=float)).tolist()
         return fig
 
@@ -237,8 +238,11 @@ class LinearAnalyzer:
         g = np.asarray(ctrl.gains, dtype=float)
         self._chords = {}
         pts = list(range(len(self.task_k) + 1)) if points is None else list(points)
+        self._sigma0 = None
         rest0 = self.figures(ctrl, g, 0, self.plants[0][1], {}, attribution)
         g_eq = self.equivalent_gains(ctrl, g, rest0)
+        if "s_std_over_delta" in rest0:          # every other point's fixed point starts from this one's
+            self._sigma0 = np.asarray(rest0["s_std_over_delta"]) * np.asarray(ctrl.delta, dtype=float)
         run = self._nominal_run(ctrl, g_eq) if any(i > 0 for i in pts) else {}
         names = self.points()
         table = []

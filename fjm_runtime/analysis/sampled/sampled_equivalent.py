@@ -30,7 +30,7 @@ from .sampled_noise import (impulse_channel_variances, modal_channel_variances, 
 __all__ = ["sat_moments", "with_slope", "EquivalentLoop", "equivalent_loop", "loop_figures", "noise_columns"]
 
 #: Iterations of the fixed point, its tolerance on ``log sigma`` and its damping.
-ITERATIONS, TOLERANCE, DAMPING = 120, 1e-4, 0.5
+ITERATIONS, TOLERANCE, DAMPING = 120, 1e-3, 0.5
 
 
 def _normal_cdf(z) -> np.ndarray:
@@ -131,7 +131,7 @@ def noise_columns(lin, ABCD, levels, residual):
     return BS, DS, DsS
 
 
-def equivalent_loop(lin, levels, k_s, delta, slope, h: int, qrows) -> Optional[EquivalentLoop]:
+def equivalent_loop(lin, levels, k_s, delta, slope, h: int, qrows, sigma0=None) -> Optional[EquivalentLoop]:
     """The fixed point ``sigma = sigma_s(N(sigma))`` of the equivalent-gain loop at ``lin``'s point.
 
     Parameters
@@ -149,6 +149,8 @@ def equivalent_loop(lin, levels, k_s, delta, slope, h: int, qrows) -> Optional[E
         Jitter half-window, samples.
     qrows : list of int
         Rows of the link angles in ``A``.
+    sigma0 : ndarray (n,), optional
+        A start for ``sigma`` (another point's fixed point); default: the saturated loop's (``N = 0``).
     """
     levels, k_s, delta = (np.asarray(v, dtype=float) for v in (levels, k_s, delta))
     active = k_s > 0
@@ -157,8 +159,10 @@ def equivalent_loop(lin, levels, k_s, delta, slope, h: int, qrows) -> Optional[E
     zero = np.zeros_like(k_s)
     ABCD = with_slope(lin, -np.asarray(slope, dtype=float))  # the saturated loop: sensor noise only
     BS, DS, DsS = noise_columns(lin, ABCD, levels, zero)
-    rho, modal = _radius(ABCD[0])
-    if rho < 1.0:
+    rho, modal = (2.0, False) if sigma0 is not None else _radius(ABCD[0])
+    if sigma0 is not None:
+        sigma = np.maximum(np.asarray(sigma0, dtype=float), 1e-9 * delta)
+    elif rho < 1.0:
         sigma = np.maximum(np.sqrt(loop_figures(ABCD[0], BS, ABCD[2], DS, lin.Cs, DsS, qrows, h, modal=modal)[2]),
                            1e-9 * delta)
     last = None

@@ -226,14 +226,14 @@ def spectral(lin: Linearization, n: int):
 
 
 def assess(lin: Linearization, levels, h: int, names: Sequence[str], attribution: bool = False,
-           layer: Optional[tuple] = None) -> dict:
+           layer: Optional[tuple] = None, sigma0=None) -> dict:
     """The verdict at one point, and when stable the predicted jitter and link-angle error std per joint.
 
     ``layer = (k_s, delta, slope)`` (each (n,)): the law's switching gain, its boundary layer and the slope
     ``lin`` carries. With it and sensor noise, the layer enters by its equivalent gain under that noise
     (:mod:`~fjm_runtime.analysis.sampled.sampled_equivalent`) unless the noise keeps ``s`` inside it; without
     noise, an equilibrium unstable inside the layer but stable outside it gets no verdict (the loop settles
-    in an oscillation of the layer's width).
+    in an oscillation of the layer's width). ``sigma0`` (n,): a start for the std of ``s`` (another point's).
 
     Returns
     -------
@@ -266,7 +266,7 @@ def assess(lin: Linearization, levels, h: int, names: Sequence[str], attribution
                     "which no linearization judges"))
             return out
         if not small_ok:
-            eq = equivalent_loop(lin, levels, k_s, delta, slope, h, qrows)
+            eq = equivalent_loop(lin, levels, k_s, delta, slope, h, qrows, sigma0)
             out.update(rho=eq.rho, method="equivalent gain", layer_fraction=eq.p_in.tolist(),
                        equivalent_gain=eq.gain.tolist(), iterations=eq.iterations)
             if not eq.converged:
