@@ -173,7 +173,9 @@ def test_a_run_that_leaves_the_workspace_is_flagged_with_its_time(capsys):
 
 
 def test_a_state_that_blows_up_exits_3_with_the_json(capsys):
-    rep, err = _json(capsys, ["simulate", "link1", "--amplitude", "1e300", "--duration", "0.05", "--json"], status=3)
+    # poles at 300 1/s sampled at 100 Hz: the discrete loop is unstable (a state that blows up from legal flags)
+    rep, err = _json(capsys, ["simulate", "link1", "--lam", "300", "--rate", "100", "--duration", "0.5", "--json"],
+                     status=3)
     assert rep["diverged"] is True and rep["rms_second_half"] is None and rep["divergence_time"] >= 0
     assert "gains_source" in rep and "fjm: diverged:" in err
 
