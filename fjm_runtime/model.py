@@ -416,6 +416,16 @@ def load(name: str) -> Model:
     return _load_cached(str(directory))
 
 
+def _model_file_name(path: Path) -> str:
+    """The ``[model] name`` of a model file (its first ``name = "..."`` line), ``<name>`` if unreadable."""
+    import re
+    try:
+        found = re.search(r'^\s*name\s*=\s*"([A-Za-z_][A-Za-z0-9_]*)"', path.read_text(errors="replace"), re.M)
+    except OSError:
+        found = None
+    return found.group(1) if found else "<name>"
+
+
 def command_name(model) -> str:
     """How ``model`` is named on the command line: its name where :func:`load` finds it by name (a built-in
     or ``$FJM_GENERATED`` model), else the path of its directory (a user's derived model), quoted for a
@@ -458,9 +468,12 @@ def model_path(given) -> str:
                                 f"expected one of them, e.g. {str(path / inside[0])!r}")
     elif path.is_file() and path.name == "manifest.json":
         return str(path.parent.resolve())
-    elif path.is_file() and path.suffix.lower() in (".toml", ".urdf"):
-        first = ("a model file, not a derived model; derive it first" if path.suffix.lower() == ".toml" else
-                 "a URDF, not a derived model; name it in a model file (docs/usage.md#model-files), derive that")
-        raise FjmValueError(f"model {str(given)!r}: {first} (`fjm derive --model-file FILE.toml --out DIR`), "
-                            "then give DIR/<name>")
+    elif path.is_file() and path.suffix.lower() == ".toml":
+        raise FjmValueError(f"model {str(given)!r}: a model file, not a derived model; derive it first "
+                            f"(`fjm derive --model-file {shlex.quote(str(given))} --out DIR`), then give DIR or "
+                            f"DIR/{_model_file_name(path)}")
+    elif path.is_file() and path.suffix.lower() == ".urdf":
+        raise FjmValueError(f"model {str(given)!r}: a URDF, not a derived model; name it in a model file "
+                            "(docs/usage.md#model-files), derive that (`fjm derive --model-file FILE.toml --out "
+                            "DIR`), then give DIR/<name>")
     return str(given)

@@ -58,11 +58,12 @@ def test_a_folder_of_several_models_names_them(out):
 @pytest.mark.parametrize("suffix, word", [(".toml", "model file"), (".urdf", "URDF")])
 def test_a_model_file_or_urdf_says_derive_it_first(tmp_path, suffix, word):
     f = tmp_path / f"arm{suffix}"
-    f.write_text("")
+    f.write_text('[model]\nname = "myarm"\n' if suffix == ".toml" else "<robot/>")
     with pytest.raises(FjmValueError) as e:
         fjm_runtime.load(str(f))
     msg = str(e.value)
-    assert "\n" not in msg and word in msg and "fjm derive --model-file" in msg and "DIR/<name>" in msg
+    assert "\n" not in msg and word in msg and "fjm derive --model-file" in msg
+    assert (f"--model-file {f} --out DIR" in msg and "DIR/myarm" in msg) if suffix == ".toml" else "DIR/<name>" in msg
 
 
 def test_unknown_model_lists_the_built_ins_and_says_a_path_works(capsys):
