@@ -141,7 +141,8 @@ def _period(args) -> float:
         raise FjmValueError("--rate and --dt: give one of them (the control period is 1 / rate)")
     dt = 1e-3 if args.rate is None and args.dt is None else (args.dt if args.rate is None else 1.0 / args.rate)
     if not (np.isfinite(dt) and 0 < dt <= args.duration):
-        raise FjmValueError(f"--rate/--dt: control period {dt!r} s; expected 0 < period <= --duration")
+        given = f"--rate {args.rate:g}" if args.rate is not None else f"--dt {args.dt:g}"
+        raise FjmValueError(f"{given}: control period {dt!r} s; expected 0 < period <= --duration {args.duration:g} s")
     return dt
 
 

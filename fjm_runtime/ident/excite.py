@@ -358,11 +358,15 @@ def design_excitation(model, duration: float, *, q0=None, amplitude: float = 0.5
         Bad settings, a posture at a limit, or gravity alone beyond the effort limits.
     """
     n = int(model.n)
-    if not (np.isfinite(duration) and duration > 0 and np.isfinite(base_freq) and base_freq > 0 and harmonics >= 3
-            and candidates >= 1 and iterations >= 0 and amplitude > 0 and rate > 0 and v_c > 0):
-        raise FjmValueError(f"excite: duration {duration!r} s, base frequency {base_freq!r} Hz, harmonics {harmonics!r}, "
-                            f"candidates {candidates!r}, iterations {iterations!r}, amplitude {amplitude!r}; expected "
-                            "positive values, harmonics >= 3 and iterations >= 0")
+    for name, value, ok, expect in (("duration", duration, duration > 0, "> 0 s"),
+                                    ("base_freq", base_freq, base_freq > 0, "> 0 Hz"),
+                                    ("harmonics", harmonics, harmonics >= 3, ">= 3"),
+                                    ("candidates", candidates, candidates >= 1, ">= 1"),
+                                    ("iterations", iterations, iterations >= 0, ">= 0"),
+                                    ("amplitude", amplitude, amplitude > 0, "> 0 rad"),
+                                    ("rate", rate, rate > 0, "> 0 Hz"), ("v_c", v_c, v_c > 0, "> 0 rad/s")):
+        if not (np.isfinite(value) and ok):                            # one line per setting, named
+            raise FjmValueError(f"excite: {name} = {value!r}; expected a finite {name} {expect}")
     pos = model.position_limits
     if q0 is None:
         q0 = np.zeros(n) if pos is None else np.where(np.isfinite(pos).all(axis=1),   # a continuous joint: 0
