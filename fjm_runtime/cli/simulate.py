@@ -147,9 +147,12 @@ def _true_params(m, args, nominal) -> Dict[str, float]:
     true = parse_assignments(args.param, "--param")
     check_magnitudes(true, true.values(), "--param ")
     if args.K is not None:
+        if not args.K > 0:                        # above: the substeps it needs, then STIFFNESS (_check_ranges)
+            STIFFNESS.check("--K", args.K)
         for i in linear_stiffness_indices(m, "--K"):
             true.setdefault(m.param_names[i], args.K)
-    p_nom = m.params_array(nominal)
+    p_nom = m.params_array(nominal, arg="--nominal")
+    m.params_array(true, arg="--param")           # the user's values named by their flag, not p[...]
     for flag, text, which in (("--k-scale", args.k_scale, 0), ("--jm-scale", args.jm_scale, 1)):
         factors = _scales(text, m.n, flag)
         if factors is not None:

@@ -202,6 +202,7 @@ def run(args) -> int:
     m = load(args.model)
     nominal = parse_assignments(args.nominal, "--nominal")
     check_magnitudes(nominal, nominal.values(), "--nominal ")
+    m.params_array(nominal, arg="--nominal")
     box = _box(m, args, nominal)
     R, ref_label = _reference(args, int(m.n))
     E = _floats(args.error_box, 4, "--error-box") if args.error_box is not None else DEFAULT_ERROR_BOX[args.reference]

@@ -65,6 +65,11 @@ CASES = [
     ("simulate link1 --duration 0.001 --rate 200000 --plot {out}", "100000 Hz"),
     ("simulate link1 --duration 0.0001 --dt 1e-7 --plot {out}", "1e-05 <= dt"),
     ("simulate link1 --delay-samples 101 --plot {out}", "100 samples"),
+    ("simulate link1 --K -3 --plot {out}", "0 < K"),
+    ("simulate link1 --K nan --plot {out}", "0 < K"),
+    ("simulate link1 --param B_m=-1 --plot {out}", ">= 0 N m s/rad"),
+    ("simulate link1 --nominal J_m=0 --plot {out}", "> 0 kg m^2"),
+    ("tune link1 --nominal K=-5", "> 0 N m/rad"),
     ("simulate link1 --noise {noise} --plot {out}", "seed"),
     # derive (python -m derive in a subprocess)
     ("derive --models link1 --max-cost -1 --out {out}", "a week"),
