@@ -1,7 +1,7 @@
 """Does identification say how sure it is? Every stated interval against the truth, on independent logs.
 
     .venv/bin/python examples/identify_validation.py [MODEL] [--duration 20] [--repeats 4]
-        [--friction-joints 1,2,4,6] [--seed 0] [--markdown]
+        [--friction-joints 1,2,4,6] [--seed 0]
 
 The logs come from MuJoCo (an engine nobody here wrote), not from fjm's simulator: the TRUE plant is
 the model exported with ``fjm export mjcf`` at parameters changed per joint (:func:`truth`: stiffness

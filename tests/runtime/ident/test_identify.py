@@ -84,11 +84,12 @@ def test_cubic_spring_of_link1_hd():
         identify(fjm_runtime.load("link1"), _sim_log(m, true, 2.0), spring="cubic")
 
 
-def _coulomb_log(F_c=0.6, B_m=0.2, J_m=0.05, K=80.0, duration=8.0, dt=1e-3, v_c=0.01, seed=1):
-    """A motor on a spring to a fixed link (q = 0), Coulomb tanh friction, RK4 at dt/10 under held u."""
+def _coulomb_log(F_c=0.6, B_m=0.2, J_m=0.05, K=80.0, duration=8.0, dt=1e-3, v_c=0.01, seed=1, amplitude=1.0):
+    """A motor on a spring to a fixed link (q = 0), Coulomb tanh friction, RK4 at dt/10 under held u
+    (``amplitude`` scales u)."""
     rng = np.random.default_rng(seed)
     t = dt * np.arange(int(duration / dt))
-    u_seq = 1.5 * np.sin(2.1 * t) + 0.8 * np.sin(5.3 * t + 1.0) + 0.3 * np.sin(13.0 * t)
+    u_seq = amplitude * (1.5 * np.sin(2.1 * t) + 0.8 * np.sin(5.3 * t + 1.0) + 0.3 * np.sin(13.0 * t))
 
     def rhs(x, u):
         return np.array([x[1], (u - B_m * x[1] - F_c * np.tanh(x[1] / v_c) - K * x[0]) / J_m])
@@ -213,3 +214,19 @@ def test_cli_reversal_share_keeps_every_row_at_0_and_is_refused_out_of_range(lin
     assert fjm_main(["identify", "link1", str(path), "--out", str(out), "--reversal-share", "1.5"]) == 2
     err = capsys.readouterr().err.strip()
     assert "--reversal-share" in err and "0.9" in err and "\n" not in err
+
+
+def test_damping_of_a_motor_that_barely_moves_is_reported_not_excited():
+    """The stick-slip motor driven hard (0.055 rad/s RMS): B_m within 10 %; driven at 35 % of that torque
+    it creeps (0.01 rad/s RMS) against its 0.6 N m friction: B_m is not excited, the warning gives the
+    speed, and the interval still holds the truth."""
+    m = fjm_runtime.load("link1")
+    moving = identify(m, _coulomb_log(seed=2), window=0.01)
+    assert "B_m" not in moving.not_excited and abs(moving.values["B_m"] / 0.2 - 1) < 0.1
+    creeping = identify(m, _coulomb_log(seed=2, amplitude=0.35), window=0.01)
+    assert "B_m" in creeping.not_excited
+    warning = next(w for w in creeping.warnings if w.startswith("B_m = "))
+    speed = float(warning.split("moves at ")[1].split(" rad/s")[0])
+    assert speed == pytest.approx(0.00984, rel=0.05)
+    lo, hi = creeping.interval("B_m")
+    assert lo <= 0.2 <= hi
