@@ -20,8 +20,9 @@ Both are linear in the unknowns: least squares on column-scaled regressors, erro
 regressors' columns (encoder noise through the filter) removed from the normal equations, standard
 errors by a Newey-West sandwich for the coloured residuals, plus a systematic term
 (:mod:`fjm_runtime.ident.uncertainty`). Signals are smoothed and differentiated offline by one
-zero-phase filter whose derivative kernels are its value kernel applied to differences, and the held
-torque is averaged over each sample (:mod:`fjm_runtime.ident.signals`).
+zero-phase filter whose derivative kernels are its value kernel applied to differences, the held
+torque is averaged over each sample, and the friction columns are evaluated on a per-sample velocity
+and then filtered like the rest (:mod:`fjm_runtime.ident.signals`).
 
 Without ``tau_J`` in the log, it is the link equation's: ``tau_J = D(q) ddq + h(q, dq)`` from the
 model's generated ``f`` and ``inertia`` at its NOMINAL link parameters (``f``'s link rows at
