@@ -10,7 +10,7 @@ the default ``--out`` only in a source checkout; from an installed package
 
 Before any symbolic work every model's cost is estimated from its chain
 (:mod:`derive.guard.cost`); a model over the limits (estimated peak memory 2 GB,
-300 s) is refused with the estimate and exit code 2, unless
+150 s at the machine's current load average) is refused with the estimate and exit code 2, unless
 ``--no-cost-limit`` or ``--max-cost SECONDS`` is given. Long derivations print
 one line per stage on stderr. The symbolic work runs in a child process
 (:mod:`derive.guard.guard`): SIGINT and SIGTERM end it at once, nothing written.
@@ -41,7 +41,7 @@ from typing import Callable, Dict, List, Optional
 from typing import TYPE_CHECKING
 
 from .guard.cost import MAX_PEAK_BYTES, MAX_SECONDS, Estimate, check_limits, estimate
-from .guard.guard import LONG_SECONDS, Interrupted, StageLog, prescan_model_file, run_interruptible
+from .guard.guard import LONG_SECONDS, Interrupted, StageLog, machine_slowdown, prescan_model_file, run_interruptible
 
 if TYPE_CHECKING:  # SymPy and CasADi are imported only after the cost pre-scan (a refusal is fast)
     from .core.model_base import FlexibleJointModel
@@ -167,11 +167,12 @@ def chain_size(spec) -> tuple:
     return (len(joints), "spatial") if joints is not None else (int(spec.links), "planar")
 
 
-def model_estimates(models: List[str], specs: Dict[str, object]) -> Dict[str, Estimate]:
+def model_estimates(models: List[str], specs: Dict[str, object], slow: float = 1.0) -> Dict[str, Estimate]:
     """The cost estimate (:func:`derive.guard.cost.estimate`) of every model, from its chain only.
 
     ``specs``: parsed model files by name; the other names are built-in (``link1``,
-    ``planar<n>``, or a spatial arm whose model file ships in ``derive/robots``).
+    ``planar<n>``, or a spatial arm whose model file ships in ``derive/robots``). ``slow``: the
+    machine's slowdown (:func:`derive.guard.guard.machine_slowdown`; 1: the idle calibration machine).
     """
     from .registry import ROBOTS
 
@@ -187,7 +188,7 @@ def model_estimates(models: List[str], specs: Dict[str, object]) -> Dict[str, Es
                 from .model_file import load_model_file
                 scanned = (name,) + chain_size(load_model_file(ROBOTS / name / f"{name}.toml", builtin=True))
             _, n, form = scanned
-        out[name] = estimate(n, form)
+        out[name] = estimate(n, form, slow)
     return out
 
 
@@ -246,7 +247,8 @@ class _OneLineParser(argparse.ArgumentParser):
 def _cost_options(ap: argparse.ArgumentParser) -> None:
     ap.add_argument("--no-cost-limit", action="store_true",
                     help="derive even if a model's estimated cost is over the limits (estimated peak memory "
-                         f"{MAX_PEAK_BYTES / 1024 ** 3:g} GB, {MAX_SECONDS:g} s; see docs/derivation.md)")
+                         f"{MAX_PEAK_BYTES / 1024 ** 3:g} GB, {MAX_SECONDS:g} s at the machine's current load; "
+                         "see docs/derivation.md)")
     ap.add_argument("--max-cost", type=_positive_seconds, default=None, metavar="SECONDS",
                     help="refuse only models whose estimated derive takes longer than SECONDS "
                          "(replaces the default limits)")
@@ -294,7 +296,7 @@ def _early_refusal(argv, prog: str) -> Optional[int]:
         scanned = prescan_model_file(path)
         if scanned is not None:
             name, n, form = scanned
-            refusal = check_limits(name, estimate(n, form), args.max_cost)
+            refusal = check_limits(name, estimate(n, form, machine_slowdown()), args.max_cost)
             if refusal:
                 print(f"{prog}: error: {refusal}", file=sys.stderr)
                 return 2
@@ -426,7 +428,7 @@ def main(argv=None, prog: str = "python -m derive") -> int:
         if specs is None:
             return 2
         models = _resolve_models(ap, args, specs)
-        estimates = model_estimates(models, specs)
+        estimates = model_estimates(models, specs, machine_slowdown())
         if not args.no_cost_limit:
             for name, est in estimates.items():
                 refusal = check_limits(name, est, args.max_cost)

@@ -27,12 +27,15 @@ import math
 from dataclasses import dataclass
 from typing import Dict, Optional, Sequence, Tuple
 
-__all__ = ["Estimate", "estimate", "check_limits", "fit_power_law", "CALIBRATION", "MAX_PEAK_BYTES",
+__all__ = ["Estimate", "estimate", "check_limits", "fit_power_law", "slowdown", "CALIBRATION", "MAX_PEAK_BYTES",
            "MAX_SECONDS", "FORMS"]
 
-#: Default limits: an estimate above either is refused unless ``--no-cost-limit`` or ``--max-cost``.
+#: Default limits: an estimate above either is refused unless ``--no-cost-limit`` or ``--max-cost``. The time
+#: limit applies to the estimate at the machine's current load (:func:`slowdown`): a derive either finishes
+#: within about this long or is refused at once (before this limit, 300 s on the idle estimate let a
+#: 60-joint chain start on a loaded 2-core machine, where it neither finished nor stopped within 150 s).
 MAX_PEAK_BYTES = 2 * 1024 ** 3
-MAX_SECONDS = 300.0
+MAX_SECONDS = 150.0
 FORMS = ("planar", "spatial")
 
 #: The cost model: per form, ``(factor, exponent)`` of each quantity's excess over the trivial derive
@@ -46,7 +49,7 @@ FORMS = ("planar", "spatial")
 #: recursion and the closed-form brackets, at the sizes where a guard matters (the growth steepens with
 #: n: fitted over 14..60 the estimate at 60 joints is 0.92-0.98 of the measurement, fitted over 3..60
 #: it was 0.74 for memory). The seconds are this machine's; a machine three times slower (as measured
-#: between sessions on this project) stays within the 300 s limit up to the memory limit. The base and the
+#: between sessions on this project) is what :func:`slowdown` scales them by. The base and the
 #: planar runs are those of 2026-12-01 (the planar derivation did not change since; planar chains stay
 #: within about a second of the base and are capped at 7 links, so their fit is nearly flat).
 CALIBRATION: Dict[str, object] = {
@@ -99,16 +102,19 @@ class Estimate:
     operations: float
     peak_bytes: float
     seconds: float
+    slowdown: float = 1.0
 
     @property
     def model_seconds(self) -> float:
         """The estimated seconds of this model's own work (over a trivial derive's startup)."""
-        return self.seconds - CALIBRATION["base_seconds"]
+        return self.seconds - CALIBRATION["base_seconds"] * self.slowdown
 
     def summary(self) -> str:
-        """``"~25k operations, ~0.31 GB peak memory, ~4 s"``."""
-        return (f"~{_si(self.operations)} operations, ~{self.peak_bytes / 1024 ** 3:.3g} GB peak memory, "
-                f"~{_seconds(self.seconds)}")
+        """``"~25k operations, ~0.31 GB peak memory, ~4 s"`` (``"~14 s at the current load (x3.5; ~4 s idle)"``)."""
+        time = f"~{_seconds(self.seconds)}"
+        if self.slowdown > 1.0:
+            time += f" at the current load (x{self.slowdown:.2g}; ~{_seconds(self.seconds / self.slowdown)} idle)"
+        return f"~{_si(self.operations)} operations, ~{self.peak_bytes / 1024 ** 3:.3g} GB peak memory, {time}"
 
 
 def _si(x: float) -> str:
@@ -128,7 +134,24 @@ def _seconds(s: float) -> str:
     return f"{s:.0f} s" if s >= 10 else f"{s:.2g} s"
 
 
-def estimate(n: int, form: str) -> Estimate:
+def slowdown(load: float, cpus: int) -> float:
+    """How many times longer a single-threaded derive takes than on the idle calibration machine.
+
+    ``max(1, (load + 1) / cpus)``: ``load`` runnable processes (the 1-minute load average) and the
+    derive share ``cpus`` cores. Measured: a 21-joint chain at load 7.3 on 2 cores took 19.9 s where the
+    idle calibration says 5.7 s (x3.5; this gives x4.2, an over-estimate as meant).
+
+    Parameters
+    ----------
+    load : float
+        Load average (runnable processes), >= 0.
+    cpus : int
+        Cores the process may run on, >= 1.
+    """
+    return max(1.0, (max(float(load), 0.0) + 1.0) / max(int(cpus), 1))
+
+
+def estimate(n: int, form: str, slow: float = 1.0) -> Estimate:
     """Cost of an ``n``-joint chain of kind ``form`` from :data:`CALIBRATION`.
 
     Parameters
@@ -137,6 +160,8 @@ def estimate(n: int, form: str) -> Estimate:
         Number of joints (>= 1).
     form : str
         ``"planar"`` (:mod:`derive.planar.planar` chains and ``link1``) or ``"spatial"`` (URDF arms).
+    slow : float
+        The machine's :func:`slowdown` (>= 1; multiplies the seconds, not the memory or operations).
 
     Returns
     -------
@@ -152,9 +177,10 @@ def estimate(n: int, form: str) -> Estimate:
         c, e = fit[q]
         return c * float(n) ** e
 
+    slow = max(1.0, float(slow))
     return Estimate(n=int(n), form=form, operations=power("operations"),
                     peak_bytes=CALIBRATION["base_bytes"] + power("peak_bytes"),
-                    seconds=CALIBRATION["base_seconds"] + power("seconds"))
+                    seconds=slow * (CALIBRATION["base_seconds"] + power("seconds")), slowdown=slow)
 
 
 def check_limits(name: str, est: Estimate, max_seconds: Optional[float] = None,

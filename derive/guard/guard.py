@@ -5,6 +5,7 @@
   TOML parser and :mod:`derive.spatial.urdf` (no SymPy, no CasADi), so a runaway
   input is refused before the heavy imports. Anything it cannot read is left
   to the full parser (:mod:`derive.model_file`), which reports it.
+* :func:`machine_slowdown` reads the load average, by which the cost estimate's seconds grow.
 * :class:`StageLog` prints one line per stage per model on stderr
   (``chain14: linearize ... 3.1 s``).
 * :func:`run_interruptible` runs the symbolic work in a forked child process.
@@ -29,7 +30,9 @@ import traceback
 from pathlib import Path
 from typing import Callable, Optional, TextIO, Tuple
 
-__all__ = ["Interrupted", "StageLog", "prescan_model_file", "run_interruptible", "LONG_SECONDS"]
+from .cost import slowdown
+
+__all__ = ["Interrupted", "StageLog", "machine_slowdown", "prescan_model_file", "run_interruptible", "LONG_SECONDS"]
 
 #: Models whose estimated derive takes longer than this print one line per stage.
 LONG_SECONDS = 2.0
@@ -43,6 +46,17 @@ class Interrupted(Exception):
     def __init__(self, signum: int):
         super().__init__(f"interrupted by {signal.Signals(signum).name}")
         self.signum = signum
+
+
+def machine_slowdown() -> float:
+    """The machine's current :func:`derive.guard.cost.slowdown`: the 1-minute load average on the cores this
+    process may use (1.0 where the load average is not available)."""
+    try:
+        load = os.getloadavg()[0]
+    except (AttributeError, OSError):  # pragma: no cover - no load average (e.g. Windows)
+        return 1.0
+    cpus = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+    return slowdown(load, cpus)
 
 
 def prescan_model_file(path: Path) -> Optional[Tuple[str, int, str]]:

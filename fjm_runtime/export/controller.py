@@ -124,8 +124,8 @@ def design_controller(model, design: Design, nominal=None, substeps: Optional[in
     subs = resolve_substeps(substeps, model, x0, ctrl.p_nom, T)
     recorded = design.predict_substeps if (substeps is None and predicting) else None
     if recorded is not None and recorded > MAX_SUBSTEPS:
-        raise FjmValueError(f"{design.source}: predict_substeps = {recorded}; expected 1..{MAX_SUBSTEPS} (straight-line "
-                            "C grows with the substeps)")
+        raise FjmValueError(f"{design.source}: predict_substeps = {recorded}; expected 1..{MAX_SUBSTEPS} "
+                            "(straight-line C grows with the substeps)")
     if substeps is None and predicting and recorded is None:
         check_rule_substeps(subs, model.name)
     L = make_layout(model, ctrl, T, subs, sensor, int(design.delay or 0), bool(design.predict),

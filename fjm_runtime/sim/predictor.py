@@ -30,7 +30,8 @@ from .sample_step import initial_measurement, predicted_measurement
 from .sensor import SensorModel, measurement_blocks
 from .step_layout import StepLayout, controller_model, make_layout
 
-__all__ = ["FLOOR", "NOISE_FRACTION", "NOISE_SEED", "REFERENCE_SUBSTEPS", "TASK_POINTS", "TASK_SECONDS", "choose_predict_substeps",
+__all__ = ["FLOOR", "NOISE_FRACTION", "NOISE_SEED", "REFERENCE_SUBSTEPS", "TASK_POINTS", "TASK_SECONDS",
+           "choose_predict_substeps",
            "loop_predict_substeps", "prediction_errors", "prediction_tolerance", "task_points"]
 
 #: Substeps per sample of the reference prediction (and the most the choice returns).

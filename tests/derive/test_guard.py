@@ -217,3 +217,34 @@ def test_signal_ends_a_long_derivation_within_a_second(tmp_path, sig):
     assert sig.name in text and "nothing was written" in text, text
     assert _tree_bytes(out) == before
     assert sorted(p.name for p in parent.iterdir()) == ["generated"]
+
+
+def test_slowdown_is_the_share_of_the_cores_under_load():
+    assert cost.slowdown(0.1, 2) == 1.0 and cost.slowdown(0.0, 1) == 1.0
+    assert math.isclose(cost.slowdown(7.3, 2), 4.15) and cost.slowdown(3.0, 1) == 4.0
+    assert cost.slowdown(-1.0, 0) == 1.0  # nonsense from the system never makes it faster than idle
+
+
+def test_loaded_machine_scales_the_time_and_refuses_sixty_joints():
+    """60 joints: idle ~57 s (within 150 s); at load 7.3 on 2 cores x4.15, over 150 s: refused, one line."""
+    idle, loaded = cost.estimate(60, "spatial"), cost.estimate(60, "spatial", cost.slowdown(7.3, 2))
+    assert math.isclose(loaded.seconds, 4.15 * idle.seconds) and loaded.peak_bytes == idle.peak_bytes
+    assert loaded.operations == idle.operations and math.isclose(loaded.model_seconds, 4.15 * idle.model_seconds)
+    assert idle.seconds < cost.MAX_SECONDS < loaded.seconds
+    assert cost.check_limits("chain60", idle) is None
+    msg = cost.check_limits("chain60", loaded)
+    assert msg is not None and "\n" not in msg
+    for needle in ("60-joint", "at the current load (x4.2;", "idle", "time over 150 s", "--no-cost-limit"):
+        assert needle in msg, (needle, msg)
+    # panda-sized arms stay far inside the limit even at load 40 on 2 cores
+    assert cost.check_limits("panda", cost.estimate(7, "spatial", cost.slowdown(40.0, 2))) is None
+
+
+def test_cli_refuses_sixty_joints_before_building_on_a_loaded_machine(tmp_path, capsys, monkeypatch):
+    import derive.__main__ as cli
+    monkeypatch.setattr(cli, "machine_slowdown", lambda: cost.slowdown(7.3, 2))
+    toml, _ = write_synthetic_chain(60, tmp_path / "model")
+    assert derive_main(["--model-file", str(toml), "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "60-joint spatial chain" in err and "time over 150 s" in err, err
+    assert not (tmp_path / "out").exists()

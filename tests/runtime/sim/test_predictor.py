@@ -39,7 +39,8 @@ def _worst_over_tolerance(model, p, X, U, sensor, T, substeps):
     K = p[stiffness_indices(model)[0]]
     exact = np.array([np.concatenate([x[:n], x[n:2 * n], K * (x[2 * n:3 * n] - x[:n]),
                                       K * (x[3 * n:] - x[n:2 * n]), x[3 * n:]]) for x in X])
-    noisy = exact + sensor.levels("torque", n) * np.random.default_rng(predictor.NOISE_SEED).standard_normal(exact.shape)
+    normals = np.random.default_rng(predictor.NOISE_SEED).standard_normal(exact.shape)
+    noisy = exact + sensor.levels("torque", n) * normals
     levels = np.concatenate([np.broadcast_to(np.asarray(getattr(sensor, b), dtype=float), (n,))
                              for b in ("q", "dq", "tau_J", "dtau_J", "dq_m")])
     tol = np.maximum(1e-3 * levels, 1e-9)
