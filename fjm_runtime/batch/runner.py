@@ -90,7 +90,7 @@ def simulate_batch(model, controller, reference, params_true_array, *, duration:
                    dt: float = 1e-3, substeps: Optional[int] = None, sensor=None, delay_samples: int = 0,
                    predict: bool = False, seeds=None, gains=None, x0=None, max_state: float = 1e6,
                    trajectories: bool = False, parallel: bool = True, simd: bool = True,
-                   threads: Optional[int] = None, loop: str = "sampled") -> BatchResult:
+                   threads: Optional[int] = None, loop: str = "sampled", interface=None) -> BatchResult:
     """Run ``B`` sampled-data closed loops (one per row of ``params_true_array``) in one compiled call.
 
     Each run is :func:`fjm_runtime.sim.simulate.simulate` with the same settings (THE sample
@@ -120,6 +120,8 @@ def simulate_batch(model, controller, reference, params_true_array, *, duration:
     parallel, simd, threads
         OpenMP across runs; vector lanes across runs (falls back to the scalar loop with a
         :class:`SimdFallbackWarning`); threads for this call (default all cores).
+    interface : CommandInterface or str, optional
+        The command interface shared by all runs (as for :func:`simulate`; default ``'motor'``).
     loop : {'sampled'}
         The one loop (any other name raises :class:`FjmValueError`).
 
@@ -136,7 +138,8 @@ def simulate_batch(model, controller, reference, params_true_array, *, duration:
     return run_sampled_batch(model, controller, reference, P, duration=duration, dt=dt, substeps=substeps,
                              sensor=sensor, delay=delay_samples, predict=predict, seeds=seeds, gains=gains, x0=x0,
                              max_state=max_state, trajectories=trajectories, parallel=parallel, simd=simd,
-                             threads=threads, result_cls=BatchResult, want_simd_runner=_warn_fallback)
+                             threads=threads, result_cls=BatchResult, want_simd_runner=_warn_fallback,
+                             interface=interface)
 
 
 def _warn_fallback(reason: str) -> None:

@@ -13,6 +13,7 @@ import numpy as np
 from ..ccache import DEFAULT_FLAGS
 from ..control.laws import SlidingModeController
 from ..sim.metrics import metrics_from_sums
+from ..sim.interface import interface_from_spec
 from ..sim.sample_step import check_loop_settings, initial_measurement, initial_step_state
 from ..sim.step_layout import make_layout
 from ..sim.sensor import SensorModel, noise_slots
@@ -117,14 +118,17 @@ def _initial_rows(model, ctrl, controller, L, A, P, G, x0, R0, sensor, seeds):
         z = np.asarray(controller.initial_state(0.0, m0, R0.reshape(5, L.n)), dtype=float)
         if G is not None:
             z = np.concatenate([z, G[i]])
-        rows.append(A.initial(initial_step_state(model, L, x0, z, P[i], seed=int(seeds[i]), sensor=sensor), P[i]))
+        w0 = initial_step_state(model, L, x0, z, P[i], seed=int(seeds[i]), sensor=sensor, controller=ctrl)
+        rows.append(A.initial(w0, P[i]))
     return np.vstack(rows)
 
 
 def run_sampled_batch(model, controller, reference, P, *, duration, dt, substeps, sensor, delay, predict, seeds,
-                      gains, x0, max_state, trajectories, parallel, simd, threads, result_cls, want_simd_runner):
+                      gains, x0, max_state, trajectories, parallel, simd, threads, result_cls, want_simd_runner,
+                      interface=None):
     """The sampled-data batch (see :func:`fjm_runtime.batch.runner.simulate_batch`); a ``result_cls``."""
     sensor = _check(duration, dt, sensor, delay, predict)
+    interface = interface_from_spec(interface, what="interface")
     n, B, N = int(model.n), P.shape[0], int(round(duration / dt))
     t = dt * np.arange(N + 1)
     R = np.asarray(reference.sample(t), dtype=float).reshape(N + 1, 5 * n)
@@ -135,7 +139,7 @@ def run_sampled_batch(model, controller, reference, P, *, duration, dt, substeps
         resolve_substeps(subs, model, x0, P[0], float(dt))   # validates, warns when coarse
     ctrl = _step_controller(controller)
     G = _gain_rows(ctrl, controller, gains, B)
-    L = make_layout(model, ctrl, float(dt), subs, sensor, int(delay), bool(predict))
+    L = make_layout(model, ctrl, float(dt), subs, sensor, int(delay), bool(predict), interface=interface)
     h = jitter_half_width(float(dt))
     runner, reason, step, A = build_sampled_runner(model, ctrl, L, max_state, 2 * h + 1, simd, parallel,
                                                    want_simd_runner)
@@ -146,13 +150,13 @@ def run_sampled_batch(model, controller, reference, P, *, duration, dt, substeps
     info = {"path": runner.path_name, "reason": reason, "threads": used, "lanes": runner.lanes,
             "openmp": runner.openmp, "instructions": int(step.n_instructions()), "library": str(runner.path),
             "substeps": subs, "loop": "sampled", "sensing": L.sensing, "delay_samples": int(delay),
-            "predict": bool(predict)}
+            "predict": bool(predict), "interface": interface.name}
     metrics, joint, diverged, first_bad, x_fin = _metrics(A, acc, L, t, R[N, :n], h)
     results = None
     if trajectories:
         results = _trajectories(model, controller, reference, P, G, gains, diverged, sd, sensor, dict(
             duration=duration, dt=dt, x0=x0, max_state=max_state, substeps=subs, delay_samples=int(delay),
-            predict=bool(predict)))
+            predict=bool(predict), interface=interface))
     return result_cls(params=P, metrics=metrics, diverged=diverged,
                       divergence_time=np.where(diverged, first_bad * dt, np.nan), x_final=x_fin,
                       results=results, info=info, joint_metrics=joint, seeds=sd)

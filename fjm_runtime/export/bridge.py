@@ -19,6 +19,11 @@ from pathlib import Path
 import numpy as np
 
 from ..drives import model_springs
+from ..sim.actuation import interface_command, motor_command
+from ..sim.interface import interface_from_spec
+from ..sim.sample_step import command_ops, initial_step_state
+from ..sim.sensor import SensorModel
+from ..sim.step_layout import make_layout
 from ..validation import FjmValueError, as_vector
 from .mjcf import FRICTION_NUMERIC, SPRING_NUMERIC, gear_ratios, load_chain, resolve_params
 
@@ -62,6 +67,7 @@ class MujocoPlant:
         self.data = mujoco.MjData(self.mj)
         chain = load_chain(model)
         p = resolve_params(model, params)
+        self.params = np.asarray(model.params_array(p) if isinstance(p, dict) else p, dtype=float)
         self.N = gear_ratios(model, p, "rotors" in chain, gear_ratio)
         joints = [e["joint"] for e in chain["elastic"]]
         names = joints + [f"{j}_rotor" for j in joints]
@@ -159,12 +165,18 @@ class MujocoPlant:
 
 
 def run_closed_loop(plant: MujocoPlant, controller, reference, *, duration: float, dt: float, substeps: int,
-                    x0=None):
+                    x0=None, interface=None):
     """The sampled-data loop of :func:`fjm_runtime.simulate` with MuJoCo as the plant.
 
     At ``t_k = k dt`` the law sees the state ``x_k`` (ideal state sensing, no delay), its
-    state advances once per sample (``z += dt z_dot``), and ``ctrl = u_k`` is held over
-    ``substeps`` MuJoCo steps -- the file's timestep must be ``dt / substeps``.
+    state advances once per sample (``z += dt z_dot``), and its output goes through the command
+    interface (:mod:`fjm_runtime.sim.interface`, the arithmetic of :mod:`fjm_runtime.sim.actuation`):
+    the interface's command ``c_k`` (vendor filter, rate limit) once per sample, then per MuJoCo step
+    the motor command (``joint_torque``: the nominal gravity and the inner torque loop on MuJoCo's
+    state, the spring torque at the file's parameters) and the current loop, whose exact mean over
+    the step is MuJoCo's ``ctrl`` (held over the step: MuJoCo's RK4 cannot take the torque at its
+    stages' times, so with a current loop the run differs from :func:`fjm_runtime.simulate` by the
+    quadrature of the lag, not by rounding). The file's timestep must be ``dt / substeps``.
 
     Parameters
     ----------
@@ -177,13 +189,15 @@ def run_closed_loop(plant: MujocoPlant, controller, reference, *, duration: floa
         MuJoCo steps per sample.
     x0 : array_like, shape (4n,), optional
         Default: at rest with ``q = q_m = q_d(0)``.
+    interface : CommandInterface or str, optional
+        Default ``'motor'``; ``'ideal'``: ``ctrl = u_k`` held over the sample.
 
     Returns
     -------
     t : numpy.ndarray, shape (N+1,)
     x : numpy.ndarray, shape (N+1, 4n)
     u : numpy.ndarray, shape (N+1, n)
-        The torque held over ``[t_k, t_k + dt)``.
+        The interface's command ``c_k`` held over ``[t_k, t_k + dt)`` (the law's torque with ``ideal``).
     """
     n = plant.model.n
     step = float(plant.mj.opt.timestep)
@@ -197,16 +211,51 @@ def run_closed_loop(plant: MujocoPlant, controller, reference, *, duration: floa
     x = as_vector("x0", x0, 4 * n)
     plant.set_state(x)
     z = np.asarray(controller.initial_state(0.0, x, r0), dtype=float)
+    act = _Actuation(plant, controller, dt, substeps, x, z, interface)
     t = np.arange(steps + 1) * dt
     X, U = np.zeros((steps + 1, 4 * n)), np.zeros((steps + 1, n))
     for k in range(steps + 1):
         x = plant.state()
         r = np.asarray(reference(t[k]), dtype=float).reshape(5, n)
         sample = controller.evaluate(t[k], x, z, r)
-        X[k], U[k] = x, np.asarray(sample.u, dtype=float)
+        X[k], U[k] = x, act.command(np.asarray(sample.u, dtype=float))
         if k == steps:
             break
         if z.size:
             z = z + dt * np.asarray(controller.state_derivative(t[k], x, z, r, sample), dtype=float)
-        plant.step(U[k], substeps)
+        act.run(U[k])
     return t, X, U
+
+
+class _Actuation:
+    """The command interface between a law and a MuJoCo plant (the sample step's arithmetic, numpy)."""
+
+    def __init__(self, plant: MujocoPlant, controller, dt: float, substeps: int, x0, z0, interface):
+        self.plant, self.substeps = plant, int(substeps)
+        L = make_layout(plant.model, controller, dt, substeps, SensorModel.ideal(), 0, False,
+                        interface=interface_from_spec(interface, what="interface"))
+        self.L, self.ops = L, command_ops(plant.model, controller, L)
+        w0 = initial_step_state(plant.model, L, x0, z0, plant.params, controller=controller)
+        _, _, last, cur = L.extra_slices()
+        self.last, self.cur = w0[last], w0[cur]
+
+    def command(self, u_law):
+        """``c_k``: the law's output through the interface's sample-rate stage."""
+        if not self.L.has_last:
+            return u_law
+        self.last = interface_command(self.ops, self.L, self.last, u_law)[0]
+        return self.last
+
+    def run(self, c) -> None:
+        """One sample of MuJoCo steps under the command ``c``."""
+        L = self.L
+        if L.interface == "motor" and not L.current_decay:
+            self.plant.step(c, self.substeps)
+            return
+        for _ in range(self.substeps):
+            u_c = motor_command(self.ops, L, self.plant.state(), c, self.plant.params)
+            u = u_c
+            if L.current_decay:
+                u = u_c + (self.cur - u_c) * L.current_mean
+                self.cur = u_c + (self.cur - u_c) * L.current_decay
+            self.plant.step(u, 1)

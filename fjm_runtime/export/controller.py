@@ -33,6 +33,7 @@ import casadi as ca
 import numpy as np
 
 from ..control.design import Design
+from ..sim.interface import CommandInterface, interface_from_record
 from ..sim.step_layout import make_layout
 from ..sim.sensor import SensorModel
 from ..sim.step_layout import StepLayout
@@ -63,6 +64,10 @@ class ControllerDesign:
         C prefix of every symbol (``panda_ismc_tau``).
     design : Design
         The design it came from.
+    interface : CommandInterface
+        What the library's output commands (``motor``: the motor torque, rate-limited in the library
+        when the interface limits it; ``joint_torque``: the desired joint torque ``tau_d`` the robot's
+        layer filters, limits and adds gravity to).
     """
 
     model: object
@@ -71,6 +76,7 @@ class ControllerDesign:
     sensor: SensorModel
     name: str
     design: Design
+    interface: CommandInterface = CommandInterface.motor()
 
     @property
     def cstate(self) -> ControllerLayout:
@@ -86,8 +92,9 @@ def design_controller(model, design: Design, nominal=None, substeps: Optional[in
     model : Model
     design : Design
         ``kind``, ``gains`` (``lam`` or ``c``, ``k_s``, ``delta``, ``k_lin``, ``u_max``), ``sensing``,
-        ``rate`` (Hz, default 1000), ``delay`` (default 0), ``predict``, ``sensor`` (or ``noise``); errors
-        name it by its ``source``.
+        ``rate`` (Hz, default 1000), ``delay`` (default 0), ``predict``, ``sensor`` (or ``noise``),
+        ``interface`` (a preset, a file or a table; a design without one: ``motor`` with the rate limit an
+        older ``sensor`` record states); errors name it by its ``source``.
     nominal : dict, optional
         Nominal parameters (default: the design's ``params.nominal`` over the model's defaults).
     substeps : int, optional
@@ -128,11 +135,12 @@ def design_controller(model, design: Design, nominal=None, substeps: Optional[in
                             "(straight-line C grows with the substeps)")
     if substeps is None and predicting and recorded is None:
         check_rule_substeps(subs, model.name)
+    interface = interface_from_record({"interface": design.interface, "sensor": design.sensor}, design.source)
     L = make_layout(model, ctrl, T, subs, sensor, int(design.delay or 0), bool(design.predict),
-                    predict_substeps=recorded)
+                    predict_substeps=recorded, interface=interface)
     sensing = design.sensing or "state"
     default_name = f"{model.name}_{design.kind}{'_tau' if sensing == 'torque' else ''}"
-    return ControllerDesign(model, ctrl, L, sensor, cname or default_c_name(default_name), design)
+    return ControllerDesign(model, ctrl, L, sensor, cname or default_c_name(default_name), design, interface)
 
 
 def _gain_names(model, ctrl) -> list:

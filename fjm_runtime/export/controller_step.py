@@ -35,6 +35,8 @@ import numpy as np
 
 from ..drives import model_springs
 from ..sim import sample_step as ss
+from ..sim.actuation import rate_limited, rate_windup
+from ..sim.interface import gravity_function
 from ..sim.step import casadi_functions
 from ..sim.step_layout import StepLayout
 from ..validation import FjmValueError
@@ -46,8 +48,11 @@ __all__ = ["ControllerLayout", "controller_functions", "raw_reading", "rest_read
 class ControllerLayout:
     """Where things sit in the controller state ``c = [z | m_buf | u_buf | filt | venc | u_last]``.
 
-    It is the sample step's ``w`` without the plant state ``x`` and the sensor's offset (those are
-    the robot's): ``c = w[nx:]`` with the offset slice removed (:meth:`from_step_state`).
+    It is the sample step's ``w`` without the robot's parts: the plant state ``x``, the sensor's
+    offset, the current loop's motor torque and, with a ``joint_torque`` interface, the vendor layer's
+    last command (the robot filters and limits ``tau_d``; the library outputs ``tau_d``):
+    ``c = w[robot_mask()]`` (:meth:`from_step_state`). ``u_last`` is the last torque of a ``motor``
+    interface's rate limit, which the library applies.
     """
 
     step: StepLayout
@@ -55,14 +60,14 @@ class ControllerLayout:
     @property
     def nc(self) -> int:
         L = self.step
-        return L.nw - L.nx - (L.n if L.offset else 0)
+        return int(np.count_nonzero(self.robot_mask()))
 
     def blocks(self):
         """``[(name, offset, size)]`` of ``c`` in order (sizes may be 0)."""
         L = self.step
         sizes = [("z", L.nz), ("m_buf", L.delay * L.nm), ("u_buf", L.delay * L.n),
                  ("filt", 2 * L.n if L.filtered else 0), ("venc", L.n_venc),
-                 ("u_last", L.n if L.rate_step else 0)]
+                 ("u_last", L.n if self.limits_rate else 0)]
         out, o = [], 0
         for name, size in sizes:
             out.append((name, o, size))
@@ -73,14 +78,25 @@ class ControllerLayout:
         """The blocks of ``c`` by name (slices of a CasADi vector or ndarray)."""
         return {name: c[o:o + size] for name, o, size in self.blocks()}
 
-    def from_step_state(self, W) -> np.ndarray:
-        """``c`` of step states ``W`` (nw,) or (N, nw): ``w[nx:]`` without the offset slice."""
-        W = np.asarray(W, dtype=float)
+    @property
+    def limits_rate(self) -> bool:
+        """True when the library applies the rate limit (a ``motor`` interface with one)."""
+        return bool(self.step.rate_step) and self.step.interface == "motor"
+
+    def robot_mask(self) -> np.ndarray:
+        """Which entries of the step state ``w`` (nw,) are the controller's (False: the robot's)."""
         L = self.step
         keep = np.ones(L.nw, dtype=bool)
         keep[:L.nx] = False
-        keep[L.extra_slices()[1]] = False
-        return W[..., keep]
+        _, off, last, cur = L.extra_slices()
+        keep[off] = keep[cur] = False
+        if not self.limits_rate:
+            keep[last] = False
+        return keep
+
+    def from_step_state(self, W) -> np.ndarray:
+        """``c`` of step states ``W`` (nw,) or (N, nw): the controller's entries (:meth:`robot_mask`)."""
+        return np.asarray(W, dtype=float)[..., self.robot_mask()]
 
 
 def raw_reading(model, L: StepLayout, w, noise, p_true) -> np.ndarray:
@@ -167,12 +183,12 @@ def controller_functions(model, controller, L: StepLayout, name: str):
     law = _RuntimeLaw(controller, p, gains)
     out = law.evaluate(m_used, b["z"], r)
     u_law = out["u"]
-    u = ss._rate_limited(ops, L, b["u_last"], u_law)
+    u = rate_limited(ops, L, b["u_last"], u_law) if CL.limits_rate else u_law
     parts = []
     if L.nz:
         zdot = law.state_derivative(m_used, b["z"], r, out)
-        if L.integral:
-            zdot = ss._rate_windup(ops, L, zdot, u_law, u, m_used[:n] - r[:n])
+        if L.integral and CL.limits_rate:
+            zdot = rate_windup(ops, L, zdot, u_law, u, m_used[:n] - r[:n])
         parts.append(b["z"] + L.T * zdot)
     if L.delay:
         ub = b["u_buf"]
@@ -181,7 +197,7 @@ def controller_functions(model, controller, L: StepLayout, name: str):
         parts.append(filt_next)
     if L.differentiated:
         parts.append(venc_next)
-    if L.rate_step:
+    if CL.limits_rate:
         parts.append(u)
     c_next = ca.vertcat(*parts) if parts else ca.MX(0, 1)
     held = ((out["u_cmd"] > u_law) + (out["u_cmd"] < u_law)) + 2 * ((u_law > u) + (u_law < u))
@@ -207,6 +223,8 @@ def _reset_function(model, L: StepLayout, CL: ControllerLayout, name: str, ops):
     m_rest = ca.vertcat(*parts)
     # the measured tau_J holds the arm; state sensing: the spring law at the read deflection
     spring = parts[ss._slot(L, "tau_J")] if L.sensing != "state" else ops.spring(parts[2] - parts[0], p)[0]
+    if L.interface == "joint_torque":          # the command holding the rest excludes the robot's gravity
+        spring = spring - gravity_function(model)(parts[0], p)
     out = [ca.MX.zeros(L.nz, 1)] if L.nz else []
     if L.delay:
         out += [ca.repmat(m_rest, L.delay, 1), ca.repmat(spring, L.delay, 1)]
@@ -214,7 +232,7 @@ def _reset_function(model, L: StepLayout, CL: ControllerLayout, name: str, ops):
         out.append(m_rest[ss._slot(L, "tau_J") * n:(ss._slot(L, "dtau_J") + 1) * n])
     if L.differentiated:
         out.append(ca.vertcat(parts[0], parts[1], qm, parts[i_dqm]))
-    if L.rate_step:
+    if CL.limits_rate:
         out.append(spring)
     c0 = ca.vertcat(*out) if out else ca.MX(0, 1)
     return ca.Function(f"{name}_ctrl_reset", [m0, p], [c0, spring], ["m0", "p"], ["c0", "u0"])

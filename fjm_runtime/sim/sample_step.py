@@ -37,11 +37,13 @@ import numpy as np
 
 from ..drives import model_springs
 from ..validation import FjmValueError
+from .actuation import actuated_plant, interface_command, plant_substeps, rate_windup
+from .interface import gravity_function
 from .sensor import SensorModel, measurement_blocks, offset_normals
 from .step import casadi_functions
 from .step_layout import StepLayout, controller_model, stiffness_indices
 
-__all__ = ["casadi_sample_step", "check_loop_settings", "initial_measurement", "initial_step_state",
+__all__ = ["casadi_sample_step", "check_loop_settings", "command_ops", "initial_measurement", "initial_step_state",
            "predicted_measurement", "python_sample_step", "sample_step_function"]
 
 # -- the arithmetic, written once for numpy and CasADi ------------------------------------------
@@ -75,27 +77,40 @@ class _NumpyOps:
         fn = model_springs(self.model)["spring_inverse"]
         return np.asarray(fn(np.asarray(tau, dtype=float), np.asarray(p, dtype=float)), dtype=float).reshape(-1)
 
+    def gravity(self, q):
+        """The NOMINAL gravity ``g(q)`` the robot adds (joint_torque), shape (n,); set ``gravity_fn``,
+        ``p_gravity`` first."""
+        return np.asarray(self.gravity_fn(np.asarray(q, dtype=float), self.p_gravity), dtype=float).reshape(-1)
+
 
 class _CasadiOps:
     def __init__(self, fns, nx, n, outline_h=None):
         import casadi as ca
         self.ca, self.fns, self.nx, self.n = ca, fns, nx, n
         self.substep = None if outline_h is None else self._substep_function(float(outline_h))
+        self.substep_staged = None if outline_h is None else self._substep_function(float(outline_h), True)
+        if outline_h is not None and "gravity" in fns:        # one call per substep, as the plant's
+            g = fns["gravity"]
+            q, p = ca.SX.sym("q", g.size1_in(0)), ca.SX.sym("p", g.size1_in(1))
+            self.fns = dict(fns, gravity=ca.Function(g.name() + "_call", [q, p], [g(q, p)], {"never_inline": True}))
 
-    def _substep_function(self, h: float):
+    def _substep_function(self, h: float, staged: bool = False):
         """One RK4 step of ``h`` as an SX Function kept as a call (``never_inline``): evaluated on SX
-        it stays one call node, so a step of ``s`` substeps holds ``s`` calls, not ``s`` copies."""
+        it stays one call node, so a step of ``s`` substeps holds ``s`` calls, not ``s`` copies.
+        ``staged``: the torque at the stages' times ``(u0, uh, u1)`` (a current loop's response)."""
         ca, nx, n = self.ca, self.nx, self.n
         x, u = ca.SX.sym("x", nx), ca.SX.sym("u", n)
+        us = (u, ca.SX.sym("uh", n), ca.SX.sym("u1", n)) if staged else (u, u, u)
         p = ca.SX.sym("p", self.fns["f"].size1_in(1))
-        k1 = self.xdot(x, u, p)
-        k2 = self.xdot(x + 0.5 * h * k1, u, p)
-        k3 = self.xdot(x + 0.5 * h * k2, u, p)
-        k4 = self.xdot(x + h * k3, u, p)
+        k1 = self.xdot(x, us[0], p)
+        k2 = self.xdot(x + 0.5 * h * k1, us[1], p)
+        k3 = self.xdot(x + 0.5 * h * k2, us[1], p)
+        k4 = self.xdot(x + h * k3, us[2], p)
         x_next = x + (h / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
-        name = f"fjm_rk4_{self.fns['f'].name()}"
-        return ca.Function(name, [x, u, p], [ca.cse(x_next)], ["x", "u", "p"], ["x_next"],
-                           {"never_inline": True})
+        name = f"fjm_rk4{'_staged' if staged else ''}_{self.fns['f'].name()}"
+        ins = [x, *us, p] if staged else [x, u, p]
+        names = ["x", "u", "uh", "u1", "p"] if staged else ["x", "u", "p"]
+        return ca.Function(name, ins, [ca.cse(x_next)], names, ["x_next"], {"never_inline": True})
 
     def cat(self, parts):
         return self.ca.vertcat(*parts)
@@ -125,6 +140,9 @@ class _CasadiOps:
 
     def spring_inverse(self, tau, p):
         return self.fns["spring_inverse"](tau, p)
+
+    def gravity(self, q):
+        return self.fns["gravity"](q, self.p_gravity)
 
 
 def _slot(L: StepLayout, signal: str) -> int:
@@ -205,22 +223,6 @@ def _sense(ops, L: StepLayout, w, noise, p):
     return _condition(ops, L, _reading(ops, L, w, noise, p), w[L.extra_slices()[0]], w[L.slices()[4]])
 
 
-def _plant(ops, L: StepLayout, x, u, p):
-    """``substeps`` RK4 steps of ``T / substeps`` under the held ``u``."""
-    h = L.T / L.substeps
-    if getattr(ops, "substep", None) is not None:
-        for _ in range(L.substeps):
-            x = ops.substep(x, u, p)
-        return x
-    for _ in range(L.substeps):
-        k1 = ops.xdot(x, u, p)
-        k2 = ops.xdot(x + 0.5 * h * k1, u, p)
-        k3 = ops.xdot(x + 0.5 * h * k2, u, p)
-        k4 = ops.xdot(x + h * k3, u, p)
-        x = x + (h / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
-    return x
-
-
 def _predict(nom_ops, L: StepLayout, m_old, u_buf, p_nom):
     """The measurement predicted ``d`` samples ahead from ``m_old`` with the controller's NOMINAL model
     (torque sensing: ``q_m = q + psi^-1(tau_J)`` by its spring law at ``p_nom``), each sample on
@@ -236,7 +238,7 @@ def _predict(nom_ops, L: StepLayout, m_old, u_buf, p_nom):
         x = nom_ops.cat([q, dq, q + nom_ops.spring_inverse(tau, p_nom), dqm])
     x_old = x
     for j in range(L.delay):
-        x = _plant(nom_ops, steps, x, u_buf[j * n:(j + 1) * n], p_nom)
+        x = plant_substeps(nom_ops, steps, x, u_buf[j * n:(j + 1) * n], p_nom)
     if L.sensing == "full":
         # the reading plus the nominal model's predicted CHANGE: the torque keeps the sensor's scale (a torque
         # from K_nom (q_m - q) would scale the law's torque feedback by K_nom / K: -0.7 became -1 at K x0.7)
@@ -269,35 +271,12 @@ def _pre_law(ops, nom_ops, L: StepLayout, w, noise, p, p_nom):
     return m_used, m_buf_next, filt_next, venc_next
 
 
-def _rate_limited(ops, L: StepLayout, u_last, u_law):
-    """The applied torque: ``u_law`` moved at most ``rate_step`` from the last applied torque ``u_last``."""
-    if not L.rate_step:
-        return u_law
-    r = ops.const(L.rate_step)
-    return ops.fmin(ops.fmax(u_law, u_last - r), u_last + r)
-
-
-def _rate_windup(ops, L: StepLayout, zdot, u_law, u, e1):
-    """``zdot`` with the error integral of the joints the rate limit holds back frozen.
-
-    A joint is frozen while the applied ``u`` lags the law's ``u_law`` in the direction the
-    measured error ``e1 = q - q_d`` asks for (``u_law > u`` with ``e1 < 0``, or ``u_law < u`` with
-    ``e1 > 0``): integrating then only winds up (the law's own anti-windup sees its torque limit,
-    not the rate limit, which acts after it).
-    """
-    if not L.integral:
-        return zdot
-    n = L.n
-    held = (u_law > u) * (e1 < 0) + (u_law < u) * (e1 > 0)
-    frozen = zdot[:n] * (1 - held)
-    return ops.cat([frozen, zdot[n:L.nz]]) if L.nz > n else frozen
-
-
 def _post_law(ops, L: StepLayout, w, u, zdot, m_buf_next, filt_next, venc_next, p):
-    """``w_next`` from the APPLIED torque and the controller-state rate."""
+    """``w_next`` from the interface's command ``u`` and the controller-state rate."""
     sx, sz, _, su, _ = L.slices()
     z_next = w[sz] + L.T * zdot if L.nz else w[sz]
-    parts = [_plant(ops, L, w[sx], u, p), z_next]
+    x_next, cur_next = actuated_plant(ops, L, w[sx], w[L.extra_slices()[3]], u, p)
+    parts = [x_next, z_next]
     if L.delay:
         ub = w[su]
         parts += [m_buf_next, ops.cat([ub[L.n:], u]) if L.delay > 1 else u]
@@ -307,8 +286,10 @@ def _post_law(ops, L: StepLayout, w, u, zdot, m_buf_next, filt_next, venc_next, 
         parts.append(venc_next)
     if L.offset:
         parts.append(w[L.extra_slices()[1]])
-    if L.rate_step:
+    if L.has_last:
         parts.append(u)
+    if L.current_decay:
+        parts.append(cur_next)
     return ops.cat(parts)
 
 
@@ -323,11 +304,31 @@ def python_sample_step(model, controller, L: StepLayout, w, t: float, r, noise, 
     r = np.asarray(r, dtype=float).reshape(5, L.n)
     sample = controller.evaluate(t, m_used, z, r)
     zdot = np.asarray(controller.state_derivative(t, m_used, z, r, sample), dtype=float) if L.nz else None
-    u = _rate_limited(ops, L, w[L.extra_slices()[2]], np.asarray(sample.u, dtype=float))
+    if L.interface == "joint_torque":
+        ops.gravity_fn, ops.p_gravity = _nominal_gravity(controller, model)
+    u, u_filtered = interface_command(ops, L, w[L.extra_slices()[2]], np.asarray(sample.u, dtype=float))
     if L.integral:
-        zdot = _rate_windup(ops, L, zdot, np.asarray(sample.u, dtype=float), u, m_used[:L.n] - r[0])
+        zdot = rate_windup(ops, L, zdot, u_filtered, u, m_used[:L.n] - r[0])
     w_next = _post_law(ops, L, w, u, zdot, m_buf_next, filt_next, venc_next, p)
-    return w_next, (sample._replace(u=u) if L.rate_step else sample)
+    return w_next, (sample._replace(u=u) if L.has_last else sample)
+
+
+def command_ops(model, controller, L: StepLayout):
+    """The numpy arithmetic of the command side for ``model`` (a plant outside the sample step, e.g.
+    MuJoCo): ``ops`` for :func:`fjm_runtime.sim.actuation.motor_command` and ``interface_command``,
+    with the controller's nominal gravity when ``L``'s interface adds it (``joint_torque``)."""
+    ops = _NumpyOps(model)
+    if L.interface == "joint_torque":
+        ops.gravity_fn, ops.p_gravity = _nominal_gravity(controller, model)
+    return ops
+
+
+def _nominal_gravity(controller, model):
+    """``(gravity Function, p_nom)``: the gravity of the controller's model at its nominal parameters."""
+    nominal = controller_model(controller, model)
+    p_nom = getattr(controller, "p_nom", None)
+    p_nom = nominal.params_array({}) if p_nom is None else p_nom
+    return gravity_function(nominal), np.asarray(p_nom, dtype=float)
 
 
 def casadi_sample_step(fns, controller, L: StepLayout, n_par: int, nominal_fns=None, outline: bool = False):
@@ -367,9 +368,11 @@ def casadi_sample_step(fns, controller, L: StepLayout, n_par: int, nominal_fns=N
     z = w[L.slices()[1]]
     out = controller.symbolic_evaluate(m_used, z, r)
     zdot = controller.symbolic_state_derivative(m_used, z, r, out) if L.nz else None
-    u = _rate_limited(ops, L, w[L.extra_slices()[2]], out["u"])
+    if L.interface == "joint_torque":
+        ops.p_gravity = ca.DM(np.asarray(controller.p_nom, dtype=float))
+    u, u_filtered = interface_command(ops, L, w[L.extra_slices()[2]], out["u"])
     if L.integral:
-        zdot = _rate_windup(ops, L, zdot, out["u"], u, m_used[:L.n] - r[:L.n])
+        zdot = rate_windup(ops, L, zdot, u_filtered, u, m_used[:L.n] - r[:L.n])
     w_next = _post_law(ops, L, w, u, zdot, m_buf_next, filt_next, venc_next, p)
     return ca.Function("fjm_sample_step", [w, r, noise, p],
                        [w_next, ca.vertcat(u, out["s"], out["y_hat"])],
@@ -380,7 +383,7 @@ def _expanded(fns):
     """``f``, ``g``, ``spring`` and ``spring_inverse`` as SX Functions (MX ones expanded) so that each substep
     is one call."""
     out = {}
-    for k in ("f", "g", "spring", "spring_inverse"):
+    for k in ("f", "g", "spring", "spring_inverse", "gravity"):
         if k not in fns:
             continue
         fn = fns[k]
@@ -391,26 +394,37 @@ def _expanded(fns):
     return out
 
 
-def initial_step_state(model, L: StepLayout, x0, z0, p_true, seed: int = 0, sensor=None) -> np.ndarray:
+def initial_step_state(model, L: StepLayout, x0, z0, p_true, seed: int = 0, sensor=None,
+                       controller=None) -> np.ndarray:
     """``w_0``: the plant and controller states and the loop's memory before sample 0.
 
     The plant rests at ``x0`` before ``t = 0``: the delay buffers hold the noise-free measurement
-    of ``x0`` and the torques that held it there (the true spring torque ``K (q_m - q)``: a robot
+    of ``x0`` and the commands that held it there (the true spring torque ``K (q_m - q)``: a robot
     hands over to the controller while holding; zeros would make the predictor see the arm fall
     for ``d`` samples and kick the law at start), the dtau_J filter the true ``tau_J(x0)``, ``dtau_J(x0)``, the
-    velocity filters the true angles and velocities, the last applied torque (rate limit) the true
-    spring torque ``K (q_m - q)`` at ``x0`` (what holds a rest state), and the run's tau_J offset is
-    ``sensor.tau_J_offset * offset_normals(seed)`` (``sensor`` needed only when ``L.offset``).
+    velocity filters the true angles and velocities, the last command (rate limit, vendor filter) and
+    the current loop's motor torque the true spring torque ``K (q_m - q)`` at ``x0`` (what holds a rest
+    state), and the run's tau_J offset is ``sensor.tau_J_offset * offset_normals(seed)`` (``sensor``
+    needed only when ``L.offset``). With a ``joint_torque`` interface the commands exclude the
+    gravity the robot adds: ``K (q_m - q) - g_nom(q)`` (``controller`` needed: its model's gravity).
     """
     ops = _NumpyOps(model)
     n = L.n
     x0 = np.asarray(x0, dtype=float)
     m0 = np.asarray(_measure(ops, L, x0, p_true), dtype=float)
     parts = [x0, z0]
-    # the spring torque that holds x0 (delay buffer, rate limit's last torque)
-    spring = ops.spring(x0[2 * n:3 * n] - x0[:n], p_true)[0] if (L.delay or L.rate_step) else None
+    # the spring torque that holds x0 (delay buffer, the interface's last command, the current loop's torque)
+    spring = ops.spring(x0[2 * n:3 * n] - x0[:n], p_true)[0] if (L.delay or L.has_last or L.current_decay) \
+        else None
+    command = spring
+    if L.interface == "joint_torque":
+        if controller is None:
+            raise FjmValueError("initial_step_state: a joint_torque interface adds the nominal gravity; pass the "
+                                "controller")
+        ops.gravity_fn, ops.p_gravity = _nominal_gravity(controller, model)
+        command = spring - ops.gravity(x0[:n])
     if L.delay:
-        parts += [np.tile(m0, L.delay), np.tile(spring, L.delay)]
+        parts += [np.tile(m0, L.delay), np.tile(command, L.delay)]
     if L.filtered:
         parts.append(m0[_slot(L, "tau_J") * n:(_slot(L, "dtau_J") + 1) * n])
     if L.differentiated:
@@ -419,7 +433,9 @@ def initial_step_state(model, L: StepLayout, x0, z0, p_true, seed: int = 0, sens
         if sensor is None:
             raise FjmValueError("initial_step_state: this layout has a tau_J offset; pass the sensor")
         parts.append(sensor.offsets(n) * offset_normals(int(seed), n))
-    if L.rate_step:
+    if L.has_last:
+        parts.append(command)
+    if L.current_decay:
         parts.append(spring)
     return ops.cat(parts)
 
@@ -445,7 +461,10 @@ def sample_step_function(model, controller, L: StepLayout, outline: bool = False
     torque = L.sensing != "state"  # only a torque (or full) sensor and its predictor evaluate the spring law
     if nominal_fns is not None and torque:
         nominal_fns.update(model_springs(nominal))
-    fns = dict(casadi_functions(model), **(model_springs(model) if torque else {}))
+    springs = torque or L.interface == "joint_torque"  # the robot's torque loop reads its torque sensor too
+    fns = dict(casadi_functions(model), **(model_springs(model) if springs else {}))
+    if L.interface == "joint_torque":
+        fns["gravity"] = gravity_function(nominal)
     return casadi_sample_step(fns, controller, L, len(model.param_names), nominal_fns, outline=outline)
 
 

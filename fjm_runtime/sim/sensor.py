@@ -1,4 +1,4 @@
-"""Sensor model of the sampled-data loop: noise, encoders, velocity and dtau_J filters, the torque-rate limit.
+"""Sensor model of the sampled-data loop: noise, encoders, velocity and dtau_J filters.
 
 The noise of a run is generated once, before the run, by :func:`standard_normals` (a
 counter-based generator: the number for sample ``k`` and channel ``c`` depends only on
@@ -17,12 +17,11 @@ robot computes it: the dq slot carries no noise (dq is the filtered difference o
 and the dq_m slot carries the noise of the MOTOR ANGLE (channel block 2, level ``q_m``), of which
 dq_m is the filtered difference (:func:`noise_slots`).
 
-A :class:`SensorModel` describes the robot's interface as the controller sees it: what it measures
-and how badly, and the one property of the command channel that the loop must respect, the
-commanded torque's rate limit. Presets (:data:`PRESETS`): ``ideal``, ``panda_white`` (white noise on
+A :class:`SensorModel` describes what the controller measures and how badly; what its output
+commands (the rate limit, a vendor's filter, the current loop) is the command interface's
+(:mod:`fjm_runtime.sim.interface`). Presets (:data:`PRESETS`): ``ideal``, ``panda_white`` (white noise on
 every signal, velocities included: the former ``panda`` preset, optimistic about velocities) and
-``franka_like`` (velocities differentiated from quantized encoders, a torque-sensor offset, the
-1000 N m/s rate limit). A user states their own in a TOML file (:func:`load_sensor_file`, format in
+``franka_like`` (velocities differentiated from quantized encoders, a torque-sensor offset). A user states their own in a TOML file (:func:`load_sensor_file`, format in
 docs/simulation.md); :func:`sensor_from_spec` takes either.
 """
 from __future__ import annotations
@@ -137,17 +136,6 @@ def _level(value, name: str) -> Level:
     return float(a) if a.ndim == 0 else tuple(a.tolist())
 
 
-def _rate(value) -> Level:
-    try:
-        a = np.asarray(value, dtype=float)
-    except (TypeError, ValueError):
-        a = np.array(np.nan)
-    if a.ndim > 1 or np.any(np.isnan(a)) or np.any(a <= 0):
-        raise FjmValueError(f"SensorModel.torque_rate_limit = {value!r}: expected a rate > 0 N m/s "
-                            "(a scalar or one per joint; inf: none)")
-    return float(a) if a.ndim == 0 else tuple(a.tolist())
-
-
 def _per_joint(value, n: int, name: str) -> np.ndarray:
     a = np.asarray(value, dtype=float)
     a = np.broadcast_to(a, (n,)).copy() if a.ndim == 0 else a
@@ -158,7 +146,7 @@ def _per_joint(value, n: int, name: str) -> np.ndarray:
 
 @dataclass(frozen=True)
 class SensorModel:
-    """What the controller measures and how badly, and the commanded torque's rate limit.
+    """What the controller measures and how badly.
 
     Attributes
     ----------
@@ -184,9 +172,6 @@ class SensorModel:
     tau_J_offset : float or tuple of n floats
         Standard deviation of a constant per-run offset of the torque sensor, N m (drawn once per
         run from the run's seed, :func:`offset_normals`).
-    torque_rate_limit : float or tuple of n floats
-        Largest change of the commanded torque per second, N m/s (``inf``: none); the sample
-        step limits ``|u_k - u_{k-1}| <= torque_rate_limit T``.
     name : str
         The preset or file it came from (reports say which sensor a number is for).
     seed : int
@@ -206,14 +191,12 @@ class SensorModel:
     velocity_mode: str = "measured"
     velocity_cutoff: float = 300.0
     tau_J_offset: Level = 0.0
-    torque_rate_limit: Level = math.inf
     name: str = "custom"
     seed: int = field(default=0)
 
     def __post_init__(self):
         for name in SIGNALS + ("q_quant", "q_m_quant", "tau_J_offset"):
             object.__setattr__(self, name, _level(getattr(self, name), name))
-        object.__setattr__(self, "torque_rate_limit", _rate(self.torque_rate_limit))
         for name in ("q_quant", "q_m_quant"):
             if not isinstance(getattr(self, name), float):
                 raise FjmValueError(f"SensorModel.{name}: expected one quantization step in rad (a scalar)")
@@ -235,7 +218,7 @@ class SensorModel:
 
     @classmethod
     def ideal(cls, seed: int = 0) -> "SensorModel":
-        """No noise, no quantization, no rate limit, dtau_J and velocities measured exactly."""
+        """No noise, no quantization, dtau_J and velocities measured exactly."""
         return cls(name="ideal", seed=seed)
 
     @classmethod
@@ -245,7 +228,7 @@ class SensorModel:
         tau_J 0.05 N m, q and q_m 1e-4 rad, dq and dq_m 1e-3 rad/s drawn independently of q (a
         real arm differentiates its encoder angle: 1e-4 rad differentiated and filtered is
         0.01-0.08 rad/s, :meth:`franka_like`); dtau_J the filtered difference of tau_J (1000 rad/s);
-        no quantization, no offset, no rate limit. Kept because the shipped 1 kHz / d = 1 designs
+        no quantization, no offset. Kept because the shipped 1 kHz / d = 1 designs
         were searched with it.
         """
         return cls(q=1e-4, dq=1e-3, q_m=1e-4, dq_m=1e-3, tau_J=0.05, dtau_J=5.0,
@@ -265,17 +248,16 @@ class SensorModel:
         * motor angle q_m (link side): white noise 1e-5 rad on a step of 2 pi / 2^21 (a motor
           encoder seen through the gear); dq_m its filtered difference (state sensing also uses q_m);
         * tau_J: white noise 0.05 N m plus a constant per-run offset of 0.2 N m (standard deviations);
-        * dtau_J: the filtered difference of tau_J, cutoff 1000 rad/s (as libfranka's dtau_J);
-        * the commanded torque's rate limit: 1000 N m/s per joint (libfranka rejects faster changes:
-          1 N m per 1 ms tick).
+        * dtau_J: the filtered difference of tau_J, cutoff 1000 rad/s (as libfranka's dtau_J).
 
-        The rate limit and the filtered differences are libfranka's behaviour; the noise levels,
+        libfranka's 1 N m per tick rate limit is the command interface's (``--interface franka``).
+        The filtered differences are libfranka's behaviour; the noise levels,
         resolutions and cutoffs are our choice where no datasheet number exists (say so in results).
         """
         return cls(q=2e-5, q_m=1e-5, tau_J=0.05, dtau_J=0.0, q_quant=2 * math.pi / 2 ** 20,
                    q_m_quant=2 * math.pi / 2 ** 21, dtau_mode="filtered", dtau_cutoff=1000.0,
                    velocity_mode="differentiated", velocity_cutoff=300.0, tau_J_offset=0.2,
-                   torque_rate_limit=1000.0, name="franka_like", seed=seed)
+                   name="franka_like", seed=seed)
 
     def with_seed(self, seed: int) -> "SensorModel":
         """The same sensor with another seed."""
@@ -287,49 +269,37 @@ class SensorModel:
         """Noise standard deviation of each slot of the noise row, shape (4n,) or (5n,) (:func:`noise_slots`)."""
         return noise_slots(self, sensing, n)[1]
 
-    def rate_limits(self, n: int) -> np.ndarray:
-        """The torque-rate limit per joint, N m/s, shape (n,) (``inf``: none)."""
-        return _per_joint(self.torque_rate_limit, n, "torque_rate_limit")
-
     def offsets(self, n: int) -> np.ndarray:
         """The standard deviation of the tau_J offset per joint, N m, shape (n,)."""
         return _per_joint(self.tau_J_offset, n, "tau_J_offset")
 
-    def has_rate_limit(self) -> bool:
-        """True when some joint's commanded torque is rate limited."""
-        return bool(np.any(np.isfinite(np.asarray(self.torque_rate_limit))))
-
     def is_ideal(self) -> bool:
-        """True when the sensor adds nothing (no noise, quantization, offset or rate limit; raw signals)."""
+        """True when the sensor adds nothing (no noise, quantization or offset; raw signals)."""
         return (all(np.all(np.asarray(getattr(self, s)) == 0) for s in SIGNALS + ("tau_J_offset",))
                 and self.q_quant == 0 and self.q_m_quant == 0 and self.dtau_mode == "measured"
-                and self.velocity_mode == "measured" and not self.has_rate_limit())
+                and self.velocity_mode == "measured")
 
     def as_dict(self) -> dict:
-        """The fields as plain JSON values (``inf`` rate limit as ``None``); :meth:`from_dict` inverts it."""
-        out = {}
-        for k in self.__dataclass_fields__:
-            v = getattr(self, k)
-            if k == "torque_rate_limit":
-                v = [None if not math.isfinite(x) else x for x in v] if isinstance(v, tuple) else \
-                    (None if not math.isfinite(v) else v)
-            out[k] = list(v) if isinstance(v, tuple) else v
-        return out
+        """The fields as plain JSON values; :meth:`from_dict` inverts it."""
+        return {k: list(v) if isinstance(v, tuple) else v
+                for k, v in ((k, getattr(self, k)) for k in self.__dataclass_fields__)}
 
     @classmethod
     def from_dict(cls, fields: dict, where: str = "sensor") -> "SensorModel":
-        """A SensorModel from :meth:`as_dict` output (or a design file's ``sensor`` record)."""
+        """A SensorModel from :meth:`as_dict` output (or a design file's ``sensor`` record).
+
+        A record written before the rate limit moved to the command interface may carry
+        ``torque_rate_limit``: it is not the sensor's and is skipped here
+        (:func:`fjm_runtime.sim.interface.interface_from_record` reads it).
+        """
         if not isinstance(fields, dict):
             raise FjmValueError(f"{where}: expected a table of SensorModel fields, got {type(fields).__name__}")
+        fields = {k: v for k, v in fields.items() if k != _MOVED}
         unknown = sorted(set(fields) - set(cls.__dataclass_fields__))
         if unknown:
             raise FjmValueError(f"{where}: unknown field(s) {unknown}; expected among "
                                 f"{sorted(cls.__dataclass_fields__)}")
         kw = dict(fields)
-        if "torque_rate_limit" in kw:
-            v = kw["torque_rate_limit"]
-            kw["torque_rate_limit"] = [math.inf if x is None else x for x in v] if isinstance(v, list) else \
-                (math.inf if v is None else v)
         for k, v in kw.items():
             if isinstance(v, list):
                 kw[k] = tuple(v)
@@ -338,6 +308,9 @@ class SensorModel:
         except FjmValueError as exc:  # a file's key is its field's name, not the Python class's attribute
             raise FjmValueError(f"{where}: {str(exc).replace(cls.__name__ + '.', '')}") from None
 
+
+#: The field that moved from the sensor model to the command interface.
+_MOVED = "torque_rate_limit"
 
 #: Preset constructors by name (``fjm ... --noise NAME``).
 PRESETS = {"ideal": SensorModel.ideal, "panda_white": SensorModel.panda_white,
@@ -351,8 +324,9 @@ def load_sensor_file(path, seed: int = 0) -> SensorModel:
 
     Keys are the :class:`SensorModel` fields (``q``, ``dq``, ``q_m``, ``dq_m``, ``tau_J``, ``dtau_J``,
     ``q_quant``, ``q_m_quant``, ``dtau_mode``, ``dtau_cutoff``, ``velocity_mode``, ``velocity_cutoff``,
-    ``tau_J_offset``, ``torque_rate_limit`` (``"inf"`` or absent: none), ``seed``) in SI units; a level
-    is a number or a list with one per joint. ``name`` defaults to the file's stem.
+    ``tau_J_offset``, ``seed``) in SI units; a level is a number or a list with one per joint.
+    ``name`` defaults to the file's stem. The rate limit is the command interface's: a
+    ``torque_rate_limit`` key is a one-line error that says so.
 
     Raises
     ------
@@ -377,11 +351,9 @@ def load_sensor_file(path, seed: int = 0) -> SensorModel:
         raise FjmValueError(f"sensor file {p}: preset = {base_name!r}; expected one of {sorted(PRESETS)}")
     base = PRESETS[base_name](seed=seed).as_dict()
     base["name"] = p.stem
-    rate = data.get("torque_rate_limit")
-    if isinstance(rate, str):
-        if rate.strip().lower() not in ("inf", "none"):
-            raise FjmValueError(f"sensor file {p}: torque_rate_limit = {rate!r}; expected a rate in N m/s or 'inf'")
-        data["torque_rate_limit"] = None
+    if _MOVED in data:
+        raise FjmValueError(f"sensor file {p}: {_MOVED} moved to the interface file (--interface FILE.toml, "
+                            f"key {_MOVED}): the rate limit is the command's, not the sensor's")
     for k, v in data.items():
         if k in ("dtau_mode", "velocity_mode", "name"):
             continue

@@ -15,6 +15,7 @@ from typing import Callable, Optional
 
 import numpy as np
 
+from ..sim.interface import interface_from_spec
 from ..sim.loops import BACKENDS
 from ..sim.metrics import Metrics, compute_metrics
 from ..sim.sample_step import check_loop_settings, initial_measurement, initial_step_state
@@ -125,7 +126,7 @@ def simulate(model, controller, reference, *, duration: float, dt: float = 1e-3,
              max_state: float = 1e6, backend: str = "auto", substeps: Optional[int] = None,
              sensor: Optional[SensorModel] = None, delay_samples: int = 0,
              predict: bool = False, loop: str = "sampled",
-             predict_substeps: Optional[int] = None) -> SimulationResult:
+             predict_substeps: Optional[int] = None, interface=None) -> SimulationResult:
     """Simulate the sampled-data closed loop: TRUE plant, controller with its NOMINAL model.
 
     Parameters
@@ -165,6 +166,8 @@ def simulate(model, controller, reference, *, duration: float, dt: float = 1e-3,
     predict : bool
         With ``d > 0``: predict the measurement ``d`` samples ahead with the NOMINAL model
         under the torques already sent (see :mod:`fjm_runtime.sim.sample_step`).
+    interface : CommandInterface or str, optional
+        The command interface (:mod:`fjm_runtime.sim.interface`; default ``'motor'``), or a TOML file.
     loop : {'sampled'}
         The one loop (any other name raises :class:`FjmValueError`).
     predict_substeps : int, optional
@@ -185,11 +188,12 @@ def simulate(model, controller, reference, *, duration: float, dt: float = 1e-3,
     p_true, x, n_steps = _initial_conditions(model, controller, reference, duration, dt, true_params, x0)
     sensor, delay = check_loop_settings(sensor, delay_samples, predict, loop)
     subs = resolve_substeps(substeps, model, x, p_true, float(dt))
-    L = make_layout(model, controller, float(dt), subs, sensor, delay, predict, predict_substeps)
+    iface = interface_from_spec(interface, what="interface")
+    L = make_layout(model, controller, float(dt), subs, sensor, delay, predict, predict_substeps, interface=iface)
     t = dt * np.arange(n_steps + 1)
     r0 = np.asarray(reference(0.0), dtype=float)
     z = np.asarray(controller.initial_state(0.0, initial_measurement(model, L, x, p_true), r0), dtype=float)
-    w0 = initial_step_state(model, L, x, z, p_true, seed=int(sensor.seed), sensor=sensor)
+    w0 = initial_step_state(model, L, x, z, p_true, seed=int(sensor.seed), sensor=sensor, controller=controller)
     R = _reference_rows(reference, t, L.n)
     NOISE = noise_array(sensor, L.sensing, L.n, t.size)
     name = _choose_backend(backend, model, controller)
@@ -197,7 +201,8 @@ def simulate(model, controller, reference, *, duration: float, dt: float = 1e-3,
     settings = {"rate": 1.0 / float(dt), "dt": float(dt), "substeps": subs, "delay_samples": delay,
                 "predict": bool(predict), "predict_substeps": L.predictor_substeps if L.predict else None,
                 "sensing": L.sensing, "seed": int(sensor.seed), "backend": name,
-                "sensor": sensor.name, "torque_rate_limit": sensor.as_dict()["torque_rate_limit"]}
+                "sensor": sensor.name, "interface": iface.name,
+                "torque_rate_limit": iface.as_dict()["torque_rate_limit"]}
     return _finish(model, controller, p_true, L, t, W, AUX, R.reshape(-1, 5, L.n), settings)
 
 

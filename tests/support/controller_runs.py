@@ -141,11 +141,12 @@ def relative(U, U_ref):
     return float(np.max(np.max(np.abs(U - U_ref), axis=0) / scale))
 
 
-def make_design(model, kind, sensing, noise, delay=1, u_max=None, predict=None, **gains):
-    """A design of ``model`` at 1 kHz (prediction on when delayed, unless ``predict`` says otherwise)."""
+def make_design(model, kind, sensing, noise, delay=1, u_max=None, predict=None, interface=None, **gains):
+    """A design of ``model`` at 1 kHz (prediction on when delayed, unless ``predict`` says otherwise; ``interface``
+    a preset name or a table of CommandInterface fields, default motor)."""
     predict = delay > 0 if predict is None else predict
     spec = {"model": model, "kind": kind, "sensing": sensing, "rate": 1000.0, "delay": delay, "predict": predict,
-            "noise": noise, "gains": {"lam": 20.0, "k_s": 200.0, "delta": 5.0, **gains}}
+            "noise": noise, "interface": interface, "gains": {"lam": 20.0, "k_s": 200.0, "delta": 5.0, **gains}}
     if u_max is not None:
         spec["gains"]["u_max"] = u_max
     return design_controller(fjm_runtime.load(model), Design.from_dict(spec))

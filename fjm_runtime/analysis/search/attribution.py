@@ -3,8 +3,8 @@
 When no screen explains a failure (:mod:`fjm_runtime.analysis.search.screen`), :func:`attribute`
 re-runs the draw of the binding miss with the same gains, plant and noise seed: once per noise
 source with its levels at zero (encoder angles ``q, q_m``; measured velocities ``dq, dq_m``; the
-torque sensor ``tau_J, dtau_J``), once with every noise level at zero, and, when the sensor limits
-the commanded torque's rate, once without that limit. Noise LEVELS are run-time inputs of the
+torque sensor ``tau_J, dtau_J``), once with every noise level at zero, and, when the command
+interface limits the command's rate, once without that limit. Noise LEVELS are run-time inputs of the
 compiled step, so those re-runs reuse the design's library; the rate limit is part of the step (its
 re-run builds one more step). Quantization, filters and the tau_J offset stay in every re-run. The
 effect whose removal brings the missed figure furthest down limits the design; if the figure still
@@ -43,12 +43,13 @@ def _figure(b, miss) -> float:
     return float(np.asarray(b.joint_metrics[_METRIC[miss["threshold"]]])[0, miss["joint"] - 1])
 
 
-def variants(sensor) -> Dict[str, dict]:
-    """The re-runs of :func:`attribute`: name -> SensorModel fields to replace."""
+def variants(sensor, interface=None) -> Dict[str, dict]:
+    """The re-runs of :func:`attribute`: name -> SensorModel fields to replace (the rate limit's: the
+    CommandInterface field ``torque_rate_limit``)."""
     out = {name: {f: 0.0 for f in fields} for name, fields in SOURCES.items() if not _silent(sensor, fields)}
     if len(out) > 1:
         out[ALL_NOISE] = {f: 0.0 for fields in SOURCES.values() for f in fields}
-    if sensor.has_rate_limit():
+    if interface is not None and interface.has_rate_limit():
         out[NO_RATE_LIMIT] = {"torque_rate_limit": math.inf}
     return out
 
@@ -77,18 +78,23 @@ def attribute(loops, gains: dict, row: np.ndarray, noise_seed: int, duration: fl
     figures : dict str -> float
         The figure per re-run (``"as designed"`` and each of :func:`variants`).
     """
-    sensor = loops.sensor
-    runs = variants(sensor)
+    sensor, interface = loops.sensor, getattr(loops, "interface", None)
+    runs = variants(sensor, interface)
     if not runs:
         return None, {}
     figures: Dict[str, float] = {}
     try:
         for name, change in [("as designed", {})] + list(runs.items()):
-            loops.sensor = replace(sensor, **change)
+            if name == NO_RATE_LIMIT:
+                loops.interface = replace(interface, **change)
+            else:
+                loops.sensor = replace(sensor, **change)
             b = loops.run([gains], np.atleast_2d(row), duration, np.array([int(noise_seed)]))
             figures[name] = _figure(b, miss)
     finally:
         loops.sensor = sensor
+        if interface is not None:
+            loops.interface = interface
     return _sentence(miss, figures), figures
 
 

@@ -13,6 +13,7 @@ import pytest
 from fjm_runtime import make_controller, make_reference, simulate, simulate_batch
 from fjm_runtime.batch.sampled import GainInput, sampled_metric_step
 from fjm_runtime.batch.simd import soa_source
+from fjm_runtime.sim.interface import CommandInterface
 from fjm_runtime.sim.sample_step import sample_step_function
 from fjm_runtime.sim.step_layout import make_layout
 from fjm_runtime.sim.sensor import SensorModel
@@ -62,10 +63,15 @@ def test_simd_calls_agree_with_the_scalar_loop_and_single_runs(case):
     assert np.allclose(single.x[-1], a.x_final[2], rtol=1e-10, atol=1e-12)
 
 
-def test_soa_source_emits_each_callee_once(case):
+@pytest.mark.parametrize("interface", [CommandInterface.ideal(), CommandInterface.motor()])
+def test_soa_source_emits_each_callee_once(case, interface):
+    """Ideal actuator: one callee (the held-torque RK4 step) for plant and predictor; with the current loop
+    the plant's substeps call the staged RK4 step (the torque at the stages' times), a second callee."""
     m, ctrl = case
-    L = make_layout(m, GainInput(ctrl), 1e-3, 4, SensorModel.ideal(), 2, True)
+    L = make_layout(m, GainInput(ctrl), 1e-3, 4, SensorModel.ideal(), 2, True, interface=interface)
     step = sampled_metric_step(m, GainInput(ctrl), L, 1e6, 21)[0]
     src = soa_source(step, 4, varying=(0, 2), invariant_from=step.size1_in(0) - len(m.param_names))
-    assert src.count("static void fjm_fn0(") == 1
-    assert src.count("fjm_fn0(ci, co);") == 4 * (1 + 2)               # plant and predictor substeps
+    callees = 1 if interface.is_ideal() else 2
+    for i in range(callees):
+        assert src.count(f"static void fjm_fn{i}(") == 1
+    assert sum(src.count(f"fjm_fn{i}(ci, co);") for i in range(callees)) == 4 * (1 + 2)  # plant and predictor

@@ -11,6 +11,7 @@ from fjm_runtime.batch.sampled_runner import JOINT_METRICS, batch_seeds
 from fjm_runtime.control.factory import make_controller
 from fjm_runtime.control.references import make_reference
 from fjm_runtime.sim import metrics as M
+from fjm_runtime.sim.interface import CommandInterface
 from fjm_runtime.sim.sensor import SensorModel
 from fjm_runtime.sim.simulate import simulate
 from fjm_runtime.sim.step import SimulationDivergedError
@@ -26,16 +27,17 @@ def _joint(res):
             "time_at_limit": M.time_at_limit(res), "torque_jitter": M.torque_jitter(res)}
 
 
-def _compare(model, ctrl, ref, P, duration, sensor, delay, predict, simd):
+def _compare(model, ctrl, ref, P, duration, sensor, delay, predict, simd, interface=None):
     with warnings.catch_warnings():
         warnings.simplefilter("error")          # a SIMD fallback would hide the SIMD path
         b = simulate_batch(model, ctrl, ref, P, duration=duration, sensor=sensor, delay_samples=delay,
-                           predict=predict, simd=simd, threads=1)
+                           predict=predict, simd=simd, threads=1, interface=interface)
     assert b.info["path"].startswith("simd") == simd
     assert not np.any(b.diverged)
     for i in range(P.shape[0]):
         r = simulate(model, ctrl, ref, duration=duration, true_params=P[i], sensor=sensor.with_seed(int(b.seeds[i])),
-                     delay_samples=delay, predict=predict, substeps=b.info["substeps"], backend="compiled")
+                     delay_samples=delay, predict=predict, substeps=b.info["substeps"], backend="compiled",
+                     interface=interface)
         assert np.max(np.abs(r.x[-1] - b.x_final[i])) < 1e-9
         for k, v in _joint(r).items():
             assert np.allclose(b.joint_metrics[k][i], v, rtol=1e-9, atol=1e-9), k
@@ -55,6 +57,22 @@ def test_link1_torque_sensed_rows_equal_simulate(simd):
     b = _compare(m, ctrl, ref, P, 0.3, SensorModel.panda_white(seed=11), 1, False, simd)
     assert np.any(b.joint_metrics["time_at_limit"] > 0) or np.all(b.joint_metrics["peak_torque"] < 50.0)
     assert len(set(b.joint_metrics["torque_jitter"][:, 0])) == 3   # each row its own noise and plant
+
+
+@pytest.mark.parametrize("simd", [False, True])
+@pytest.mark.parametrize("interface", [CommandInterface(current_bandwidth_hz=500.0, torque_rate_limit=300.0),
+                                       CommandInterface(kind="joint_torque", lowpass_cutoff_hz=100.0, K_T=-0.5,
+                                                        D_T=0.01, torque_rate_limit=400.0)])
+def test_each_interface_rows_equal_simulate(simd, interface):
+    """The current loop, the vendor filter, the rate limit, the nominal gravity and the inner torque loop
+    in the batch engine (scalar and SIMD) equal the single runs."""
+    m = fjm_runtime.load("planar2")
+    ctrl = make_controller("ismc", m, {}, sensing="torque", lam=10.0, k_s=20.0, delta=0.5, u_max=200.0)
+    ref = make_reference("sine", 2, amplitude=0.3, omega=1.5)
+    P = np.tile(m.params_array({}), (2, 1))
+    P[1, [m.param_names.index("K1"), m.param_names.index("K2")]] *= [0.8, 1.2]
+    b = _compare(m, ctrl, ref, P, 0.2, SensorModel.franka_like(seed=3), 1, True, simd, interface)
+    assert b.info["interface"] == interface.name
 
 
 @pytest.mark.parametrize("simd", [False, True])

@@ -121,9 +121,10 @@ def test_small_models_equal_simulator(tmp_path_factory, model, kind, sensing, no
 
 @pytest.mark.slow
 def test_rate_limit_is_applied_in_c(tmp_path_factory):
-    """franka_like (1000 N m/s): the C torque never changes by more than 1 N m a sample, and it does
-    change by exactly that while the limit holds it (the clip is in the library, not the caller)."""
-    design = make_design("link1", "ismc", "torque", "franka_like", u_max=25.0, lam=10.0, k_s=20.0, delta=20.0)
+    """A motor interface limited to 1000 N m/s: the C torque never changes by more than 1 N m a sample, and it
+    does change by exactly that while the limit holds it (the clip is in the library, not the caller)."""
+    design = make_design("link1", "ismc", "torque", "franka_like", u_max=25.0, lam=10.0, k_s=20.0, delta=20.0,
+                         interface={"torque_rate_limit": 1000.0})
     run = Run(design, 1.0, sine(design))
     U, S = free_running(library(design, tmp_path_factory), run)
     dU = np.abs(np.diff(np.vstack([run.u0[None], U]), axis=0))

@@ -19,6 +19,7 @@ import mujoco  # the dev extra: no skip
 import fjm_runtime
 from fjm_runtime.cli.main import main as fjm_main
 from fjm_runtime.export.bridge import MujocoPlant, run_closed_loop
+from fjm_runtime.sim.interface import CommandInterface
 from fjm_runtime.export.mjcf import mjcf_text, write_mjcf
 from fjm_runtime.validation import FjmValueError
 
@@ -208,8 +209,9 @@ def _mujoco_equals_simulate(m, ref, true, tmp_path, dt=1e-3, sub=10, x0=None):
 
     def ctrl():
         return fjm_runtime.make_controller("ismc", m, None, lam=10.0, k_s=50.0, delta=0.25)
-    res = fjm_runtime.simulate(m, ctrl(), ref, duration=1.0, dt=dt, substeps=sub, true_params=true, x0=x0)
-    t, X, U = run_closed_loop(MujocoPlant(m, path, true), ctrl(), ref, duration=1.0, dt=dt, substeps=sub, x0=x0)
+    kw = dict(duration=1.0, dt=dt, substeps=sub, x0=x0, interface="ideal")   # held ctrl: MuJoCo's RK4 stages
+    res = fjm_runtime.simulate(m, ctrl(), ref, true_params=true, **kw)
+    t, X, U = run_closed_loop(MujocoPlant(m, path, true), ctrl(), ref, **kw)
     assert np.array_equal(t, res.t)
     assert np.max(np.abs(X - res.x)) < 1e-9 * max(1.0, np.max(np.abs(res.x)))
     assert np.max(np.abs(U - res.u)) < 1e-9 * max(1.0, np.max(np.abs(res.u)))
@@ -222,6 +224,25 @@ def test_closed_loop_equals_simulate(tmp_path):
     ref = fjm_runtime.make_reference("sine", m.n, amplitude=0.4, omega=2.0)
     res = _mujoco_equals_simulate(m, ref, dict(m.default_params, K1=m.default_params["K1"] * 1.2), tmp_path)
     assert np.max(np.abs(res.x[:, :m.n])) > 0.2 and np.ptp(res.u) > 1.0  # the loop moves the arm: not a trivial match
+
+
+@pytest.mark.parametrize("interface", [CommandInterface.motor(),
+                                       CommandInterface(kind="joint_torque", lowpass_cutoff_hz=100.0, K_T=-0.5,
+                                                        D_T=0.005, torque_rate_limit=2000.0)])
+def test_closed_loop_through_the_interface_follows_simulate(tmp_path, interface):
+    """The interface between the law and MuJoCo's motors (the current loop's mean per MuJoCo step, the vendor
+    layer with the nominal gravity and the inner loop on MuJoCo's state) follows fjm's simulate to the
+    quadrature of the lag (MuJoCo's RK4 holds ctrl over a step), far inside what the interface changes."""
+    m = fjm_runtime.load("elbow3")
+    ref = fjm_runtime.make_reference("sine", m.n, amplitude=0.4, omega=2.0)
+    path = write_mjcf(m, tmp_path / "elbow3.xml", None, timestep=5e-5)
+    ctrl = lambda: fjm_runtime.make_controller("ismc", m, None, lam=10.0, k_s=50.0, delta=0.25)  # noqa: E731
+    kw = dict(duration=0.5, dt=1e-3, substeps=20)
+    res = fjm_runtime.simulate(m, ctrl(), ref, interface=interface, **kw)
+    ideal = fjm_runtime.simulate(m, ctrl(), ref, interface="ideal", **kw)
+    t, X, U = run_closed_loop(MujocoPlant(m, path), ctrl(), ref, interface=interface, **kw)
+    gap, effect = np.max(np.abs(X - res.x)), np.max(np.abs(ideal.x - res.x))
+    assert gap < 1e-3 * effect and effect > 1e-6
 
 
 def test_closed_loop_on_the_cubic_spring_equals_simulate(tmp_path):
@@ -296,8 +317,9 @@ def test_closed_loop_on_the_panda_drives_equals_simulate(tmp_path):
 
     def ctrl():
         return fjm_runtime.make_controller("ismc", m, None, u_max=design.gains["u_max"], **design.law_gains())
-    res = fjm_runtime.simulate(m, ctrl(), ref, duration=0.5, dt=1e-3, substeps=14, true_params=true, x0=x0)
-    t, X, U = run_closed_loop(MujocoPlant(m, path, true), ctrl(), ref, duration=0.5, dt=1e-3, substeps=14, x0=x0)
+    kw = dict(duration=0.5, dt=1e-3, substeps=14, x0=x0, interface="ideal")  # held ctrl: MuJoCo's RK4 stages
+    res = fjm_runtime.simulate(m, ctrl(), ref, true_params=true, **kw)
+    t, X, U = run_closed_loop(MujocoPlant(m, path, true), ctrl(), ref, **kw)
     assert np.array_equal(t, res.t)
     assert np.max(np.abs(X - res.x)) < 1e-9 * max(1.0, np.max(np.abs(res.x)))
     assert np.max(np.abs(U - res.u)) < 1e-9 * max(1.0, np.max(np.abs(res.u)))

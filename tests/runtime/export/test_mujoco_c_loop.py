@@ -18,6 +18,7 @@ import pytest
 
 from fjm_runtime.ccache import compile_library
 from fjm_runtime.export.controller import amalgamation, export_controller
+from fjm_runtime.export.controller_step import ControllerLayout
 from fjm_runtime.sim.sample_step import sample_step_function
 from support.paths import load_example
 
@@ -46,9 +47,7 @@ def _step_states(design, res):
     """The simulator's step state ``w_k`` of every sample: MuJoCo's x_k, the library's controller state
     c_k (before its step) and the run's tau_J offset, shape (N+1, nw)."""
     L = design.layout
-    keep = np.ones(L.nw, dtype=bool)
-    keep[:L.nx] = False
-    keep[L.extra_slices()[1]] = False
+    keep = ControllerLayout(L).robot_mask()
     W = np.zeros((res.t.size, L.nw))
     W[:, :L.nx] = res.x
     W[:, keep] = res.c

@@ -45,10 +45,11 @@ def test_substeps_converge_to_a_ten_times_finer_reference(planar2):
     ref = Sinusoid(0.5, 1.0, n=2)
     S = resolve_substeps(None, planar2, np.zeros(8), planar2.params_array(stiff), 1e-3)
     assert S > 1                                   # the rule asks for substeps on this stiff plant
-    a = simulate(planar2, ctrl, ref, duration=2.0, true_params=stiff)
-    b = simulate(planar2, ctrl, ref, duration=2.0, true_params=stiff, substeps=10 * S)
+    ideal = "ideal"                                # the rule is for the plant under a held torque
+    a = simulate(planar2, ctrl, ref, duration=2.0, true_params=stiff, interface=ideal)
+    b = simulate(planar2, ctrl, ref, duration=2.0, true_params=stiff, substeps=10 * S, interface=ideal)
     with pytest.warns(CoarseIntegrationWarning):  # deliberately coarse: the warning is part of the contract
-        c = simulate(planar2, ctrl, ref, duration=2.0, true_params=stiff, substeps=1)
+        c = simulate(planar2, ctrl, ref, duration=2.0, true_params=stiff, substeps=1, interface=ideal)
     assert a.settings["substeps"] == S
     err = np.max(np.abs(a.x[:, :2] - b.x[:, :2]))
     assert err < 1e-8
@@ -70,7 +71,7 @@ def test_zero_order_hold_and_once_per_sample_controller_state(link1):
     """u is constant within a sample: the plant under u_k equals a hand-written RK4 under that constant."""
     ctrl = _ismc(link1)
     res = simulate(link1, ctrl, Sinusoid(0.5, 1.0), duration=0.05, substeps=4, true_params={"K": 120.0},
-                   backend="python")
+                   backend="python", interface="ideal")
     p = link1.params_array({"K": 120.0})
     T, h = 1e-3, 1e-3 / 4
     for k in (0, 17, 42):
@@ -107,10 +108,10 @@ def test_delay_shifts_the_controller_input(link1, d):
     ctrl = _ismc(link1)
     ref = Sinusoid(0.5, 1.0)
     p = link1.params_array({"K": 130.0})
-    res = simulate(link1, ctrl, ref, duration=0.1, true_params=p, delay_samples=d, substeps=1)
+    res = simulate(link1, ctrl, ref, duration=0.1, true_params=p, delay_samples=d, substeps=1, interface="ideal")
     u_ref = _reference_delay_loop(link1, ctrl, ref, p, d, 100)
     assert np.max(np.abs(res.u[:100, 0] - u_ref[:, 0])) < 1e-9
-    undelayed = simulate(link1, ctrl, ref, duration=0.1, true_params=p, substeps=1)
+    undelayed = simulate(link1, ctrl, ref, duration=0.1, true_params=p, substeps=1, interface="ideal")
     assert np.max(np.abs(res.u - undelayed.u)) > 1e-3          # the delay is not a no-op
 
 
@@ -118,9 +119,10 @@ def test_prediction_undoes_the_delay_with_an_exact_model(link1):
     """Exact nominal model, no noise: predicting d samples ahead gives the undelayed loop."""
     ctrl = make_controller("smc", link1, {}, lam=8.0, k_s=100.0, delta=2.0)
     ref = Sinusoid(0.5, 1.0)
-    base = simulate(link1, ctrl, ref, duration=0.2, substeps=2)
-    pred = simulate(link1, ctrl, ref, duration=0.2, substeps=2, delay_samples=2, predict=True)
-    late = simulate(link1, ctrl, ref, duration=0.2, substeps=2, delay_samples=2)
+    kw = dict(duration=0.2, substeps=2, interface="ideal")   # the predictor's model has no current loop
+    base = simulate(link1, ctrl, ref, **kw)
+    pred = simulate(link1, ctrl, ref, delay_samples=2, predict=True, **kw)
+    late = simulate(link1, ctrl, ref, delay_samples=2, **kw)
     # after the first d samples (the fictitious history before t = 0) the prediction is exact
     k0 = 50
     assert np.max(np.abs(pred.u[k0:] - base.u[k0:])) < 1e-3 * np.max(np.abs(late.u[k0:] - base.u[k0:]))
@@ -173,7 +175,7 @@ def test_one_substep_and_a_stateless_law_is_the_former_single_step_loop(link1):
     ctrl = make_controller("smc", link1, {}, lam=8.0, k_s=100.0, delta=2.0)
     ref = Sinusoid(0.5, 1.0)
     p = link1.params_array({"K": 130.0})
-    res = simulate(link1, ctrl, ref, duration=0.2, true_params=p, substeps=1, backend="compiled")
+    res = simulate(link1, ctrl, ref, duration=0.2, true_params=p, substeps=1, backend="compiled", interface="ideal")
     us = _reference_delay_loop(link1, ctrl, ref, p, 0, 200)
     assert np.max(np.abs(res.u[:200] - us)) < 1e-9 * max(1.0, np.max(np.abs(us)))
 

@@ -64,7 +64,8 @@ def test_presets():
     assert (p.tau_J, p.q, p.dq, p.dtau_mode, p.velocity_mode) == (0.05, 1e-4, 1e-3, "filtered", "measured")
     assert SensorModel.panda() == p                       # the former name
     f = SensorModel.franka_like()
-    assert (f.velocity_mode, f.torque_rate_limit, f.dq, f.tau_J_offset) == ("differentiated", 1000.0, 0.0, 0.2)
+    assert (f.velocity_mode, f.dq, f.tau_J_offset) == ("differentiated", 0.0, 0.2)
+    assert not hasattr(f, "torque_rate_limit")           # the rate limit is the command interface's
 
 
 @pytest.mark.parametrize("kw", [{"q": float("nan")}, {"tau_J": -1.0}, {"dq": float("inf")},

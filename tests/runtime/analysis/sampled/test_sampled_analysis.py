@@ -43,7 +43,7 @@ def test_jacobians_match_finite_differences(planar2):
     """(a) A, B, C, D of the step at the rest equilibrium equal central differences of the step itself,
     and the constant per-run tau_J offset is dropped from the dynamics (not an eigenvalue at 1)."""
     sensor = SensorModel(q=1e-6, q_m=1e-6, tau_J=2e-3, dtau_mode="filtered", velocity_mode="differentiated",
-                         tau_J_offset=0.1, torque_rate_limit=1000.0)
+                         tau_J_offset=0.1)
     cond, ref, x0, p = _setting(planar2, sensor)
     an = LinearAnalyzer(cond, plants=[("nominal", p)], task_times=())
     ctrl = cond.controller(QUIET)
