@@ -59,7 +59,10 @@ def controllers(reduced, complete, ratios=None) -> Tuple[object, object]:
 
 def _run(plant, ctrl, ref, duration, p_true, x0, backend):
     try:
-        return simulate(plant, ctrl, ref, duration=duration, dt=P.DT, true_params=p_true, x0=x0, backend=backend)
+        # an ideal actuator on both sides: the section compares the plants (MuJoCo's RK4 holds ctrl over its
+        # stages, so a current loop's lag would differ by its quadrature, not by the plant)
+        return simulate(plant, ctrl, ref, duration=duration, dt=P.DT, true_params=p_true, x0=x0, backend=backend,
+                        interface="ideal")
     except SimulationDivergedError as exc:
         return exc
 
@@ -142,7 +145,7 @@ def mujoco_runs(out, duration: float, fjm_runs: Dict[str, object], progress=None
         if progress:
             progress(f"MuJoCo {path.name}, {label.split(',')[0]}")
         mp = MujocoPlant(complete, path, p)
-        t, X, U = run_closed_loop(mp, law, ref, duration=duration, dt=P.DT, substeps=subs, x0=x0)
+        t, X, U = run_closed_loop(mp, law, ref, duration=duration, dt=P.DT, substeps=subs, x0=x0, interface="ideal")
         e1 = X[:, :n] - np.array([np.asarray(ref(tk), dtype=float)[0] for tk in t])
         r = fjm_runs.get(label)
         gap = (float(np.max(np.abs(X[:, :n] - r.x[:, :n])))

@@ -95,11 +95,12 @@ def _finite(value, name: str, low: float, strict: bool) -> Level:
     return float(a) if a.ndim == 0 else tuple(a.tolist())
 
 
-def _per_joint(value, n: int, name: str) -> np.ndarray:
+def _per_joint(value, n: int, name: str, where: str) -> np.ndarray:
     a = np.asarray(value, dtype=float)
     a = np.broadcast_to(a, (n,)).copy() if a.ndim == 0 else a
     if a.shape != (n,):
-        raise FjmValueError(f"interface {name} with {a.size} values: expected 1 or {n} (one per joint)")
+        raise FjmValueError(f"interface {where!r}: {name} has {a.size} values; expected 1 or {n} (one per joint of "
+                            "this model; give a file with yours)")
     return a
 
 
@@ -184,7 +185,7 @@ class CommandInterface:
 
     def rate_limits(self, n: int) -> np.ndarray:
         """The command's rate limit per joint, N m/s, shape (n,) (``inf``: none)."""
-        return _per_joint(self.torque_rate_limit, n, "torque_rate_limit")
+        return _per_joint(self.torque_rate_limit, n, "torque_rate_limit", self.name)
 
     def has_rate_limit(self) -> bool:
         """True when some joint's command is rate limited."""
@@ -192,7 +193,7 @@ class CommandInterface:
 
     def torque_gains(self, n: int):
         """``(K_T, D_T)`` per joint, each shape (n,)."""
-        return _per_joint(self.K_T, n, "K_T"), _per_joint(self.D_T, n, "D_T")
+        return _per_joint(self.K_T, n, "K_T", self.name), _per_joint(self.D_T, n, "D_T", self.name)
 
     def lowpass_alpha(self, T: float) -> float:
         """libfranka's filter gain ``T / (T + 1 / (2 pi f_c))`` at the period ``T`` (1.0: no filter)."""

@@ -74,24 +74,27 @@ def _columns(nw, n, nm):
 
 @pytest.mark.parametrize("argv, samples", [(["--duration", "1e9"], 1e12 + 1), (["--rate", "1e12"], 1e13 + 1)])
 def test_a_run_too_large_to_hold_is_refused_with_its_estimate(capsys, argv, samples):
-    # the Panda, state sensing, smc, no delay: the step state is x alone (4n = 28), measurement 4n
+    # the Panda, state sensing, smc, no delay: the step state is x (4n = 28) and the default motor interface's
+    # current-loop torque (n), measurement 4n
     n = 7
-    stored_gb = samples * _columns(4 * n, n, 4 * n) * 8 / 1e9
+    stored_gb = samples * _columns(5 * n, n, 4 * n) * 8 / 1e9
     _one_line_error(capsys, ["simulate", "panda", "--json", *argv],
-                    [argv[0], f"{_columns(28, 7, 28)} stored columns", f"{stored_gb:.3g} GB", "--max-memory 4 GB"])
+                    [argv[0], f"{_columns(35, 7, 28)} stored columns", f"{stored_gb:.3g} GB", "--max-memory 4 GB"])
 
 
 def test_the_delay_buffer_counts_in_the_estimate(capsys):
-    # link1, d = 10^8: the step state holds d measurements (4) and d torques (1) besides x (4)
+    # link1, d = 10^8: the step state holds d measurements (4) and d torques (1) besides x (4) and the
+    # current-loop torque (1)
     d = 10 ** 8
     _one_line_error(capsys, ["simulate", "link1", "--delay-samples", str(d), "--duration", "0.05", "--json"],
-                    [f"{_columns(4 + d * 5, 1, 4)} stored columns", "--delay-samples"])
+                    [f"{_columns(4 + d * 5 + 1, 1, 4)} stored columns", "--delay-samples"])
 
 
 def test_max_memory_is_the_limit(capsys):
-    # 1 s at 1 kHz on link1: 1001 x 24 x 8 bytes = 192 kB stored, about 12x at peak: over 0.001 GB? no; 1e-4 yes
+    # 1 s at 1 kHz on link1: 1001 x 25 x 8 bytes = 200 kB stored (the step state x and the default motor
+    # interface's current-loop torque), about 12x at peak: over 0.001 GB? no; 1e-4 yes
     _one_line_error(capsys, ["simulate", "link1", "--duration", "1", "--max-memory", "1e-4", "--json"],
-                    ["1001 samples x 24 stored columns", "--max-memory 0.0001 GB"])
+                    ["1001 samples x 25 stored columns", "--max-memory 0.0001 GB"])
 
 
 @pytest.mark.parametrize("argv, must", [

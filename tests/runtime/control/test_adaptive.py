@@ -84,7 +84,7 @@ def test_least_squares_closed_form_and_exact_regression(link1):
     regresses on F[phi_k], and K - K_hat = (K - K0) P / P0 up to what that residual drives."""
     K = 120.0
     ctrl = _adaptive(link1)
-    res = simulate(link1, ctrl, Sinusoid(0.5, 1.0), duration=5.0, true_params={"K": K})
+    res = simulate(link1, ctrl, Sinusoid(0.5, 1.0), duration=5.0, true_params={"K": K}, interface="ideal")
     zi = ctrl.n_int
     K_hat, u_f, phi_f, w_f, P = (res.z[:, zi + j] for j in range(5))
     a, x = ctrl.filter_rate, res.x

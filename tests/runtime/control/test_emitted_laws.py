@@ -225,7 +225,7 @@ def test_runtime_law_equals_independent_reference(model, kind, case, extra):
     runs = [("casadi", 10.0)] + ([("python", 0.5)] if model == "link1" and kind in ("ismc", "adaptive") else [])
     for backend, duration in runs:
         res = simulate(m, ctrl, ref, duration=duration, dt=1e-3, true_params=case["p_true"], backend=backend,
-                       substeps=SUBSTEPS)
+                       substeps=SUBSTEPS, interface="ideal")   # the reference loop holds the torque (ideal actuator)
         X, U = X_ref[:len(res.t)], U_ref[:len(res.t)]
         assert len(res.t) == int(round(duration / 1e-3)) + 1
         scale = max(1.0, np.max(np.abs(U)))
