@@ -54,6 +54,8 @@ class LoopSpec:
     x0 : tuple of float
         Initial state (decided on the client).
     simd : bool
+    interface : CommandInterface, optional
+        The command interface (default motor).
     """
 
     model: str
@@ -71,6 +73,7 @@ class LoopSpec:
     x0: tuple
     simd: bool = True
     model_name: str = ""
+    interface: object = None
 
 
 _BUILT: dict = {}
@@ -106,7 +109,7 @@ def run_loop_rows(spec: LoopSpec, P: np.ndarray, seeds: np.ndarray, G: Optional[
     model, controller = _build(spec)
     b = simulate_batch(model, controller, spec.reference, P, duration=spec.duration, dt=spec.dt,
                        substeps=spec.substeps, sensor=spec.sensor, delay_samples=spec.delay, predict=spec.predict,
-                       seeds=seeds, gains=G, x0=np.asarray(spec.x0), simd=spec.simd,
+                       seeds=seeds, gains=G, x0=np.asarray(spec.x0), simd=spec.simd, interface=spec.interface,
                        threads=1)  # the OpenMP build on one thread: the library of the local run, no second build
     return {"joint_metrics": b.joint_metrics, "metrics": b.metrics, "diverged": b.diverged,
             "divergence_time": b.divergence_time, "x_final": b.x_final, "seeds": b.seeds, "info": b.info}

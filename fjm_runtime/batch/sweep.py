@@ -64,6 +64,8 @@ class SweepSpec:
         RK4 steps per sample; :func:`sweep` sets the largest of the rule over all rows.
     x0 : tuple of float, optional
         Initial state of every run (default: at rest on the reference's start).
+    interface : CommandInterface, optional
+        The command interface (default motor).
     """
 
     model: str = "link1"
@@ -79,6 +81,7 @@ class SweepSpec:
     predict: bool = False
     substeps: Optional[int] = None
     x0: Optional[tuple] = None
+    interface: Optional[object] = None
 
 
 def _inertia_names(model) -> List[str]:
@@ -170,7 +173,7 @@ def run_chunk(spec: SweepSpec, params: np.ndarray, seeds=None) -> Dict[str, np.n
     res = simulate_batch(model, controller, reference, params, duration=spec.duration, dt=spec.dt,
                          substeps=spec.substeps, sensor=spec.sensor, delay_samples=spec.delay_samples,
                          predict=spec.predict, seeds=seeds, x0=None if spec.x0 is None else np.asarray(spec.x0),
-                         threads=1)  # one thread per Dask worker (no oversubscription), the local run's library
+                         interface=spec.interface, threads=1)  # one thread per Dask worker (no oversubscription), the local run's library
     out = {k: np.asarray(v) for k, v in res.metrics.items()}
     out["diverged"] = res.diverged.astype(float)
     out["divergence_time"] = np.asarray(res.divergence_time, dtype=float)

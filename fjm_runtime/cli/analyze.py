@@ -19,6 +19,7 @@ import numpy as np
 
 from .models import MODEL_HELP
 from ..validation import FjmValueError
+from .common import add_interface_argument, interface_arg
 from .ranges import DELAY, RATE
 
 __all__ = ["add_arguments", "run", "conditions_from_design"]
@@ -39,6 +40,7 @@ def add_arguments(p) -> None:
     p.add_argument("--sensing", choices=("state", "torque"), default=None, help="default: the file's, else torque")
     p.add_argument("--noise", default=None, metavar="PRESET|FILE",
                    help="sensor model: preset or TOML file (default: the file's sensor)")
+    add_interface_argument(p)
     p.add_argument("--task-times", default="0.5,1,2", metavar="S[,S..]",
                    help="frozen-time points along the task, s (default 0.5,1,2; 'none': rest only)")
     p.add_argument("--plants", choices=("corners", "nominal"), default="corners",
@@ -89,7 +91,7 @@ def conditions_from_design(m, design, args):
     u_max = design.gains.get("u_max")
     return Conditions(m, design.kind, sensing, 1.0 / rate, int(delay), predict, _sensor(args, design), ref,
                       np.asarray(x0, dtype=float), {}, None if u_max is None else tuple(np.broadcast_to(
-                          np.asarray(u_max, dtype=float), (int(m.n),)).tolist()))
+                          np.asarray(u_max, dtype=float), (int(m.n),)).tolist()), interface_arg(args, design))
 
 
 def _times(text: str):
@@ -136,7 +138,8 @@ def table_lines(out: dict):
     """The readable report of an analysis record."""
     s = out["settings"]
     lines = [f"{s['rate']:g} Hz, delay {s['delay']}{' + prediction' if s['predict'] else ''}, sensing {s['sensing']}, "
-             f"sensor {s['sensor']}, {s['substeps']} substeps; jitter window {s['jitter_window_samples']} samples"]
+             f"sensor {s['sensor']}, interface {s.get('interface')}, {s['substeps']} substeps; "
+             f"jitter window {s['jitter_window_samples']} samples"]
     for row in out["plants"]:
         lines.append(f"{row['plant']}:")
         for name, f in row["points"].items():

@@ -87,3 +87,25 @@ def finite_or_note(report: Dict[str, object], name: str, value: float, not_finit
     else:
         report[name] = None
         report[name + "_note"] = "not reached" if v == math.inf else not_finite
+
+
+INTERFACE_HELP = ("command interface: a preset (motor: motor torque through a 2 kHz current loop, the default; "
+                  "ideal; joint_torque; franka: libfranka's filter, rate limit and gravity) or a TOML interface "
+                  "file (docs/simulation.md)")
+
+
+def add_interface_argument(parser) -> None:
+    """``--interface NAME|FILE.toml`` (default: the design's, else ``motor``)."""
+    parser.add_argument("--interface", default=None, metavar="NAME|FILE.toml", help=INTERFACE_HELP)
+
+
+def interface_arg(args, design=None):
+    """The run's CommandInterface: ``--interface``, else the design's (a design record without one: ``motor``
+    with the rate limit its sensor record states), else ``motor``."""
+    from ..sim.interface import CommandInterface, interface_from_record, interface_from_spec
+    given = getattr(args, "interface", None)
+    if given is not None:
+        return interface_from_spec(given, what="--interface")
+    if design is not None:
+        return interface_from_record({"interface": design.interface, "sensor": design.sensor}, design.source)
+    return CommandInterface.motor()

@@ -8,6 +8,7 @@ import sys
 import time
 from pathlib import Path
 
+from .common import add_interface_argument, interface_arg
 from .models import MODEL_HELP
 from ..validation import FjmValueError, check_magnitudes
 from .ranges import DELAY, DURATION, RATE, SEED, THREADS, TORQUE, Range
@@ -49,6 +50,7 @@ def add_arguments(p) -> None:
                    help=f"run length of the search stages, {DURATION} (default 2)")
     p.add_argument("--rounds", type=ROUNDS, default=6, help=f"rounds of the pattern search, {ROUNDS} (default 6)")
     p.add_argument("--seed", type=SEED, default=0, help=f"draws and noise seed, {SEED} (default 0)")
+    add_interface_argument(p)
     p.add_argument("--threads", type=THREADS, default=None, help=f"OpenMP threads, {THREADS} (default all cores)")
     p.add_argument("--simd", action=argparse.BooleanOptionalAction, default=True,
                    help="SIMD batch (default; its C build is cached, the first one takes minutes for the Panda); "
@@ -173,7 +175,8 @@ def run(args) -> int:
     _warn_position_limits(m, task, max(args.duration, args.screen_duration), 1.0 / args.rate)
     t0 = time.perf_counter()
     settings = SearchSettings(kind=args.controller, sensing=args.sensing, rate=args.rate, delay=args.delay_samples,
-                              sensor=sensor, draws=args.draws, duration=args.duration, seed=args.seed,
+                              sensor=sensor, interface=interface_arg(args), draws=args.draws, duration=args.duration,
+                              seed=args.seed,
                               threads=args.threads, simd=args.simd, predict=args.predict, thresholds=thresholds,
                               spread=spread, recheck_draws=args.recheck_draws, scheduler=args.scheduler,
                               screen_draws=args.screen_draws, screen=None if args.screen == "none" else args.screen,

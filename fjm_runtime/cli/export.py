@@ -43,15 +43,19 @@ def add_arguments(ex) -> None:
                     help=f"reduced model: rotor angle = GEAR_RATIO * q_m for every joint, {GEAR_RATIO} (default 1; complete "
                          "models take N1..Nn via --param)")
     ex.add_argument("--timestep", type=float, default=None, help="MuJoCo step, s (integrator RK4; default 1e-4)")
+    ex.add_argument("--interface", default=None, metavar="NAME|FILE.toml",
+                    help="controller: what the library's output commands (default: the design's, else motor; "
+                         "joint_torque, franka: the library outputs tau_d, the robot filters it and adds gravity)")
 
 
 #: Gear ratios of a drive (harmonic drives reach 160, stacked gearboxes a few thousand).
 GEAR_RATIO = Range(0, 1e4, "", "N", lo_open=True)
 
 #: The flags each format reads; any other given flag is refused (not silently ignored).
-_FLAGS = {"controller": ("gains", "params", "substeps", "name", "unverified"),
+_FLAGS = {"controller": ("gains", "params", "substeps", "name", "unverified", "interface"),
           "mjcf": ("complete", "K", "param", "gear_ratio", "timestep")}
-_UNSET = {"gains": None, "params": None, "substeps": None, "name": None, "unverified": False, "complete": False,
+_UNSET = {"gains": None, "params": None, "substeps": None, "name": None, "unverified": False, "interface": None,
+          "complete": False,
           "K": None, "param": [], "gear_ratio": None, "timestep": None}
 
 
@@ -90,6 +94,7 @@ def _run_controller(args) -> int:
     from .. import load
     from ..control.design import Design
     from ..export.controller import design_controller, export_controller
+    from ..sim.interface import interface_from_spec
     if args.gains is None:
         raise FjmValueError("export controller: --gains FILE is required (a design file from `fjm design`)")
     gains = Design.load(args.gains)
@@ -97,6 +102,9 @@ def _run_controller(args) -> int:
     if gains.model not in (None, m.name):
         raise FjmValueError(f"--gains {args.gains}: designed for model {gains.model!r}, not {m.name!r}")
     gains = dataclasses.replace(gains, file=gains.file or str(args.gains))
+    if args.interface is not None:
+        interface_from_spec(args.interface, what="--interface")            # checked before any work
+        gains = dataclasses.replace(gains, interface=args.interface)
     from ..export.controller_checks import check_c_values
     from .simulate import params_file_nominal
     design_nominal, file_nominal = gains.nominal(m), params_file_nominal(args.params, m)

@@ -28,7 +28,7 @@ from ..sim.sensor import PRESETS, SensorModel, sensor_from_spec
 from ..sim.simulate import simulate, stderr_progress
 from ..sim.step import SimulationDivergedError
 from ..validation import FjmValueError, check_magnitudes
-from .common import check_output_file, finite_or_note, parse_assignments
+from .common import add_interface_argument, check_output_file, finite_or_note, interface_arg, parse_assignments
 from .ranges import ANGLE, DELAY, DURATION, FACTOR, GAIN, LAYER, MASS, PERIOD, RATE, SEED, STIFFNESS, TORQUE, Range
 from ..control.design import Design
 from .simulate_checks import (DEFAULT_MAX_MEMORY_GB, MAX_SUBSTEPS, check_pole, check_run_size, check_substeps,
@@ -109,6 +109,7 @@ def _add_sampled_data_flags(sim) -> None:
                      help="sensor model: a preset (ideal, panda_white, franka_like) or a TOML sensor file "
                           "(docs/simulation.md; default: the --gains file's sensor, else ideal)")
     sim.add_argument("--seed", type=SEED, default=0, help=f"noise seed, {SEED} (default 0)")
+    add_interface_argument(sim)
     sim.add_argument("--k-scale", default=None, metavar="A[,B,..]",
                      help="TRUE stiffness = nominal x A (one value, or one per joint)")
     sim.add_argument("--jm-scale", default=None, metavar="A[,B,..]",
@@ -375,7 +376,8 @@ def run(args) -> int:
     ctrl, gain, k_s, delta = _build_controller(m, args, nominal, ref, kind, design.gains if design else {})
     if file_design is None:  # a shipped design made with prediction keeps it
         args.predict = bool(args.predict or (design and design.predict))
-    _check_size(m, args, ctrl, ref, x0, true, sensor, dt)
+    interface = interface_arg(args, design)
+    _check_size(m, args, ctrl, ref, x0, true, sensor, dt, interface)
     conditions = {"model": m.name, "kind": kind, "sensing": args.sensing, "rate": 1.0 / dt,
                   "delay": args.delay_samples, "predict": bool(args.predict), "sensor": sensor}
     provenance = gains_provenance(source, design, conditions,
@@ -384,7 +386,8 @@ def run(args) -> int:
     progress = None if (args.quiet or args.json) else stderr_progress(f"simulating {args.model} ({args.duration:g} s)")
     settings = {"model": m.name, "controller": kind, "rate": 1.0 / dt, "dt": dt, "substeps": args.substeps,
                 "delay_samples": args.delay_samples, "predict": bool(args.predict), "sensing": args.sensing,
-                "seed": args.seed, "noise": args.noise, "duration": args.duration,
+                "seed": args.seed, "noise": args.noise, "interface": interface.as_dict(),
+                "duration": args.duration,
                 "effort_limits": limits[0], "effort_limits_from": limits[1],
                 "true_params": dict(zip(m.param_names, m.params_array(true).tolist())),
                 "nominal_params": dict(zip(m.param_names, m.params_array(nominal).tolist())),
@@ -392,7 +395,7 @@ def run(args) -> int:
     try:
         res = simulate(m, ctrl, ref, duration=args.duration, dt=dt, true_params=true, progress=progress, x0=x0,
                        substeps=args.substeps, sensor=sensor, delay_samples=args.delay_samples,
-                       predict=args.predict)
+                       predict=args.predict, interface=interface)
     except SimulationDivergedError as exc:
         if args.json:
             print(json.dumps(_script_report(None, settings, exc, provenance), allow_nan=False))
@@ -413,7 +416,7 @@ def run(args) -> int:
     return status
 
 
-def _check_size(m, args, ctrl, ref, x0, true, sensor, dt) -> None:
+def _check_size(m, args, ctrl, ref, x0, true, sensor, dt, interface) -> None:
     """Refuse, before allocating, a run whose substeps or memory are out of reach (:func:`check_run_size`)."""
     from ..sim.sample_step import check_loop_settings
     from ..sim.step_layout import make_layout
@@ -433,7 +436,7 @@ def _check_size(m, args, ctrl, ref, x0, true, sensor, dt) -> None:
     subs = args.substeps if args.substeps is not None else max(1.0, SAFETY * dt * omega / STEP_PER_RADIAN)
     check_substeps(subs, None if args.substeps is not None else omega)
     subs = int(math.ceil(subs - 1e-12))
-    layout = make_layout(m, ctrl, dt, subs, sensor, delay, args.predict)
+    layout = make_layout(m, ctrl, dt, subs, sensor, delay, args.predict, interface=interface)
     check_run_size(layout.nw, m.n, layout.nm, args.duration, dt, args.max_memory)
     _check_ranges(args)
 

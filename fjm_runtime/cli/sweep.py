@@ -13,7 +13,7 @@ from ..control.defaults import DEFAULT_LAM, DEFAULT_LAYER_RATE, DEFAULT_SWITCHIN
 from ..control.factory import CONTROLLER_KINDS
 from ..control.references import REFERENCE_KINDS
 from ..validation import FjmValueError
-from .common import check_output_file, finite_or_note
+from .common import add_interface_argument, check_output_file, finite_or_note, interface_arg
 from .ranges import (DELAY, DURATION, FACTOR, GAIN, LAYER, PERIOD, POLE, RATE, SEED, STIFFNESS, THREADS,
                      Range)
 
@@ -61,6 +61,7 @@ def add_arguments(sw) -> None:
     sw.add_argument("--predict", action="store_true",
                     help="delay compensation by the nominal-model predictor (on when the gains file was designed "
                          "with it)")
+    add_interface_argument(sw)
     sw.add_argument("--noise", default="ideal", metavar="PRESET|FILE",
                     help="sensor model: a preset (ideal, panda_white, franka_like) or a TOML sensor file "
                          "(docs/simulation.md); run i gets noise seed --seed + i (default ideal)")
@@ -168,6 +169,7 @@ def _reference(m, args, file_spec):
 def _spec(m, args):
     """The :class:`SweepSpec` of the flags (controller, gains, sampled-loop settings), checked."""
     from ..batch.sweep import SweepSpec
+    from ..sim.interface import interface_from_record
     from ..sim.sensor import sensor_from_spec
     if args.delay_samples < 0:
         raise FjmValueError(f"--delay-samples {args.delay_samples}: expected >= 0")
@@ -194,9 +196,11 @@ def _spec(m, args):
             options["k_s"] = args.k_s
         sensing, predict = args.sensing or "state", bool(args.predict)
     reference, ref_options, x0 = _reference(m, args, file_spec)
+    interface = interface_arg(args) if file_spec is None or args.interface is not None else \
+        interface_from_record(file_spec, f"--gains {args.gains}")
     return SweepSpec(model=args.model, controller=kind, controller_options=options, reference=reference,
                      reference_options=ref_options, duration=args.duration, dt=dt, sensing=sensing, sensor=sensor,
-                     delay_samples=int(args.delay_samples), predict=predict, x0=x0)
+                     delay_samples=int(args.delay_samples), predict=predict, x0=x0, interface=interface)
 
 
 def run(args) -> int:
@@ -217,7 +221,7 @@ def run(args) -> int:
     out = summary(P, metrics, time.perf_counter() - t0, path)
     out["settings"] = {"controller": spec.controller, "sensing": spec.sensing, "rate": 1.0 / spec.dt,
                        "delay_samples": spec.delay_samples, "predict": spec.predict, "noise": args.noise,
-                       "sensor": spec.sensor.name, "reference": spec.reference,
+                       "sensor": spec.sensor.name, "interface": spec.interface.as_dict(), "reference": spec.reference,
                        "gains": None if args.gains is None else str(args.gains)}
     print(json.dumps(out, indent=2, allow_nan=False))
     return 0

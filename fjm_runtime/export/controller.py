@@ -195,8 +195,10 @@ def _fields(design: ControllerDesign, step, reset) -> dict:
     sizes = [max(int(step.sz_arg()), int(reset.sz_arg())), max(int(step.sz_res()), int(reset.sz_res())),
              max(int(step.sz_iw()), int(reset.sz_iw())), max(int(step.sz_w()), int(reset.sz_w()))]
     CL = design.cstate
-    rate_limit = "none" if not L.rate_step else \
-        f"{', '.join(f'{r / L.T:g}' for r in L.rate_step)} N m/s"
+    rate_limit = f"{', '.join(f'{r / L.T:g}' for r in L.rate_step)} N m/s" if CL.limits_rate else "none"
+    if L.interface == "joint_torque":
+        rate_limit = (f"none in the library: its output is tau_d, the desired joint torque without gravity, for "
+                      f"the robot's joint-torque layer ({design.interface.name}), which filters and limits it")
     return {"NAME": design.name, "UNAME": design.name.upper(), "GUARD": f"{design.name.upper()}_CONTROLLER_H",
             "BASE": design.name, "REAL": "double",
             "DESIGN": str(design.design.file or design.design.report.get("source", "(given)")),

@@ -82,7 +82,7 @@ class LinearAnalyzer:
 
     def _step(self, ctrl, delay):
         c = self.cond
-        return linear_step(self.model, ctrl, self.T, self.substeps, self.sensor, delay, c.predict)
+        return linear_step(self.model, ctrl, self.T, self.substeps, self.sensor, delay, c.predict, c.interface)
 
     def _rows(self):
         if self._R is None and self.task_k:
@@ -263,7 +263,9 @@ class LinearAnalyzer:
                 sc = out["stiffness_scale"][names[i]] = self.scale_range(ctrl, g_eq, i, run, hint)
                 hint = None if sc["unstable"] else sc["range"]
         out["settings"] = {"rate": 1.0 / self.T, "delay": self.cond.delay, "predict": self.cond.predict,
-                           "sensing": self.cond.sensing, "sensor": self.cond.sensor.name, "substeps": self.substeps,
+                           "sensing": self.cond.sensing, "sensor": self.cond.sensor.name,
+                           "interface": None if self.cond.interface is None else self.cond.interface.name,
+                           "substeps": self.substeps,
                            "jitter_window_samples": 2 * self.h + 1, "catch_up_samples": self.catch,
                            "noise_levels": dict(zip(self.names, self.levels.tolist()))}
         out["seconds"] = time.perf_counter() - t0

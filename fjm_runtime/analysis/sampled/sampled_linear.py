@@ -96,6 +96,7 @@ class LinearStep:
         from ...batch.sampled import GainInput
         gi = GainInput(controller)
         self.model, self.L, self.n, self.n_law, self.n_gains = model, L, L.n, gi.n_law, gi.n_gains
+        self.controller = gi
         F = sample_step_function(model, gi, L, outline=True)
         a = L.slices()[1].start + gi.n_law
         self._a = a
@@ -121,7 +122,7 @@ class LinearStep:
         (:func:`~fjm_runtime.sim.sample_step.initial_step_state`: the delay buffer holds the spring
         torques that held ``x0``), the per-run sensor offset 0 (an input, not a state of the analysis)."""
         z = np.concatenate([np.asarray(z_law, dtype=float), np.zeros(self.n_gains)])
-        w = initial_step_state(self.model, self.L, x0, z, p, seed=0, sensor=sensor)
+        w = initial_step_state(self.model, self.L, x0, z, p, seed=0, sensor=sensor, controller=self.controller)
         if getattr(self.L, "offset", False):
             w[self.L.extra_slices()[1]] = 0.0
         return np.r_[w[:self._a], w[self._a + self.n_gains:]]
@@ -190,13 +191,15 @@ class LinearStep:
 _STEPS: dict = {}
 
 
-def linear_step(model, controller, T, substeps, sensor, delay, predict) -> LinearStep:
+def linear_step(model, controller, T, substeps, sensor, delay, predict, interface=None) -> LinearStep:
     """The :class:`LinearStep` of these settings, built once per (model, law structure, nominal, layout).
 
-    ``sensor`` is the linearized one (quantization off). The gains are NOT part of the key.
+    ``sensor`` is the linearized one (quantization off); ``interface`` default motor. The gains are NOT
+    part of the key.
     """
     from ...batch.sampled import GainInput
-    L = make_layout(model, GainInput(controller), float(T), int(substeps), sensor, int(delay), bool(predict))
+    L = make_layout(model, GainInput(controller), float(T), int(substeps), sensor, int(delay), bool(predict),
+                    interface=interface)
     key = (id(model), controller.law_kind, tuple(np.asarray(controller.p_nom, dtype=float).tolist()), L)
     hit = _STEPS.get(key)
     if hit is None or hit.model is not model:
@@ -326,6 +329,8 @@ class Conditions:
     nominal : dict
         The controller's nominal parameters.
     u_max : sequence of float or None
+    interface : CommandInterface, optional
+        The command interface (default motor).
     """
 
     model: object
@@ -339,13 +344,14 @@ class Conditions:
     x0: np.ndarray = field(compare=False)
     nominal: dict = field(compare=False, default_factory=dict)
     u_max: Optional[tuple] = None
+    interface: object = None
 
     @classmethod
     def from_loops(cls, loops) -> "Conditions":
         """From a :class:`~fjm_runtime.analysis.search.runs.DesignLoops`."""
         return cls(loops.model, loops.kind, loops.sensing, float(loops.dt), int(loops.delay), bool(loops.predict),
                    loops.sensor, loops.reference, np.asarray(loops.x0, dtype=float), dict(loops.nominal),
-                   None if loops.u_max is None else tuple(loops.u_max))
+                   None if loops.u_max is None else tuple(loops.u_max), getattr(loops, "interface", None))
 
     def controller(self, gains: dict):
         """The law with ``gains`` (``lam, k_lin, k_s, delta``; ``u_max`` from the conditions unless given)."""

@@ -40,7 +40,8 @@ def report(model, prob, best, worst, b, margins, draws, seed, duration) -> dict:
     if prob.u_max is not None:
         gains["u_max"] = [float(v) for v in np.broadcast_to(prob.u_max, (int(model.n),))]
     rec = {"model": model.name, "kind": prob.kind, "sensing": prob.sensing, "rate": 1.0 / prob.dt,
-           "delay": prob.delay, "sensor": prob.sensor.as_dict(), "reference": prob.task, "predict": prob.predict}
+           "delay": prob.delay, "sensor": prob.sensor.as_dict(), "interface": prob.interface.as_dict(),
+           "reference": prob.task, "predict": prob.predict}
     if prob.predict and prob.delay > 0:  # the predictor's substeps by accuracy, for the exported controller
         rec["predict_substeps"] = loop_predict_substeps(model, prob.controller(best), prob.sensor, prob.dt,
                                                         prob.delay, prob.reference, prob.x0)

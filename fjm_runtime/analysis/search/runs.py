@@ -16,6 +16,7 @@ from typing import Optional
 import numpy as np
 
 from ...control.factory import make_controller
+from ...sim.interface import CommandInterface
 from ...control.references import make_reference
 from .thresholds import Thresholds, run_cost
 
@@ -51,15 +52,18 @@ class DesignLoops:
     thresholds : Thresholds, optional
     client : dask.distributed.Client, optional
         Run the batches on this cluster.
+    interface : CommandInterface, optional
+        The command interface (default motor).
     """
 
     def __init__(self, model, kind, sensing, rate, delay, sensor, u_max, threads, simd, predict=False,
                  reference=None, x0=None, task=None, nominal=None, thresholds: Optional[Thresholds] = None,
-                 client=None):
+                 client=None, interface=None):
         from ...batch.distributed import initial_state
         self.model, self.kind, self.sensing, self.delay = model, kind, sensing, int(delay)
         self.dt, self.sensor, self.u_max, self.threads, self.simd = 1.0 / rate, sensor, u_max, threads, simd
         self.predict = bool(predict)
+        self.interface = CommandInterface.motor() if interface is None else interface
         self.reference = make_reference("sine", int(model.n), amplitude=0.5, omega=1.0) if reference is None \
             else reference
         self.x0 = initial_state(model, self.reference, x0)
@@ -105,13 +109,14 @@ class DesignLoops:
         if self.client is None:
             return simulate_batch(self.model, ctrls[0], self.reference, rows, duration=duration, dt=self.dt,
                                   substeps=subs, sensor=self.sensor, delay_samples=d, seeds=seeds, gains=G,
-                                  threads=self.threads, simd=self.simd, predict=self.predict, x0=self.x0)
+                                  threads=self.threads, simd=self.simd, predict=self.predict, x0=self.x0,
+                                  interface=self.interface)
         from ...batch.distributed import LoopSpec, run_on_cluster
         spec = LoopSpec(model=str(self.model.directory), model_name=self.model.name, kind=self.kind,
                         sensing=self.sensing, nominal=self.nominal, options=dict(cands[0], u_max=self.u_max),
                         reference=self.reference,
                         duration=float(duration), dt=self.dt, substeps=subs, sensor=self.sensor, delay=d,
-                        predict=self.predict, x0=tuple(self.x0.tolist()), simd=self.simd)
+                        predict=self.predict, x0=tuple(self.x0.tolist()), simd=self.simd, interface=self.interface)
         return run_on_cluster(self.client, spec, rows, seeds, G, BatchResult)
 
     def batch(self, cands, P, duration, seed, delay=None):

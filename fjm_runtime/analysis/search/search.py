@@ -350,7 +350,8 @@ def _design(model, s: SearchSettings, say, client) -> dict:
     t0 = time.perf_counter()
     spread, thresholds, screen, seed = s.spread, s.thresholds, s.screen, s.seed
     prob = DesignLoops(model, s.kind, s.sensing, s.rate, s.delay, s.sensor, s.u_max, s.threads, s.simd, s.predict,
-                       s.reference, s.x0, s.task, nominal=spread.nominal, thresholds=thresholds, client=client)
+                       s.reference, s.x0, s.task, nominal=spread.nominal, thresholds=thresholds, client=client,
+                       interface=s.interface)
     if isinstance(screen, str):
         if screen != "linear":
             raise FjmValueError(f"design: screen = {screen!r}: expected None, 'linear' or a Screen object")

@@ -22,6 +22,8 @@ class SearchSettings:
         Computation delay, samples.
     sensor : SensorModel, optional
         Default ``SensorModel.panda_white(seed=seed)``.
+    interface : CommandInterface, optional
+        The command interface (default motor).
     draws : int
         Plant draws of the final check.
     duration : float
@@ -67,6 +69,7 @@ class SearchSettings:
     rate: float = 1000.0
     delay: int = 1
     sensor: Any = None
+    interface: Any = None
     draws: int = 200
     duration: float = 10.0
     seed: int = 0

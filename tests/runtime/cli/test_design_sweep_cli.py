@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from fjm_runtime.cli.main import main
+from fjm_runtime.sim.interface import CommandInterface
 
 QUICK = ["--draws", "3", "--duration", "0.3", "--screen-draws", "3", "--screen-duration", "0.2", "--rounds", "1",
          "--seed", "5", "--task", "sine"]
@@ -111,6 +112,7 @@ def test_cli_sweep_with_a_gains_file_and_the_sampled_settings(tmp_path, capsys):
     summary = json.loads(capsys.readouterr().out)
     assert summary["settings"] == {"controller": "ismc", "sensing": "torque", "rate": 500.0, "delay_samples": 1,
                                    "predict": True, "noise": "panda_white", "sensor": "panda_white",
+                                   "interface": CommandInterface.motor().as_dict(),   # the default, recorded
                                    "reference": "sine", "gains": str(gains)}
     header = out.read_text().splitlines()[0].split(",")
     assert "torque_jitter_1" in header and "time_at_rate_limit_1" in header and summary["runs"] == 4

@@ -176,3 +176,30 @@ def test_label_of_a_searched_design_without_a_verdict():
     assert d.meets is None and d.report["draws"] == 200 and rms < 2e-3
     assert text.startswith(f"searched by fjm design over 200 plant draws (worst second-half RMS {rms:.3g} rad, "
                            f"{d.report['worst_case']['diverged']} diverged)"), text
+
+
+@pytest.mark.parametrize("interface", ["joint_torque", "motor"])
+def test_the_library_outputs_what_the_interface_takes(interface):
+    """joint_torque: the exported step outputs the law's tau_d (the robot filters, limits it and adds gravity;
+    its last command and the current loop are not in the library's state); motor: the motor torque. Against
+    the law evaluated on the same reading, and the runtime's filtered command, which differs."""
+    from fjm_runtime.sim.sample_step import initial_measurement, initial_step_state, python_sample_step
+    spec = dict(LINK1, delay=0, predict=False, noise="ideal", interface=interface)
+    design = design_controller(fjm_runtime.load("link1"), Design.from_dict(spec))
+    L, ctrl, CL = design.layout, design.controller, design.cstate
+    step, _ = controller_functions(design.model, ctrl, L, "t")
+    n = L.n
+    assert CL.nc == L.nw - L.nx - n * (L.current_decay > 0) - n * (interface == "joint_torque")
+    x = np.array([0.3, 0.2, 0.36, -0.1])
+    p = design.model.params_array({})
+    r = np.array([0.5, 0.1, 0.0, 0.0, 0.0])
+    m = initial_measurement(design.model, L, x, p)
+    w = initial_step_state(design.model, L, x, np.zeros(L.nz), p, controller=ctrl)
+    u_lib = float(np.asarray(step(CL.from_step_state(w), m, r, ctrl.p_nom, ctrl.gains)[0]).ravel()[0])
+    u_law = float(np.asarray(ctrl.evaluate(0.0, m, np.zeros(L.nz), r.reshape(5, 1)).u).ravel()[0])
+    assert abs(u_lib - u_law) <= 1e-12 * max(1.0, abs(u_law))
+    u_runtime = float(python_sample_step(design.model, ctrl, L, w, 0.0, r, np.zeros(L.nm), p)[1].u[0])
+    if interface == "joint_torque":          # the robot's 100 Hz filter against its last command
+        assert abs(u_runtime - u_law) > 0.1 * abs(u_law) > 0
+    else:
+        assert u_runtime == pytest.approx(u_law, rel=1e-12)

@@ -8,6 +8,7 @@ import pytest
 import fjm_runtime
 from fjm_runtime.analysis.search.search import RECHECK_SEED_OFFSET
 from fjm_runtime.analysis.search.thresholds import Thresholds
+from fjm_runtime.sim.interface import CommandInterface
 from fjm_runtime.sim.sensor import SensorModel
 from support.tiny_search import TINY, run_search
 
@@ -16,7 +17,11 @@ from support.tiny_search import TINY, run_search
 def test_passing_gains_are_rechecked_on_fresh_plants_and_seeds():
     m = fjm_runtime.load("link1")
     lax = Thresholds(max_rms=1.0, max_jitter=1e4, max_at_limit=1.0)
-    a = run_search(m, sensor=SensorModel.panda_white(seed=5), thresholds=lax, recheck_draws=16, **TINY)
+    # the scenario (lax limits no searched plant reaches, one fresh plant tracking worse) was measured on the
+    # ideal actuator: with the 2 kHz current loop a fresh draw of these high gains (k_s 4e4) jitters 1.65e4 N m
+    ideal = CommandInterface.ideal()
+    a = run_search(m, sensor=SensorModel.panda_white(seed=5), thresholds=lax, recheck_draws=16, interface=ideal,
+                   **TINY)
     assert a["meets"] is True and a["misses"] == []
     rc = a["recheck"]
     assert rc["draws"] == 16 and rc["meets"] is True
@@ -24,7 +29,7 @@ def test_passing_gains_are_rechecked_on_fresh_plants_and_seeds():
     final_rms, fresh_rms = a["worst_case"]["rms_second_half"][0], rc["worst_case"]["rms_second_half"][0]
     assert fresh_rms > final_rms          # measured: one fresh plant tracks worse than every searched one
     # a limit between the two: the final check passes, the re-check on fresh plants fails the design
-    b = run_search(m, sensor=SensorModel.panda_white(seed=5), recheck_draws=16,
+    b = run_search(m, sensor=SensorModel.panda_white(seed=5), recheck_draws=16, interface=ideal,
                                  thresholds=Thresholds(max_rms=0.5 * (final_rms + fresh_rms), max_jitter=1e4,
                                                        max_at_limit=1.0), **TINY)
     assert b["gains"] == a["gains"] and b["meets"] is False and b["recheck"]["meets"] is False
