@@ -2,8 +2,8 @@
 
 ``arm1_hd`` is a one-link arm on a harmonic drive (the three-segment datasheet stiffness curve, motor
 friction; docs/real-drives.md). The laws run in the sampled loop as a Franka-like robot runs it (1 kHz,
-``franka_like`` sensor with its 1000 N m/s torque-rate limit, tau_J offset and velocities differentiated
-from quantized encoders, one sample of delay with prediction) on ``draws`` TRUE drives that differ from
+``franka_like`` sensor (tau_J offset, velocities differentiated from quantized encoders), the motor interface
+with a 1000 N m/s rate limit and the 2 kHz current loop, one sample of delay with prediction) on ``draws`` TRUE drives that differ from
 the datasheet (curve x U(0.85, 1.15), friction x U(0.5, 1.5), rotor x U(0.9, 1.1)), holding the arm
 about horizontal where the drive works past its first breakpoint. :func:`compare_datasheet_laws` is
 shared with ``examples/nonlinear_spring_laws.py``; :func:`real_drives_section` is the demo's section.
@@ -17,6 +17,10 @@ from typing import Dict, List, Tuple
 import numpy as np
 
 from .plots import write_figure
+from ..sim.interface import CommandInterface
+
+#: The motor interface with libfranka's 1000 N m/s rate limit (the franka_like sensor held it before).
+FRANKA_RATE = CommandInterface.motor().with_rate_limit(1000.0)
 
 #: ismc gains of the comparison (a stiff drive: lambda 60), N m limit.
 GAINS = {"lam": 60.0, "k_s": 100.0, "delta": 5.0, "u_max": 100.0}
@@ -70,7 +74,7 @@ def compare_datasheet_laws(duration: float, draws: int, progress=None) -> Dict[s
             x0 = np.array([np.pi / 2, 0.0, np.pi / 2 + phi0, 0.0])          # at rest, horizontal: past T_1
             ctrl = make_controller("ismc", arm, nominal, sensing=sensing, **GAINS)
             r = simulate(arm, ctrl, ref, duration=duration, dt=1e-3, x0=x0, true_params=true, delay_samples=1,
-                         predict=True, sensor=SensorModel.franka_like())
+                         predict=True, sensor=SensorModel.franka_like(), interface=FRANKA_RATE)
             phi = r.x[:, 2] - r.x[:, 0]
             row["rms"].append(float(np.max(rms_second_half(r))))
             row["at_limit"].append(float(np.max(time_at_limit(r))))
@@ -122,7 +126,8 @@ def real_drives_section(ctx) -> Tuple[List[str], list]:
     md = ["## Real drives: the datasheet spring (`arm1_hd`)", "",
           "A one-link arm on a harmonic drive whose stiffness follows the catalogue's three segments "
           "(1.3e4, 1.7e4, 2.0e4 N m/rad to 14 and 48 N m, C2-blended) with motor friction, in the loop as a "
-          "Franka-like robot runs it (1 kHz, `franka_like` sensor with the 1000 N m/s torque-rate limit, one "
+          "Franka-like robot runs it (1 kHz, `franka_like` sensor, the motor interface with a 1000 N m/s rate "
+          "limit and the 2 kHz current loop, one "
           f"sample of delay with prediction), {draws} TRUE drives off the datasheet (curve x0.85..1.15, friction "
           f"x0.5..1.5, rotor x0.9..1.1), {duration:g} s of a 0.5 rad, 3 rad/s sine about horizontal:", "",
           *table, "",
