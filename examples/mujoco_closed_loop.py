@@ -91,8 +91,9 @@ def main(argv=None) -> dict:
         for _ in range(SUBSTEPS):
             mujoco.mj_step(mj, data)
 
+    # ctrl = u held over the sample above: the ideal actuator (no current loop) on fjm's side too
     fjm = fjm_runtime.simulate(m, law(), ref, duration=steps * DT, dt=DT, substeps=SUBSTEPS, true_params=true,
-                               x0=x0)
+                               x0=x0, interface="ideal")
     rms = np.sqrt(np.mean(err[steps // 2:] ** 2, axis=0))
     gap = float(np.max(np.abs(X - fjm.x)))
     print(f"MuJoCo {mujoco.__version__}, {path}: Panda, ismc at {1 / DT:g} Hz, {SUBSTEPS} MuJoCo steps per sample, "
