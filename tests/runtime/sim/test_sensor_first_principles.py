@@ -20,6 +20,7 @@ import pytest
 import fjm_runtime
 from fjm_runtime import make_controller, make_reference, simulate
 from fjm_runtime.control.laws import ControlSample
+from fjm_runtime.sim.interface import CommandInterface
 from fjm_runtime.sim.sample_step import initial_step_state, python_sample_step
 from fjm_runtime.sim.step_layout import make_layout
 from fjm_runtime.sim.sensor import SensorModel, noise_array, offset_normals, sensor_from_spec
@@ -120,7 +121,7 @@ def test_velocity_from_a_quantized_ramp_has_the_slope_as_mean_and_quantization_n
     step, T, cutoff, v = 1e-3, 1e-3, 300.0, 0.7318          # v T / step = 0.73...: the error is well mixed
     sensor = SensorModel(q_quant=step, q_m_quant=step, velocity_mode="differentiated", velocity_cutoff=cutoff)
     model, law = _kinematic_model(), _Zero()
-    L = make_layout(model, law, T, 1, sensor, 0, False)
+    L = make_layout(model, law, T, 1, sensor, 0, False, CommandInterface.ideal())   # g = 0: no actuator to model
     w = initial_step_state(model, L, np.array([0.0, v, 0.0, v]), np.zeros(0), np.zeros(0))
     N = 20000
     for k in range(N):
