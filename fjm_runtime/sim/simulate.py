@@ -198,12 +198,16 @@ def simulate(model, controller, reference, *, duration: float, dt: float = 1e-3,
     NOISE = noise_array(sensor, L.sensing, L.n, t.size)
     name = _choose_backend(backend, model, controller)
     W, AUX = BACKENDS[name](model, controller, L, p_true, w0, t, R, NOISE, progress, max_state)
-    settings = {"rate": 1.0 / float(dt), "dt": float(dt), "substeps": subs, "delay_samples": delay,
-                "predict": bool(predict), "predict_substeps": L.predictor_substeps if L.predict else None,
-                "sensing": L.sensing, "seed": int(sensor.seed), "backend": name,
-                "sensor": sensor.name, "interface": iface.name,
-                "torque_rate_limit": iface.as_dict()["torque_rate_limit"]}
-    return _finish(model, controller, p_true, L, t, W, AUX, R.reshape(-1, 5, L.n), settings)
+    return _finish(model, controller, p_true, L, t, W, AUX, R.reshape(-1, 5, L.n),
+                   _run_settings(L, dt, predict, sensor, iface, name))
+
+
+def _run_settings(L, dt, predict, sensor, iface, backend) -> dict:
+    """:attr:`SimulationResult.settings` of a run."""
+    return {"rate": 1.0 / float(dt), "dt": float(dt), "substeps": L.substeps, "delay_samples": L.delay,
+            "predict": bool(predict), "predict_substeps": L.predictor_substeps if L.predict else None,
+            "sensing": L.sensing, "seed": int(sensor.seed), "backend": backend,
+            "sensor": sensor.name, "interface": iface.name, "torque_rate_limit": iface.as_dict()["torque_rate_limit"]}
 
 
 def _reference_rows(reference, t, n):
