@@ -121,7 +121,7 @@ def test_velocity_from_a_quantized_ramp_has_the_slope_as_mean_and_quantization_n
     step, T, cutoff, v = 1e-3, 1e-3, 300.0, 0.7318          # v T / step = 0.73...: the error is well mixed
     sensor = SensorModel(q_quant=step, q_m_quant=step, velocity_mode="differentiated", velocity_cutoff=cutoff)
     model, law = _kinematic_model(), _Zero()
-    L = make_layout(model, law, T, 1, sensor, 0, False, CommandInterface.ideal())   # g = 0: no actuator to model
+    L = make_layout(model, law, T, 1, sensor, 0, False, interface=CommandInterface.ideal())   # g = 0: no actuator
     w = initial_step_state(model, L, np.array([0.0, v, 0.0, v]), np.zeros(0), np.zeros(0))
     N = 20000
     for k in range(N):
