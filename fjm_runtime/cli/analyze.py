@@ -2,8 +2,10 @@
 
 Defaults to the gains file's own conditions (rate, delay, prediction, sensing, sensor, task); flags
 override them. Prints a table per plant (nominal and the corners of the parameter box) and operating
-point (at rest, and frozen-time points along the task): spectral radius, the joint of its mode, the
-first unstable delay, the predicted torque jitter and link-angle error std per joint; then the
+point (at rest, and frozen-time points along the task): the verdict (stable, UNSTABLE, or NO VERDICT
+with the reason), its spectral radius and method (small-signal, or the boundary layer's equivalent gain
+under the sensor noise), the joint of its mode, the first unstable delay, the predicted torque jitter,
+link-angle error std and time inside the layer per joint; then the
 stiffness-scale range and the noise channel that dominates each joint's jitter. ``--json`` prints the
 record, ``--out`` writes it (docs/design-command.md, "The linear analysis").
 """
