@@ -54,7 +54,8 @@ def params_toml(ident, model) -> str:
         lines += [f"#   {k} = {v!r}  # +- {ident.stderr[k]:.3g}" for k, v in other.items()]
     lines += [f"# warning: {w}" for w in ident.warnings]
     lines += ["", "[parameters]"]
-    lines += [f"{k} = {v!r}  # +- {ident.stderr[k]:.3g}" for k, v in mine.items()]
+    lines += [f"{k} = {v!r}  # std. error {ident.stderr[k]:.3g}, interval [{lo:.6g}, {hi:.6g}]"
+              for k, v in mine.items() for lo, hi in [ident.interval(k)]]
     lines += [f"{k} = {v!r}  # held by the fit, not identified" for k, v in ident.fixed.items()
               if k in names and k not in mine]
     lines += ["", f"[spread]  # relative half-width of the design's draws: {SPREAD_SIGMAS:g} standard uncertainties, "
