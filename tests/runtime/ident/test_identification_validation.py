@@ -42,3 +42,11 @@ def test_every_interval_contains_the_truth_at_both_lengths(val, tmp_path, name, 
     short, long = results
     for nm in J:                                       # the longer log narrows the statistical part
         assert widths[long, nm] < widths[short, nm], nm
+
+
+@pytest.mark.exhaustive
+def test_panda_intervals_contain_the_truth_at_both_lengths(val, tmp_path):
+    """The docs' Panda table (frictionloss on joints 1, 2, 4, 6): about 4 minutes."""
+    results = val.validate(fjm_runtime.load("panda"), 20.0, 4, (1, 2, 4, 6), tmp_path)
+    missed = [(length, r[0]) for length, rows in results.items() for r in rows if not r[7]]
+    assert not missed and sum(len(rows) for rows in results.values()) == 70, missed

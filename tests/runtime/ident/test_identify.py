@@ -136,6 +136,9 @@ def test_parameter_file_is_what_fjm_design_reads(link1, tmp_path):
     for k in ("K", "J_m", "B_m"):
         assert spread.overrides[k] == pytest.approx(ident.values[k], rel=0, abs=0)
         assert 0.01 <= spread.relative[k] < 1
+        lo, hi = ident.interval(k)                 # the spread is the interval's half-width, at least 1 %
+        assert spread.relative[k] == pytest.approx(max((hi - lo) / 2 / abs(ident.values[k]), 0.01), rel=1e-12)
+        assert (hi - lo) / 2 == pytest.approx(3 * np.hypot(ident.stderr[k], ident.systematic[k]), rel=1e-12)
     assert "tau_J_offset1" in path.read_text() and "tau_J_offset1" not in spread.overrides
 
 
