@@ -170,6 +170,8 @@ def controller_functions(model, controller, L: StepLayout, name: str):
     if fns is None:
         raise FjmValueError(f"model {model.name!r}: no CasADi Functions f, g to predict with")
     fns = dict(fns, **model_springs(model))  # the spring law's psi, psi^-1 (prediction, rest torque)
+    if L.interface == "joint_torque":        # the predictor runs the robot's torque loop with its gravity
+        fns["gravity"] = gravity_function(model)
     n, n_par = L.n, len(model.param_names)
     CL = ControllerLayout(L)
     n_gains = int(np.asarray(controller.gains).size)
@@ -179,6 +181,7 @@ def controller_functions(model, controller, L: StepLayout, name: str):
     r, p, gains = ca.MX.sym("r", 5 * n), ca.MX.sym("p", n_par), ca.MX.sym("gains", n_gains)
     b = CL.split(c)
     m_k, filt_next, venc_next = ss._condition(ops, L, _blocks(m_raw, L), b["venc"], b["filt"])
+    ops.p_gravity = p                        # the library's nominal parameters (joint_torque's gravity)
     m_used, m_buf_next = ss._delayed(ops, ops, L, m_k, b["m_buf"], b["u_buf"], p)
     law = _RuntimeLaw(controller, p, gains)
     out = law.evaluate(m_used, b["z"], r)

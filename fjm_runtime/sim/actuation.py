@@ -8,9 +8,13 @@ substep, :mod:`fjm_runtime.sim.interface`).
 """
 from __future__ import annotations
 
-from .step_layout import StepLayout
+import numpy as np
 
-__all__ = ["actuated_plant", "interface_command", "plant_substeps", "rate_limited", "rate_windup", "rk4_step"]
+from .interface import gravity_function
+from .step_layout import StepLayout, controller_model
+
+__all__ = ["actuated_plant", "interface_command", "nominal_gravity", "plant_substeps", "rate_limited", "rate_windup",
+           "rk4_step"]
 
 
 def rk4_step(ops, x, u, p, h: float):
@@ -105,3 +109,11 @@ def rate_windup(ops, L: StepLayout, zdot, u_law, u, e1):
     held = (u_law > u) * (e1 < 0) + (u_law < u) * (e1 > 0)
     frozen = zdot[:n] * (1 - held)
     return ops.cat([frozen, zdot[n:L.nz]]) if L.nz > n else frozen
+
+
+def nominal_gravity(controller, model):
+    """``(gravity Function, p_nom)``: the gravity of the controller's model at its nominal parameters."""
+    nominal = controller_model(controller, model)
+    p_nom = getattr(controller, "p_nom", None)
+    p_nom = nominal.params_array({}) if p_nom is None else p_nom
+    return gravity_function(nominal), np.asarray(p_nom, dtype=float)

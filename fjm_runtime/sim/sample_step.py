@@ -37,7 +37,7 @@ import numpy as np
 
 from ..drives import model_springs
 from ..validation import FjmValueError
-from .actuation import actuated_plant, interface_command, plant_substeps, rate_windup
+from .actuation import actuated_plant, interface_command, nominal_gravity, plant_substeps, rate_windup
 from .interface import gravity_function
 from .sensor import SensorModel, measurement_blocks, offset_normals
 from .step import casadi_functions
@@ -226,9 +226,14 @@ def _sense(ops, L: StepLayout, w, noise, p):
 def _predict(nom_ops, L: StepLayout, m_old, u_buf, p_nom):
     """The measurement predicted ``d`` samples ahead from ``m_old`` with the controller's NOMINAL model
     (torque sensing: ``q_m = q + psi^-1(tau_J)`` by its spring law at ``p_nom``), each sample on
-    ``L.predictor_substeps`` RK4 substeps (an outlined ``nom_ops`` holds the substep of that count)."""
+    ``L.predictor_substeps`` RK4 substeps (an outlined ``nom_ops`` holds the substep of that count). Under
+    a ``joint_torque`` interface the commands ``u_buf`` are the robot's ``c`` (without gravity): the predictor
+    runs the robot's torque loop on the nominal model too (its gravity and spring law; no current loop, as
+    for a motor interface)."""
     n = L.n
     steps = L if L.predictor_substeps == L.substeps else replace(L, substeps=L.predictor_substeps)
+    if L.interface == "joint_torque":
+        steps = replace(steps, current_decay=0.0)
     if L.sensing == "state":
         x = m_old
     elif L.sensing == "full":  # the state is read: only the prediction's own measurement needs psi
@@ -238,7 +243,8 @@ def _predict(nom_ops, L: StepLayout, m_old, u_buf, p_nom):
         x = nom_ops.cat([q, dq, q + nom_ops.spring_inverse(tau, p_nom), dqm])
     x_old = x
     for j in range(L.delay):
-        x = plant_substeps(nom_ops, steps, x, u_buf[j * n:(j + 1) * n], p_nom)
+        x = actuated_plant(nom_ops, steps, x, None, u_buf[j * n:(j + 1) * n], p_nom)[0] \
+            if L.interface == "joint_torque" else plant_substeps(nom_ops, steps, x, u_buf[j * n:(j + 1) * n], p_nom)
     if L.sensing == "full":
         # the reading plus the nominal model's predicted CHANGE: the torque keeps the sensor's scale (a torque
         # from K_nom (q_m - q) would scale the law's torque feedback by K_nom / K: -0.7 became -1 at K x0.7)
@@ -249,7 +255,9 @@ def _predict(nom_ops, L: StepLayout, m_old, u_buf, p_nom):
 def predicted_measurement(model, L: StepLayout, m_old, u_buf, p_nom) -> np.ndarray:
     """The predictor of the sample step in numpy: ``m_old`` (nm,) predicted ``L.delay`` samples ahead under
     the torques ``u_buf`` (delay * n,) with ``model`` (the controller's) at ``p_nom``, shape (nm,)."""
-    return np.asarray(_predict(_NumpyOps(model), L, np.asarray(m_old, dtype=float), np.asarray(u_buf, dtype=float),
+    ops = _NumpyOps(model)
+    ops.gravity_fn, ops.p_gravity = gravity_function(model), np.asarray(p_nom, dtype=float)
+    return np.asarray(_predict(ops, L, np.asarray(m_old, dtype=float), np.asarray(u_buf, dtype=float),
                                np.asarray(p_nom, dtype=float)), dtype=float)
 
 
@@ -298,14 +306,16 @@ def python_sample_step(model, controller, L: StepLayout, w, t: float, r, noise, 
     ops = _NumpyOps(model)
     nom_ops = _NumpyOps(controller_model(controller, model)) if L.predict else None
     p_nom = np.asarray(controller.p_nom, dtype=float) if L.predict else None
+    if L.interface == "joint_torque":   # the robot adds the controller model's gravity (and so does its predictor)
+        ops.gravity_fn, ops.p_gravity = nominal_gravity(controller, model)
+        if nom_ops is not None:
+            nom_ops.gravity_fn, nom_ops.p_gravity = ops.gravity_fn, ops.p_gravity
     m_used, m_buf_next, filt_next, venc_next = _pre_law(ops, nom_ops, L, w, noise, p, p_nom)
     sz = L.slices()[1]
     z = w[sz]
     r = np.asarray(r, dtype=float).reshape(5, L.n)
     sample = controller.evaluate(t, m_used, z, r)
     zdot = np.asarray(controller.state_derivative(t, m_used, z, r, sample), dtype=float) if L.nz else None
-    if L.interface == "joint_torque":
-        ops.gravity_fn, ops.p_gravity = _nominal_gravity(controller, model)
     u, u_filtered = interface_command(ops, L, w[L.extra_slices()[2]], np.asarray(sample.u, dtype=float))
     if L.integral:
         zdot = rate_windup(ops, L, zdot, u_filtered, u, m_used[:L.n] - r[0])
@@ -319,16 +329,8 @@ def command_ops(model, controller, L: StepLayout):
     with the controller's nominal gravity when ``L``'s interface adds it (``joint_torque``)."""
     ops = _NumpyOps(model)
     if L.interface == "joint_torque":
-        ops.gravity_fn, ops.p_gravity = _nominal_gravity(controller, model)
+        ops.gravity_fn, ops.p_gravity = nominal_gravity(controller, model)
     return ops
-
-
-def _nominal_gravity(controller, model):
-    """``(gravity Function, p_nom)``: the gravity of the controller's model at its nominal parameters."""
-    nominal = controller_model(controller, model)
-    p_nom = getattr(controller, "p_nom", None)
-    p_nom = nominal.params_array({}) if p_nom is None else p_nom
-    return gravity_function(nominal), np.asarray(p_nom, dtype=float)
 
 
 def casadi_sample_step(fns, controller, L: StepLayout, n_par: int, nominal_fns=None, outline: bool = False):
@@ -364,12 +366,12 @@ def casadi_sample_step(fns, controller, L: StepLayout, n_par: int, nominal_fns=N
     w, r = ca.MX.sym("w", L.nw), ca.MX.sym("r", 5 * L.n)
     noise, p = ca.MX.sym("noise", L.nm), ca.MX.sym("p", n_par)
     p_nom = ca.DM(np.asarray(controller.p_nom, dtype=float)) if L.predict else None
+    if L.interface == "joint_torque":  # the robot adds the controller model's gravity (and so does its predictor)
+        ops.p_gravity = nom_ops.p_gravity = ca.DM(np.asarray(controller.p_nom, dtype=float))
     m_used, m_buf_next, filt_next, venc_next = _pre_law(ops, nom_ops, L, w, noise, p, p_nom)
     z = w[L.slices()[1]]
     out = controller.symbolic_evaluate(m_used, z, r)
     zdot = controller.symbolic_state_derivative(m_used, z, r, out) if L.nz else None
-    if L.interface == "joint_torque":
-        ops.p_gravity = ca.DM(np.asarray(controller.p_nom, dtype=float))
     u, u_filtered = interface_command(ops, L, w[L.extra_slices()[2]], out["u"])
     if L.integral:
         zdot = rate_windup(ops, L, zdot, u_filtered, u, m_used[:L.n] - r[:L.n])
@@ -421,7 +423,7 @@ def initial_step_state(model, L: StepLayout, x0, z0, p_true, seed: int = 0, sens
         if controller is None:
             raise FjmValueError("initial_step_state: a joint_torque interface adds the nominal gravity; pass the "
                                 "controller")
-        ops.gravity_fn, ops.p_gravity = _nominal_gravity(controller, model)
+        ops.gravity_fn, ops.p_gravity = nominal_gravity(controller, model)
         command = spring - ops.gravity(x0[:n])
     if L.delay:
         parts += [np.tile(m0, L.delay), np.tile(command, L.delay)]
@@ -459,9 +461,11 @@ def sample_step_function(model, controller, L: StepLayout, outline: bool = False
         raise FjmValueError(f"predict: the controller's model {getattr(nominal, 'name', nominal)!r} has no CasADi "
                             "Functions to predict with")
     torque = L.sensing != "state"  # only a torque (or full) sensor and its predictor evaluate the spring law
-    if nominal_fns is not None and torque:
-        nominal_fns.update(model_springs(nominal))
     springs = torque or L.interface == "joint_torque"  # the robot's torque loop reads its torque sensor too
+    if nominal_fns is not None and springs:
+        nominal_fns.update(model_springs(nominal))
+    if nominal_fns is not None and L.interface == "joint_torque":
+        nominal_fns["gravity"] = gravity_function(nominal)
     fns = dict(casadi_functions(model), **(model_springs(model) if springs else {}))
     if L.interface == "joint_torque":
         fns["gravity"] = gravity_function(nominal)

@@ -101,7 +101,8 @@ class Run:
         if x0 is None:
             q0 = np.asarray(reference(0.0))[0]
             x0 = np.concatenate([q0, np.zeros(L.n), q0, np.zeros(L.n)])
-        w0 = initial_step_state(model, L, x0, np.zeros(L.nz), p, seed=int(sensor.seed), sensor=sensor)
+        w0 = initial_step_state(model, L, x0, np.zeros(L.nz), p, seed=int(sensor.seed), sensor=sensor,
+                                controller=ctrl)
         self.R = np.asarray(reference.sample(t), dtype=float).reshape(t.size, 5 * L.n)
         NOISE = noise_array(sensor, L.sensing, L.n, t.size)
         self.W, AUX = run_casadi(model, ctrl, L, p, w0, t, self.R, NOISE, None, 1e6)

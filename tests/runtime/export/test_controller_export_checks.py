@@ -203,3 +203,25 @@ def test_the_library_outputs_what_the_interface_takes(interface):
         assert abs(u_runtime - u_law) > 0.1 * abs(u_law) > 0
     else:
         assert u_runtime == pytest.approx(u_law, rel=1e-12)
+
+
+
+def test_a_joint_torque_library_with_prediction_is_the_simulators_law():
+    """joint_torque with one sample of delay and prediction (the predictor runs the robot's torque loop and
+    gravity on the nominal model, in the library too): from the simulator's controller state at each of 30
+    samples, the exported step's tau_d is the law's, recovered from the robot's filtered commands c_k by
+    inverting libfranka's recursion, tau_d = (c_k - (1 - a) c_{k-1}) / a."""
+    spec = dict(LINK1, noise="ideal", interface={"kind": "joint_torque", "lowpass_cutoff_hz": 100.0, "K_T": -0.3,
+                                                 "D_T": 0.005})
+    design = design_controller(fjm_runtime.load("link1"), Design.from_dict(spec))
+    L, ctrl = design.layout, design.controller
+    assert L.predict and L.interface == "joint_torque" and L.has_last
+    step, _ = controller_functions(design.model, ctrl, L, design.name)
+    ref = fjm_runtime.make_reference("sine", 1, amplitude=0.3, omega=3.0, offset=0.3)
+    run = Run(design, 0.03, ref, np.array([0.3, 0.0, 0.3 + 9.8 * np.sin(0.3) / 150.0, 0.0]))   # at rest, held
+    p, g = np.asarray(ctrl.p_nom), np.asarray(ctrl.gains)
+    U = np.stack([np.asarray(step(run.C[k], run.M[k], run.R[k], p, g)[0]).ravel() for k in range(run.M.shape[0])])
+    c = np.vstack([run.W[0][L.extra_slices()[2]][None], run.U])
+    a = L.lowpass_alpha
+    tau_d = (c[1:] - (1.0 - a) * c[:-1]) / a
+    assert relative(U, tau_d) <= 1e-12 and np.max(np.abs(U - run.U)) > 1e-3   # tau_d, not the filtered c

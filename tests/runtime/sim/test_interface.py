@@ -224,3 +224,22 @@ def test_the_current_loop_keeps_rk4_fourth_order():
           for s in (11, 22, 440)]
     e1, e2 = (np.max(np.abs(x[:, :2] - xs[2][:, :2])) for x in xs[:2])
     assert e1 / e2 > 12.0 and e1 < 1e-7
+
+
+def test_prediction_on_joint_torque_runs_the_robots_torque_loop(link1):
+    """Exact nominal model, no noise, a joint_torque layer without current loop: the predictor runs the robot's
+    torque loop and gravity on the nominal model under the commands sent, so predicting 2 samples ahead
+    gives the undelayed loop to a small fraction of what the delay alone changes (a predictor that took
+    the commands for motor torques would leave out the 9.8 sin q gravity the robot adds)."""
+    ctrl = make_controller("smc", link1, {}, lam=8.0, k_s=100.0, delta=2.0)
+    ref = make_reference("sine", 1, amplitude=0.5, omega=1.0, offset=0.3)
+    iface = CommandInterface(kind="joint_torque", current_bandwidth_hz=math.inf, lowpass_cutoff_hz=100.0,
+                             K_T=-0.4, D_T=0.01)
+    x0 = np.array([0.3, 0.0, 0.3 + 9.8 * math.sin(0.3) / 150.0, 0.0])
+    kw = dict(duration=0.3, substeps=2, x0=x0, interface=iface)
+    base = simulate(link1, ctrl, ref, **kw)
+    pred = simulate(link1, ctrl, ref, delay_samples=2, predict=True, **kw)
+    late = simulate(link1, ctrl, ref, delay_samples=2, **kw)
+    k0 = 50
+    gap, delay_effect = np.max(np.abs(pred.x[k0:] - base.x[k0:])), np.max(np.abs(late.x[k0:] - base.x[k0:]))
+    assert gap < 1e-6 * delay_effect and delay_effect > 1e-4
