@@ -2,8 +2,10 @@
 
 Layout: ``tests/derive`` (the symbolic derivation), ``tests/generated`` (the committed outputs:
 C, reports), ``tests/runtime/<room>`` (``fjm_runtime``: model and validation at the top,
-``control``, ``sim``, ``batch``, ``analysis``, ``experiments``, ``cli``), ``tests/packaging``
-(wheel, docs, examples, self-containment), ``tests/bench`` (the benchmark's peers). Helpers shared
+``control``, ``sim``, ``batch``, ``analysis``, ``export``, ``ident``, ``experiments``, ``cli``; a module's
+tests in ``test_<module>.py``), ``tests/scenarios`` (runs through several rooms: a CLI run end to end,
+a user's arm, MuJoCo against ``simulate``, the demo's figures), ``tests/packaging`` (wheel, docs,
+examples, self-containment), ``tests/bench`` (the benchmark's peers). Helpers shared
 by several files live in the package ``tests/support`` (no tests there).
 
 Tests that build C, a wheel or derive in a subprocess are marked ``slow``:
@@ -62,17 +64,17 @@ def panda():
 #: them, in the usual order. (A worker is handed its next file once at most 2 tests of its current one
 #: are left: the quick-figures file, 2 tests behind one ~40 s CPU fixture, always has one queued.)
 HEAVY_FIRST = (
-    "tests/runtime/experiments/test_figures_quick.py",  # fjm figures --quick (~40 s CPU)
+    "tests/scenarios/test_figures_quick.py",            # fjm figures --quick (~40 s CPU)
     "tests/generated/test_c_sources.py",               # strict -O2 build of every model (~37 s CPU cold, cached warm)
-    "tests/runtime/batch/test_sampled_batch.py",       # panda smoke: a 1.8 MB batch C source (~16 s gcc cold)
+    "tests/runtime/batch/test_sampled_runner.py",      # panda smoke: a 1.8 MB batch C source (~16 s gcc cold)
     "tests/derive/test_interrupted_derive.py",
     "tests/runtime/analysis/certificates/test_certify.py",
     "tests/packaging/test_wheel.py",
     "tests/runtime/control/test_smc.py",
-    "tests/runtime/sim/test_spatial_control.py",
+    "tests/scenarios/test_spatial_control.py",
     "tests/packaging/test_realtime_example.py",
     "tests/derive/test_derive_check_and_timings.py",
-    "tests/runtime/control/test_emitted_laws.py",
+    "tests/scenarios/test_emitted_laws.py",
     "tests/derive/test_physics.py",
     "tests/packaging/test_self_contained.py",
     "tests/runtime/sim/test_sampled_data.py",

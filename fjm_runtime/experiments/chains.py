@@ -104,7 +104,7 @@ def low_nominal_section(ctx: DemoContext) -> Section:
           "Same reference, lambda, delta = k_s / 200 and k_s = 20000 as above, every joint with the same "
           "true stiffness. Underestimating the stiffness avoids the divergence seen above at K_nom = 150 "
           "for equal stiffnesses over the whole range [100, 200] (not for unequal ones: on planar3, e.g. "
-          "K = (200, 100, 150) diverges; see tests/test_chain_stability.py); the "
+          "K = (200, 100, 150) diverges; see tests/scenarios/test_chain_stability.py); the "
           "accuracy still degrades as the true stiffness moves away from the nominal one, much less with "
           "the integral surface than with the paper's.", "",
           f"| model | controller | true stiffness | {METRIC_HEADER} |", "|---|---|---|---|---|---|---|---|---|"]

@@ -2,7 +2,7 @@
 
 The logs come from fjm's own sampled loop with TRUE parameters away from the model's defaults (the
 identification never sees them), or from a small plant integrated here with Coulomb friction
-(link1_hd's generated plant carries Coulomb + Stribeck friction too). MuJoCo logs: test_mujoco_identification.py.
+(link1_hd's generated plant carries Coulomb + Stribeck friction too). MuJoCo logs: tests/scenarios/test_mujoco_identification.py.
 """
 import numpy as np
 import pytest

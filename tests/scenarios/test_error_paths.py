@@ -1,7 +1,7 @@
 """Every runtime error path in one list: each raises ValueError naming the field and the expectation.
 
 (The model-file error paths are listed in tests/derive/test_model_file.py; property-based
-variations of x and p are in tests/runtime/test_validation_props.py.)
+variations of x and p are in tests/runtime/test_validation.py.)
 """
 
 import re

@@ -130,7 +130,7 @@ def test_short_run_has_nan_jitter_and_divergence_is_flagged():
     assert all(np.isnan(long.joint_metrics[k][1]).all() for k in JOINT_METRICS)
 
 
-@pytest.mark.exhaustive  # a cold Panda batch build (~20 s); test_outlined_step builds the Panda step in make test
+@pytest.mark.exhaustive  # a cold Panda batch build (~20 s); batch/test_sampled.py builds the Panda step in make test
 def test_panda_smoke():
     m = fjm_runtime.load("panda")
     u_max = [87.0] * 4 + [12.0] * 3

@@ -8,7 +8,7 @@ step state made of MuJoCo's plant state and the library's controller state read 
 ``get_state``, with the run's noise (so its reading is the library's); its applied torque must be the
 library's torque and its next controller state the library's next state (1e-9 of each joint's
 largest torque / each slot's largest value). Free-running replays are not compared: the predictor and
-the law without the plant amplify rounding ~1.26x per sample (test_controller_library.py).
+the law without the plant amplify rounding ~1.26x per sample (tests/runtime/export/test_controller.py).
 """
 from __future__ import annotations
 
