@@ -33,7 +33,7 @@ from typing import Dict, Optional, Tuple
 import numpy as np
 
 from ...sim.step_layout import spring_scale_groups, stiffness_scale_indices
-from ...validation import FjmValueError
+from ...validation import FjmValueError, check_domains, check_magnitudes
 
 __all__ = ["GROUPS", "PlantSpread", "default_spread", "draw_params", "load_params_file"]
 
@@ -269,6 +269,8 @@ def _spread_entry(where, model, key, v):
         if (positive and v[0] <= 0) or v[0] < 0 and key == "m_load":
             raise FjmValueError(f"{where('spread', key)}: range {v!r}; expected lo > 0 for a stiffness or an "
                                 "inertia, lo >= 0 for a payload mass")
+        check_magnitudes([key, key], v, f"{where('spread', key)}: range ")       # within the parameter's
+        check_domains(model.parameter_info, [key, key], v, f"{where('spread', key)}: range")  # domain, physical
         return (float(v[0]), float(v[1]))
     want = "a relative half-width 0 <= s < 1" + ("" if key in GROUPS else " or a range [lo, hi] with lo <= hi")
     raise FjmValueError(f"{where('spread', key)}: {v!r}; expected {want}")

@@ -89,6 +89,8 @@ CASES = [
     ("design planar2 --max-jitter 1e300 --out {out}", "N m"),
     ("design planar2 --duration 5000 --out {out}", "3600 s"),
     ("design planar2 --draws 100000 --duration 3000 --out {out}", "control samples"),
+    ("design planar2 --params {spread_K} --out {out}", "1e+12"),
+    ("design planar2 --params {spread_Bm} --out {out}", ">= 0 N m s/rad"),
     # sweep
     ("sweep link1 --samples 0 --out {out}", "1 <= samples"),
     ("sweep link1 --samples 1e12 --out {out}", "10000000"),
@@ -146,6 +148,12 @@ def _flag_and_value(argv):
     raise AssertionError(argv)
 
 
+def _file_kind(command: str) -> str:
+    """Which bad file a case passes (its value is in the file, not on the command line), or ''."""
+    return next((k for k in ("spread_K", "spread_Bm") if "{" + k + "}" in command), "--noise" if "{noise}" in command
+                else "")
+
+
 def _names_value(line: str, value: str) -> bool:
     """The value as typed, or as Python prints it (1e300 -> 1e+300, 4.5 -> 4.5)."""
     shown = {value}
@@ -164,7 +172,11 @@ def test_nonsense_is_one_line_naming_flag_value_and_range(command, must, tmp_pat
     out_dir.mkdir()
     noise = tmp_path / "sensor.toml"         # a sensor file whose seed is out of range
     noise.write_text("seed = -1\n")
-    argv = command.format(out=out_dir / "result", noise=noise).split()
+    files = {"noise": noise}
+    for name, text in (("spread_K", "K1 = [1e-300, 1e300]"), ("spread_Bm", "Bm1 = [-1.0, 1.0]")):
+        files[name] = tmp_path / f"{name}.toml"        # a parameter file whose [spread] range is not physical
+        files[name].write_text(f"[spread]\n{text}\n")
+    argv = command.format(out=out_dir / "result", **files).split()
     try:
         status = main(argv)
     except SystemExit as exc:       # fjm tune's parser leaves through sys.exit (its own one-line error)
@@ -173,7 +185,9 @@ def test_nonsense_is_one_line_naming_flag_value_and_range(command, must, tmp_pat
     lines = [ln for ln in got.err.splitlines() if ln.strip()]
     assert status == 2 and got.out == "", (status, got.out, got.err)
     assert len(lines) == 1 and lines[0].startswith(("fjm: error: ", "fjm tune: error: ", "fjm derive: error: ")), got.err
-    flag, name, value = _flag_and_value(argv) if "--noise" not in argv else ("--noise", "seed", "-1")
+    flag, name, value = _flag_and_value(argv)
+    flag, name, value = {"--noise": ("--noise", "seed", "-1"), "spread_K": ("--params", "K1", "1e-300"),
+                         "spread_Bm": ("--params", "Bm1", "-1")}.get(_file_kind(command), (flag, name, value))
     line = lines[0]
     assert name in line and _names_value(line, value), (name, value, line)
     assert must in line, (must, line)
