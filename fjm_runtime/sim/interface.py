@@ -58,11 +58,9 @@ __all__ = ["CURRENT_BANDWIDTH_HZ", "KINDS", "PRESETS", "CommandInterface", "grav
 #: The kinds of command: motor torque through a current loop, or a vendor's joint-torque layer.
 KINDS = ("motor", "joint_torque")
 
-#: The default closed-loop bandwidth of the servo drive's current (torque) loop, Hz. Industrial
-#: servo drives close their current loop at 1-4 kHz (e.g. Elmo's Gold and Copley's Accelnet
-#: drives state current-loop bandwidths above 2 kHz; the DLR LWR III's motor current loop runs at
-#: 40 kHz with a comparable bandwidth); 2 kHz is the middle of that range and the lag the
-#: torque-sensed prototypes of docs/simulation.md assumed.
+#: The default closed-loop bandwidth of the servo drive's current (torque) loop, Hz: industrial servo drives
+#: close their current loop with a bandwidth of the order of 1-4 kHz; 2 kHz is the lag the torque-sensed
+#: prototypes assumed (docs/simulation.md). A typical value, not a datasheet's: an arm's own goes in a file.
 CURRENT_BANDWIDTH_HZ = 2000.0
 
 Level = Union[float, Sequence[float]]
