@@ -379,7 +379,7 @@ def run(args) -> int:
     interface = interface_arg(args, design)
     _check_size(m, args, ctrl, ref, x0, true, sensor, dt, interface)
     conditions = {"model": m.name, "kind": kind, "sensing": args.sensing, "rate": 1.0 / dt,
-                  "delay": args.delay_samples, "predict": bool(args.predict), "sensor": sensor}
+                  "delay": args.delay_samples, "predict": bool(args.predict), "sensor": sensor, "interface": interface}
     provenance = gains_provenance(source, design, conditions,
                                   None if gain is None else f"K in [{args.k_min:g}, {args.k_max:g}]")
     say_conditions(m, args, ref, dt, taken, source, provenance, limits, (args.lam, k_s, delta))

@@ -257,7 +257,7 @@ class Design:
         ----------
         conditions : dict
             The run's ``model``, ``kind``, ``sensing``, ``rate`` (Hz), ``delay``, ``predict``, ``sensor``
-            (the run's SensorModel).
+            (the run's SensorModel) and, optionally, ``interface`` (the run's CommandInterface).
 
         Returns
         -------
@@ -269,7 +269,22 @@ class Design:
         same, name = self.same_sensor(conditions["sensor"])
         if not same:
             out.append(f"designed with the sensor {name!r}, run with {conditions['sensor'].name!r}")
+        if conditions.get("interface") is not None:
+            out += self._interface_mismatch(conditions["interface"])
         return out
+
+    def _interface_mismatch(self, interface) -> List[str]:
+        """``[reason]`` when ``interface`` (a CommandInterface) is not the one the design was made for (its
+        record, or for an older record the ``motor`` interface with the rate limit its sensor states)."""
+        from ..sim.interface import interface_from_record
+        try:
+            design = interface_from_record({"interface": self.interface, "sensor": self.sensor}, self.source)
+        except FjmValueError:
+            return [f"the design's interface record {self.interface!r} is not readable"]
+        a, b = design.as_dict(), interface.as_dict()
+        if {k: v for k, v in a.items() if k != "name"} == {k: v for k, v in b.items() if k != "name"}:
+            return []
+        return [f"designed for the command interface {design.name!r}, run with {interface.name!r}"]
 
     def same_sensor(self, sensor) -> Tuple[bool, str]:
         """Whether ``sensor`` (a SensorModel) is the design's, and the design's sensor name.

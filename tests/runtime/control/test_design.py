@@ -121,3 +121,18 @@ def test_a_null_condition_stays_in_the_file(tmp_path):
     assert d.task is None and d.as_dict() == raw and list(d.as_dict()) == list(raw)
     d.save(tmp_path / "g.json")
     assert json.loads((tmp_path / "g.json").read_text()) == raw
+
+
+def test_a_run_on_another_command_interface_is_not_the_designs():
+    from fjm_runtime.control.design import Design
+    from fjm_runtime.sim.interface import CommandInterface
+    from fjm_runtime.sim.sensor import SensorModel
+    d = Design.shipped("panda", "ismc", "torque", 1000.0, 1)
+    cond = {"model": "panda", "kind": "ismc", "sensing": "torque", "rate": 1000.0, "delay": 1, "predict": True,
+            "sensor": d.sensor_model()}
+    # the shipped record predates the interface: the motor interface without a rate limit is its own
+    assert d.mismatches({**cond, "interface": CommandInterface.motor()}) == []
+    why = d.mismatches({**cond, "interface": CommandInterface.ideal()})
+    assert len(why) == 1 and "'ideal'" in why[0]
+    limited = CommandInterface.motor().with_rate_limit(1000.0)
+    assert d.mismatches({**cond, "interface": limited}) != []
