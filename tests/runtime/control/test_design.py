@@ -126,7 +126,6 @@ def test_a_null_condition_stays_in_the_file(tmp_path):
 def test_a_run_on_another_command_interface_is_not_the_designs():
     from fjm_runtime.control.design import Design
     from fjm_runtime.sim.interface import CommandInterface
-    from fjm_runtime.sim.sensor import SensorModel
     d = Design.shipped("panda", "ismc", "torque", 1000.0, 1)
     cond = {"model": "panda", "kind": "ismc", "sensing": "torque", "rate": 1000.0, "delay": 1, "predict": True,
             "sensor": d.sensor_model()}
