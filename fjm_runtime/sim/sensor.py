@@ -319,6 +319,14 @@ PRESETS = {"ideal": SensorModel.ideal, "panda_white": SensorModel.panda_white,
 _ALIASES = {"none": "ideal", "panda": "panda_white"}
 
 
+#: Largest value of a sensor file's key (noise levels, quantization steps, cutoffs, rate limit): beyond them
+#: a sensor measures nothing (a 1 rad angle noise) or the number overflows the loop's products.
+SENSOR_FILE_MAX = {"q": (1.0, "rad"), "q_m": (1.0, "rad"), "dq": (1e3, "rad/s"), "dq_m": (1e3, "rad/s"),
+                   "tau_J": (1e6, "N m"), "dtau_J": (1e9, "N m/s"), "tau_J_offset": (1e6, "N m"),
+                   "q_quant": (1.0, "rad"), "q_m_quant": (1.0, "rad"), "dtau_cutoff": (1e7, "rad/s"),
+                   "velocity_cutoff": (1e7, "rad/s"), "torque_rate_limit": (1e12, "N m/s")}
+
+
 def load_sensor_file(path, seed: int = 0) -> SensorModel:
     """A SensorModel from a TOML file: optional ``preset = NAME`` as the base, then field overrides.
 
@@ -360,6 +368,10 @@ def load_sensor_file(path, seed: int = 0) -> SensorModel:
         vals = v if isinstance(v, list) else [v]
         if not all(x is None or (isinstance(x, (int, float)) and not isinstance(x, bool)) for x in vals):
             raise FjmValueError(f"sensor file {p}: {k} = {v!r}; expected a number or a list of numbers")
+        top, unit = SENSOR_FILE_MAX.get(k, (math.inf, ""))
+        if not all(x is None or abs(x) <= top for x in vals):
+            raise FjmValueError(f"sensor file {p}: {k} = {v!r}; expected 0 <= {k} <= {top:g} {unit} (no physical "
+                                "sensor is worse)")
     base.update(data)
     return SensorModel.from_dict(base, where=f"sensor file {p}")
 

@@ -71,6 +71,7 @@ CASES = [
     ("simulate link1 --nominal J_m=0 --plot {out}", "> 0 kg m^2"),
     ("tune link1 --nominal K=-5", "> 0 N m/rad"),
     ("simulate link1 --noise {noise} --plot {out}", "seed"),
+    ("simulate link1 --noise {noise_level} --plot {out}", "1 rad"),
     # derive (python -m derive in a subprocess)
     ("derive --models link1 --max-cost -1 --out {out}", "a week"),
     ("derive --models link1 --max-cost 1e300 --out {out}", "604800"),
@@ -150,8 +151,8 @@ def _flag_and_value(argv):
 
 def _file_kind(command: str) -> str:
     """Which bad file a case passes (its value is in the file, not on the command line), or ''."""
-    return next((k for k in ("spread_K", "spread_Bm") if "{" + k + "}" in command), "--noise" if "{noise}" in command
-                else "")
+    return next((k for k in ("spread_K", "spread_Bm", "noise_level") if "{" + k + "}" in command),
+                "--noise" if "{noise}" in command else "")
 
 
 def _names_value(line: str, value: str) -> bool:
@@ -172,7 +173,8 @@ def test_nonsense_is_one_line_naming_flag_value_and_range(command, must, tmp_pat
     out_dir.mkdir()
     noise = tmp_path / "sensor.toml"         # a sensor file whose seed is out of range
     noise.write_text("seed = -1\n")
-    files = {"noise": noise}
+    files = {"noise": noise, "noise_level": tmp_path / "loud.toml"}
+    files["noise_level"].write_text("q = 1e300\n")       # an angle noise of 1e300 rad
     for name, text in (("spread_K", "K1 = [1e-300, 1e300]"), ("spread_Bm", "Bm1 = [-1.0, 1.0]")):
         files[name] = tmp_path / f"{name}.toml"        # a parameter file whose [spread] range is not physical
         files[name].write_text(f"[spread]\n{text}\n")
@@ -186,7 +188,7 @@ def test_nonsense_is_one_line_naming_flag_value_and_range(command, must, tmp_pat
     assert status == 2 and got.out == "", (status, got.out, got.err)
     assert len(lines) == 1 and lines[0].startswith(("fjm: error: ", "fjm tune: error: ", "fjm derive: error: ")), got.err
     flag, name, value = _flag_and_value(argv)
-    flag, name, value = {"--noise": ("--noise", "seed", "-1"), "spread_K": ("--params", "K1", "1e-300"),
+    flag, name, value = {"--noise": ("--noise", "seed", "-1"), "noise_level": ("--noise", "q", "1e300"), "spread_K": ("--params", "K1", "1e-300"),
                          "spread_Bm": ("--params", "Bm1", "-1")}.get(_file_kind(command), (flag, name, value))
     line = lines[0]
     assert name in line and _names_value(line, value), (name, value, line)
