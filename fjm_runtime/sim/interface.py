@@ -51,6 +51,7 @@ from typing import Sequence, Union
 import numpy as np
 
 from ..validation import FjmValueError
+from .preset_file import read_preset_file
 
 __all__ = ["CURRENT_BANDWIDTH_HZ", "KINDS", "PRESETS", "CommandInterface", "gravity_function", "interface_from_record",
            "interface_from_spec", "load_interface_file"]
@@ -258,24 +259,7 @@ def load_interface_file(path) -> CommandInterface:
     FjmValueError
         One line naming the file and the key.
     """
-    from pathlib import Path
-    try:
-        import tomllib
-    except ImportError:  # Python < 3.11
-        import tomli as tomllib
-    p = Path(path)
-    if not p.is_file():
-        raise FjmValueError(f"interface file {p}: not found (expected a preset name among {sorted(PRESETS)} "
-                            "or a TOML file)")
-    try:
-        data = tomllib.loads(p.read_text())
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-        raise FjmValueError(f"interface file {p}: not valid TOML ({exc})") from None
-    base_name = data.pop("preset", "motor")
-    if base_name not in PRESETS:
-        raise FjmValueError(f"interface file {p}: preset = {base_name!r}; expected one of {sorted(PRESETS)}")
-    base = PRESETS[base_name]().as_dict()
-    base["name"] = p.stem
+    p, base, data = read_preset_file(path, "interface file", PRESETS, "motor")
     for k, v in data.items():
         if k in ("kind", "name"):
             continue

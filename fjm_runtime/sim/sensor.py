@@ -33,6 +33,7 @@ from typing import Sequence, Tuple, Union
 import numpy as np
 
 from ..validation import FjmValueError
+from .preset_file import read_preset_file
 
 __all__ = ["DTAU_MODES", "PRESETS", "SIGNALS", "VELOCITY_MODES", "SensorModel", "linear_noise_levels",
            "load_sensor_file", "measurement_blocks", "noise_array", "noise_slots", "offset_normals",
@@ -341,24 +342,7 @@ def load_sensor_file(path, seed: int = 0) -> SensorModel:
     FjmValueError
         One line naming the file and the key.
     """
-    from pathlib import Path
-    try:
-        import tomllib
-    except ImportError:  # Python < 3.11
-        import tomli as tomllib
-    p = Path(path)
-    if not p.is_file():
-        raise FjmValueError(f"sensor file {p}: not found (expected a preset name among {sorted(PRESETS)} "
-                            "or a TOML file)")
-    try:
-        data = tomllib.loads(p.read_text())
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-        raise FjmValueError(f"sensor file {p}: not valid TOML ({exc})") from None
-    base_name = data.pop("preset", "ideal")
-    if base_name not in PRESETS:
-        raise FjmValueError(f"sensor file {p}: preset = {base_name!r}; expected one of {sorted(PRESETS)}")
-    base = PRESETS[base_name](seed=seed).as_dict()
-    base["name"] = p.stem
+    p, base, data = read_preset_file(path, "sensor file", PRESETS, "ideal", make=lambda build: build(seed=seed))
     if _MOVED in data:
         raise FjmValueError(f"sensor file {p}: {_MOVED} moved to the interface file (--interface FILE.toml, "
                             f"key {_MOVED}): the rate limit is the command's, not the sensor's")
