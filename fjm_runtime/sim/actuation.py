@@ -14,7 +14,7 @@ from .interface import gravity_function
 from .step_layout import StepLayout, controller_model
 
 __all__ = ["actuated_plant", "interface_command", "nominal_gravity", "plant_substeps", "rate_limited", "rate_windup",
-           "rk4_step"]
+           "rk4_step", "spring_torque"]
 
 
 def rk4_step(ops, x, u, p, h: float):
@@ -38,16 +38,21 @@ def plant_substeps(ops, L: StepLayout, x, u, p):
     return x
 
 
+def spring_torque(ops, x, p, n: int):
+    """``(tau_J, dtau_J)`` of the state ``x`` (4n): ``psi(q_m - q)`` and ``psi'(q_m - q) (dq_m - dq)`` with the
+    spring law of ``ops``'s model at parameters ``p``, each (n,)."""
+    q, dq, qm, dqm = x[0:n], x[n:2 * n], x[2 * n:3 * n], x[3 * n:4 * n]
+    psi, dpsi = ops.spring(qm - q, p)
+    return psi, dpsi * (dqm - dq)
+
+
 def motor_command(ops, L: StepLayout, x, c, p):
     """The motor torque command of a substep at ``x``: ``c`` (motor), or the joint_torque layer's inner
     loop ``(1 + K_T) (c + g(q)) - K_T tau_J - D_T dtau_J`` with the robot's torque sensor (the TRUE
     spring) and the NOMINAL gravity, clipped at the motor's limit."""
     if L.interface == "motor":
         return c
-    n = L.n
-    q, dq, qm, dqm = x[0:n], x[n:2 * n], x[2 * n:3 * n], x[3 * n:4 * n]
-    psi, dpsi = ops.spring(qm - q, p)
-    tau, dtau = psi, dpsi * (dqm - dq)
+    q, tau, dtau = x[0:L.n], *spring_torque(ops, x, p, L.n)
     K_T, D_T = ops.const(L.K_T), ops.const(L.D_T)
     u = (1.0 + K_T) * (c + ops.gravity(q)) - K_T * tau - D_T * dtau
     if L.u_limit:

@@ -37,7 +37,8 @@ import numpy as np
 
 from ..drives import model_springs
 from ..validation import FjmValueError
-from .actuation import actuated_plant, interface_command, nominal_gravity, plant_substeps, rate_windup
+from .actuation import (actuated_plant, interface_command, nominal_gravity, plant_substeps, rate_windup,
+                        spring_torque)
 from .interface import gravity_function
 from .sensor import SensorModel, measurement_blocks, offset_normals
 from .step import casadi_functions
@@ -158,8 +159,7 @@ def _measure(ops, L: StepLayout, x, p):
         return x
     n = L.n
     q, dq, qm, dqm = x[0:n], x[n:2 * n], x[2 * n:3 * n], x[3 * n:4 * n]
-    psi, dpsi = ops.spring(qm - q, p)
-    tau, dtau = psi, dpsi * (dqm - dq)
+    tau, dtau = spring_torque(ops, x, p, n)
     return ops.cat([q, dq, qm, dqm, tau, dtau] if L.sensing == "full" else [q, dq, tau, dtau, dqm])
 
 
