@@ -19,7 +19,7 @@ from fjm_runtime.batch.runner import simulate_batch
 from fjm_runtime.control.design import Design
 from fjm_runtime.control.factory import make_controller
 from fjm_runtime.experiments import panda as task
-from fjm_runtime.sim.step_layout import stiffness_indices
+from fjm_runtime.drives import drive_indices, linear_stiffness_indices
 from fjm_runtime.sim.sensor import SensorModel
 
 TARGETS = {"worst_rms": 2e-3, "worst_time_at_limit": 0.02, "worst_jitter_j1_4": 3.0}
@@ -28,7 +28,7 @@ TARGETS = {"worst_rms": 2e-3, "worst_time_at_limit": 0.02, "worst_jitter_j1_4": 
 def plants(m, seed: int = 2024) -> np.ndarray:
     """The 52 true parameter rows (K box draws x J_m 0.8 / 1.2, payload 1 kg)."""
     n = int(m.n)
-    iK, iJ = stiffness_indices(m)
+    iK, iJ = linear_stiffness_indices(m, "the K draws"), drive_indices(m, "rotor_inertia")
     iL = m.param_names.index("m_load")
     p0 = np.asarray(m.params_array({}))
     rng = np.random.default_rng(seed)

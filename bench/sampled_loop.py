@@ -40,9 +40,9 @@ def _panda(sensing: str = "state"):
 
 def _true(m, factor: float) -> np.ndarray:
     """The TRUE parameters: the defaults with every ``K_i`` times ``factor``, shape (n_params,)."""
-    from fjm_runtime.sim.step_layout import stiffness_indices
+    from fjm_runtime.drives import linear_stiffness_indices
     p = np.array(m.params_array({}), dtype=float)
-    p[stiffness_indices(m)[0]] *= factor
+    p[linear_stiffness_indices(m, "the stiffness factor")] *= factor
     return p
 
 

@@ -42,13 +42,13 @@ import numpy as np
 
 import fjm_runtime
 from fjm_runtime.control.design import Design
+from fjm_runtime.drives import role_names
 from fjm_runtime.export.controller import design_controller
 from fjm_runtime.export.controller_step import raw_reading, rest_reading
 from fjm_runtime.ident.excite import design_excitation
 from fjm_runtime.ident.identify import identify
 from fjm_runtime.ident.mujoco_robot import (B_M, FRICTION, JM_FACTOR, K_FACTOR, RATE, mujoco_log, mujoco_plant,
                                              true_params)
-from fjm_runtime.ident.mujoco_robot import drive_names as names
 from fjm_runtime.ident.report import table_lines
 from fjm_runtime.sim.metrics import rms_second_half, time_at_limit, torque_jitter
 from fjm_runtime.sim.rest import rest_state
@@ -69,7 +69,7 @@ def _c_example():
 def errors(model, ident) -> dict:
     """``{name: (identified, true, relative error)}`` for the model's K, J_m, B_m and the friction."""
     p, out = true_params(model), {}
-    K, J, B = names(model)
+    K, J, B = (role_names(model, role) for role in ("stiffness", "rotor_inertia", "damping"))
     for i in range(model.n):
         for nm in (K[i], J[i], B[i]):
             out[nm] = (ident.values[nm], p[nm], ident.values[nm] / p[nm] - 1.0)
@@ -161,7 +161,7 @@ def main(argv=None) -> int:
         errs = errors(m, ident)
         for nm, (v, true, e) in errs.items():
             print(f"   {nm:6s} identified {v:10.5g}  true {true:10.5g}  error {100 * e:+7.2f} %")
-        K, J, _ = names(m)
+        K, J = role_names(m, "stiffness"), role_names(m, "rotor_inertia")
         seen = lambda k: k not in ident.not_excited  # noqa: E731 - the file keeps the model's value for the others
         ok_id = all(abs(errs[k][2]) <= TOLERANCE["stiffness"] for k in K if seen(k)) and \
             all(abs(errs[j][2]) <= TOLERANCE["rotor inertia"] for j in J if seen(j))

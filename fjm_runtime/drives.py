@@ -17,7 +17,8 @@ import numpy as np
 from .validation import REDERIVE, FjmValueError
 
 __all__ = ["Drive", "ParameterInfo", "read_drives", "read_parameter_info", "drive_indices", "role_names", "spring_laws",
-           "linear_stiffness_indices", "joint_coefficients", "model_springs", "DRIVE_ROLES"]
+           "linear_stiffness_indices", "spring_scale_groups", "joint_coefficients", "model_springs",
+           "DRIVE_ROLES"]
 
 #: The per-joint roles :func:`drive_indices` selects (``"stiffness"``: the spring's small-deflection
 #: stiffness, the first coefficient of its law: ``K``, ``k1``, ``K_1``).
@@ -161,6 +162,17 @@ def linear_stiffness_indices(model, purpose: str) -> np.ndarray:
         raise FjmValueError(f"model {model.name!r}: {purpose} needs a linear spring K (q_m - q) per joint "
                             f"(found spring laws {sorted(set(laws))})")
     return drive_indices(model, "stiffness")
+
+
+def spring_scale_groups(model):
+    """Per joint, the indices of the parameters that scale its spring torque together, list of n int arrays.
+
+    Multiplying a group by ``g`` multiplies that joint's ``psi`` by ``g`` exactly: a linear spring's ``K``; a
+    nonlinear law's coefficients but the blend width: the cubic's ``k1, k3``, the three-segment curve's
+    ``K_1, K_2, K_3, T_1, T_2`` (its breakpoints ``T / K`` stay). The first index of a group is the joint's
+    stiffness at small deflection (``K``, ``k1``, ``K_1``).
+    """
+    return [np.array(d.spring_scale, dtype=int) for d in model.drives]
 
 
 def joint_coefficients(model, joint: int) -> Dict[str, str]:

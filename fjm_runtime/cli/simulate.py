@@ -22,7 +22,7 @@ from ..analysis.certificates.lemma1 import FALLBACK_SWITCHING_GAIN, paper_beta_h
 from ..control.defaults import DEFAULT_LAM, DEFAULT_LAYER_RATE, PAPER_K_RANGE, default_delta
 from ..control.factory import CONTROLLER_KINDS, make_controller
 from ..control.references import REFERENCE_KINDS, make_reference
-from ..drives import linear_stiffness_indices
+from ..drives import drive_indices, linear_stiffness_indices
 from ..sim.metrics import peak_torque, rms_second_half, time_at_limit, time_at_rate_limit, torque_jitter
 from ..sim.sensor import PRESETS, SensorModel, sensor_from_spec
 from ..sim.simulate import simulate, stderr_progress
@@ -144,7 +144,6 @@ def _scales(text: Optional[str], n: int, flag: str) -> Optional[np.ndarray]:
 
 
 def _true_params(m, args, nominal) -> Dict[str, float]:
-    from ..sim.step_layout import stiffness_indices
     true = parse_assignments(args.param, "--param")
     check_magnitudes(true, true.values(), "--param ")
     if args.K is not None:
@@ -154,11 +153,11 @@ def _true_params(m, args, nominal) -> Dict[str, float]:
             true.setdefault(m.param_names[i], args.K)
     p_nom = m.params_array(nominal, arg="--nominal")
     m.params_array(true, arg="--param")           # the user's values named by their flag, not p[...]
-    for flag, text, which in (("--k-scale", args.k_scale, 0), ("--jm-scale", args.jm_scale, 1)):
+    for flag, text, role in (("--k-scale", args.k_scale, "stiffness"), ("--jm-scale", args.jm_scale, "rotor_inertia")):
         factors = _scales(text, m.n, flag)
         if factors is not None:
-            idx = stiffness_indices(m)[which]
-            for j, i in enumerate(idx):
+            linear_stiffness_indices(m, flag)     # the scales are for linear springs: refused on a nonlinear one
+            for j, i in enumerate(drive_indices(m, role)):
                 true[m.param_names[i]] = float(p_nom[i] * factors[j])
     if args.payload is not None:
         if "m_load" not in m.param_names:

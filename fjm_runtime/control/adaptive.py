@@ -86,27 +86,10 @@ from ..drives import drive_indices, linear_stiffness_indices
 from .defaults import DEFAULT_FILTER_RATE, DEFAULT_LS_GAIN, default_K_bounds
 from .laws import SlidingModeController
 
-__all__ = ["AdaptiveStiffnessController", "ESTIMATOR_BLOCKS", "make_adaptive", "param_indices"]
+__all__ = ["AdaptiveStiffnessController", "ESTIMATOR_BLOCKS", "make_adaptive"]
 
 #: Names of the blocks of the estimator part of ``z``, in order.
 ESTIMATOR_BLOCKS = ("K_hat", "u_f", "phi_f", "w_f", "P")
-
-
-def param_indices(model):
-    """Indices of the stiffness, motor inertia and motor damping of each joint in ``param_names``
-    (``model.drives``).
-
-    Returns
-    -------
-    (idx_K, idx_Jm, idx_Bm) : three ndarray of int, shape (n,)
-
-    Raises
-    ------
-    ValueError
-        A joint's spring is not linear (the estimator adapts ``K``).
-    """
-    return (linear_stiffness_indices(model, "adaptive stiffness"), drive_indices(model, "rotor_inertia"),
-            drive_indices(model, "damping"))
 
 
 def _bounds(K_bounds, n: int):
@@ -172,7 +155,8 @@ class AdaptiveStiffnessController(SlidingModeController):
         self.K_min, self.K_max = _bounds(K_bounds, n)
         self.filter_rate = _positive(filter_rate, "filter_rate")
         self.ls_gain = _positive(ls_gain, "ls_gain")
-        self.idx_K, self.idx_Jm, self.idx_Bm = param_indices(model)
+        self.idx_K = linear_stiffness_indices(model, "adaptive stiffness")   # the estimator adapts K
+        self.idx_Jm, self.idx_Bm = drive_indices(model, "rotor_inertia"), drive_indices(model, "damping")
         K0 = self.p_nom[self.idx_K]
         if np.any(K0 < self.K_min) or np.any(K0 > self.K_max):
             raise ValueError(f"K_bounds = ({self.K_min.tolist()}, {self.K_max.tolist()}): the nominal stiffness "
@@ -224,6 +208,6 @@ def make_adaptive(model, nominal_params, *, K_bounds=None, **kwargs) -> Adaptive
     (``nominal +- 1/3``: 100-200 at 150); ``mode`` defaults to ``'sat'``."""
     if K_bounds is None:
         p = np.asarray(model.params_array(nominal_params), dtype=float)
-        K_bounds = default_K_bounds(p[param_indices(model)[0]])
+        K_bounds = default_K_bounds(p[linear_stiffness_indices(model, "adaptive stiffness")])
     kwargs.setdefault("mode", "sat")
     return AdaptiveStiffnessController(model, nominal_params, K_bounds=K_bounds, **kwargs)

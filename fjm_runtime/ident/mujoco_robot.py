@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import re
 from pathlib import Path
-from typing import List, Tuple
 
 import numpy as np
 
@@ -23,7 +22,7 @@ from ..sim.substeps import resolve_substeps
 from .excite import nominal_motion
 from .log import Log
 
-__all__ = ["RATE", "K_FACTOR", "JM_FACTOR", "B_M", "FRICTION", "PD_OMEGA", "drive_names", "true_params",
+__all__ = ["RATE", "K_FACTOR", "JM_FACTOR", "B_M", "FRICTION", "PD_OMEGA", "true_params",
            "with_rotor_friction", "mujoco_plant", "mujoco_log", "tau_J_offsets"]
 
 RATE = 1000.0
@@ -32,15 +31,10 @@ K_FACTOR, JM_FACTOR, B_M, FRICTION = 1.15, 0.9, 0.3, 0.4
 PD_OMEGA = 30.0
 
 
-def drive_names(model) -> Tuple[List[str], List[str], List[str]]:
-    """``(K, J_m, B_m)`` parameter names per joint (``model.drives``; linear springs)."""
-    linear_stiffness_indices(model, "the MuJoCo robot")
-    return tuple(role_names(model, role) for role in ("stiffness", "rotor_inertia", "damping"))
-
-
 def true_params(model) -> dict:
     """The TRUE plant of the module docstring, as a parameter dict."""
-    K, J, B = drive_names(model)
+    linear_stiffness_indices(model, "the MuJoCo robot")     # its TRUE plant scales a linear K
+    K, J, B = (role_names(model, role) for role in ("stiffness", "rotor_inertia", "damping"))
     p = dict(model.default_params)
     for k, j, b in zip(K, J, B):
         p[k], p[j], p[b] = K_FACTOR * p[k], JM_FACTOR * p[j], B_M
@@ -95,8 +89,8 @@ def mujoco_log(model, exc_ref, duration: float, work: Path, seed: int = 0, frict
     plant = mujoco_plant(model, p_true, work, subs, friction)
     plant.set_state(x0)
     sensor, rng = SensorModel.franka_like(seed=seed), np.random.default_rng(seed)
-    K = np.array([p_true[k] for k in drive_names(model)[0]])
-    Jm = np.array([model.default_params[j] for j in drive_names(model)[1]])
+    K = np.array([p_true[model.param_names[i]] for i in linear_stiffness_indices(model, "the MuJoCo robot")])
+    Jm = np.array([model.default_params[j] for j in role_names(model, "rotor_inertia")])
     kp, kd = Jm * PD_OMEGA ** 2, 2 * 0.7 * PD_OMEGA * Jm
     offset = tau_J_offsets(n, seed)
     Q, QM, TAU, U = (np.zeros((t.size, n)) for _ in range(4))

@@ -42,7 +42,7 @@ from .actuation import (actuated_plant, interface_command, nominal_gravity, plan
 from .interface import gravity_function
 from .sensor import SensorModel, measurement_blocks, offset_normals
 from .step import casadi_functions
-from .step_layout import StepLayout, controller_model, stiffness_indices
+from .step_layout import StepLayout, controller_model
 
 __all__ = ["casadi_sample_step", "check_loop_settings", "command_ops", "initial_measurement", "initial_step_state",
            "predicted_measurement", "python_sample_step", "sample_step_function"]

@@ -12,39 +12,14 @@ from typing import Optional
 
 import numpy as np
 
-from ..drives import drive_indices, linear_stiffness_indices
 from ..validation import FjmValueError
 from .interface import CommandInterface
 from .sensor import SensorModel
 
-__all__ = ["StepLayout", "controller_model", "make_layout", "spring_scale_groups", "stiffness_indices",
-           "stiffness_scale_indices"]
+__all__ = ["StepLayout", "controller_model", "make_layout"]
 
 #: The rate limit's stand-in for "none" in the arithmetic (finite, so C and SIMD code see no inf).
 _NO_LIMIT = 1e300
-
-
-def stiffness_indices(model):
-    """Indices of the linear springs' ``K_i`` and the rotor inertias ``J_mi`` in ``model.param_names``
-    (``model.drives``): ``(idx_K, idx_Jm)``, each shape (n,); FjmValueError for a nonlinear spring."""
-    return linear_stiffness_indices(model, "torque sensing"), drive_indices(model, "rotor_inertia")
-
-
-def spring_scale_groups(model):
-    """Per joint, the indices of the parameters that scale its spring torque together, list of n int arrays.
-
-    Multiplying a group by ``g`` multiplies that joint's ``psi`` by ``g`` exactly: a linear spring's ``K``; a
-    nonlinear law's coefficients but the blend width: the cubic's ``k1, k3``, the three-segment curve's
-    ``K_1, K_2, K_3, T_1, T_2`` (its breakpoints ``T / K`` stay). The first index of a group is the joint's
-    stiffness at small deflection (``K``, ``k1``, ``K_1``).
-    """
-    return [np.array(d.spring_scale, dtype=int) for d in model.drives]
-
-
-def stiffness_scale_indices(model):
-    """``(idx_K, idx_Jm)`` as :func:`stiffness_indices`, with a nonlinear spring's small-deflection stiffness
-    (the first index of each :func:`spring_scale_groups` group) standing for ``K_i``."""
-    return drive_indices(model, "stiffness"), drive_indices(model, "rotor_inertia")
 
 
 def controller_model(controller, plant):

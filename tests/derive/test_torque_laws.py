@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 import fjm_runtime
-from fjm_runtime.control.adaptive import param_indices
+from fjm_runtime.drives import drive_indices, linear_stiffness_indices
 from fjm_runtime.control.sensing import torque_measurement
 from support.numerics import random_params, random_state
 
@@ -27,7 +27,7 @@ POINTS = 3
 
 def _case(model, rng, damping=True):
     """x, p_true, p_nom (p_nom = p_true with K scaled per joint by U[0.7, 1.3]), K_true, Gamma."""
-    iK, _, _ = param_indices(model)
+    iK = linear_stiffness_indices(model, "torque sensing")
     p_true = random_params(model, rng, damping=damping)
     K = p_true[iK]
     p_nom = p_true.copy()
@@ -60,7 +60,7 @@ def test_torque_coordinates_exact_under_any_stiffness(name):
 def test_stiffness_error_is_a_matched_input_gain(name):
     m = fjm_runtime.load(name)
     n = m.n
-    _, iJ, iB = param_indices(m)
+    iJ, iB = drive_indices(m, "rotor_inertia"), drive_indices(m, "damping")
     rng = np.random.default_rng(11)
     for damping in (True, False):
         for _ in range(POINTS):
@@ -95,7 +95,7 @@ def _y4_rate(m, x, p, u):
 def test_exact_stiffness_linearizes(name):
     m = fjm_runtime.load(name)
     rng = np.random.default_rng(5)
-    iK, _, _ = param_indices(m)
+    iK = linear_stiffness_indices(m, "torque sensing")
     for _ in range(2):
         x = random_state(m, rng)
         p = random_params(m, rng)
@@ -144,7 +144,7 @@ def test_pdg_rest_and_stiffness_offset(name):
     m = fjm_runtime.load(name)
     n = m.n
     rng = np.random.default_rng(3)
-    iK, _, _ = param_indices(m)
+    iK = linear_stiffness_indices(m, "torque sensing")
     p_nom = m.params_array(None)
     K_nom = p_nom[iK]
     q_d = rng.uniform(-0.8, 0.8, n)

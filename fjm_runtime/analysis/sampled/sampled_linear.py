@@ -35,10 +35,9 @@ from typing import Optional, Sequence
 
 import numpy as np
 
-from ...drives import model_springs
+from ...drives import model_springs, spring_scale_groups
 from ...sim.sample_step import initial_step_state, sample_step_function
 from ...sim.step_layout import make_layout
-from ...sim.step_layout import spring_scale_groups
 from ...sim.sensor import SIGNALS, noise_slots
 from ...validation import FjmValueError
 
@@ -370,7 +369,7 @@ class Conditions:
 
 def scaled_stiffness(model, p, g: float) -> np.ndarray:
     """``p`` with every spring torque times ``g`` (the TRUE plant): each ``K_i``, or every coefficient of a
-    nonlinear law that scales its torque (:func:`~fjm_runtime.sim.step_layout.spring_scale_groups`)."""
+    nonlinear law that scales its torque (:func:`~fjm_runtime.drives.spring_scale_groups`)."""
     p = np.asarray(p, dtype=float).copy()
     for grp in spring_scale_groups(model):
         p[grp] *= g

@@ -32,7 +32,7 @@ from typing import Dict, Optional, Tuple
 
 import numpy as np
 
-from ...sim.step_layout import spring_scale_groups, stiffness_scale_indices
+from ...drives import drive_indices, spring_scale_groups
 from ...validation import FjmValueError, check_domains, check_magnitudes
 
 __all__ = ["GROUPS", "PlantSpread", "default_spread", "draw_params", "load_params_file"]
@@ -80,7 +80,7 @@ def default_spread(model, nominal: Optional[Dict[str, float]] = None) -> PlantSp
     """Today's box around ``nominal`` (default: the model's defaults)."""
     nom = dict(model.default_params)
     nom.update(nominal or {})
-    iK, iJ = stiffness_scale_indices(model)
+    iK, iJ = drive_indices(model, "stiffness"), drive_indices(model, "rotor_inertia")
     names = list(model.param_names)
     rel = {names[i]: DEFAULT_GROUP_SPREAD["stiffness"] for i in iK}
     rel.update({names[i]: DEFAULT_GROUP_SPREAD["motor_inertia"] for i in iJ})
@@ -107,7 +107,7 @@ def _bounds(model, spread: PlantSpread, idx):
 
 def _blocks(model, spread: PlantSpread):
     """Index blocks in draw order: stiffnesses, motor inertias, payload, every other spread parameter."""
-    iK, iJ = (list(map(int, a)) for a in stiffness_scale_indices(model))
+    iK, iJ = (list(map(int, drive_indices(model, role))) for role in ("stiffness", "rotor_inertia"))
     names = list(model.param_names)
     iL = [names.index("m_load")] if "m_load" in spread.absolute or "m_load" in spread.relative else []
     taken = set(iK) | set(iJ) | set(iL)
@@ -156,7 +156,7 @@ def draw_params(model, count: int, seed: int, spread: Optional[PlantSpread] = No
     p0 = np.asarray(model.params_array(spread.nominal), dtype=float)
     blocks = _blocks(model, spread)
     bounds = [_bounds(model, spread, b) for b in blocks]
-    iK = list(map(int, stiffness_scale_indices(model)[0]))
+    iK = list(map(int, drive_indices(model, "stiffness")))
     groups = spring_scale_groups(model)
     kb = _bounds(model, spread, iK)
     alt = np.where(np.arange(n) % 2 == 0, kb[0], kb[1])
@@ -183,7 +183,7 @@ def draw_params(model, count: int, seed: int, spread: Optional[PlantSpread] = No
 
 def _follow(p, p0, groups):
     """``p`` with each nonlinear spring's other torque coefficients scaled as its drawn small-deflection stiffness
-    (:func:`~fjm_runtime.sim.step_layout.spring_scale_groups`): the whole curve x the factor, its shape kept."""
+    (:func:`~fjm_runtime.drives.spring_scale_groups`): the whole curve x the factor, its shape kept."""
     for grp in groups:
         if len(grp) > 1:
             p[grp[1:]] = p0[grp[1:]] * (p[grp[0]] / p0[grp[0]])
@@ -254,7 +254,7 @@ def _nominal_entry(where, model, key, entry, units) -> float:
 
 
 def _spread_entry(where, model, key, v):
-    iK, iJ = stiffness_scale_indices(model)
+    iK, iJ = drive_indices(model, "stiffness"), drive_indices(model, "rotor_inertia")
     names = list(model.param_names)
     if key not in GROUPS and key not in names:
         raise FjmValueError(f"{where('spread', key)}: not a group ({', '.join(GROUPS)}) or a parameter of "
@@ -305,7 +305,7 @@ def load_params_file(path, model) -> PlantSpread:
             raise FjmValueError(f"{p}: {table} = {data[table]!r}; expected a table [{table}]")
     units = _units(model)
     overrides = {k: _nominal_entry(where, model, k, v, units) for k, v in data.get("parameters", {}).items()}
-    iK, iJ = stiffness_scale_indices(model)
+    iK, iJ = drive_indices(model, "stiffness"), drive_indices(model, "rotor_inertia")
     names = list(model.param_names)
     for i in list(iK) + list(iJ):
         if names[i] in overrides and overrides[names[i]] <= 0:

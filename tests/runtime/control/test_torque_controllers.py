@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import fjm_runtime
-from fjm_runtime.control.adaptive import param_indices
+from fjm_runtime.drives import linear_stiffness_indices
 from fjm_runtime.control.factory import make_controller
 from fjm_runtime.control.sensing import torque_measurement, torque_measurement_symbolic
 from fjm_runtime.validation import FjmValueError
@@ -26,7 +26,7 @@ def test_torque_law_equals_state_law_at_exact_stiffness(kind):
     m = fjm_runtime.load("planar2")
     rng = np.random.default_rng(2)
     p = m.params_array(None)
-    K = p[param_indices(m)[0]]
+    K = p[linear_stiffness_indices(m, "torque sensing")]
     st = make_controller(kind, m, {}, **GAINS[kind])
     tq = make_controller(kind, m, {}, sensing="torque", **GAINS[kind])
     assert (st.sensing, st.measurement_size, tq.sensing, tq.measurement_size) == ("state", 8, "torque", 10)
@@ -46,7 +46,7 @@ def test_torque_law_equals_state_law_at_exact_stiffness(kind):
 def test_torque_law_sees_the_true_coordinates_under_wrong_stiffness():
     m = fjm_runtime.load("planar3")
     rng = np.random.default_rng(4)
-    iK = param_indices(m)[0]
+    iK = linear_stiffness_indices(m, "torque sensing")
     p_true = m.params_array(None)
     p_true[iK] *= np.array([0.7, 1.3, 0.8])
     tq = make_controller("ismc", m, {}, sensing="torque", **GAINS["ismc"])
@@ -63,7 +63,7 @@ def test_torque_law_sees_the_true_coordinates_under_wrong_stiffness():
 def test_symbolic_evaluate_takes_the_measurement():
     m = fjm_runtime.load("planar2")
     rng = np.random.default_rng(6)
-    K = m.params_array(None)[param_indices(m)[0]]
+    K = m.params_array(None)[linear_stiffness_indices(m, "torque sensing")]
     tq = make_controller("ismc", m, {}, sensing="torque", **GAINS["ismc"])
     xs, zs, rs = ca.SX.sym("x", 8), ca.SX.sym("z", 2), ca.SX.sym("r", 10)
     ms = torque_measurement_symbolic(xs, K)
@@ -106,7 +106,7 @@ def test_pdg_controller_holds_gravity_at_the_set_point():
     m = fjm_runtime.load("planar2")
     n = m.n
     p = m.params_array(None)
-    K = p[param_indices(m)[0]]
+    K = p[linear_stiffness_indices(m, "torque sensing")]
     q_d = np.array([0.4, -0.3])
     # gravity from the plant: relaxed spring at rest, ddq = -D^-1 G
     x0 = np.concatenate([q_d, np.zeros(n), q_d, np.zeros(n)])

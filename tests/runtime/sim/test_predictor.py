@@ -14,7 +14,8 @@ from fjm_runtime.export.controller import design_controller
 from fjm_runtime.sim import predictor
 from fjm_runtime.sim.sensor import SensorModel
 from fjm_runtime.sim.simulate import simulate
-from fjm_runtime.sim.step_layout import make_layout, stiffness_indices
+from fjm_runtime.drives import linear_stiffness_indices
+from fjm_runtime.sim.step_layout import make_layout
 from fjm_runtime.sim.substeps import resolve_substeps
 from fjm_runtime.validation import FjmValueError
 from support.numerics import rk4
@@ -23,7 +24,7 @@ from support.numerics import rk4
 def _predicted(model, p, m_old, U_row, T, substeps):
     """This file's predictor: state from the torque measurement, RK4 per sample, measurement again."""
     n = model.n
-    K = p[stiffness_indices(model)[0]]
+    K = p[linear_stiffness_indices(model, "torque sensing")]
     q, dq, tau, dqm = m_old[:n], m_old[n:2 * n], m_old[2 * n:3 * n], m_old[4 * n:]
     x = np.concatenate([q, dq, q + tau / K, dqm])
     for j in range(len(U_row) // n):
@@ -36,7 +37,7 @@ def _predicted(model, p, m_old, U_row, T, substeps):
 def _worst_over_tolerance(model, p, X, U, sensor, T, substeps):
     """max over starts and slots of |prediction - 64-substep prediction| / tolerance."""
     n = model.n
-    K = p[stiffness_indices(model)[0]]
+    K = p[linear_stiffness_indices(model, "torque sensing")]
     exact = np.array([np.concatenate([x[:n], x[n:2 * n], K * (x[2 * n:3 * n] - x[:n]),
                                       K * (x[3 * n:] - x[n:2 * n]), x[3 * n:]]) for x in X])
     normals = np.random.default_rng(predictor.NOISE_SEED).standard_normal(exact.shape)

@@ -11,7 +11,7 @@ import pytest
 
 import fjm_runtime
 from fjm_runtime.sim.rest import rest_state
-from fjm_runtime.sim.step_layout import stiffness_indices
+from fjm_runtime.drives import linear_stiffness_indices
 
 
 @pytest.mark.parametrize("name", ["link1", "planar2", "panda", "panda_complete"])
@@ -22,7 +22,7 @@ def test_rest_state_is_an_equilibrium_under_the_spring_torque(name):
     q = np.linspace(0.2, -0.5, n)
     x = rest_state(m, q, p)
     assert np.array_equal(x[:n], q) and not np.any(x[n:2 * n]) and not np.any(x[3 * n:])
-    u = p[stiffness_indices(m)[0]] * (x[2 * n:3 * n] - x[:n])
+    u = p[linear_stiffness_indices(m, "the spring torque")] * (x[2 * n:3 * n] - x[:n])
     assert np.max(np.abs(u)) > 1e-3                      # gravity does load the springs here
     xdot = np.asarray(m.f(x, p), dtype=float).ravel() + np.asarray(m.g(x, p), dtype=float) @ u
     assert np.max(np.abs(xdot)) < 1e-9 * (1.0 + np.max(np.abs(u)))

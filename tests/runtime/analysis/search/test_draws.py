@@ -5,7 +5,7 @@ import pytest
 
 import fjm_runtime
 from fjm_runtime.analysis.search.draws import draw_params, load_params_file
-from fjm_runtime.sim.step_layout import stiffness_indices
+from fjm_runtime.drives import drive_indices, linear_stiffness_indices
 from fjm_runtime.validation import FjmValueError
 
 
@@ -13,7 +13,7 @@ def test_draws_corners_then_box():
     m = fjm_runtime.load("panda")
     P = draw_params(m, 40, seed=3)
     p0 = np.asarray(m.params_array({}))
-    iK, iJ = stiffness_indices(m)
+    iK, iJ = linear_stiffness_indices(m, "the draws"), drive_indices(m, "rotor_inertia")
     kr, jr = P[:, iK] / p0[iK], P[:, iJ] / p0[iJ]
     assert np.allclose(kr[0], 0.7) and np.allclose(kr[1], 1.3)
     assert np.allclose(kr[2], [0.7, 1.3] * 3 + [0.7])
@@ -28,7 +28,7 @@ def test_draws_corners_then_box():
 def _former_draws(model, count, seed):
     """The hard-coded box of the former design.py, verbatim: the reference the default spread must equal."""
     n = int(model.n)
-    iK, iJ = stiffness_indices(model)
+    iK, iJ = linear_stiffness_indices(model, "the draws"), drive_indices(model, "rotor_inertia")
     p0 = np.asarray(model.params_array({}), dtype=float)
     iL = list(model.param_names).index("m_load") if "m_load" in model.param_names else None
     alt = np.where(np.arange(n) % 2 == 0, 0.7, 1.3)
