@@ -139,6 +139,16 @@ def _link1_latex(lin: Linearization) -> List[str]:
     return lines
 
 
+def _parameter_and_function_tables(m, functions, ops) -> List[str]:
+    """The ``## Parameters`` and ``## Generated functions`` tables of a model's REPORT.md."""
+    lines = ["## Parameters", "", "| name | default | meaning | unit |", "|---|---|---|---|"]
+    lines += [f"| `{p.name}` | {p.default:g} | {p.meaning} | {p.unit} |" for p in m.params]
+    lines += ["", "## Generated functions", "", "| function | output shape | operations |", "|---|---|---|"]
+    for name, fn in functions.items():
+        lines.append(f"| `{m.name}_{name}` | {fn.size_out(0)[0]} x {fn.size_out(0)[1]} | {ops[name]} |")
+    return lines
+
+
 def render_report(lin: Linearization, functions: Dict[str, ca.Function], ops: Dict[str, int],
                   header: str) -> str:
     """The Markdown text of ``REPORT.md`` for one model."""
@@ -146,11 +156,8 @@ def render_report(lin: Linearization, functions: Dict[str, ca.Function], ops: Di
     n = m.n
     lines = [f"<!-- {header} -->", f"# {m.name}", "", m.description, "",
              f"State $x = [q; \\dot q; q_m; \\dot q_m]$ ({4 * n} entries), input $u$ ({n} motor torques).",
-             "", "## Parameters", "", "| name | default | meaning | unit |", "|---|---|---|---|"]
-    lines += [f"| `{p.name}` | {p.default:g} | {p.meaning} | {p.unit} |" for p in m.params]
-    lines += ["", "## Generated functions", "", "| function | output shape | operations |", "|---|---|---|"]
-    for name, fn in functions.items():
-        lines.append(f"| `{m.name}_{name}` | {fn.size_out(0)[0]} x {fn.size_out(0)[1]} | {ops[name]} |")
+             ""]
+    lines += _parameter_and_function_tables(m, functions, ops)
     lines += ["", f"Named intermediate symbols in the derivation program: {len(m.program.definitions)}.", ""]
     if m.name == "link1":
         lines += _link1_latex(lin)
@@ -242,11 +249,8 @@ def render_complete_report(lin: Linearization, functions: Dict[str, ca.Function]
     lines = [f"<!-- {header} -->", f"# {m.name}", "", m.description, "",
              f"Complete elastic model (docs/complete-model.md); reduced model: `{m.reduced_model}`. "
              f"State $x = [q; \\dot q; q_m; \\dot q_m]$ ({4 * n} entries), input $u$ ({n} motor torques).",
-             "", "## Parameters", "", "| name | default | meaning | unit |", "|---|---|---|---|"]
-    lines += [f"| `{p.name}` | {p.default:g} | {p.meaning} | {p.unit} |" for p in m.params]
-    lines += ["", "## Generated functions", "", "| function | output shape | operations |", "|---|---|---|"]
-    for name, fn in functions.items():
-        lines.append(f"| `{m.name}_{name}` | {fn.size_out(0)[0]} x {fn.size_out(0)[1]} | {ops[name]} |")
+             ""]
+    lines += _parameter_and_function_tables(m, functions, ops)
     defaults = np.array([p.default for p in m.params])
     rows = complete_brackets(functions["f"], functions["g"], n, defaults)
     verdict = static_fl_verdict(rows, n)
