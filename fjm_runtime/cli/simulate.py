@@ -20,7 +20,7 @@ import numpy as np
 from .models import MODEL_HELP
 from ..analysis.certificates.lemma1 import FALLBACK_SWITCHING_GAIN, paper_beta_hat, paper_bound_applies
 from ..control.defaults import DEFAULT_LAM, DEFAULT_LAYER_RATE, PAPER_K_RANGE, default_delta
-from ..control.factory import CONTROLLER_KINDS, make_controller
+from ..control.factory import CONTROLLER_KINDS, FULL_SENSED_KINDS, make_controller
 from ..control.references import REFERENCE_KINDS, make_reference
 from ..drives import drive_indices, linear_stiffness_indices
 from ..sim.metrics import peak_torque, rms_second_half, time_at_limit, time_at_rate_limit, torque_jitter
@@ -36,6 +36,7 @@ from .simulate_checks import (DEFAULT_MAX_MEMORY_GB, MAX_SUBSTEPS, check_pole, c
 
 #: ``--max-memory``, GB.
 MEMORY_GB = Range(0, 1e4, "GB", "memory", lo_open=True)
+from .simulate_laws import check_run_interface, impedance_controller, take_law_sensing
 from .simulate_conditions import (default_gains, design_sensor, peak_text, peak_until, run_effort_limits,
                                   say_conditions, take_design_conditions)
 
@@ -43,11 +44,13 @@ from .simulate_conditions import (default_gains, design_sensor, peak_text, peak_
 def add_arguments(sim) -> None:
     """The arguments of ``fjm simulate`` on its parser ``sim`` (name, help, description: commands.toml)."""
     sim.add_argument("model", help=MODEL_HELP)
-    sim.add_argument("--controller", default=None, choices=CONTROLLER_KINDS,
+    sim.add_argument("--controller", default=None, choices=CONTROLLER_KINDS + FULL_SENSED_KINDS,
                      help="smc: paper's law with sat; sign: paper's discontinuous law; ismc: integral "
                           "sliding surface; fl: plain feedback linearization; adaptive: integral surface "
-                          "with an online stiffness estimate projected onto [--k-min, --k-max] "
-                          "(default: the kind of --gains, else smc)")
+                          "with an online stiffness estimate projected onto [--k-min, --k-max]; impedance: "
+                          "motor-side impedance with torque feedback (motor interface); joint_impedance: "
+                          "link-side impedance, tau_d for a joint_torque interface (both read q, dq, q_m, dq_m, "
+                          "tau_J, dtau_J) (default: the kind of --gains, else smc)")
     sim.add_argument("--reference", default=None,
                      help=f"one of {', '.join(REFERENCE_KINDS)}, or 'task': the task the gains were designed on "
                           "(default: 'task' when the gains come from a design file that records one, else sine)")
@@ -96,9 +99,10 @@ def _add_sampled_data_flags(sim) -> None:
                           "default: the --gains file's, else 1000)")
     sim.add_argument("--substeps", type=int, default=None,
                      help=f"RK4 plant steps per control sample, 1..{MAX_SUBSTEPS} (default: the fastest-mode rule)")
-    sim.add_argument("--sensing", choices=("state", "torque"), default=None,
-                     help="what the controller measures: the state, or q, dq, tau_J, dtau_J, dq_m (default: the "
-                          "--gains file's, else state)")
+    sim.add_argument("--sensing", choices=("state", "torque", "full"), default=None,
+                     help="what the controller measures: the state, or q, dq, tau_J, dtau_J, dq_m, or (full, the "
+                          "impedance laws') q, dq, q_m, dq_m, tau_J, dtau_J (default: the --gains file's, else full "
+                          "for the impedance laws, else state)")
     sim.add_argument("--delay-samples", type=int, default=None,
                      help=f"computation delay in samples, {DELAY} (default: the --gains "
                           "file's, else 0)")
@@ -250,6 +254,8 @@ def _check_flags(args, dt: float) -> None:
 
 def _build_controller(m, args, nominal, ref, kind, file_gains):
     """The controller of the run and the Lemma 1 gain record (or None)."""
+    if kind in FULL_SENSED_KINDS:
+        return impedance_controller(m, args, nominal, kind, file_gains), None, None, None
     k_bounds = (args.k_min, args.k_max)
     extra: Dict[str, object] = {}
     if args.beta_hat == "paper" and paper_bound_applies(m) and args.sensing == "state":
@@ -360,6 +366,7 @@ def run(args) -> int:
         check_output_file(args.plot, "--plot")
     m = load(args.model)
     file_design = _load_gains(args)
+    take_law_sensing(args, file_design)
     taken = take_design_conditions(args, file_design)
     dt = _period(args)
     _check_flags(args, dt)
@@ -376,6 +383,7 @@ def run(args) -> int:
     if file_design is None:  # a shipped design made with prediction keeps it
         args.predict = bool(args.predict or (design and design.predict))
     interface = interface_arg(args, design)
+    check_run_interface(kind, interface, args, design)
     _check_size(m, args, ctrl, ref, x0, true, sensor, dt, interface)
     conditions = {"model": m.name, "kind": kind, "sensing": args.sensing, "rate": 1.0 / dt,
                   "delay": args.delay_samples, "predict": bool(args.predict), "sensor": sensor, "interface": interface}

@@ -259,8 +259,11 @@ def say_conditions(m, args, ref, dt, taken, source, provenance, limits, gains) -
     if taken:
         print(f"fjm: {taken}", file=sys.stderr)
     if not provenance["designed_for_these_conditions"]:
-        what = (f"default gains (lam {gains[0]:g} 1/s, k_s {short_gain(gains[1])} rad/s^4, delta "
-                f"{short_gain(gains[2])} rad/s^3)" if source == "defaults" else f"gains ({source})")
+        if source == "defaults" and gains[1] is None:   # an impedance law: its defaults from the nominal drives
+            what = "law's default gains (from the nominal stiffness and inertia)"
+        else:
+            what = (f"default gains (lam {gains[0]:g} 1/s, k_s {short_gain(gains[1])} rad/s^4, delta "
+                    f"{short_gain(gains[2])} rad/s^3)" if source == "defaults" else f"gains ({source})")
         print(f"fjm: warning: the {what} were not designed for {m.name} under these conditions: "
               f"{'; '.join(provenance['not_designed_because'])}", file=sys.stderr)
     elif source.startswith("shipped"):

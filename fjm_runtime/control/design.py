@@ -19,7 +19,7 @@ import numpy as np
 
 from ..model import command_name
 from ..validation import FjmValueError
-from .factory import CONTROLLER_KINDS, make_controller
+from .factory import CONTROLLER_KINDS, FULL_SENSED_KINDS, make_controller
 from .sensing import SENSING_KINDS
 
 __all__ = ["CONDITION_KEYS", "Design", "design_file_name", "is_real", "task_start"]
@@ -29,12 +29,20 @@ CONDITION_KEYS = ("model", "kind", "sensing", "rate", "delay", "predict")
 
 # gains a file may set: (sign rule, unit); per-joint unless noted in _SCALAR
 _GAIN_RULES = {"lam": ("> 0", "1/s"), "k_s": (">= 0", "rad/s^4"), "delta": ("> 0", "rad/s^3"),
-               "k_lin": (">= 0", "1/s"), "u_max": ("> 0", "N m")}
+               "k_lin": (">= 0", "1/s"), "u_max": ("> 0", "N m"),
+               # the impedance laws' (fjm_runtime.control.impedance): motor PD, torque feedback, link integral
+               "K_p": (">= 0", "N m/rad"), "K_d": (">= 0", "N m s/rad"), "K_T": ("> -1", "1"),
+               "K_i": (">= 0", "N m/(rad s)"), "K_q": (">= 0", "N m/rad"), "D_q": (">= 0", "N m s/rad")}
+# the sign rules: what each allows
+_RULE_HOLDS = {"> 0": lambda a: a > 0, ">= 0": lambda a: a >= 0, "> -1": lambda a: a > -1}
 _SCALAR = ("lam",)
 # keys the law of each kind reads from a design (one of the tuple's names)
 _REQUIRED = {"smc": (("lam", "c"), ("k_s",), ("delta",)), "ismc": (("lam", "c"), ("k_s",), ("delta",)),
              "adaptive": (("lam", "c"), ("k_s",), ("delta",)), "sign": (("lam", "c"), ("k_s",)),
              "fl": (("lam", "c"),)}
+# the only gains the impedance laws take (their keywords); any other key is refused by name
+_ONLY = {"impedance": ("K_p", "K_d", "K_T", "K_i", "u_max", "anti_windup"),
+         "joint_impedance": ("K_q", "D_q", "K_i", "u_max", "anti_windup")}
 # JSON keys held by typed fields (the field name where it differs from the key)
 _FIELD_OF_KEY = {"reference": "task"}
 _TYPED_KEYS = ("model", "kind", "sensing", "rate", "delay", "predict", "predict_substeps", "sensor", "noise",
@@ -105,10 +113,12 @@ class Design:
     Attributes
     ----------
     kind : str
-        Law, one of :data:`~fjm_runtime.control.factory.CONTROLLER_KINDS`.
+        Law, one of :data:`~fjm_runtime.control.factory.CONTROLLER_KINDS` or
+        :data:`~fjm_runtime.control.factory.FULL_SENSED_KINDS`.
     gains : dict
         ``lam`` (1/s) or ``c``, ``k_s`` (rad/s^4), ``delta`` (rad/s^3), ``k_lin`` (1/s), ``u_max``
-        (N m): scalars or per-joint lists (n,).
+        (N m): scalars or per-joint lists (n,). The impedance laws': ``K_p``, ``K_d``, ``K_T``, ``K_i``
+        (``impedance``) or ``K_q``, ``D_q``, ``K_i`` (``joint_impedance``), each optional (the law's default).
     model, sensing, rate, delay, predict : optional
         The conditions (model name; ``'state'``/``'torque'``; control rate, Hz; computation delay,
         samples; delay compensation). ``None``: not recorded (a hand-written file).
@@ -158,9 +168,9 @@ class Design:
     @classmethod
     def from_dict(cls, d, where: str = "gains file") -> "Design":
         """A design from its JSON object; one-line :class:`FjmValueError` naming ``where`` and the key."""
-        if not isinstance(d, dict) or not isinstance(d.get("gains"), dict) or d.get("kind") not in CONTROLLER_KINDS:
-            raise FjmValueError(f"{where}: expected {{\"kind\": one of {', '.join(CONTROLLER_KINDS)}, "
-                                "\"gains\": {...}}")
+        kinds = CONTROLLER_KINDS + FULL_SENSED_KINDS
+        if not isinstance(d, dict) or not isinstance(d.get("gains"), dict) or d.get("kind") not in kinds:
+            raise FjmValueError(f"{where}: expected {{\"kind\": one of {', '.join(kinds)}, \"gains\": {{...}}}}")
         _check_conditions(d, where)
         typed = {_FIELD_OF_KEY.get(k, k): d[k] for k in _TYPED_KEYS if k in d}
         report = {k: v for k, v in d.items() if k not in _TYPED_KEYS and k != "file"}
@@ -241,6 +251,10 @@ class Design:
             what = f"model {self.model!r} with {joints} joints" if self.model else f"{joints} joints"
             raise FjmValueError(f"{where}: the gains are for {what}; {name} has {n} joint{'s' * (n != 1)} "
                                 f"(expected gains designed for {name}, e.g. from `fjm design {command_name(model)}`)")
+        unknown = [k for k in self.gains if k not in _ONLY.get(self.kind, self.gains)]
+        if unknown:
+            raise FjmValueError(f"{where}: gains.{unknown[0]} is not a gain of the {self.kind} law; expected "
+                                f"{', '.join(_ONLY[self.kind])}")
         for key, (rule, unit) in _GAIN_RULES.items():
             if key in self.gains:
                 _check_gain(where, key, self.gains[key], rule, unit, n, name)
@@ -407,7 +421,7 @@ def _check_gain(where: str, key: str, v, rule: str, unit: str, n: int, name: str
     if isinstance(v, list) and len(v) not in (1, n):
         raise FjmValueError(f"{where}: gains.{key} has {len(v)} entries; {expected} for {name}")
     arr = np.asarray(vals, dtype=float)
-    if not np.all(np.isfinite(arr)) or not np.all(arr > 0 if rule == "> 0" else arr >= 0):
+    if not np.all(np.isfinite(arr)) or not np.all(_RULE_HOLDS[rule](arr)):
         raise FjmValueError(f"{where}: gains.{key} = {v!r}; {expected}")
 
 

@@ -18,9 +18,10 @@ from .impedance import ImpedanceController, JointImpedanceController
 from .laws import SlidingModeController
 from .pdg import MotorPDGravityController
 from .sensing import SENSING_KINDS
+from ..validation import FjmValueError
 
-__all__ = ["CONTROLLER_KINDS", "FULL_SENSED_KINDS", "LAWS", "Law", "REGULATION_KINDS", "TORQUE_SENSED_KINDS",
-           "make_controller"]
+__all__ = ["CONTROLLER_KINDS", "FULL_SENSED_KINDS", "INTERFACE_OF_LAW", "LAWS", "Law", "REGULATION_KINDS",
+           "TORQUE_SENSED_KINDS", "check_law_interface", "make_controller"]
 
 
 @dataclass(frozen=True)
@@ -60,8 +61,36 @@ FULL_SENSED_KINDS = ("impedance", "joint_impedance")
 #: line's ``--controller`` choices); ``make_controller`` also takes :data:`FULL_SENSED_KINDS`.
 CONTROLLER_KINDS = tuple(k for k in LAWS if k not in REGULATION_KINDS + FULL_SENSED_KINDS)
 
+#: The command-interface kind each full-sensed law is made for: ``impedance`` outputs the motor torque, ``joint_impedance``
+#: the desired link torque without gravity that a joint-torque layer (libfranka's) takes.
+INTERFACE_OF_LAW = {"impedance": "motor", "joint_impedance": "joint_torque"}
+
 #: The kinds that accept ``sensing='torque'`` (emitted as ``control_<kind>_tau``).
 TORQUE_SENSED_KINDS = ("smc", "ismc", "fl")
+
+
+def check_law_interface(kind: str, interface, where: str = "--interface") -> None:
+    """Refuse, in one line, a law of :data:`INTERFACE_OF_LAW` on a command interface of another kind.
+
+    Parameters
+    ----------
+    kind : str
+        The law (other laws pass).
+    interface : CommandInterface
+        Its ``kind`` (``'motor'`` or ``'joint_torque'``) and ``name`` are read.
+    where : str
+        How the error names the interface's origin.
+
+    Raises
+    ------
+    FjmValueError
+        Naming the law, the interface and the valid pairing.
+    """
+    want = INTERFACE_OF_LAW.get(kind)
+    if want is not None and interface.kind != want:
+        raise FjmValueError(f"{where} {interface.name} (a {interface.kind} interface) with controller {kind}: "
+                            f"{kind} is made for a {want} interface (expected impedance on motor or ideal, "
+                            "joint_impedance on joint_torque or franka, or an interface file of that kind)")
 
 
 def make_controller(kind: str, model, nominal_params, sensing: str = "state", **kwargs) -> SlidingModeController:
