@@ -11,7 +11,7 @@ from pathlib import Path
 from typing import Callable, List, Tuple
 
 from . import (baxter, certified, chains, complete, identification, panda_drives, paper, plots, real_arm,
-               real_drives)
+               real_drives, real_interface)
 from .panda import panda_section
 from .report import log
 from .settings import DURATION, QUICK_DURATION, QUICK_SAMPLES, DemoContext
@@ -31,7 +31,8 @@ SECTIONS: Tuple[Callable[[DemoContext], Tuple[List[str], list]], ...] = (
     paper.chattering_section, paper.comparison_section, paper.adaptive_section, paper.anti_windup_section,
     chains.chains_section, chains.eigenvalue_section, chains.low_nominal_section,
     certified.certificates_section, certified.synthesized_loop_section, certified.disturbance_section,
-    paper.monte_carlo_section, spatial_section, real_arm.real_arm_section, complete.complete_section,
+    paper.monte_carlo_section, spatial_section, real_arm.real_arm_section,
+    real_interface.real_interface_section, complete.complete_section,
     baxter.tree_section, identification.identification_section, real_drives.real_drives_section,
     panda_drives.panda_drives_section,
 )

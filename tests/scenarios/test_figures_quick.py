@@ -20,10 +20,11 @@ PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 FIGURES = ["fig1_2_regulation.png", "fig3_4_tracking.png", "chattering_sat_vs_sign.png",
            "compare_link1_regulation.png", "compare_link1_tracking.png", "adaptive_stiffness_link1.png",
            "compare_planar2_tracking.png", "compare_planar3_tracking.png", "monte_carlo.png", "real_drives.png",
-           "panda_drives.png"]
+           "panda_drives.png", "real_arm_laws.png"]
 SECTIONS = ["## Lemma 1 switching gain", "## Paper reproduction", "## Chattering",
             "## Plain feedback linearization", "## n links", "## Certified gains for the law that runs",
-            "## Monte Carlo robustness", "## Real drives: the datasheet spring", "## Real drives on the Panda"]
+            "## Monte Carlo robustness", "## Real drives: the datasheet spring", "## Real drives on the Panda",
+            "## Which law on which interface"]
 
 
 def table_rows(text, heading):
