@@ -70,7 +70,7 @@ HEAVY_FIRST = (
     "tests/derive/test_interrupted_derive.py",
     "tests/runtime/analysis/certificates/test_certify.py",
     "tests/packaging/test_wheel.py",
-    "tests/runtime/control/test_smc.py",
+    "tests/runtime/control/test_laws.py",
     "tests/scenarios/test_spatial_control.py",
     "tests/packaging/test_realtime_example.py",
     "tests/derive/test_derive_check_and_timings.py",
@@ -80,7 +80,7 @@ HEAVY_FIRST = (
     "tests/runtime/sim/test_sampled_data.py",
     "tests/runtime/sim/test_compiled.py",
     "tests/derive/test_guard.py",
-    "tests/runtime/control/test_ismc.py",
+    "tests/runtime/analysis/certificates/test_regulation.py",
 )
 
 

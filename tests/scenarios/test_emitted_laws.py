@@ -220,7 +220,7 @@ def test_runtime_law_equals_independent_reference(model, kind, case, extra):
         assert np.max(np.abs(U_ref)) == pytest.approx(kw["u_max"])
     # python (calls the law and its _zdot per sample) on the stateful link1 laws; casadi (composes them
     # into the fused loop) everywhere;
-    # compiled == casadi and python == casadi on chains: tests/runtime/sim/test_compiled.py, tests/runtime/control/test_smc.py
+    # compiled == casadi and python == casadi on chains: tests/runtime/sim/test_compiled.py, tests/runtime/control/test_laws.py
     # (the python backend over the first 0.5 s only: ~40 s of Python loop per 10 s run otherwise)
     runs = [("casadi", 10.0)] + ([("python", 0.5)] if model == "link1" and kind in ("ismc", "adaptive") else [])
     for backend, duration in runs:
