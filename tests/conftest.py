@@ -77,7 +77,7 @@ HEAVY_FIRST = (
     "tests/scenarios/test_emitted_laws.py",
     "tests/derive/test_physics.py",
     "tests/packaging/test_self_contained.py",
-    "tests/runtime/sim/test_sampled_data.py",
+    "tests/runtime/sim/test_simulate.py",
     "tests/runtime/sim/test_compiled.py",
     "tests/derive/test_guard.py",
     "tests/runtime/analysis/certificates/test_regulation.py",

@@ -14,7 +14,7 @@ affine in ``q_m`` (its derivative is ``D^-1 K``) and the motor acceleration affi
 rounding. ``D^-1`` varies with ``q``: :data:`SAFETY` covers a fastest mode up to that factor
 faster than at the initial configuration. :data:`STEP_PER_RADIAN` (``omega h`` per RK4 substep)
 is chosen so that the substepped plant equals a 10x finer reference to 1e-8 rad over 10 s on
-the Panda at 1 kHz and on link1 (docs/simulation.md; tests/runtime/sim/test_sampled_data.py).
+the Panda at 1 kHz and on link1 (docs/simulation.md; tests/runtime/sim/test_substeps.py).
 """
 from __future__ import annotations
 

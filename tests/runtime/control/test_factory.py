@@ -5,6 +5,7 @@ import pytest
 from fjm_runtime.control.defaults import DEFAULT_LAM, DEFAULT_SWITCHING_GAIN, PAPER_K_RANGE, default_delta
 from fjm_runtime.control.factory import CONTROLLER_KINDS, FULL_SENSED_KINDS, LAWS, REGULATION_KINDS, make_controller
 from fjm_runtime.control.laws import SlidingModeController
+from fjm_runtime.control.references import Sinusoid, make_reference
 
 
 def test_every_name_is_in_the_table():
@@ -39,3 +40,14 @@ def test_the_defaults_agree_with_each_other():
     from fjm_runtime.control.defaults import default_K_bounds
     assert default_K_bounds(150.0) == PAPER_K_RANGE
     assert default_delta(DEFAULT_SWITCHING_GAIN) == 5.0
+
+
+def test_unknown_reference_and_controller(link1):
+    with pytest.raises(ValueError, match="reference = 'ramp'"):
+        make_reference("ramp")
+    with pytest.raises(ValueError, match="controller = 'pid'"):
+        make_controller("pid", link1, {}, lam=5.0)
+    with pytest.raises(ValueError, match="amplitude"):
+        Sinusoid([0.1, 0.2, 0.3], n=2)
+    with pytest.raises(ValueError, match="rise_time"):
+        make_reference("step", rise_time=0.0)

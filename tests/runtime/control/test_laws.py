@@ -192,3 +192,34 @@ def test_anti_windup_under_torque_limit(link1, K_true):
     assert overshoot < 0.2  # stated bound (measured 0.075 at K=100, 0.186 at K=200)
     assert final < 1e-10  # measured 5.9e-12 (K = 100) and 0 (K = 200) at 10 s
     assert zmax < out[False][2] and overshoot <= out[False][0]
+
+
+@pytest.mark.parametrize("kwargs, field", [
+    ({"delta": 0.0}, "delta"),
+    ({"delta": -1.0}, "delta"),
+    ({"k_s": -5.0}, "k_s"),
+    ({"k_s": float("nan")}, "k_s"),
+    ({"k_s": [1.0, 2.0]}, "k_s"),
+    ({"lam": -2.0, "c": None}, "lam"),
+    ({"lam": None, "c": [1.0, 2.0]}, "c"),
+    ({"lam": None, "c": [8.0, 1.0, 1.0]}, "c"),      # c3 c2 < c1: not Hurwitz
+    ({"lam": None, "c": [1.0, -2.0, 3.0]}, "c"),
+    ({"mode": "tanh"}, "mode"),
+    ({"beta_hat": [[1.0, 0.0]]}, "beta_hat"),
+    ({"beta_hat": -0.01}, "beta_hat"),
+    ({"u_max": 0.0}, "u_max"),
+    ({"k_lin": -1.0}, "k_lin"),
+])
+def test_controller_rejects_bad_design(link1, kwargs, field):
+    args = {"lam": 5.0, "k_s": 10.0, "delta": 1.0}
+    args.update(kwargs)
+    args = {k: v for k, v in args.items() if v is not None}
+    with pytest.raises(ValueError, match=field):
+        SlidingModeController(link1, {}, **args)
+
+
+def test_controller_rejects_bad_nominal_params(link1):
+    with pytest.raises(ValueError, match="nominal_params"):
+        SlidingModeController(link1, {"K": float("nan")}, lam=5.0, k_s=1.0)
+    with pytest.raises(ValueError, match="stiffness|nominal_params"):
+        SlidingModeController(link1, {"stiffness": 1.0}, lam=5.0, k_s=1.0)

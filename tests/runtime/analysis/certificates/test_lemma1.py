@@ -124,3 +124,19 @@ def test_paper_bound_in_true_coordinates(link1, box, published):
     got = paper_bound(link1, {"K": K_NOM}, param_box=K_BOX, reference_bounds=ref.derivative_bounds()[:, 0],
                       error_bounds=E, lam=8.0)
     assert got.k_s_tight == pytest.approx(expected, rel=1e-6)
+
+
+@pytest.mark.parametrize("kwargs, field", [
+    ({"c": [1.0, 2.0]}, "c"),
+    ({"reference_bounds": [1.0, 1.0]}, "reference_bounds"),
+    ({"error_bounds": [-1.0, 0, 0, 0]}, "error_bounds"),
+    ({"eta": 0.0}, "eta"),
+    ({"bounds": {"K": (200.0, 100.0)}}, "bounds"),
+    ({"bounds": {"stiffness": (1.0, 2.0)}}, "bounds"),
+])
+def test_lemma1_rejects_bad_inputs(kwargs, field):
+    args = {"c": [512.0, 192.0, 24.0], "reference_bounds": [0.5] * 5, "bounds": {"K": (100.0, 200.0)}}
+    args.update(kwargs)
+    c, rb = args.pop("c"), args.pop("reference_bounds")
+    with pytest.raises(ValueError, match=field):
+        lemma1_gain(c, rb, **args)

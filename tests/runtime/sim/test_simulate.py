@@ -1,75 +1,23 @@
-"""The sampled-data loop: substep convergence, zero-order hold, the delay against a reference loop
-written here, noise reproducibility and equality across backends, the substep warning, bad input."""
-import warnings
-
+"""simulate (fjm_runtime.sim.simulate), THE sampled-data loop: zero-order hold, the delay against a reference loop
+written here, noise reproducibility and equality across backends, bad input named by its field, divergence
+reported with its time."""
 import numpy as np
 import pytest
 
 from fjm_runtime.control.factory import make_controller
+from fjm_runtime.control.laws import SlidingModeController
 from fjm_runtime.control.references import Sinusoid
 from fjm_runtime.sim.sensor import SensorModel
 from fjm_runtime.sim.simulate import simulate
-from fjm_runtime.sim.substeps import CoarseIntegrationWarning, fastest_mode, resolve_substeps
+from fjm_runtime.sim.step import SimulationDivergedError
 from fjm_runtime.validation import FjmValueError
 from support.numerics import rk4
-
-
-def _ismc(m, **kw):
-    kw.setdefault("lam", 8.0)
-    kw.setdefault("k_s", 100.0)
-    kw.setdefault("delta", 2.0)
-    return make_controller("ismc", m, {}, **kw)
-
-
-def test_fastest_mode_equals_the_link1_formula(link1):
-    # link1: D = J_l, so omega^2 = K / J_l + K / J_m (independent of q)
-    p = link1.params_array({"K": 180.0, "J_l": 0.7, "J_m": 1.9})
-    x0 = np.array([0.4, 0.1, -0.2, 0.3])
-    assert fastest_mode(link1, x0, p) == pytest.approx(np.sqrt(180.0 / 0.7 + 180.0 / 1.9), rel=1e-12)
-
-
-def test_fastest_mode_uses_the_inverse_inertia_diagonal(planar2):
-    p = planar2.params_array({})
-    x0 = np.array([0.3, -0.5, 0, 0, 0.3, -0.5, 0, 0], dtype=float)
-    D = np.asarray(planar2.inertia(x0, p), dtype=float).reshape(2, 2)
-    K = p[[planar2.param_names.index("K1"), planar2.param_names.index("K2")]]
-    Jm = p[[planar2.param_names.index("Jm1"), planar2.param_names.index("Jm2")]]
-    expected = np.max(np.sqrt(K * np.diag(np.linalg.inv(D)) + K / Jm))
-    assert fastest_mode(planar2, x0, p) == pytest.approx(expected, rel=1e-9)
-
-
-def test_substeps_converge_to_a_ten_times_finer_reference(planar2):
-    """The default rule's plant equals a 10x finer one to 1e-8 rad (planar2, 2 s at 1 kHz, stiff joints)."""
-    ctrl = _ismc(planar2)
-    stiff = {"K1": 4e4, "K2": 4e4}
-    ref = Sinusoid(0.5, 1.0, n=2)
-    S = resolve_substeps(None, planar2, np.zeros(8), planar2.params_array(stiff), 1e-3)
-    assert S > 1                                   # the rule asks for substeps on this stiff plant
-    ideal = "ideal"                                # the rule is for the plant under a held torque
-    a = simulate(planar2, ctrl, ref, duration=2.0, true_params=stiff, interface=ideal)
-    b = simulate(planar2, ctrl, ref, duration=2.0, true_params=stiff, substeps=10 * S, interface=ideal)
-    with pytest.warns(CoarseIntegrationWarning):  # deliberately coarse: the warning is part of the contract
-        c = simulate(planar2, ctrl, ref, duration=2.0, true_params=stiff, substeps=1, interface=ideal)
-    assert a.settings["substeps"] == S
-    err = np.max(np.abs(a.x[:, :2] - b.x[:, :2]))
-    assert err < 1e-8
-    assert np.max(np.abs(c.x[:, :2] - b.x[:, :2])) > 10 * err   # one step per sample is measurably worse
-
-
-def test_coarse_substeps_warn_in_one_line(planar2):
-    stiff = {"K1": 4e4, "K2": 4e4}
-    with pytest.warns(CoarseIntegrationWarning) as rec:
-        simulate(planar2, _ismc(planar2), Sinusoid(0.5, 1.0, n=2), duration=0.01, true_params=stiff, substeps=1)
-    msg = str(rec[0].message)
-    assert "\n" not in msg and "omega_max" in msg and "rule" in msg
-    with warnings.catch_warnings():
-        warnings.simplefilter("error", CoarseIntegrationWarning)
-        simulate(planar2, _ismc(planar2), Sinusoid(0.5, 1.0, n=2), duration=0.01, true_params=stiff)
+from support.sampled_loop import ismc_controller
 
 
 def test_zero_order_hold_and_once_per_sample_controller_state(link1):
     """u is constant within a sample: the plant under u_k equals a hand-written RK4 under that constant."""
-    ctrl = _ismc(link1)
+    ctrl = ismc_controller(link1)
     res = simulate(link1, ctrl, Sinusoid(0.5, 1.0), duration=0.05, substeps=4, true_params={"K": 120.0},
                    backend="python", interface="ideal")
     p = link1.params_array({"K": 120.0})
@@ -105,7 +53,7 @@ def _reference_delay_loop(m, ctrl, ref, p_true, d, n_samples):
 
 @pytest.mark.parametrize("d", [1, 3])
 def test_delay_shifts_the_controller_input(link1, d):
-    ctrl = _ismc(link1)
+    ctrl = ismc_controller(link1)
     ref = Sinusoid(0.5, 1.0)
     p = link1.params_array({"K": 130.0})
     res = simulate(link1, ctrl, ref, duration=0.1, true_params=p, delay_samples=d, substeps=1, interface="ideal")
@@ -135,7 +83,7 @@ SENSOR = SensorModel(q=1e-3, dq=1e-2, q_m=2e-3, dq_m=1e-2, q_quant=1e-4, q_m_qua
 @pytest.mark.parametrize("name", ["link1", "planar2"])
 def test_backends_agree_with_noise_delay_and_substeps(name, request):
     m = request.getfixturevalue(name)
-    ctrl = _ismc(m)
+    ctrl = ismc_controller(m)
     ref = Sinusoid(0.5, 1.0, n=m.n)
     runs = {b: simulate(m, ctrl, ref, duration=0.3, backend=b, sensor=SENSOR, delay_samples=2, predict=True,
                         substeps=3) for b in ("python", "casadi", "compiled")}
@@ -146,7 +94,7 @@ def test_backends_agree_with_noise_delay_and_substeps(name, request):
 
 
 def test_noise_is_reproducible_by_seed_and_changes_the_run(planar2):
-    ctrl = _ismc(planar2)
+    ctrl = ismc_controller(planar2)
     ref = Sinusoid(0.5, 1.0, n=2)
     a = simulate(planar2, ctrl, ref, duration=0.1, sensor=SENSOR)
     b = simulate(planar2, ctrl, ref, duration=0.1, sensor=SENSOR)
@@ -165,7 +113,7 @@ def test_noise_is_reproducible_by_seed_and_changes_the_run(planar2):
 ])
 def test_bad_settings_are_one_line_errors(link1, kw, text):
     with pytest.raises(FjmValueError) as exc:
-        simulate(link1, _ismc(link1), Sinusoid(0.5, 1.0), duration=0.01, **kw)
+        simulate(link1, ismc_controller(link1), Sinusoid(0.5, 1.0), duration=0.01, **kw)
     assert text in str(exc.value) and "\n" not in str(exc.value)
 
 
@@ -184,7 +132,42 @@ def test_one_substep_and_a_stateless_law_is_the_former_single_step_loop(link1):
 def test_only_the_sampled_loop_is_accepted(link1, loop):
     """loop='sampled' is the one loop: the retired 'legacy' and any other name are a one-line error."""
     with pytest.raises(FjmValueError) as exc:
-        simulate(link1, _ismc(link1), Sinusoid(0.5, 1.0), duration=0.01, loop=loop)
+        simulate(link1, ismc_controller(link1), Sinusoid(0.5, 1.0), duration=0.01, loop=loop)
     msg = str(exc.value)
     assert "\n" not in msg and f"loop = {loop!r}" in msg
     assert msg.endswith("expected 'sampled'")
+
+
+@pytest.mark.parametrize("kwargs, field", [
+    ({"duration": 0.0}, "duration"),
+    ({"duration": float("inf")}, "duration"),
+    ({"dt": 0.0}, "dt"),
+    ({"dt": 2.0}, "dt"),
+    ({"x0": np.zeros(3)}, "x0"),
+    ({"x0": [0.0, np.nan, 0.0, 0.0]}, "x0"),
+    ({"true_params": {"K": np.nan}}, "true_params"),
+    ({"true_params": {"K": -100.0}}, "true_params"),
+    ({"true_params": np.ones(3)}, "true_params"),
+    ({"backend": "gpu"}, "backend"),
+])
+def test_simulate_rejects_bad_inputs(link1, kwargs, field):
+    args = {"duration": 1.0}
+    args.update(kwargs)
+    ctrl = SlidingModeController(link1, {}, lam=5.0, k_s=10.0, delta=1.0)
+    with pytest.raises(ValueError, match=field):
+        simulate(link1, ctrl, Sinusoid(0.5, 1.0), **args)
+
+
+def test_simulate_rejects_reference_for_wrong_joint_count(link1):
+    ctrl = SlidingModeController(link1, {}, lam=5.0, k_s=10.0, delta=1.0)
+    with pytest.raises(ValueError, match="reference"):
+        simulate(link1, ctrl, Sinusoid(0.5, 1.0, n=2), duration=1.0)
+
+
+@pytest.mark.parametrize("backend", ["casadi", "python"])
+def test_divergence_reports_time(link1, backend):
+    # a linear gain far beyond what a 1 ms zero-order hold can take: the sampled loop is unstable
+    ctrl = SlidingModeController(link1, {}, lam=5.0, mode="fl", k_lin=5.0e3)
+    with pytest.raises(SimulationDivergedError, match=r"diverged at t = \d") as info:
+        simulate(link1, ctrl, Sinusoid(0.5, 1.0), duration=2.0, backend=backend)
+    assert 0.0 < info.value.t < 2.0
