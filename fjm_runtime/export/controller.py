@@ -33,6 +33,7 @@ import casadi as ca
 import numpy as np
 
 from ..control.design import Design
+from ..control.factory import FULL_SENSED_KINDS, check_law_interface
 from ..sim.interface import CommandInterface, interface_from_record
 from ..sim.step_layout import make_layout
 from ..sim.sensor import SensorModel
@@ -47,7 +48,7 @@ from .controller_step import ControllerLayout, controller_functions
 __all__ = ["ControllerDesign", "amalgamation", "design_controller", "export_controller"]
 
 #: Law kinds the library exports (the adaptive law's estimator state is not in the step yet).
-EXPORTED_KINDS = ("smc", "ismc", "fl", "sign")
+EXPORTED_KINDS = ("smc", "ismc", "fl", "sign") + FULL_SENSED_KINDS
 
 
 @dataclass(frozen=True)
@@ -136,6 +137,7 @@ def design_controller(model, design: Design, nominal=None, substeps: Optional[in
     if substeps is None and predicting and recorded is None:
         check_rule_substeps(subs, model.name)
     interface = interface_from_record({"interface": design.interface, "sensor": design.sensor}, design.source)
+    check_law_interface(design.kind, interface, f"{design.source}: interface")
     L = make_layout(model, ctrl, T, subs, sensor, int(design.delay or 0), bool(design.predict),
                     predict_substeps=recorded, interface=interface)
     sensing = design.sensing or "state"
@@ -179,6 +181,12 @@ def _reading_text(L: StepLayout) -> str:
         base = "[q; dq; q_m; dq_m] (4N: rad, rad/s, link-side motor angle and rate)"
         if L.differentiated:
             base += "; dq and dq_m slots are not read (computed from q, q_m)"
+    elif L.sensing == "full":
+        base = "[q; dq; q_m; dq_m; tau_J; dtau_J] (6N: rad, rad/s, link-side motor angle and rate, N m, N m/s)"
+        if L.differentiated:
+            base += "; dq and dq_m slots are not read (computed from q, q_m)"
+        if L.filtered:
+            base += "; the dtau_J slot is not read (filtered difference of tau_J)"
     else:
         base = "[q; dq; tau_J; dtau_J; dq_m] (5N: rad, rad/s, N m, N m/s, rad/s)"
         if L.differentiated:
