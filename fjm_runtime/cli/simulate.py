@@ -29,13 +29,11 @@ from ..sim.simulate import simulate, stderr_progress
 from ..sim.step import SimulationDivergedError
 from ..validation import FjmValueError, check_magnitudes
 from .common import add_interface_argument, check_output_file, finite_or_note, interface_arg, parse_assignments
-from .ranges import ANGLE, DELAY, DURATION, FACTOR, GAIN, LAYER, MASS, PERIOD, RATE, SEED, STIFFNESS, TORQUE, Range
+from .ranges import ANGLE, DELAY, DURATION, FACTOR, GAIN, LAYER, MASS, PERIOD, RATE, SEED, STIFFNESS, TORQUE
 from ..control.design import Design
-from .simulate_checks import (DEFAULT_MAX_MEMORY_GB, MAX_SUBSTEPS, check_pole, check_run_size, check_substeps,
-                              gains_provenance, workspace_exit)
-
-#: ``--max-memory``, GB.
-MEMORY_GB = Range(0, 1e4, "GB", "memory", lo_open=True)
+from .simulate_checks import (DEFAULT_MAX_MEMORY_GB, MAX_SUBSTEPS, MEMORY_GB, check_flag_ranges,
+                              check_gain_magnitudes, check_pole, check_run_size, check_substeps, gains_provenance,
+                              workspace_exit)
 from .simulate_laws import check_run_interface, impedance_controller, take_law_sensing
 from .simulate_conditions import (default_gains, design_sensor, peak_text, peak_until, run_effort_limits,
                                   say_conditions, take_design_conditions)
@@ -151,7 +149,7 @@ def _true_params(m, args, nominal) -> Dict[str, float]:
     true = parse_assignments(args.param, "--param")
     check_magnitudes(true, true.values(), "--param ")
     if args.K is not None:
-        if not args.K > 0:                        # above: the substeps it needs, then STIFFNESS (_check_ranges)
+        if not args.K > 0:                        # above: the substeps it needs, then STIFFNESS (check_flag_ranges)
             STIFFNESS.check("--K", args.K)
         for i in linear_stiffness_indices(m, "--K"):
             true.setdefault(m.param_names[i], args.K)
@@ -213,7 +211,9 @@ def _gains_file(args, m, rate: float, design: Optional[Design]):
     defaults (design None; source ``"command line"`` or ``"defaults"``). Every design is checked against
     the model before any work (:meth:`Design.check`)."""
     if design is not None:
-        return design.check(m), f"--gains {args.gains}"
+        design.check(m)
+        check_gain_magnitudes(args.gains, design)
+        return design, f"--gains {args.gains}"
     flags_given = args.lam is not None or args.k_s is not None or args.delta is not None
     shipped = None if flags_given else Design.shipped(m.name, args.controller, args.sensing, rate,
                                                       args.delay_samples)
@@ -445,21 +445,7 @@ def _check_size(m, args, ctrl, ref, x0, true, sensor, dt, interface) -> None:
     subs = int(math.ceil(subs - 1e-12))
     layout = make_layout(m, ctrl, dt, subs, sensor, delay, args.predict, interface=interface)
     check_run_size(layout.nw, m.n, layout.nm, args.duration, dt, args.max_memory)
-    _check_ranges(args)
-
-
-def _check_ranges(args) -> None:
-    """The flags' physical ranges beyond what the memory and substeps checks (first: they state the size) let by."""
-    DURATION.check("--duration", args.duration)
-    if args.rate is not None:
-        RATE.check("--rate", args.rate)
-    if args.dt is not None and args.dt < 1.0 / RATE.hi:
-        raise FjmValueError(f"--dt {args.dt:g}: expected {1.0 / RATE.hi:g} <= dt <= 1 s (rates up to {RATE.hi:g} Hz)")
-    if args.delay_samples is not None:
-        DELAY.check("--delay-samples", args.delay_samples)
-    if args.K is not None:
-        STIFFNESS.check("--K", args.K)
-    MEMORY_GB.check("--max-memory", args.max_memory)
+    check_flag_ranges(args)
 
 
 def _print_report(m, args, res, kind, true, nominal, k_s, delta, gain, ctrl, provenance, left, limits) -> int:

@@ -7,6 +7,10 @@ Before any work (one-line :class:`~fjm_runtime.validation.FjmValueError`, exit 2
 * :func:`check_run_size`: the memory the run will hold and the RK4 substeps per sample, against
   :data:`DEFAULT_MAX_MEMORY_GB` (``--max-memory``) and :data:`MAX_SUBSTEPS`.
 
+Then :func:`check_flag_ranges` (the flags' physical ranges, :mod:`fjm_runtime.cli.ranges`, beyond what the
+memory and substeps checks let by) and :func:`check_gain_magnitudes` (a ``--gains`` file's gains within a
+physical loop's magnitudes).
+
 After the run: :func:`gains_provenance` (where the gains came from, and whether they were designed
 for this model and these conditions) and :func:`workspace_exit` (the first sample where a link
 angle or the tracking error is beyond :data:`WORKSPACE_BOUND` / :data:`ERROR_BOUND`).
@@ -19,12 +23,15 @@ from typing import Optional, Tuple
 import numpy as np
 
 from ..control.design import is_real
-from ..validation import FjmValueError
-from .ranges import available_bytes
+from ..validation import FjmValueError, check_magnitudes
+from .ranges import DELAY, DURATION, GAIN, RATE, STIFFNESS, TORQUE, Range, available_bytes
 
-__all__ = ["DEFAULT_MAX_MEMORY_GB", "ERROR_BOUND", "MAX_SUBSTEPS", "PEAK_FACTOR", "WORKSPACE_BOUND",
+__all__ = ["DEFAULT_MAX_MEMORY_GB", "ERROR_BOUND", "MAX_SUBSTEPS", "MEMORY_GB", "PEAK_FACTOR", "WORKSPACE_BOUND",
+           "check_flag_ranges", "check_gain_magnitudes",
            "check_pole", "check_run_size", "check_substeps", "gains_provenance", "workspace_exit"]
 
+#: ``--max-memory``, GB.
+MEMORY_GB = Range(0, 1e4, "GB", "memory", lo_open=True)
 #: Default of ``--max-memory``: the largest estimated peak memory of one run, GB.
 DEFAULT_MAX_MEMORY_GB = 4.0
 #: Measured peak resident memory of a run / the arrays it stores (link1 2000 s: 4.4 GB for 0.38 GB
@@ -112,6 +119,36 @@ def check_run_size(layout_nw: int, n: int, nm: int, duration: float, dt: float, 
         raise FjmValueError(f"{what}; this machine has {avail / 1e9:.3g} GB available (shorten --duration "
                             "or lower --rate)")
     return {"samples": samples, "columns": columns, "stored_bytes": stored, "peak_bytes": peak}
+
+
+def check_flag_ranges(args) -> None:
+    """The flags' physical ranges beyond what the memory and substeps checks (first: they state the size) let by."""
+    DURATION.check("--duration", args.duration)
+    if args.rate is not None:
+        RATE.check("--rate", args.rate)
+    if args.dt is not None and args.dt < 1.0 / RATE.hi:
+        raise FjmValueError(f"--dt {args.dt:g}: expected {1.0 / RATE.hi:g} <= dt <= 1 s (rates up to {RATE.hi:g} Hz)")
+    if args.delay_samples is not None:
+        DELAY.check("--delay-samples", args.delay_samples)
+    if args.K is not None:
+        STIFFNESS.check("--K", args.K)
+    MEMORY_GB.check("--max-memory", args.max_memory)
+
+
+def check_gain_magnitudes(path, design) -> None:
+    """A ``--gains`` file's gains (already finite, of the right sign and shape: :meth:`Design.check`) within a
+    physical loop's magnitudes: 0 or 1e-12..1e20, ``u_max`` up to 1e6 N m (``lam``: at most pi x rate, checked
+    with the rate)."""
+    for key, value in design.gains.items():
+        if key == "lam" or value is None or isinstance(value, (bool, str, dict)):
+            continue
+        try:
+            values = np.ravel(np.asarray(value, dtype=float))
+        except (TypeError, ValueError):                         # not numbers: the law's own check names it
+            continue
+        top = TORQUE.hi if key == "u_max" else GAIN.hi
+        check_magnitudes([key] * values.size, values, f"--gains {path}: gains.", hi=top,
+                         why=f"SI units: {'N m' if key == 'u_max' else 'a gain'} of a physical loop")
 
 
 def gains_provenance(source: str, design, conditions: dict, lemma1: Optional[str] = None) -> dict:

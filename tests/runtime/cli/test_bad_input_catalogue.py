@@ -72,6 +72,8 @@ CASES = [
     ("tune link1 --nominal K=-5", "> 0 N m/rad"),
     ("simulate link1 --noise {noise} --plot {out}", "seed"),
     ("simulate link1 --noise {noise_level} --plot {out}", "1 rad"),
+    ("simulate link1 --gains {gains_k_s} --plot {out}", "1e+20"),
+    ("simulate link1 --gains {gains_u_max} --plot {out}", "1e+06"),
     # derive (python -m derive in a subprocess)
     ("derive --models link1 --max-cost -1 --out {out}", "a week"),
     ("derive --models link1 --max-cost 1e300 --out {out}", "604800"),
@@ -151,7 +153,8 @@ def _flag_and_value(argv):
 
 def _file_kind(command: str) -> str:
     """Which bad file a case passes (its value is in the file, not on the command line), or ''."""
-    return next((k for k in ("spread_K", "spread_Bm", "noise_level") if "{" + k + "}" in command),
+    return next((k for k in ("spread_K", "spread_Bm", "noise_level", "gains_k_s", "gains_u_max")
+                 if "{" + k + "}" in command),
                 "--noise" if "{noise}" in command else "")
 
 
@@ -175,6 +178,9 @@ def test_nonsense_is_one_line_naming_flag_value_and_range(command, must, tmp_pat
     noise.write_text("seed = -1\n")
     files = {"noise": noise, "noise_level": tmp_path / "loud.toml"}
     files["noise_level"].write_text("q = 1e300\n")       # an angle noise of 1e300 rad
+    for name, extra in (("gains_k_s", '"k_s": 1e300, "delta": 1'), ("gains_u_max", '"k_s": 10, "delta": 1, "u_max": 1e300')):
+        files[name] = tmp_path / f"{name}.json"           # a gains file with a gain no loop has
+        files[name].write_text('{"kind": "smc", "gains": {"lam": 8, ' + extra + "}}")
     for name, text in (("spread_K", "K1 = [1e-300, 1e300]"), ("spread_Bm", "Bm1 = [-1.0, 1.0]")):
         files[name] = tmp_path / f"{name}.toml"        # a parameter file whose [spread] range is not physical
         files[name].write_text(f"[spread]\n{text}\n")
@@ -187,9 +193,9 @@ def test_nonsense_is_one_line_naming_flag_value_and_range(command, must, tmp_pat
     lines = [ln for ln in got.err.splitlines() if ln.strip()]
     assert status == 2 and got.out == "", (status, got.out, got.err)
     assert len(lines) == 1 and lines[0].startswith(("fjm: error: ", "fjm tune: error: ", "fjm derive: error: ")), got.err
-    flag, name, value = _flag_and_value(argv)
-    flag, name, value = {"--noise": ("--noise", "seed", "-1"), "noise_level": ("--noise", "q", "1e300"), "spread_K": ("--params", "K1", "1e-300"),
-                         "spread_Bm": ("--params", "Bm1", "-1")}.get(_file_kind(command), (flag, name, value))
+    flag, name, value = {"--noise": ("--noise", "seed", "-1"), "noise_level": ("--noise", "q", "1e300"),
+                         "gains_k_s": ("--gains", "k_s", "1e300"), "gains_u_max": ("--gains", "u_max", "1e300"), "spread_K": ("--params", "K1", "1e-300"),
+                         "spread_Bm": ("--params", "Bm1", "-1")}.get(_file_kind(command)) or _flag_and_value(argv)
     line = lines[0]
     assert name in line and _names_value(line, value), (name, value, line)
     assert must in line, (must, line)
