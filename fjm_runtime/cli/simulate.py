@@ -374,7 +374,9 @@ def run(args) -> int:
     design, source = _gains_file(args, m, 1.0 / dt, file_design)
     from_file = params_file_nominal(args.params, m)
     check_magnitudes(from_file, from_file.values(), f"--params {args.params}: [parameters] ")
-    nominal = {**(design.nominal(m) if design else {}), **from_file, **parse_assignments(args.nominal, "--nominal")}
+    given = parse_assignments(args.nominal, "--nominal")
+    check_magnitudes(given, given.values(), "--nominal ")
+    nominal = {**(design.nominal(m) if design else {}), **from_file, **given}
     true = _true_params(m, args, nominal)
     kind = design.kind if design else (args.controller or "smc")
     ref, x0 = _reference(m, args, design)

@@ -54,6 +54,7 @@ CASES = [
     ("simulate link1 --dt 5 --plot {out}", "0 < dt"),
     ("simulate link1 --payload -1 --plot {out}", "kg"),
     ("simulate link1 --param K=1e300 --plot {out}", "1e+12"),
+    ("simulate link1 --nominal K=1e300 --plot {out}", "1e+12"),
     ("simulate link1 --duration 1e9 --plot {out}", "GB"),
     ("simulate link1 --rate 1e12 --plot {out}", "GB"),
     ("simulate link1 --lam 1e300 --plot {out}", "Nyquist"),

@@ -110,7 +110,7 @@ def test_max_memory_is_the_limit(capsys):
     (["--substeps", "20000"], ["--substeps 20000", "at most 10000"]),
     (["--substeps", "-3"], ["--substeps -3", ">= 1"]),
     (["--delay-samples", "-1"], ["delay_samples", ">= 0"]),
-    (["--nominal", "K=1e300"], ["Lemma 1 switching gain", "--nominal", "--k-s"]),
+    (["--nominal", "K=1e300"], ["--nominal K = 1e+300", "1e-12 <= |value| <= 1e+12"]),  # refused before Lemma 1
     (["--max-memory", "0"], ["--max-memory", "> 0 GB"]),
     (["--seed", "-1"], ["seed", "-1"]),
 ])
