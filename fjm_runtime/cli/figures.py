@@ -7,8 +7,8 @@ from ..validation import FjmValueError
 from .ranges import Range
 from .common import check_output_dir
 
-#: Monte Carlo samples of the figures (each a 10 s run of every law compared).
-MC_SAMPLES = Range(1, 10_000, "", "samples", integer=True)
+#: Monte Carlo samples of the figures (each a 10 s run of every law compared; 40 take minutes).
+MC_SAMPLES = Range(1, 1000, "", "samples", integer=True)
 
 
 def add_arguments(fig) -> None:
