@@ -27,7 +27,7 @@ from ..sim.step_layout import make_layout
 from ..validation import FjmValueError, as_vector
 from .mjcf import FRICTION_NUMERIC, SPRING_NUMERIC, gear_ratios, load_chain, resolve_params
 
-__all__ = ["MujocoPlant"]
+__all__ = ["Actuation", "MujocoPlant", "run_closed_loop"]
 
 
 def _mujoco():
@@ -211,7 +211,7 @@ def run_closed_loop(plant: MujocoPlant, controller, reference, *, duration: floa
     x = as_vector("x0", x0, 4 * n)
     plant.set_state(x)
     z = np.asarray(controller.initial_state(0.0, x, r0), dtype=float)
-    act = _Actuation(plant, controller, dt, substeps, x, z, interface)
+    act = Actuation(plant, controller, dt, substeps, x, z, interface)
     t = np.arange(steps + 1) * dt
     X, U = np.zeros((steps + 1, 4 * n)), np.zeros((steps + 1, n))
     for k in range(steps + 1):
@@ -227,8 +227,25 @@ def run_closed_loop(plant: MujocoPlant, controller, reference, *, duration: floa
     return t, X, U
 
 
-class _Actuation:
-    """The command interface between a law and a MuJoCo plant (the sample step's arithmetic, numpy)."""
+class Actuation:
+    """The command interface between a law and a MuJoCo plant (the sample step's arithmetic, numpy).
+
+    Parameters
+    ----------
+    plant : MujocoPlant
+    controller : a controller of :func:`fjm_runtime.make_controller`
+        Its nominal model gives the interface's gravity (``joint_torque``) and its layout.
+    dt : float
+        Sample period, s.
+    substeps : int
+        MuJoCo steps per sample.
+    x0 : array_like, shape (4n,)
+        The state the loop starts from (the current loop starts at the torque holding it).
+    z0 : array_like, shape (nz,)
+        The law's initial state.
+    interface : CommandInterface or str or None
+        Default ``'motor'``.
+    """
 
     def __init__(self, plant: MujocoPlant, controller, dt: float, substeps: int, x0, z0, interface):
         self.plant, self.substeps = plant, int(substeps)
