@@ -43,7 +43,8 @@ def add_arguments(p) -> None:
     p.add_argument("--amplitude", type=AMPLITUDE, default=0.5,
                    help=f"largest excursion from the posture, {AMPLITUDE} (default 0.5)")
     p.add_argument("--posture", default=None, metavar="Q1,Q2,...",
-                   help="base posture, rad (default: the middle of the joint ranges, 0 where none is stated)")
+                   help=f"base posture, each angle {ANGLE} (default: the middle of the joint ranges, 0 where none is "
+                        "stated)")
     p.add_argument("--candidates", type=CANDIDATES, default=20, help=f"random series drawn, {CANDIDATES} (default 20)")
     p.add_argument("--iterations", type=ITERATIONS, default=40,
                    help=f"local-search iterations after them, {ITERATIONS} (default 40)")
