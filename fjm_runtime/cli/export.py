@@ -36,13 +36,14 @@ def add_arguments(ex) -> None:
                     help="the complete model (rotor i on link i-1, spin coupling; gear ratios N1..Nn from "
                          "<model>_complete): needs a generated <model>_complete")
     ex.add_argument("--K", type=float, default=None,
-                    help="joint stiffness, N m/rad (link1: K; others: every K_i)")
+                    help="joint stiffness, 0 < K <= 1e12 N m/rad (link1: K; others: every K_i)")
     ex.add_argument("--param", action="append", default=[], metavar="NAME=VALUE",
-                    help="parameter value (repeatable), e.g. --param Jm7=0.2 --param m_load=1.5 --param N7=300")
+                    help="parameter value (repeatable) in its domain and 0 or 1e-12..1e12 in magnitude, e.g. --param "
+                         "Jm7=0.2 --param m_load=1.5 --param N7=300")
     ex.add_argument("--gear-ratio", type=GEAR_RATIO, default=None,
                     help=f"reduced model: rotor angle = GEAR_RATIO * q_m for every joint, {GEAR_RATIO} (default 1; complete "
                          "models take N1..Nn via --param)")
-    ex.add_argument("--timestep", type=float, default=None, help="MuJoCo step, s (integrator RK4; default 1e-4)")
+    ex.add_argument("--timestep", type=float, default=None, help="MuJoCo step, 1e-07 <= timestep <= 0.01 s (integrator RK4; default 1e-4)")
     ex.add_argument("--interface", default=None, metavar="NAME|FILE.toml",
                     help="controller: what the library's output commands (default: the design's, else motor; "
                          "joint_torque, franka: the library outputs tau_d, the robot filters it and adds gravity)")
