@@ -60,11 +60,15 @@ def test_quick_section_rows_are_sane(section):
             assert 0.0 <= r["at_torque_limit"] <= 1.0 and 0.0 <= r["at_rate_limit"] <= 1.0
         if r["interface"] == "motor":
             assert r["at_rate_limit"] == 0.0, label
+    sens = ctx.results["real_interface_sensing"]
+    assert set(sens) == {f"{law}, {name}" for law in ri.FOURTH_ORDER for name in ri.SENSORS}
+    assert sens["ismc_tau (shipped design), ideal"]["diverged"] == 0  # the design holds without noise
+    assert np.isfinite(sens["ismc_tau (shipped design), ideal"]["rms"])
     # the impedance laws hold the task from rest: well below a degree over 0.3 s
     assert rows["impedance"]["rms"] < 2e-3 and rows["joint_impedance"]["rms"] < 5e-3
     assert figs[0].name == "real_arm_laws.png" and figs[0].stat().st_size > 5_000
     table = [line for line in md if line.startswith("| ")]
-    assert len(table) == 1 + len(ri.LAWS)
+    assert len(table) == 2 + len(ri.LAWS) + len(ri.SENSORS) * len(ri.FOURTH_ORDER)
     assert table[1 + list(rows).index("impedance")].split(" | ")[2] == f"{1e3 * rows['impedance']['rms']:.3g}"
 
 
