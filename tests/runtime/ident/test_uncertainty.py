@@ -1,56 +1,7 @@
-"""The identification's signal processing, standard errors and plausibility warnings, from first principles
-(fjm_runtime.ident.signals, .uncertainty, .checks)."""
+"""The identification's standard errors from first principles (fjm_runtime.ident.uncertainty)."""
 import numpy as np
-import pytest
 
-import fjm_runtime
-from fjm_runtime.ident.checks import gear_ratio_warnings, nominal_warnings
-from fjm_runtime.ident.signals import consistent_kernels, held_torque, moving_rows, smooth_derivatives, white_noise
 from fjm_runtime.ident.uncertainty import hac_covariance
-
-
-def test_derivative_kernels_are_the_value_kernel_on_differences():
-    """K1 x = w (central difference of x) and K2 x = w (second difference of x), to rounding, for any x."""
-    dt, h = 1e-3, 15
-    K = consistent_kernels(h, dt)
-    x = np.random.default_rng(0).standard_normal(400)
-    w = K[0][1:-1]                       # zero at both ends
-    S, dS, ddS = smooth_derivatives(x[:, None], dt, h, kernels=K)
-    d1 = (x[2:] - x[:-2]) / (2 * dt)
-    d2 = (x[2:] - 2 * x[1:-1] + x[:-2]) / dt ** 2
-    ref1 = np.convolve(d1, w[::-1], mode="valid")
-    ref2 = np.convolve(d2, w[::-1], mode="valid")
-    assert K[0].sum() == pytest.approx(1.0, abs=1e-15)
-    np.testing.assert_allclose(dS[:, 0], ref1, rtol=0, atol=1e-9 * np.max(abs(ref1)))
-    np.testing.assert_allclose(ddS[:, 0], ref2, rtol=0, atol=1e-9 * np.max(abs(ref2)))
-
-
-def test_held_torque_matches_the_second_difference_of_a_held_motion():
-    """A unit mass under a held (zero-order) torque: Delta^2 x / dt^2 at t_k is (u[k-1] + u[k]) / 2 exactly."""
-    dt = 1e-2
-    u = np.random.default_rng(1).standard_normal(50)
-    x, v, X = 0.0, 0.0, []
-    for uk in u:                          # exact integration of a constant acceleration over each sample
-        X.append(x)
-        x, v = x + v * dt + 0.5 * uk * dt ** 2, v + uk * dt
-    X = np.array(X)
-    acc = (X[2:] - 2 * X[1:-1] + X[:-2]) / dt ** 2
-    np.testing.assert_allclose(acc, held_torque(u)[1:-1], rtol=0, atol=1e-9)
-
-
-def test_white_noise_variance_under_a_smooth_motion():
-    rng = np.random.default_rng(2)
-    t = np.arange(0, 20, 1e-3)
-    x = 0.5 * np.sin(2 * t) + 3e-5 * rng.standard_normal(t.size)
-    assert white_noise(x) == pytest.approx(9e-10, rel=0.03)
-
-
-def test_moving_rows_leave_out_the_windows_around_a_reversal():
-    v = np.cos(np.linspace(0, np.pi, 1001))          # one reversal at sample 500
-    rows = moving_rows(v, 10, 0.1)
-    slow = np.flatnonzero(np.abs(v) <= 0.1)
-    assert not rows[slow[0] - 10:slow[-1] + 11].any()
-    assert rows[:slow[0] - 10].all() and rows[slow[-1] + 11:].all()
 
 
 def test_sandwich_is_the_white_noise_formula_for_white_residuals_and_grows_for_coloured_ones():
@@ -64,17 +15,3 @@ def test_sandwich_is_the_white_noise_formula_for_white_residuals_and_grows_for_c
     coloured = np.convolve(r, np.ones(20) / np.sqrt(20), mode="same")   # same variance, correlated over 20
     ratio = np.diag(hac_covariance(A, coloured, G_inv, 80)) / (np.diag(G_inv) * np.mean(coloured ** 2))
     assert np.all(ratio > 8)                          # about the 20-sample correlation length (Bartlett-shrunk)
-
-
-def test_gear_ratio_and_nominal_warnings_name_the_joint_and_the_factor():
-    m = fjm_runtime.load("planar2")
-    t = np.linspace(0, 10, 5000)
-    q = np.column_stack([0.3 * np.sin(t), 0.2 * np.cos(t)])
-    q_m = q.copy()
-    q_m[:, 1] = 100.0 * q[:, 1]                        # joint 2 logged on the rotor side
-    w = gear_ratio_warnings(q, q_m)
-    assert len(w) == 1 and w[0].startswith("joint 2:") and "100 times" in w[0]
-    assert gear_ratio_warnings(q, q + 1e-3 * q) == []
-    nominal = m.default_params["K1"]
-    w = nominal_warnings({"K1": nominal / 160.0, "K2": 1.3 * m.default_params["K2"], "Bm1": 0.2}, m)
-    assert len(w) == 1 and w[0].startswith("K1 = ") and "1/160 of" in w[0]
