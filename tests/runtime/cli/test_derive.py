@@ -1,6 +1,5 @@
-"""``fjm derive`` passes SIGTERM/SIGINT on to the derivation it runs in a subprocess: it ends
-within a second and writes nothing (without forwarding, the child went on deriving)."""
-
+"""``fjm derive`` (fjm_runtime.cli.derive) passes SIGTERM/SIGINT on to the derivation it runs in a subprocess: it
+ends within a second and writes nothing (without forwarding, the child went on deriving); its help is plain text."""
 from __future__ import annotations
 
 import signal
@@ -10,11 +9,10 @@ import time
 
 import pytest
 
-pytestmark = pytest.mark.slow  # derives in a subprocess
-
 
 # exhaustive pass (.ci/run), to keep make test under 5 minutes: in make test the derive's own signal
 # handling is checked by tests/derive/test_guard.py and test_interrupted_derive.py
+@pytest.mark.slow  # derives in a subprocess
 @pytest.mark.exhaustive
 @pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGINT])
 def test_fjm_derive_ends_on_a_signal_and_writes_nothing(tmp_path, signum):
@@ -43,3 +41,12 @@ def test_fjm_derive_ends_on_a_signal_and_writes_nothing(tmp_path, signum):
     time.sleep(0.5)
     ps = subprocess.run(["ps", "-eo", "args"], capture_output=True, text=True).stdout
     assert str(out) not in ps, "the derivation is still running after fjm derive ended"
+
+
+def test_derive_help_is_plain_text():
+    from fjm_runtime.cli.derive import plain_help
+    raw = ("usage: fjm derive [-h] [--out DIR]\n\n``python -m derive [--models M ...]``.\n\n"
+           "options:\n  --out DIR  output root (default: ``generated/``)\n")
+    text = plain_help(raw)
+    assert "``" not in text and text.startswith("usage: fjm derive") and "Derive models" in text
+    assert "output root (default: generated/)" in text

@@ -1,18 +1,12 @@
-"""The first hour of a new user: --version, `fjm models`, one-line errors before long work, JSON without
-NaN/inf, readable --help texts, the sweep's stiffness default on arms whose nominal is far from 100..200."""
+"""The fjm command (fjm_runtime.cli.main) in a new user's first hour: --version, `fjm models`, one-line errors
+before long work, readable --help texts, one command table for the parser, the help and the dispatch."""
 import json
-import math
 import time
-import warnings
 
-import numpy as np
 import pytest
 
 import fjm_runtime
-from fjm_runtime.cli.common import finite_or_note
 from fjm_runtime.cli.main import build_parser, main
-from fjm_runtime.cli.sweep import stiffness_range, summary
-from fjm_runtime.validation import FjmValueError
 
 
 def one_line_error(capsys, argv, must=()):
@@ -67,47 +61,6 @@ def test_bad_values_are_one_line(capsys):
     one_line_error(capsys, ["figures", "--samples", "0"], ["--samples"])
 
 
-def test_sweep_stiffness_default_follows_the_nominal():
-    link1, panda = fjm_runtime.load("link1"), fjm_runtime.load("panda")
-    assert stiffness_range(link1, None, None, None) == ((100.0, 200.0), None)
-    k_range, k_rel = stiffness_range(panda, None, None, None)
-    assert k_rel == (0.7, 1.3)  # relative to each joint's nominal 3e3..1e4, not 100..200 N m/rad
-    assert stiffness_range(panda, None, None, [0.9, 1.1])[1] == (0.9, 1.1)
-    with pytest.raises(FjmValueError, match="--k-rel"):
-        stiffness_range(panda, 100.0, 200.0, None)
-    assert stiffness_range(panda, 2000.0, 20000.0, None) == ((2000.0, 20000.0), None)
-
-
-def test_sweep_summary_without_nan_or_warnings():
-    P = np.zeros((3, 7))
-    metrics = {"rms_error_second_half": np.full(3, np.nan), "diverged": np.ones(3, dtype=int)}
-    with warnings.catch_warnings():
-        warnings.simplefilter("error")
-        out = summary(P, metrics, 1.0, "t.csv")
-    text = json.dumps(out, allow_nan=False)
-    assert out["rms_error_second_half_max"] is None and out["rms_error_second_half_max_note"] == "every run diverged"
-    assert "NaN" not in text and out["diverged"] == 3
-    metrics = {"rms_error_second_half": np.array([1.0, np.nan, 3.0]), "diverged": np.array([0, 1, 0])}
-    out = summary(P, metrics, 1.0, "t.csv")
-    assert out["rms_error_second_half_max"] == 3.0 and out["rms_error_second_half_median"] == 2.0
-
-
-def test_simulate_json_has_no_inf(capsys):
-    report = {}
-    finite_or_note(report, "reaching_time", math.inf)
-    finite_or_note(report, "rms", float("nan"))
-    finite_or_note(report, "final", 0.5)
-    assert report == {"reaching_time": None, "reaching_time_note": "not reached", "rms": None,
-                      "rms_note": "not finite", "final": 0.5}
-    # a run too short to reach the layer: reaching time not reached -> null plus a note
-    assert main(["simulate", "link1", "--reference", "step", "--duration", "0.05", "--k-s", "1", "--delta",
-                 "1e-9", "--quiet"]) == 0
-    out = capsys.readouterr().out
-    assert '"inf"' not in out and "Infinity" not in out and "NaN" not in out
-    metrics = json.loads(out)["metrics"]
-    assert all(v is not None or f"{k}_note" in metrics for k, v in metrics.items() if not k.endswith("_note"))
-
-
 def _subparser(name):
     parser = build_parser()
     action = next(a for a in parser._actions if getattr(a, "choices", None) and name in a.choices)
@@ -119,15 +72,6 @@ def test_help_texts_are_plain():
     assert "+-20 %" in sweep_help and "%%" not in sweep_help
     assert _subparser("figures").description
     assert "Figs 1-4" in _subparser("figures").format_help()
-
-
-def test_derive_help_is_plain_text():
-    from fjm_runtime.cli.derive import plain_help
-    raw = ("usage: fjm derive [-h] [--out DIR]\n\n``python -m derive [--models M ...]``.\n\n"
-           "options:\n  --out DIR  output root (default: ``generated/``)\n")
-    text = plain_help(raw)
-    assert "``" not in text and text.startswith("usage: fjm derive") and "Derive models" in text
-    assert "output root (default: generated/)" in text
 
 
 #: The fewest arguments each command parses (derive's are passed on as they are).
@@ -158,3 +102,10 @@ def test_one_command_table_builds_the_parser_the_help_and_the_dispatch(capsys, m
         argv = [name] + ARGS.get(name, [])
         assert main(argv) == 7, name
         assert seen and (seen[0] == ["--x", "1"] if name == "derive" else seen[0].command == name), name
+
+
+def test_cli_help(capsys):
+    with pytest.raises(SystemExit) as info:
+        main(["--help"])
+    assert info.value.code == 0
+    assert "simulate" in capsys.readouterr().out
