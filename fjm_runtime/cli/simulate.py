@@ -34,7 +34,7 @@ from ..control.design import Design
 from .simulate_checks import (DEFAULT_MAX_MEMORY_GB, MAX_SUBSTEPS, MEMORY_GB, check_flag_ranges,
                               check_gain_magnitudes, check_pole, check_run_size, check_substeps, gains_provenance,
                               workspace_exit)
-from .simulate_laws import check_run_interface, impedance_controller, take_law_sensing
+from .simulate_laws import check_run_interface, check_set_point, impedance_controller, take_law_sensing
 from .simulate_conditions import (default_gains, design_sensor, peak_text, peak_until, run_effort_limits,
                                   say_conditions, take_design_conditions)
 
@@ -386,6 +386,7 @@ def run(args) -> int:
         args.predict = bool(args.predict or (design and design.predict))
     interface = interface_arg(args, design)
     check_run_interface(kind, interface, args, design)
+    check_set_point(kind, m, args, ref, nominal)
     _check_size(m, args, ctrl, ref, x0, true, sensor, dt, interface)
     conditions = {"model": m.name, "kind": kind, "sensing": args.sensing, "rate": 1.0 / dt,
                   "delay": args.delay_samples, "predict": bool(args.predict), "sensor": sensor, "interface": interface}

@@ -6,15 +6,20 @@
   ``K_q``, ``D_q``, ``K_i`` (the sliding-mode flags ``--lam``, ``--k-s``, ``--delta`` refused).
 * :func:`check_run_interface`: the law on the command interface it is made for (``impedance``: motor torque,
   ``joint_impedance``: the joint-torque layer's ``tau_d``).
+* :func:`check_set_point`: ``impedance`` regulating to a set point (``--reference constant`` or ``step``) where
+  the nominal spring dominates gravity (:func:`~fjm_runtime.control.impedance.regulation_motor_position`).
 """
 from __future__ import annotations
 
 from typing import Optional
 
+import numpy as np
+
 from ..control.factory import FULL_SENSED_KINDS, check_law_interface, make_controller
+from ..control.impedance import regulation_motor_position
 from ..validation import FjmValueError
 
-__all__ = ["check_run_interface", "impedance_controller", "take_law_sensing"]
+__all__ = ["check_run_interface", "check_set_point", "impedance_controller", "take_law_sensing"]
 
 
 def _kind(args, design) -> Optional[str]:
@@ -64,3 +69,11 @@ def check_run_interface(kind: str, interface, args, design) -> None:
     else:
         where = "the default interface"
     check_law_interface(kind, interface, where)
+
+
+def check_set_point(kind: str, m, args, reference, nominal) -> None:
+    """Refuse, in one line naming ``--q-d``, ``impedance`` regulating (``--reference constant`` or ``step``) to a
+    set point where the fixed-point iteration of the motor-side gravity compensation does not contract."""
+    if kind == "impedance" and args.reference in ("constant", "step"):
+        q_final = np.asarray(reference(float(args.rise_time + args.duration)), dtype=float)[0]
+        regulation_motor_position(m, q_final, nominal, where="--q-d")

@@ -25,6 +25,16 @@ small-deflection stiffness, ``J_m`` the rotor inertia)::
 
 On the Panda (``K`` 1e4 / 3e3 N m/rad, ``J_m`` 0.3 / 0.1 kg m^2) this gives ``K_p`` 1000 / 300 N m/rad: the
 prototype's joints 1-4 (K_p 1000, its torque-feedback -0.7) with its damping raised from 0.5 to 0.7.
+
+Regulation (a constant reference ``q_d``): the feedforward is already the exact gravity compensation on the motor
+side. With every derivative of ``q_d`` zero, the rigid inverse dynamics is ``tau_Jd = g(q_d)`` and
+``theta_d = q_d + psi^-1(g(q_d))``, ``u_ff = tau_Jd``: the motor position whose spring holds the link at ``q_d``
+against gravity, the fixed point ``theta_d = q_bar + psi^-1(g(q_bar))`` at ``q_bar = q_d`` that Ott, Albu-Schaeffer,
+Kugi and Hirzinger ("On the passivity-based impedance control of flexible joint robots", IEEE TRO 24(2), 2008)
+reach by iterating ``q_bar <- theta - psi^-1(g(q_bar))`` (no iteration is needed when ``q_d`` is given). That
+equilibrium is the link's unique one near ``q_d`` when the iteration contracts there,
+``rho = || diag(psi'(phi_d))^-1 dg/dq(q_d) ||_2 < 1`` (the spring dominates the gravity gradient):
+:func:`regulation_contraction` gives ``rho``, :func:`regulation_motor_position` refuses a set point where it fails.
 """
 from __future__ import annotations
 
@@ -32,13 +42,13 @@ import math
 
 import numpy as np
 
-from ..drives import drive_indices
+from ..drives import drive_indices, model_springs
 from ..validation import REDERIVE, FjmValueError, joint_vector
 from .laws import SlidingModeController
 
 __all__ = ["DEFAULT_DAMPING", "DEFAULT_INTEGRAL_RATIO", "DEFAULT_K_T", "DEFAULT_OMEGA_I", "DEFAULT_STIFFNESS_SHARE",
            "ImpedanceController", "JointImpedanceController", "default_impedance_gains",
-           "default_joint_impedance_gains"]
+           "default_joint_impedance_gains", "regulation_contraction", "regulation_motor_position"]
 
 #: Joint-torque feedback of the default gains (1): the motor feels 0.3 of the spring torque.
 DEFAULT_K_T = -0.7
@@ -197,3 +207,56 @@ class JointImpedanceController(ImpedanceController):
         return {"K_q": self.K_q, "D_q": self.D_q, "K_i": self.K_i,
                 "u_max": self.u_max if self.u_max is not None else np.ones(self.n),
                 "limit": float(self.u_max is not None), "anti_windup": float(self.anti_windup)}
+
+
+def regulation_contraction(model, q_d, nominal_params) -> float:
+    """The contraction factor at the set point ``q_d`` of the fixed-point iteration
+    ``q_bar <- theta_d - psi^-1(g(q_bar))`` (module docstring): ``|| diag(psi'(phi_d))^-1 dg/dq(q_d) ||_2`` with
+    ``phi_d = psi^-1(g(q_d))`` the deflection holding gravity (``psi' = K`` for a linear spring).
+
+    Parameters
+    ----------
+    model : Model
+    q_d : array_like, shape (n,)
+        Link set point, rad.
+    nominal_params : dict or array_like
+        Nominal parameters (gravity and spring of the controller's model).
+
+    Returns
+    -------
+    float
+        ``rho`` (dimensionless); ``< 1``: the iteration contracts near ``q_d`` and the link's equilibrium under the
+        motor position ``theta_d`` is unique there.
+    """
+    import casadi as ca
+    from ..sim.interface import gravity_function
+    n = int(model.n)
+    p = np.asarray(model.params_array(nominal_params, arg="nominal_params"), dtype=float)
+    q = np.asarray(joint_vector(q_d, n, "q_d"), dtype=float)
+    g = gravity_function(model)
+    qs = ca.SX.sym("q", n)
+    dg = np.asarray(ca.Function("dg", [qs], [ca.jacobian(g(qs, p), qs)])(q), dtype=float)
+    springs = model_springs(model)
+    phi = springs["spring_inverse"](np.asarray(g(q, p), dtype=float).ravel(), p)
+    dpsi = np.asarray(springs["spring"](phi, p)[1], dtype=float).ravel()
+    return float(np.linalg.norm(dg / dpsi[:, None], 2))
+
+
+def regulation_motor_position(model, q_d, nominal_params, where: str = "q_d") -> np.ndarray:
+    """The motor position ``theta_d = q_d + psi^-1(g(q_d))`` (rad, shape (n,)) that holds the link at the set point
+    ``q_d`` against gravity: the feedforward's ``theta_d`` at a constant reference, after checking that the
+    fixed-point iteration contracts there (:func:`regulation_contraction` < 1).
+
+    Raises
+    ------
+    FjmValueError
+        One line naming ``where``, the set point and the factor, where ``rho >= 1``.
+    """
+    rho = regulation_contraction(model, q_d, nominal_params)
+    q = np.asarray(joint_vector(q_d, int(model.n), "q_d"), dtype=float)
+    if not rho < 1.0:
+        raise FjmValueError(f"{where} = {np.round(q, 4).tolist()}: the nominal spring does not dominate gravity there "
+                            f"(||psi'^-1 dg/dq|| = {rho:.3g}, expected < 1): under the motor position holding it the link's "
+                            "equilibrium is not assured unique; expected another set point or stiffer nominal springs")
+    r = np.concatenate([q, np.zeros(4 * q.size)])
+    return np.asarray(model.feedforward(r, nominal_params)[1], dtype=float)
