@@ -102,14 +102,17 @@ def test_inverse_dynamics_programme_equals_pinocchio_rnea(name):
 @pytest.mark.parametrize("name", ["planar3", "panda"])
 def test_c_twins_equal_the_casadi_functions(name):
     """The MX twins the C file is generated from (kernel called once) == the SX ``.casadi`` Functions."""
+    from derive.emit.feedforward import build_feedforward
     from derive.emit.writer import _build_laws, c_functions
     lin = linearize(build(name))
     functions, kernel = build_model_functions(lin)
-    controls = _build_laws(lin, functions, kernel)
-    twins = c_functions(lin, functions, controls, kernel)
-    assert set(twins) == set(functions) | set(controls)
+    feedforward = build_feedforward(lin.model)
+    controls = _build_laws(lin, functions, kernel, feedforward)
+    twins = c_functions(lin, functions, controls, kernel, feedforward)
+    assert set(twins) == set(functions) | set(controls) | {"feedforward"}
     rng = np.random.default_rng(3)
-    for key in ("T", "alpha", "control_core", "T_tau", "alpha_tau", "control_core_tau", "control_smc"):
+    for key in ("T", "alpha", "control_core", "T_tau", "alpha_tau", "control_core_tau", "control_smc",
+                "control_impedance", "control_joint_impedance"):
         sx, mx = {**functions, **controls}[key], twins[key]
         assert mx.name() == sx.name() and mx.name_in() == sx.name_in() and mx.name_out() == sx.name_out()
         args = [rng.uniform(0.5, 1.5, sx.size1_in(i) * sx.size2_in(i)) for i in range(sx.n_in())]
