@@ -1,12 +1,11 @@
 """fjm excite: rest-to-rest series, the nominal model's exact inverse, better conditioned than a random draw,
-within the Panda's limits, and the CLI's files.
+within the Panda's limits, bad settings refused in one line.
 
 Independent references: central differences for the derivatives; the model's own linearizing
 coordinates inverted by Newton (``analysis.certificates.evaluator.inverse_T``) and its emitted ``alpha``, ``beta``
 (``u = alpha + beta q_d''''``) for the flat-output inverse; link1's gravity torque ``M g0 L sin q`` at rest;
 the condition numbers recomputed here with ``numpy.linalg.cond``.
 """
-import json
 
 import numpy as np
 import pytest
@@ -15,7 +14,7 @@ import fjm_runtime
 from fjm_runtime.cli.main import main as fjm_main
 from fjm_runtime.ident.excite import (FourierReference, design_excitation, nominal_motion, rest_coefficients,
                                       whole_periods)
-from fjm_runtime.ident.excite_loop import check_in_closed_loop, load_excitation, read_excitation
+from fjm_runtime.ident.excite_loop import read_excitation
 from fjm_runtime.validation import FjmValueError
 
 
@@ -104,38 +103,6 @@ def test_panda_excitation_within_limits_and_better_than_random():
         rand = FourierReference(ref.q0, a * scale[:, None], b * scale[:, None], ref.w0)
         random.append(_cond(nominal_motion(m, rand, t[:-1:10], m.params_array())))
     assert exc.condition < 0.7 * np.median(random), (exc.condition, random)
-
-
-def test_closed_loop_check_tracks_on_the_nominal_model():
-    m = fjm_runtime.load("link1")
-    exc = design_excitation(m, 4.0, candidates=3, iterations=2)
-    check = check_in_closed_loop(m, exc)
-    assert "diverged" not in check
-    assert check["max_error"] < 5e-3                       # PD + exact feedforward: noise-level errors
-    assert check["peak_torque"][0] == pytest.approx(np.max(np.abs(nominal_motion(
-        m, exc.reference, np.arange(4001) * 1e-3, m.params_array())["u"])), rel=0.1)
-
-
-def test_cli_writes_the_trajectory_a_robot_plays(tmp_path, capsys):
-    out = tmp_path / "traj.csv"
-    assert fjm_main(["excite", "link1", "--duration", "4", "--out", str(out), "--posture", "0.3",
-                     "--candidates", "3", "--iterations", "2"]) == 0
-    text = capsys.readouterr().out
-    assert "condition number" in text and "closed-loop check" in text and "from rest to rest" in text
-    m = fjm_runtime.load("link1")
-    d = read_excitation(out, m)
-    assert d["t"][0] == 0.0 and d["t"][-1] == pytest.approx(4.0) and d["t"].size == 4001
-    np.testing.assert_allclose(d["q_d"][:, 0], load_excitation(out).sample(d["t"])[:, 0, 0], atol=1e-12)
-    p = m.default_params
-    hold = p["M"] * p["g0"] * p["L"] * np.sin(0.3)                      # at rest at both ends: gravity only
-    for row in (0, -1):
-        assert d["q_d"][row, 0] == pytest.approx(0.3, abs=1e-12)
-        assert abs(d["dq_d"][row, 0]) < 1e-10 and abs(d["dq_m_d"][row, 0]) < 1e-8
-        assert d["u_ff"][row, 0] == pytest.approx(hold, rel=1e-9)
-        assert d["tau_J_d"][row, 0] == pytest.approx(hold, rel=1e-9)
-        assert d["q_m_d"][row, 0] == pytest.approx(0.3 + hold / p["K"], rel=1e-9)
-    meta = json.loads(out.with_suffix(".json").read_text())
-    assert meta["condition"] >= 1.0 and meta["check"]["max_error"] < 5e-3
 
 
 def test_bad_settings_are_refused_in_one_line(tmp_path, capsys):
