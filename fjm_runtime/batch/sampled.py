@@ -132,8 +132,10 @@ def _limits(ctrl, z, n):
 
 
 def _delta(ctrl, z, n):
-    if isinstance(ctrl, GainInput):
+    if isinstance(ctrl, GainInput) and "delta" in ctrl.layout:   # a law without a layer (impedance): never outside
         return ctrl.gain_block(z, "delta")
+    if isinstance(ctrl, GainInput):
+        return ca.DM(np.full(n, np.inf))
     return ca.DM(np.asarray(getattr(ctrl, "delta", np.full(n, np.inf)), dtype=float))
 
 

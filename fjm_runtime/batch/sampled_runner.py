@@ -11,6 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..ccache import DEFAULT_FLAGS
+from ..control.impedance import ImpedanceController, JointImpedanceController
 from ..control.laws import SlidingModeController
 from ..sim.metrics import metrics_from_sums
 from ..sim.interface import interface_from_spec
@@ -42,8 +43,9 @@ def batch_seeds(sensor: SensorModel, B: int, seeds=None) -> np.ndarray:
 
 
 def _step_controller(controller):
-    """A :class:`GainInput` for a sliding-mode law (gains per run), else the controller itself."""
-    if type(controller) is SlidingModeController:  # subclasses (adaptive) keep their own gains
+    """A :class:`GainInput` for a sliding-mode or impedance law (gains per run), else the controller itself."""
+    # the impedance laws' emitted Functions take the sliding-mode law's arguments; adaptive keeps its own gains
+    if type(controller) in (SlidingModeController, ImpedanceController, JointImpedanceController):
         return GainInput(controller)
     return controller
 

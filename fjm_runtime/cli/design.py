@@ -10,6 +10,7 @@ from pathlib import Path
 
 from .common import add_interface_argument, interface_arg
 from .models import MODEL_HELP
+from ..analysis.search.compare import LAWS_BY_INTERFACE
 from ..validation import FjmValueError, check_magnitudes
 from .ranges import DELAY, DURATION, RATE, SEED, THREADS, TORQUE, Range
 
@@ -19,8 +20,14 @@ __all__ = ["add_arguments", "run", "demo_task"]
 def add_arguments(p) -> None:
     """The arguments of ``fjm design`` on its parser ``p`` (name, help, description: commands.toml)."""
     p.add_argument("model", help=MODEL_HELP)
-    p.add_argument("--controller", default="ismc", choices=("ismc",), help="law (default ismc)")
-    p.add_argument("--sensing", default="torque", choices=("state", "torque"), help="default torque")
+    laws = tuple(dict.fromkeys(law for group in LAWS_BY_INTERFACE.values() for law in group))
+    p.add_argument("--law", default="auto", choices=("auto",) + laws,
+                   help="auto: search every law of the --interface (motor: ismc, fl, impedance; joint_torque: "
+                        "joint_impedance) on the same draws and thresholds, print them side by side and keep the best "
+                        "that meets; a name: that law only (default auto)")
+    p.add_argument("--controller", default=None, choices=laws, help="the same as --law NAME")
+    p.add_argument("--sensing", default="torque", choices=("state", "torque"),
+                   help="what ismc and fl read (default torque; impedance reads q, dq, q_m, dq_m, tau_J, dtau_J)")
     p.add_argument("--rate", type=RATE, default=1000.0, help=f"control rate, {RATE} (default 1000)")
     p.add_argument("--delay-samples", type=DELAY, default=1, help=f"computation delay, {DELAY} (default 1)")
     p.add_argument("--noise", default="panda_white", metavar="PRESET|FILE",
@@ -149,7 +156,7 @@ def run(args) -> int:
     Returns 0 when the gains meet every threshold (final check and re-check), 1 otherwise.
     """
     from .. import load
-    from ..analysis.search.search import design
+    from ..analysis.search.compare import comparison_lines, design_laws, laws_for
     from ..analysis.search.settings import SearchSettings
     from ..analysis.search.report import summary_lines
     from ..control.design import Design
@@ -174,20 +181,24 @@ def run(args) -> int:
     task = demo_task(m, spread.nominal) if args.task == "auto" else {}
     _warn_position_limits(m, task, max(args.duration, args.screen_duration), 1.0 / args.rate)
     t0 = time.perf_counter()
-    settings = SearchSettings(kind=args.controller, sensing=args.sensing, rate=args.rate, delay=args.delay_samples,
-                              sensor=sensor, interface=interface_arg(args), draws=args.draws, duration=args.duration,
-                              seed=args.seed,
+    law, interface = args.controller or args.law, interface_arg(args)
+    laws = laws_for(m, interface.kind, args.sensing) if law == "auto" else [law]
+    settings = SearchSettings(kind=laws[0] if laws else law, sensing=args.sensing, rate=args.rate,
+                              delay=args.delay_samples, sensor=sensor, interface=interface, draws=args.draws,
+                              duration=args.duration, seed=args.seed,
                               threads=args.threads, simd=args.simd, predict=args.predict, thresholds=thresholds,
                               spread=spread, recheck_draws=args.recheck_draws, scheduler=args.scheduler,
                               screen_draws=args.screen_draws, screen=None if args.screen == "none" else args.screen,
                               screen_duration=args.screen_duration, rounds=args.rounds, **task)
-    found = Design.from_dict({**design(m, settings), "wall_seconds": time.perf_counter() - t0, "noise": args.noise},
-                             "fjm design")
+    rec = design_laws(m, settings, laws, asked=law)
+    found = Design.from_dict({**rec, "wall_seconds": time.perf_counter() - t0, "noise": args.noise}, "fjm design")
     if args.out is None:
         print(json.dumps(found.as_dict(), indent=2, allow_nan=False))
     else:
         found.save(args.out)
         print(f"fjm design: wrote {args.out} ({found.report['wall_seconds']:.0f} s)", file=sys.stderr)
+    for line in comparison_lines(rec["comparison"], rec["law_choice"]["chosen"]):
+        print(f"fjm design: {line}", file=sys.stderr)
     for line in summary_lines(found.as_dict()):
         print(f"fjm design: {line}", file=sys.stderr)
     return 0 if found.meets else 1

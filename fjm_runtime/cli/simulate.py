@@ -205,6 +205,18 @@ def _load_gains(args) -> Optional[Design]:
     return design
 
 
+def _shipped_for_sensor(args, m) -> Optional[Design]:
+    """The shipped design for ``--noise`` (a preset or sensor file) on this model, at ``--rate`` and
+    ``--delay-samples`` when given, when no gains, law or sensing is asked for (None otherwise): a run
+    under that sensor takes the design's conditions as from ``--gains``."""
+    if args.noise is None or args.gains is not None or args.controller is not None or args.sensing is not None \
+            or args.lam is not None or args.k_s is not None or args.delta is not None or args.dt is not None \
+            or Path(args.noise).suffix == ".json":
+        return None
+    sensor = sensor_from_spec(args.noise, seed=args.seed, what="--noise")
+    return Design.shipped_for_sensor(m.name, sensor, args.rate, args.delay_samples)
+
+
 def _gains_file(args, m, rate: float, design: Optional[Design]):
     """``(design, source)``: the ``--gains`` design, else the shipped design for this model, rate, delay and
     sensing (any kind unless --controller names one) when no gain flag is given, else the flags or the
@@ -213,7 +225,7 @@ def _gains_file(args, m, rate: float, design: Optional[Design]):
     if design is not None:
         design.check(m)
         check_gain_magnitudes(args.gains, design)
-        return design, f"--gains {args.gains}"
+        return design, (f"--gains {args.gains}" if args.gains is not None else design.source)
     flags_given = args.lam is not None or args.k_s is not None or args.delta is not None
     shipped = None if flags_given else Design.shipped(m.name, args.controller, args.sensing, rate,
                                                       args.delay_samples)
@@ -366,12 +378,13 @@ def run(args) -> int:
         check_output_file(args.plot, "--plot")
     m = load(args.model)
     file_design = _load_gains(args)
-    take_law_sensing(args, file_design)
-    taken = take_design_conditions(args, file_design)
+    by_sensor = None if file_design is not None else _shipped_for_sensor(args, m)
+    take_law_sensing(args, file_design or by_sensor)
+    taken = take_design_conditions(args, file_design or by_sensor)
     dt = _period(args)
     _check_flags(args, dt)
     sensor = _sensor(args)
-    design, source = _gains_file(args, m, 1.0 / dt, file_design)
+    design, source = _gains_file(args, m, 1.0 / dt, file_design or by_sensor)
     from_file = params_file_nominal(args.params, m)
     check_magnitudes(from_file, from_file.values(), f"--params {args.params}: [parameters] ")
     given = parse_assignments(args.nominal, "--nominal")

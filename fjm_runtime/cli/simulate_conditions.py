@@ -82,7 +82,8 @@ def take_design_conditions(args, design) -> Optional[str]:
     args.predict = bool(args.predict)
     if not recorded:
         return None
-    line = f"the design's conditions (--gains {args.gains}): {', '.join(taken) or 'none taken'}"
+    where = f"--gains {args.gains}" if args.gains is not None else design.source
+    line = f"the design's conditions ({where}): {', '.join(taken) or 'none taken'}"
     return line + (f"; overridden on the command line: {'; '.join(overridden)}" if overridden else "")
 
 

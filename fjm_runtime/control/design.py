@@ -223,6 +223,30 @@ class Design:
                 return cls.from_dict(d, f"shipped design {_SHIPPED}/{name}")
         return None
 
+    @classmethod
+    def shipped_for_sensor(cls, model: str, sensor, rate: Optional[float] = None,
+                           delay: Optional[int] = None) -> Optional["Design"]:
+        """The shipped design for ``model`` made with ``sensor`` (a SensorModel; its fields compared, seed and
+        name aside), at ``rate`` (Hz) and ``delay`` (samples) when given; of several, the highest rate, then
+        the shortest delay, then the first file by name. ``None`` when none is shipped."""
+        folder = resources.files(__package__).joinpath("designed")
+        found = []
+        for path in sorted(folder.iterdir(), key=lambda p: p.name):
+            if not (path.name.endswith(".json") and path.name.startswith(model + "_")):
+                continue
+            d = json.loads(path.read_text(encoding="utf-8"))
+            if d.get("model") != model or d.get("rate") is None or d.get("delay") is None:
+                continue
+            d["file"] = f"{_SHIPPED}/{path.name}"
+            design = cls.from_dict(d, f"shipped design {_SHIPPED}/{path.name}")
+            if rate is not None and not math.isclose(float(design.rate), float(rate), rel_tol=1e-9):
+                continue
+            if (delay is not None and int(design.delay) != int(delay)) or not design.same_sensor(sensor)[0]:
+                continue
+            found.append(design)
+        found.sort(key=lambda dsg: (-float(dsg.rate), int(dsg.delay)))
+        return found[0] if found else None
+
     # -- checks --------------------------------------------------------------------------------------
 
     def joints(self) -> Optional[int]:

@@ -144,7 +144,7 @@ def test_a_users_urdf_arm_goes_through_every_command(tmp_path, capfd):
 
     # design on the smallest budget: a verdict either way (0 meets, 1 misses), recorded in the file
     design = work / "design.json"
-    got, _, e = fjm("design", out, "--draws", "3", "--recheck-draws", "0", "--duration", "0.5",
+    got, _, e = fjm("design", out, "--law", "ismc", "--draws", "3", "--recheck-draws", "0", "--duration", "0.5",
                     "--screen-draws", "3", "--screen-duration", "0.3", "--rounds", "1", "--threads", "1",
                     "--out", design, status=(0, 1))
     verdict = json.loads(design.read_text())

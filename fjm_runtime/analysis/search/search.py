@@ -1,9 +1,11 @@
 """Gains for a sampling rate, found by running the batch engine over many sampled closed loops.
 
-:func:`design` searches the integral sliding-mode law's gains for a model, control rate, computation
-delay and sensor model: the surface pole ``lam`` (the quadruple pole of the integral surface, shared
-by the joints because the emitted law has one set of surface coefficients) and, PER JOINT, ``k_lin``,
-``k_s`` and ``delta``. Every candidate is simulated (:class:`~fjm_runtime.analysis.search.runs.DesignLoops`:
+:func:`design` searches one law's gains for a model, control rate, computation delay and sensor model,
+in the law's gain space (:mod:`fjm_runtime.analysis.search.gain_spaces`: its gains, ranges and starting
+grid). For the integral sliding-mode law: the surface pole ``lam`` (the quadruple pole of the integral
+surface, shared by the joints because the emitted law has one set of surface coefficients) and, PER
+JOINT, ``k_lin``, ``k_s`` and ``delta``; for the motor-side impedance: ``K_p``, ``K_d``, ``K_T``, ``K_i``
+per joint. Every candidate is simulated (:class:`~fjm_runtime.analysis.search.runs.DesignLoops`:
 one compiled library for all candidates, the gains ride per run; SIMD by default; here or on a
 dask cluster, bit for bit the same) on draws of the TRUE plant
 (:mod:`fjm_runtime.analysis.search.draws`): by default
@@ -21,13 +23,13 @@ Cost of a run: the worst joint's RMS error (rad) plus ``PENALTY`` times the exce
 thresholds, each relative to its limit, summed over joints; a diverged run costs
 :data:`DIVERGED_COST`. The objective of a candidate is the worst cost over the draws.
 
-Search (deterministic by seed): a log grid on ``lam`` x ``k_s`` x the layer's slope ``k_s / delta``
-(``k_lin = LIN_RATIO lam``, slopes :data:`LAYER_SLOPES`, the same on every joint) on a screening set of draws and a short run, then a
-pattern search: each round tries every coordinate (``lam``, and ``k_lin_j``, ``k_s_j``, ``delta_j``
+Search (deterministic by seed): the law's starting grid (ismc: a log grid on ``lam`` x ``k_s`` x the
+layer's slope ``k_s / delta``, the same on every joint) on a screening set of draws and a short run, then a
+pattern search: each round tries every coordinate (ismc: ``lam``, and ``k_lin_j``, ``k_s_j``, ``delta_j``
 of every joint) times and divided by a factor ``f``, plus the candidate that takes every improving
 move at once (the joints are weakly coupled, so their moves mostly add); the best of these replaces
 the incumbent if it is better, otherwise ``f`` shrinks to ``sqrt(f)``. ``k_lin_j`` is kept at or above
-:data:`LIN_FLOOR` ``lam`` (measured reason at the constant). Per-joint gains matter on an
+:data:`~fjm_runtime.analysis.search.gain_spaces.LIN_FLOOR` ``lam`` (measured reason at the constant). Per-joint gains matter on an
 arm: the proximal joints (large ``D``, stiff) turn encoder noise into torque jitter through
 ``beta^-1 = J_m K^-1 D`` and want a small ``k_lin``, the wrist (small ``D``) wants a large one. A
 screen (:mod:`fjm_runtime.analysis.search.screen`; the linear sampled-data analysis when installed)
@@ -58,15 +60,14 @@ from ..sampled.sampled_linear import scaled_stiffness
 from ...sim.sensor import SensorModel
 from ...validation import FjmValueError
 from .draws import PlantSpread, default_spread, draw_params
+from .gain_spaces import GainSpace, combine_moves, gain_space
 from .runs import DesignLoops
 from .screen import SCREENED_COST, screen_costs
 from .settings import SearchSettings
 from .thresholds import PENALTY, Thresholds, describe_miss, find_misses, run_cost
 
-__all__ = ["LIN_FLOOR", "RECHECK_SEED_OFFSET", "combine_moves", "design", "evaluate_gains", "move_gain"]
+__all__ = ["RECHECK_SEED_OFFSET", "design", "evaluate_gains"]
 
-#: ``k_lin / lam`` of the grid stage.
-LIN_RATIO = 5.0
 #: Today's default thresholds (kept for importers; :class:`Thresholds` holds the limits).
 MAX_TIME_AT_LIMIT = Thresholds().max_at_limit
 MAX_JITTER = Thresholds().max_jitter
@@ -90,51 +91,11 @@ def evaluate_gains(prob: DesignLoops, gains: dict, P, duration: float, seed, del
     return float(np.max(cost)), b
 
 
-#: The per-joint gains of the pattern search.
-PER_JOINT = ("k_lin", "k_s", "delta")
-#: Floor of ``k_lin_j / lam``: the sliding variable's own pole no slower than 1.25 x the surface's.
-#: Without it the search (2 s screening runs) drove one Panda joint's k_lin to 6 (1/s), and 7 of 200
-#: final 10 s runs diverged after 2 s (slow limit cycles through the delay and the boundary layer);
-#: on those draws plus the screening ones (22 runs, 10 s), floors of 25 / 50 / 100 left 8 / 1 / 0 diverged.
-LIN_FLOOR = 1.25
-
-
-#: Boundary-layer slopes ``k_s / delta`` of the grid stage (N m per unit of ``s``). The former grid had 200
-#: only: on the Panda with velocities differentiated from the encoders (``franka_like``) every such
-#: candidate diverged (the layer's slope through the velocity filter's lag); ``lam 40, k_lin 200`` at 25
-#: held every joint but the wrist's (4 s, one draw) and the linear analysis puts it at radius 0.983.
-LAYER_SLOPES = (25.0, 200.0)
-
-
-def _grid(lams, kss, n: int, slopes=LAYER_SLOPES):
-    """The grid stage's candidates: the same gains on every joint (per-joint lists of length ``n``)."""
-    return [{"lam": float(lam), "k_lin": [LIN_RATIO * float(lam)] * n, "k_s": [float(ks)] * n,
-             "delta": [float(ks) / float(slope)] * n} for slope in slopes for lam in lams for ks in kss]
-
-
-def move_gain(gains: dict, coord, factor: float) -> dict:
-    """``gains`` with one coordinate (``"lam"`` or ``(name, joint)``) multiplied by ``factor``."""
-    out = {k: (list(v) if isinstance(v, list) else v) for k, v in gains.items()}
-    if coord == "lam":
-        out["lam"] = gains["lam"] * factor
-    else:
-        out[coord[0]][coord[1]] = gains[coord[0]][coord[1]] * factor
-    out["k_lin"] = [max(v, LIN_FLOOR * out["lam"]) for v in out["k_lin"]]
-    return out
-
-
-def combine_moves(gains: dict, moves) -> dict:
-    """``gains`` with every ``(coord, factor)`` of ``moves`` applied (distinct coordinates)."""
-    for coord, factor in moves:
-        gains = move_gain(gains, coord, factor)
-    return gains
-
-
 class _Search:
     """The screened objective of the search: worst cost over rows, candidates the screen rejects skipped."""
 
-    def __init__(self, prob: DesignLoops, screen):
-        self.prob, self.screen = prob, screen
+    def __init__(self, prob: DesignLoops, screen, space: GainSpace):
+        self.prob, self.screen, self.space = prob, screen, space
         self.screened = 0
         self.simulated = 0
 
@@ -150,19 +111,19 @@ class _Search:
 
 
 def _refine(search: _Search, best, best_cost, P, duration, seed, rounds, say, f: float = 2.0):
-    """Pattern search over ``lam`` and the per-joint gains (module docstring), first factor ``f``."""
-    n = len(best["k_lin"])
-    coords = ["lam"] + [(key, j) for key in PER_JOINT for j in range(n)]
+    """Pattern search over the law's scalar and per-joint gains (module docstring), first factor ``f``."""
+    space = search.space
+    coords = space.coords(int(search.prob.model.n))
     for rnd in range(rounds):
         moves = [(c, s) for c in coords for s in (f, 1.0 / f)]
-        cands = [move_gain(best, c, s) for c, s in moves]
+        cands = [space.move(best, c, s) for c, s in moves]
         cost = search.objective(cands, P, duration, seed)
         better = {}
         for (c, s), v in zip(moves, cost):       # the better direction of each improving coordinate
             if v < best_cost and (c not in better or v < better[c][1]):
                 better[c] = (s, v)
         if len(better) > 1:
-            cands.append(combine_moves(best, [(c, s) for c, (s, _v) in better.items()]))
+            cands.append(combine_moves(best, [(c, s) for c, (s, _v) in better.items()], space))
             cost = np.append(cost, search.objective(cands[-1:], P, duration, seed))
         j = int(np.argmin(cost))
         say(f"refine round {rnd + 1}/{rounds} (factor {f:.3g}, {len(cands)} candidates, {len(better)} "
@@ -279,7 +240,7 @@ def _attribution(prob, gains, miss, P_all, spread, recheck, duration, seed, say)
 def _search(search, model, P_all, draws, screen_draws, screen_duration, duration, rounds, active_sets, seed, say):
     """Grid, pattern search, final check and active set: ``(best, worst, batch)``."""
     P_screen = P_all[:screen_draws]
-    cands = _grid(np.geomspace(20.0, 160.0, 4), np.geomspace(200.0, 20000.0, 5), int(model.n))
+    cands = search.space.grid(model, np.asarray(model.params_array(search.prob.nominal), dtype=float))
     cost = search.objective(cands, P_screen, screen_duration, seed)
     if np.all(cost >= SCREENED_COST) and search.screen is not None:
         say("grid: the screen rejected every candidate; simulating them all")
@@ -319,8 +280,9 @@ def design(model, settings: Optional[SearchSettings] = None, *,
         input_gain_range), ``params, screen, scheduler, evaluations, draws, seed, duration, fjm_version``.
     """
     s = SearchSettings() if settings is None else settings
-    if s.kind != "ismc":
-        raise FjmValueError(f"design: controller {s.kind!r}: the search covers the integral law 'ismc'")
+    space = gain_space(s.kind)
+    if space.sensing is not None:
+        s = replace(s, sensing=space.sensing)   # the law reads its own measurement
     if s.draws < 1 or s.duration <= 0 or s.rate <= 0 or s.delay < 0 or s.screen_draws < 1 or s.screen_duration <= 0:
         raise FjmValueError(f"design: draws = {s.draws}, duration = {s.duration}, rate = {s.rate}, delay = {s.delay}, "
                             f"screen_draws = {s.screen_draws}, screen_duration = {s.screen_duration}: expected "
@@ -358,7 +320,7 @@ def _design(model, s: SearchSettings, say, client) -> dict:
         screen = linear_screen(prob, spread)
         if screen is None:
             raise FjmValueError("design: screen = 'linear': fjm_runtime.analysis.sampled.sampled_linear is not installed")
-    search = _Search(prob, screen)
+    search = _Search(prob, screen, gain_space(s.kind))
     draws, duration, screen_draws, screen_duration = s.draws, s.duration, s.screen_draws, s.screen_duration
     P_all = draw_params(model, max(draws, screen_draws), seed, spread)
     best, worst, b = _search(search, model, P_all, draws, screen_draws, screen_duration, duration, s.rounds,

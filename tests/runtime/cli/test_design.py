@@ -13,7 +13,7 @@ QUICK = ["--draws", "3", "--duration", "0.3", "--screen-draws", "3", "--screen-d
 @pytest.mark.slow  # builds the batch step (C) on a cold cache
 def test_design_that_misses_exits_1_names_the_miss_and_records_it(tmp_path, capsys):
     out = tmp_path / "g.json"
-    rc = main(["design", "link1", "--noise", "panda_white", "--recheck-draws", "2", "--out", str(out), *QUICK])
+    rc = main(["design", "link1", "--law", "ismc", "--noise", "panda_white", "--recheck-draws", "2", "--out", str(out), *QUICK])
     err = capsys.readouterr().err
     assert rc == 1
     rec = json.loads(out.read_text())
@@ -27,7 +27,7 @@ def test_design_that_misses_exits_1_names_the_miss_and_records_it(tmp_path, caps
 @pytest.mark.slow  # builds the batch step (C) on a cold cache
 def test_design_that_meets_exits_0_after_the_recheck(tmp_path, capsys):
     out = tmp_path / "g.json"
-    rc = main(["design", "link1", "--noise", "ideal", "--max-rms", "0.5", "--max-jitter", "1e4", "--max-at-limit",
+    rc = main(["design", "link1", "--law", "ismc", "--noise", "ideal", "--max-rms", "0.5", "--max-jitter", "1e4", "--max-at-limit",
                "100", "--recheck-draws", "2", "--out", str(out), *QUICK])
     err = capsys.readouterr().err
     rec = json.loads(out.read_text())
@@ -41,7 +41,7 @@ def test_design_params_file_reaches_the_controller_and_the_record(tmp_path, caps
     params = tmp_path / "p.toml"
     params.write_text("[parameters]\nK = 180.0\n\n[spread]\nstiffness = 0.1\nJ_m = 0.0\n")
     out = tmp_path / "g.json"
-    main(["design", "link1", "--noise", "ideal", "--params", str(params), "--recheck-draws", "0", "--out", str(out),
+    main(["design", "link1", "--law", "ismc", "--noise", "ideal", "--params", str(params), "--recheck-draws", "0", "--out", str(out),
           *QUICK])
     rec = json.loads(out.read_text())
     assert rec["params"] == {"source": str(params), "nominal": {"K": 180.0}, "relative": {"K": 0.1, "J_m": 0.0},

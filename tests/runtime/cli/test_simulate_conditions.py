@@ -180,7 +180,7 @@ def test_check_divergence_peak_covers_the_rows_up_to_the_bad_state_only():
 
 
 def test_design_warns_when_its_task_leaves_the_position_limits(arm, tmp_path, capsys):
-    status, out, err = _run(capsys, ["design", str(arm), "--draws", "1", "--recheck-draws", "0", "--duration", "0.5",
+    status, out, err = _run(capsys, ["design", str(arm), "--law", "ismc", "--draws", "1", "--recheck-draws", "0", "--duration", "0.5",
                                      "--screen-draws", "1", "--screen-duration", "0.3", "--rounds", "0",
                                      "--threads", "1", "--out", str(tmp_path / "d.json")])
     assert status in (0, 1)

@@ -67,7 +67,7 @@ def test_input_gain_scaling_and_respring_keep_the_physics(hd):
 @pytest.mark.slow  # builds the batch step (C) on a cold cache
 def test_design_runs_on_a_datasheet_spring(tmp_path, capsys):
     out = tmp_path / "g.json"
-    rc = main(["design", "arm1_hd", "--noise", "ideal", "--draws", "3", "--duration", "0.5", "--screen-draws", "3",
+    rc = main(["design", "arm1_hd", "--law", "ismc", "--noise", "ideal", "--draws", "3", "--duration", "0.5", "--screen-draws", "3",
                "--screen-duration", "0.3", "--rounds", "1", "--seed", "2", "--recheck-draws", "0", "--out", str(out)])
     capsys.readouterr()
     rec = json.loads(out.read_text())

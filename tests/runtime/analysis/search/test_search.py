@@ -120,7 +120,7 @@ def test_design_on_process_workers_is_bit_identical():
 
 
 def test_moves_are_per_joint_and_keep_the_k_lin_floor():
-    from fjm_runtime.analysis.search.search import LIN_FLOOR, combine_moves, move_gain
+    from fjm_runtime.analysis.search.gain_spaces import LIN_FLOOR, combine_moves, move_gain
     g = {"lam": 80.0, "k_lin": [400.0, 200.0], "k_s": [1e3, 2e3], "delta": [5.0, 10.0]}
     h = move_gain(g, ("k_s", 1), 2.0)
     assert h["k_s"] == [1e3, 4e3] and g["k_s"] == [1e3, 2e3]          # the input is not changed
