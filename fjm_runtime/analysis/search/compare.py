@@ -106,7 +106,6 @@ def design_laws(model, settings, laws: Sequence[str], asked: str = "auto",
     for law in laws:
         gain_space(law)                                  # refuses an unknown law before any run
     for law in laws:
-        say(f"law {law}: searching its gains")
         records[law] = design(model, replace(settings, kind=law), progress=lambda msg, law=law: say(f"[{law}] {msg}"))
     rows = [comparison_row(law, records[law]) for law in laws]
     chosen = list(laws)[_best(rows)]
