@@ -36,7 +36,7 @@ from .simulate_checks import (DEFAULT_MAX_MEMORY_GB, MAX_SUBSTEPS, MEMORY_GB, ch
                               workspace_exit)
 from .simulate_laws import check_run_interface, check_set_point, impedance_controller, take_law_sensing
 from .simulate_conditions import (default_gains, design_sensor, peak_text, peak_until, run_effort_limits,
-                                  say_conditions, take_design_conditions)
+                                  say_conditions, shipped_for_sensor, take_design_conditions)
 
 
 def add_arguments(sim) -> None:
@@ -205,18 +205,6 @@ def _load_gains(args) -> Optional[Design]:
     return design
 
 
-def _shipped_for_sensor(args, m) -> Optional[Design]:
-    """The shipped design for ``--noise`` (a preset or sensor file) on this model, at ``--rate`` and
-    ``--delay-samples`` when given, when no gains, law or sensing is asked for (None otherwise): a run
-    under that sensor takes the design's conditions as from ``--gains``."""
-    if args.noise is None or args.gains is not None or args.controller is not None or args.sensing is not None \
-            or args.lam is not None or args.k_s is not None or args.delta is not None or args.dt is not None \
-            or Path(args.noise).suffix == ".json":
-        return None
-    sensor = sensor_from_spec(args.noise, seed=args.seed, what="--noise")
-    return Design.shipped_for_sensor(m.name, sensor, args.rate, args.delay_samples)
-
-
 def _gains_file(args, m, rate: float, design: Optional[Design]):
     """``(design, source)``: the ``--gains`` design, else the shipped design for this model, rate, delay and
     sensing (any kind unless --controller names one) when no gain flag is given, else the flags or the
@@ -378,7 +366,7 @@ def run(args) -> int:
         check_output_file(args.plot, "--plot")
     m = load(args.model)
     file_design = _load_gains(args)
-    by_sensor = None if file_design is not None else _shipped_for_sensor(args, m)
+    by_sensor = None if file_design is not None else shipped_for_sensor(args, m)
     take_law_sensing(args, file_design or by_sensor)
     taken = take_design_conditions(args, file_design or by_sensor)
     dt = _period(args)

@@ -22,7 +22,7 @@ import numpy as np
 
 from ..control.defaults import DEFAULT_LAM, PAPER_K_RANGE, default_delta
 
-__all__ = ["SIMULATE_DEFAULTS", "take_design_conditions", "default_gains", "default_design", "effort_limits",
+__all__ = ["SIMULATE_DEFAULTS", "shipped_for_sensor", "take_design_conditions", "default_gains", "default_design", "effort_limits",
            "run_effort_limits", "position_limit_warning", "peak_until", "peak_text", "say_conditions"]
 
 #: ``fjm simulate``'s conditions without a design file: 1 kHz, state sensing, no delay, no prediction,
@@ -85,6 +85,28 @@ def take_design_conditions(args, design) -> Optional[str]:
     where = f"--gains {args.gains}" if args.gains is not None else design.source
     line = f"the design's conditions ({where}): {', '.join(taken) or 'none taken'}"
     return line + (f"; overridden on the command line: {'; '.join(overridden)}" if overridden else "")
+
+
+def shipped_for_sensor(args, m):
+    """The shipped design made with ``--noise`` (a preset or sensor file) for this model, at ``--rate`` and
+    ``--delay-samples`` when given and for ``--interface`` when given, when no gains, law or sensing is asked
+    for (None otherwise): a run under that sensor then takes the design's conditions as from ``--gains``."""
+    from pathlib import Path
+
+    from ..control.design import Design
+    from ..sim.interface import interface_from_record, interface_from_spec
+    from ..sim.sensor import sensor_from_spec
+    if args.noise is None or args.gains is not None or args.controller is not None or args.sensing is not None \
+            or args.lam is not None or args.k_s is not None or args.delta is not None or args.dt is not None \
+            or Path(args.noise).suffix == ".json":
+        return None
+    sensor = sensor_from_spec(args.noise, seed=args.seed, what="--noise")
+    design = Design.shipped_for_sensor(m.name, sensor, args.rate, args.delay_samples)
+    if design is not None and getattr(args, "interface", None) is not None:
+        want = interface_from_spec(args.interface, what="--interface")
+        got = interface_from_record({"interface": design.interface, "sensor": design.sensor}, design.source)
+        return design if got.as_dict() == want.as_dict() else None
+    return design
 
 
 def _same(key: str, a, b) -> bool:
