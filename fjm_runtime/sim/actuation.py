@@ -14,7 +14,17 @@ from .interface import gravity_function
 from .step_layout import StepLayout, controller_model
 
 __all__ = ["actuated_plant", "interface_command", "nominal_gravity", "plant_substeps", "rate_limited", "rate_windup",
-           "rk4_step", "spring_torque"]
+           "rk4_stages", "rk4_step", "spring_torque"]
+
+
+def rk4_stages(xdot, x, u0, uh, u1, p, h: float):
+    """The RK4 formula over ``h`` for ``x' = xdot(x, u, p)``, the torque ``u0``, ``uh``, ``u1`` at the stages'
+    times ``0, h/2, h`` (numpy or CasADi values alike)."""
+    k1 = xdot(x, u0, p)
+    k2 = xdot(x + 0.5 * h * k1, uh, p)
+    k3 = xdot(x + 0.5 * h * k2, uh, p)
+    k4 = xdot(x + h * k3, u1, p)
+    return x + (h / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
 
 
 def rk4_step(ops, x, u, p, h: float):
@@ -23,12 +33,7 @@ def rk4_step(ops, x, u, p, h: float):
     staged = isinstance(u, tuple)
     if getattr(ops, "substep", None) is not None:
         return ops.substep_staged(x, *u, p) if staged else ops.substep(x, u, p)
-    u0, uh, u1 = u if staged else (u, u, u)
-    k1 = ops.xdot(x, u0, p)
-    k2 = ops.xdot(x + 0.5 * h * k1, uh, p)
-    k3 = ops.xdot(x + 0.5 * h * k2, uh, p)
-    k4 = ops.xdot(x + h * k3, u1, p)
-    return x + (h / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+    return rk4_stages(ops.xdot, x, *(u if staged else (u, u, u)), p, h)
 
 
 def plant_substeps(ops, L: StepLayout, x, u, p):

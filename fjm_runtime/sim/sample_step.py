@@ -38,7 +38,7 @@ import numpy as np
 from ..drives import model_springs
 from ..validation import FjmValueError
 from .actuation import (actuated_plant, interface_command, nominal_gravity, plant_substeps, rate_windup,
-                        spring_torque)
+                        rk4_stages, spring_torque)
 from .interface import gravity_function
 from .sensor import SensorModel, measurement_blocks, offset_normals
 from .step import casadi_functions
@@ -103,11 +103,7 @@ class _CasadiOps:
         x, u = ca.SX.sym("x", nx), ca.SX.sym("u", n)
         us = (u, ca.SX.sym("uh", n), ca.SX.sym("u1", n)) if staged else (u, u, u)
         p = ca.SX.sym("p", self.fns["f"].size1_in(1))
-        k1 = self.xdot(x, us[0], p)
-        k2 = self.xdot(x + 0.5 * h * k1, us[1], p)
-        k3 = self.xdot(x + 0.5 * h * k2, us[1], p)
-        k4 = self.xdot(x + h * k3, us[2], p)
-        x_next = x + (h / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+        x_next = rk4_stages(self.xdot, x, *us, p, h)
         name = f"fjm_rk4{'_staged' if staged else ''}_{self.fns['f'].name()}"
         ins = [x, *us, p] if staged else [x, u, p]
         names = ["x", "u", "uh", "u1", "p"] if staged else ["x", "u", "p"]
@@ -303,13 +299,11 @@ def _post_law(ops, L: StepLayout, w, u, zdot, m_buf_next, filt_next, venc_next, 
 
 def python_sample_step(model, controller, L: StepLayout, w, t: float, r, noise, p):
     """One sample in numpy: ``(w_next, sample)`` (the controller's ControlSample, ``u`` the APPLIED torque)."""
-    ops = _NumpyOps(model)
+    ops = command_ops(model, controller, L)   # the robot adds the controller model's gravity (joint_torque)
     nom_ops = _NumpyOps(controller_model(controller, model)) if L.predict else None
     p_nom = np.asarray(controller.p_nom, dtype=float) if L.predict else None
-    if L.interface == "joint_torque":   # the robot adds the controller model's gravity (and so does its predictor)
-        ops.gravity_fn, ops.p_gravity = nominal_gravity(controller, model)
-        if nom_ops is not None:
-            nom_ops.gravity_fn, nom_ops.p_gravity = ops.gravity_fn, ops.p_gravity
+    if nom_ops is not None and L.interface == "joint_torque":   # and so does its predictor
+        nom_ops.gravity_fn, nom_ops.p_gravity = ops.gravity_fn, ops.p_gravity
     m_used, m_buf_next, filt_next, venc_next = _pre_law(ops, nom_ops, L, w, noise, p, p_nom)
     sz = L.slices()[1]
     z = w[sz]

@@ -14,7 +14,7 @@ import numpy as np
 
 from ..validation import FjmValueError
 from .interface import CommandInterface
-from .sensor import SensorModel
+from .sensor import SensorModel, measurement_blocks
 
 __all__ = ["StepLayout", "controller_model", "make_layout"]
 
@@ -173,7 +173,7 @@ def make_layout(model, controller, T: float, substeps: int, sensor: SensorModel,
     rate_step = tuple(float(r * T) if np.isfinite(r) else _NO_LIMIT for r in rate) \
         if interface.has_rate_limit() else ()
     return StepLayout(n=n, nx=int(model.nx), nz=int(getattr(controller, "n_states", 0)), sensing=sensing,
-                      nm={"state": 4, "torque": 5, "full": 6}[sensing] * n, delay=int(delay), predict=predicting,
+                      nm=len(measurement_blocks(sensing)) * n, delay=int(delay), predict=predicting,
                       filtered=torque and sensor.dtau_mode == "filtered", T=float(T), substeps=int(substeps),
                       a_filter=1.0 - math.exp(-sensor.dtau_cutoff * T), q_quant=sensor.q_quant,
                       q_m_quant=sensor.q_m_quant,
