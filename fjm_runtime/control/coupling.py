@@ -201,6 +201,16 @@ def coupling_terms(complete, reduced, x, ddq, ddq_m, p):
     return np.asarray(d_l).ravel(), np.asarray(d_m).ravel()
 
 
+def _compensation(complete, pv, x, d_l, d_l1, d_l2, d_m, motor: bool):
+    """``(x_tilde, u_add)`` of the module docstring from ``d_l`` and its first two derivatives, at the
+    NOMINAL stiffness, motor damping and rotor inertia of ``pv`` (CasADi)."""
+    import casadi as ca
+    n = int(complete.n)
+    K, B, Jm = (ca.DM(_param(complete, pv, k)) for k in ("stiffness", "damping", "rotor_inertia"))
+    x_t = ca.vertcat(x[:2 * n], x[2 * n:3 * n] - d_l / K, x[3 * n:] - d_l1 / K)
+    return x_t, d_l + (d_m if motor else 0) + (B * d_l1 + Jm * d_l2) / K
+
+
 def coupling_function(complete, reduced, p_nom, motor: bool = True):
     """``comp(x, r) -> (x_tilde, u_add, d_l, d_m)``: the compensation of the module docstring, in CasADi.
 
@@ -227,9 +237,7 @@ def coupling_function(complete, reduced, p_nom, motor: bool = True):
     d_l, d_m = coupling_terms(complete, reduced, ca.vertcat(q, dq, q, dq), ddq, ddq, ca.DM(pv))
     d_l1 = ca.jtimes(d_l, Z, Zdot)
     d_l2 = ca.jtimes(d_l1, Z, Zdot)
-    K, B, Jm = (ca.DM(_param(complete, pv, k)) for k in ("stiffness", "damping", "rotor_inertia"))
-    x_t = ca.vertcat(x[:2 * n], x[2 * n:3 * n] - d_l / K, x[3 * n:] - d_l1 / K)
-    u_add = d_l + (d_m if motor else 0) + (B * d_l1 + Jm * d_l2) / K
+    x_t, u_add = _compensation(complete, pv, x, d_l, d_l1, d_l2, d_m, motor)
     inner = ca.Function("inner", [q, dq, ddq, d3, d4, x], [x_t, u_add, d_l, d_m])
     out = inner(*[r[k * n:(k + 1) * n] for k in range(5)], x)
     return ca.Function("coupling_compensation", [x, r], list(out), ["x", "r"],
@@ -277,9 +285,7 @@ def measured_coupling_function(complete, reduced, p_nom, motor: bool = True, ord
     xd = complete.functions["f"](x, p) + ca.mtimes(complete.functions["g"](x, p), u)
     d_l, d_m = coupling_terms(complete, reduced, x, xd[n:2 * n], xd[3 * n:], p)
     d_l, d_l1, d_l2 = _derivatives(d_l, x, xd, order)
-    K, B, Jm = (ca.DM(_param(complete, pv, k)) for k in ("stiffness", "damping", "rotor_inertia"))
-    x_t = ca.vertcat(x[:2 * n], x[2 * n:3 * n] - d_l / K, x[3 * n:] - d_l1 / K)
-    u_add = d_l + (d_m if motor else 0) + (B * d_l1 + Jm * d_l2) / K
+    x_t, u_add = _compensation(complete, pv, x, d_l, d_l1, d_l2, d_m, motor)
     return ca.Function("measured_coupling_compensation", [x, u], [x_t, u_add, d_l, d_m], ["x", "u_prev"],
                        ["x_tilde", "u_add", "d_l", "d_m"])
 
