@@ -37,7 +37,7 @@ from ..sim.simulate import simulate
 from ..sim.step import SimulationDivergedError
 from .panda import DIVERGED_ERROR
 from .plots import write_figure
-from .real_arm import PDG_GAINS, draws
+from .real_arm import PDG_GAINS, draws, diverged as real_arm_diverged
 
 RATE = 1000.0          # Hz, the Panda's control rate
 DELAY = 1              # samples of computation delay (predicted with the nominal model)
@@ -131,9 +131,9 @@ def sensing_rows(model, duration: float, backend: str = "compiled") -> Dict[str,
 
 
 def diverged(r) -> bool:
-    """Stopped by the integrator, or some joint's error beyond :data:`DIVERGED_ERROR` rad (or not finite)."""
-    return (isinstance(r, SimulationDivergedError) or not np.all(np.isfinite(r.e1))
-            or bool(np.any(np.abs(r.e1) > DIVERGED_ERROR)))
+    """:func:`fjm_runtime.experiments.real_arm.diverged` (stopped by the integrator, or some joint's error beyond
+    :data:`DIVERGED_ERROR` rad), or an error that is not finite."""
+    return real_arm_diverged(r) or not np.all(np.isfinite(r.e1))
 
 
 def summary_rows(model, results: Dict[str, list]) -> Dict[str, dict]:
