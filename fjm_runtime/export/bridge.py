@@ -67,7 +67,7 @@ class MujocoPlant:
         self.data = mujoco.MjData(self.mj)
         chain = load_chain(model)
         p = resolve_params(model, params)
-        self.params = np.asarray(model.params_array(p) if isinstance(p, dict) else p, dtype=float)
+        self.params = np.array([p[k] for k in model.param_names], dtype=float)  # validated by resolve_params
         self.N = gear_ratios(model, p, "rotors" in chain, gear_ratio)
         joints = [e["joint"] for e in chain["elastic"]]
         names = joints + [f"{j}_rotor" for j in joints]
@@ -79,7 +79,7 @@ class MujocoPlant:
         # (spring tendon, link dof, rotor dof, N, joint index) per spring the file states as numerics; their
         # torque is the model's spring law at the file's coefficients (put into the parameter vector)
         self.friction, self.springs = [], []
-        self._p = np.array([p[k] for k in model.param_names], dtype=float)
+        self._p = self.params.copy()
         for i in range(self.mj.nnumeric):
             num = self.mj.numeric(i)
             if num.name.startswith(FRICTION_NUMERIC):
