@@ -28,11 +28,16 @@ from fjm_runtime.control.laws import coefficients_from_pole
 from fjm_runtime.control.references import Sinusoid
 from fjm_runtime.sim.compiled import sampled_loop_runner
 from fjm_runtime.sim.metrics import metrics_from_sums
+from fjm_runtime.sim.interface import CommandInterface
 from fjm_runtime.sim.sample_step import initial_step_state
 from fjm_runtime.sim.step_layout import make_layout
 from fjm_runtime.sim.sensor import SensorModel
 
 from .ccutil import compile_object, link_shared
+
+#: The command interface of every fjm run compared with a peer here: the peers (hand-written C, numpy,
+#: solve_ivp) apply the computed torque at once, so fjm runs them on the ``ideal`` interface (like for like).
+PEER_INTERFACE = "ideal"
 
 HERE = Path(__file__).resolve().parent
 
@@ -95,8 +100,10 @@ class Case:
         return int(round(self.duration / self.dt))
 
     def layout(self):
-        """The sample step's layout: one RK4 substep, ideal sensor, no delay (``w = x`` for the SMC law)."""
-        return make_layout(self.model, self.controller, self.dt, 1, SensorModel.ideal(), 0, False)
+        """The sample step's layout: one RK4 substep, ideal sensor, no delay, the torque applied as computed (the
+        ``ideal`` command interface, as every peer here integrates it): ``w = x`` for the SMC law."""
+        return make_layout(self.model, self.controller, self.dt, 1, SensorModel.ideal(), 0, False,
+                           interface=CommandInterface.ideal())
 
     def reference_rows(self):
         """The reference at ``t_k``, ``k = 0 .. N-1``, shape (N, 5) (what sample k reads)."""
@@ -177,7 +184,7 @@ def simulate_call(case: Case, backend: str):
     """The whole ``simulate(..., backend=backend, substeps=1)`` call of the case (references, outputs, metrics)."""
     from fjm_runtime.sim.simulate import simulate
     return simulate(case.model, case.controller, case.reference, duration=case.duration, dt=case.dt,
-                    true_params=case.p_true, x0=case.x0(), backend=backend, substeps=1)
+                    true_params=case.p_true, x0=case.x0(), backend=backend, substeps=1, interface=PEER_INTERFACE)
 
 
 def python_loop(case: Case):

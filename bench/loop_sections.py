@@ -91,7 +91,7 @@ def bench_batch(reps: int, slow_reps: int, checks: list, n_runs: int = 1000) -> 
     import warnings
     from fjm_runtime.batch.runner import METRIC_NAMES, SimdFallbackWarning, simulate_batch
     from fjm_runtime.batch.simd import vector_isa
-    from .closed_loop import link1_case, numpy_batch
+    from .closed_loop import PEER_INTERFACE, link1_case, numpy_batch
     case = link1_case()
     from fjm_runtime.control.defaults import PAPER_K_RANGE
     Ks = np.random.default_rng(0).uniform(*PAPER_K_RANGE, n_runs)
@@ -102,7 +102,8 @@ def bench_batch(reps: int, slow_reps: int, checks: list, n_runs: int = 1000) -> 
         with warnings.catch_warnings():
             warnings.simplefilter("error", SimdFallbackWarning)   # an error here, not a footnote
             return simulate_batch(case.model, case.controller, case.reference, P, duration=case.duration,
-                                  dt=case.dt, x0=case.x0(), substeps=1, simd=simd, threads=threads)
+                                  dt=case.dt, x0=case.x0(), substeps=1, simd=simd, threads=threads,
+                                  interface=PEER_INTERFACE)
 
     log(f"batch {n_runs} x 10 s: compiling ...")
     one, allt, scal = run(threads=1), run(), run(simd=False)

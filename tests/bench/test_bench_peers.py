@@ -97,13 +97,14 @@ def test_python_and_solve_ivp_peers_track_the_same_loop():
 
 def test_numpy_batch_peer_equals_simulate_batch():
     """The NumPy peer (one RK4 step per sample, closed forms) == the sampled batch with substeps=1, row by row."""
-    from bench.closed_loop import link1_case, numpy_batch
+    from bench.closed_loop import PEER_INTERFACE, link1_case, numpy_batch
     from fjm_runtime.batch.runner import METRIC_NAMES, simulate_batch
     case = link1_case(duration=1.0)
     Ks = np.array([100.0, 140.0, 200.0])
     P = np.tile(case.p_true, (3, 1))
     P[:, 2] = Ks
-    b = simulate_batch(case.model, case.controller, case.reference, P, duration=1.0, x0=case.x0(), substeps=1)
+    b = simulate_batch(case.model, case.controller, case.reference, P, duration=1.0, x0=case.x0(), substeps=1,
+                       interface=PEER_INTERFACE)
     nb = numpy_batch(case, Ks)
     for k in METRIC_NAMES:
         assert np.allclose(b.metrics[k], nb[k], rtol=1e-9, atol=1e-12), k
