@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from fjm_runtime.control.defaults import DEFAULT_LAM, DEFAULT_SWITCHING_GAIN, PAPER_K_RANGE, default_delta
+from fjm_runtime.control.defaults import DEFAULT_LAM, DEFAULT_SWITCHING_GAIN, default_delta
 from fjm_runtime.control.factory import CONTROLLER_KINDS, FULL_SENSED_KINDS, LAWS, REGULATION_KINDS, make_controller
 from fjm_runtime.control.laws import SlidingModeController
 from fjm_runtime.control.references import Sinusoid, make_reference
@@ -33,13 +33,6 @@ def test_ismc_takes_another_mode_and_unknown_names_are_refused(planar2):
                                                integral=True).law_kind
     with pytest.raises(ValueError, match="controller = 'nope'"):
         make_controller("nope", planar2, {})
-
-
-def test_the_defaults_agree_with_each_other():
-    """The adaptive estimator's default bounds at the paper's nominal 150 are the paper's range."""
-    from fjm_runtime.control.defaults import default_K_bounds
-    assert default_K_bounds(150.0) == PAPER_K_RANGE
-    assert default_delta(DEFAULT_SWITCHING_GAIN) == 5.0
 
 
 def test_unknown_reference_and_controller(link1):
