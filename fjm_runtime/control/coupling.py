@@ -262,11 +262,8 @@ def measured_coupling_function(complete, reduced, p_nom, motor: bool = True, ord
 
     Parameters
     ----------
-    complete, reduced : Model
-    p_nom : ndarray, shape (n_params,)
-        NOMINAL parameters of the complete model (baked in).
-    motor : bool
-        Include ``d_m`` in ``u_add``.
+    complete, reduced, p_nom, motor
+        As :func:`coupling_function` (``p_nom`` baked in; ``motor``: ``d_m`` in ``u_add``).
     order : {0, 1, 2}
         Derivatives of ``d_l`` used (0: none, the motor shift and torque take ``d_l`` only).
 
