@@ -14,7 +14,7 @@ from typing import Dict, Tuple
 import casadi as ca
 
 from ..core.linearize import Linearization
-from .sx import SympyToSX, ldl_factor, ldl_solve, spd_inverse
+from .sx import SympyToSX, ldl_factor, ldl_solve, spd_inverse, state_symbols
 
 #: Quantities emitted for a complete model, in file order, with their meaning.
 COMPLETE_QUANTITIES: Tuple[Tuple[str, str], ...] = (
@@ -43,10 +43,7 @@ def build_complete_functions(lin: Linearization, cse: bool = True) -> Dict[str, 
     """
     m = lin.model
     n = m.n
-    x = ca.SX.sym("x", 4 * n)
-    p = ca.SX.sym("p", len(m.params))
-    bindings = {s: x[i] for i, s in enumerate(m.state)}
-    bindings.update({s: p[j] for j, s in enumerate(m.param_symbols)})
+    x, p, bindings = state_symbols(m)
     conv = SympyToSX(bindings, dict(m.program.definitions), {})
     M = conv(lin.outputs["inertia"])
     L, inv_d = ldl_factor(M)

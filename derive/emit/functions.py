@@ -23,7 +23,7 @@ import casadi as ca
 from ..core.linearize import Linearization
 from .brackets import closed_form_brackets
 from .dynamics import build_kernel, state_bodies, sx_function
-from .sx import SympyToSX, ldl_factor, ldl_solve
+from .sx import SympyToSX, ldl_factor, ldl_solve, state_symbols
 
 #: Quantities emitted for every model, in file order, with their meaning.
 QUANTITIES: Tuple[Tuple[str, str], ...] = (
@@ -97,10 +97,7 @@ def build_model_functions(lin: Linearization, cse: bool = True,
     """
     m = lin.model
     n = m.n
-    x = ca.SX.sym("x", 4 * n)
-    p = ca.SX.sym("p", len(m.params))
-    bindings = {s: x[i] for i, s in enumerate(m.state)}
-    bindings.update({s: p[j] for j, s in enumerate(m.param_symbols)})
+    x, p, bindings = state_symbols(m)
     lazy: Dict[str, object] = {}
 
     def factors():  # one LDL^T of D(q), shared by every solve

@@ -151,6 +151,16 @@ class SympyToSX:
         raise ValueError(f"cannot emit power with exponent {expo}")
 
 
+def state_symbols(m):
+    """``(x, p, bindings)``: SX symbols of model ``m``'s state ``x`` (4n) and parameters ``p``, and the SymPy
+    state and parameter symbols bound to their entries (the bindings of :class:`SympyToSX`)."""
+    x = ca.SX.sym("x", 4 * m.n)
+    p = ca.SX.sym("p", len(m.params))
+    bindings = {s: x[i] for i, s in enumerate(m.state)}
+    bindings.update({s: p[j] for j, s in enumerate(m.param_symbols)})
+    return x, p, bindings
+
+
 def _ldl_factor_py(A: ca.SX):
     """The arithmetic of :func:`ldl_factor` in Python SX (traced once per size into its Function)."""
     n = A.shape[0]
@@ -174,16 +184,7 @@ def _ldl_factor_py(A: ca.SX):
 
 
 def _ldl_solve_py(L, inv_d, b: ca.SX) -> ca.SX:
-    """Solve ``A x = b`` given :func:`ldl_factor` of A.
-
-    Parameters
-    ----------
-    b : casadi.SX, shape (n, 1)
-
-    Returns
-    -------
-    casadi.SX, shape (n, 1)
-    """
+    """The arithmetic of :func:`ldl_solve` in Python SX (traced once per size into its Function)."""
     n = len(inv_d)
     z = [None] * n
     for i in range(n):
