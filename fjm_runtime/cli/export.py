@@ -43,7 +43,7 @@ def add_arguments(ex) -> None:
     ex.add_argument("--gear-ratio", type=GEAR_RATIO, default=None,
                     help=f"reduced model: rotor angle = GEAR_RATIO * q_m for every joint, {GEAR_RATIO} (default 1; complete "
                          "models take N1..Nn via --param)")
-    ex.add_argument("--timestep", type=float, default=None, help="MuJoCo step, 1e-07 <= timestep <= 0.01 s (integrator RK4; default 1e-4)")
+    ex.add_argument("--timestep", type=float, default=None, help=f"MuJoCo step, {TIMESTEP} (integrator RK4; default 1e-4)")
     ex.add_argument("--interface", default=None, metavar="NAME|FILE.toml",
                     help="controller: what the library's output commands (default: the design's, else motor; "
                          "joint_torque, franka: the library outputs tau_d, the robot filters it and adds gravity)")
@@ -51,6 +51,9 @@ def add_arguments(ex) -> None:
 
 #: Gear ratios of a drive (harmonic drives reach 160, stacked gearboxes a few thousand).
 GEAR_RATIO = Range(0, 1e4, "", "N", lo_open=True)
+#: MuJoCo RK4 step, s: above 10 ms RK4 leaves its stability region on the elastic modes (|omega h| <= 2.8;
+#: the Panda's wrist mode is ~700 rad/s); below 0.1 us a second of simulation takes 1e7 steps.
+TIMESTEP = Range(1e-7, 1e-2, "s", "timestep", why="MuJoCo's RK4 step; default 1e-4")
 
 #: The flags each format reads; any other given flag is refused (not silently ignored).
 _FLAGS = {"controller": ("gains", "params", "substeps", "name", "unverified", "interface"),
@@ -121,18 +124,12 @@ def _run_controller(args) -> int:
     return 0
 
 
-#: MuJoCo RK4 step range, s: above 10 ms RK4 leaves its stability region on the elastic modes (|omega h| <= 2.8;
-#: the Panda's wrist mode is ~700 rad/s); below 0.1 us a second of simulation takes 1e7 steps.
-TIMESTEP_RANGE = (1e-7, 1e-2)
-
-
 def _check_mjcf_flags(args) -> None:
-    """``--timestep`` within :data:`TIMESTEP_RANGE` and ``--K`` a stiffness the export holds, in one line each."""
+    """``--timestep`` within :data:`TIMESTEP` and ``--K`` a stiffness the export holds, in one line each (after
+    :func:`_refuse_foreign_flags`, hence not argparse types)."""
     from ..export.controller_checks import check_c_values
-    lo, hi = TIMESTEP_RANGE
-    if args.timestep is not None and not (lo <= args.timestep <= hi):
-        raise FjmValueError(f"--timestep {args.timestep:g}: expected {lo:g} <= timestep <= {hi:g} s (MuJoCo's RK4 "
-                            "step; default 1e-4)")
+    if args.timestep is not None:
+        TIMESTEP.check("--timestep", args.timestep)
     if args.K is not None:
         check_c_values(["--K"], [args.K], "")
 
