@@ -7,7 +7,6 @@ result, not an input error: the JSON says why and the exit status is 1.
 """
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 from typing import Dict, List, Tuple
