@@ -50,6 +50,13 @@ def planar2():
     return fjm_runtime.load("planar2")
 
 
+@pytest.fixture
+def private_cache(tmp_path, monkeypatch):
+    """A compiled-code cache of this test's own (``FJM_CACHE`` set to a fresh directory, ``pathlib.Path``)."""
+    monkeypatch.setenv("FJM_CACHE", str(tmp_path / "cache"))
+    return tmp_path / "cache"
+
+
 @pytest.fixture(scope="session")
 def panda():
     """The generated ``panda`` model (``fjm_runtime.Model``), loaded once."""
@@ -79,6 +86,7 @@ HEAVY_FIRST = (
     "tests/packaging/test_self_contained.py",
     "tests/runtime/sim/test_simulate.py",
     "tests/runtime/sim/test_compiled.py",
+    "tests/runtime/test_ccache.py",
     "tests/derive/test_guard.py",
     "tests/runtime/analysis/certificates/test_regulation.py",
 )
