@@ -17,6 +17,8 @@ from typing import List, Tuple
 
 import numpy as np
 
+from .plots import write_figure
+
 #: Excitation length, s (quick mode: QUICK_DURATION).
 DURATION, QUICK_DURATION = 10.0, 3.0
 #: State-sensed ismc gains from `fjm design link1 --params <identified> --sensing state --noise panda_white
@@ -62,10 +64,7 @@ def _plot(log, ident, p_true, path: Path) -> Path:
     ax[1].bar(names, err, yerr=se, capsize=4)
     ax[1].axhline(0, color="k", lw=0.8)
     ax[1].set(ylabel="identified - true (%)", title="error, with one standard error")
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return write_figure(fig, path, tight=True)
 
 
 def identification_section(ctx) -> Tuple[List[str], list]:
