@@ -35,7 +35,7 @@ from typing import Dict, List, Optional, Sequence, Tuple
 from ..core.domains import FRICTION_DOMAINS, SPRING_DOMAINS
 from ..core.friction import FRICTION_PARAMETERS
 from ..core.spring_laws import LAW_COEFFICIENTS, SPRING_KINDS, SPRING_PARAMETERS, SpringError
-from .schema import Checker, got, number, show, suggest
+from .schema import Checker, got, number, optional_table, show, suggest
 
 __all__ = ["DRIVE_TABLES", "SpringSpec", "parse_spring_table", "parse_friction_table", "parse_joint_drive_tables",
            "SPRING_COEFFICIENTS", "FRICTION_COEFFICIENTS"]
@@ -72,12 +72,8 @@ class SpringSpec:
 
 
 def _table(data: dict, chk: Checker, name: str, links: int) -> Optional[dict]:
-    if name not in data:
-        return None
-    table = data[name]
-    if not isinstance(table, dict):
-        raise chk.fail((name,), f"expected a table ([{name}] with key = value lines), {got(table)}")
-    if links != 1:
+    table = optional_table(data, chk, name)
+    if table is not None and links != 1:
         raise chk.fail((name,), f"a flat [{name}] table is for one link; this file has links = {links}: give "
                                 f"[{name}.default] and [{name}.<joint number>] tables (per joint, 1..{links})")
     return table

@@ -29,7 +29,7 @@ from __future__ import annotations
 
 from typing import Dict, List, Optional, Sequence, Tuple
 
-from .schema import Checker, check_description, got, number, show, suggest
+from .schema import Checker, check_description, got, number, optional_table, show, suggest
 from .toml_keys import KeyPath
 
 __all__ = ["FACT_TABLES", "LIMIT_KEYS", "TASK_KINDS", "robot_facts"]
@@ -75,12 +75,8 @@ def per_joint(chk: Checker, path: KeyPath, value, joints: Sequence[str], unit: s
 
 
 def _table(data: dict, chk: Checker, name: str, keys: Sequence[str]) -> Optional[dict]:
-    if name not in data:
-        return None
-    table = data[name]
-    if not isinstance(table, dict):
-        raise chk.fail((name,), f"expected a table ([{name}] with key = value lines), {got(table)}")
-    for key in table:
+    table = optional_table(data, chk, name)
+    for key in table or ():
         if key not in keys:
             raise chk.fail((name, key), f"unknown key; [{name}] allows {', '.join(keys)}" + suggest(key, keys))
     return table

@@ -18,7 +18,7 @@ from ..core.model_base import MODEL_NAMES
 from .toml_keys import BARE_KEY, KeyPath, locate_keys
 
 __all__ = ["ModelFileError", "Checker", "got", "show", "suggest", "check_name", "check_description",
-           "number", "NAME_RE", "MAX_NAME", "MAX_DESCRIPTION"]
+           "number", "optional_table", "NAME_RE", "MAX_NAME", "MAX_DESCRIPTION"]
 
 NAME_RE = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
 MAX_NAME = 64
@@ -111,6 +111,16 @@ def suggest(word: str, options) -> str:
     lower = [o for o in options if o.lower() == word.lower()]
     best = lower or close
     return f" (did you mean {best[0]!r}?)" if best else ""
+
+
+def optional_table(data: dict, chk: Checker, name: str) -> Optional[dict]:
+    """The top-level table ``[name]`` of a parsed file, None when absent; a value that is not a table is refused."""
+    if name not in data:
+        return None
+    table = data[name]
+    if not isinstance(table, dict):
+        raise chk.fail((name,), f"expected a table ([{name}] with key = value lines), {got(table)}")
+    return table
 
 
 def check_name(chk: Checker, name, builtin: bool) -> None:
