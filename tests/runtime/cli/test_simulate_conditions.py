@@ -17,7 +17,7 @@ import fjm_runtime
 from fjm_runtime import make_reference, simulate
 from fjm_runtime.cli.main import main as fjm_main
 from fjm_runtime.cli.simulate_conditions import default_design, default_gains
-from fjm_runtime.sim.step import SimulationDivergedError, check_divergence
+from fjm_runtime.sim.step import SimulationDivergedError
 
 from support.paths import GENERATED
 
@@ -167,16 +167,6 @@ def test_a_diverged_run_reports_the_peak_torques_up_to_the_divergence(capsys):
     with pytest.raises(SimulationDivergedError) as e:
         simulate(m, ctrl, ref, duration=0.5, dt=1e-3, interface="ideal")
     assert np.allclose(e.value.peak_torque, expected, rtol=1e-9)
-
-
-def test_check_divergence_peak_covers_the_rows_up_to_the_bad_state_only():
-    t = np.array([0.1, 0.2, 0.3, 0.4])
-    W = np.array([[0.0], [1.0], [np.inf], [0.0]])
-    U = np.array([[1.0, -2.0], [-5.0, 1.0], [3.0, 7.0], [100.0, 100.0]])
-    before = np.array([[-6.0, 0.5]])
-    with pytest.raises(SimulationDivergedError) as e:
-        check_divergence(t, W, U, 1e6, before)
-    assert e.value.t == 0.3 and e.value.peak_torque.tolist() == [6.0, 7.0]
 
 
 def test_design_warns_when_its_task_leaves_the_position_limits(arm, tmp_path, capsys):
