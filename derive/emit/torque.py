@@ -27,6 +27,7 @@ import casadi as ca
 from ..core.linearize import Linearization
 from ..core.torque import TorqueLinearization
 from .dynamics import mx_function, sx_function, torque_bodies
+from .impedance import split_blocks
 from .sx import SympyToSX, ldl_factor, ldl_solve
 
 #: Torque-coordinate functions emitted for every model, in file order, with their meaning.
@@ -181,10 +182,7 @@ def build_pdg(model) -> ca.Function:
     p = ca.SX.sym("p", len(model.params))
     layout = pdg_gains_layout(n)
     gains = ca.SX.sym("gains", sum(b[1] for b in layout))
-    g, k = {}, 0
-    for name, size, _ in layout:
-        g[name] = gains[k:k + size]
-        k += size
+    g = split_blocks(gains, layout)
     q_d = r[:n]
     bindings = {s: q_d[i] for i, s in enumerate(model.q)}
     bindings.update({s: ca.SX(0) for s in model.dq})
