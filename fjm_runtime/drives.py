@@ -17,7 +17,7 @@ import numpy as np
 from .validation import REDERIVE, FjmValueError
 
 __all__ = ["Drive", "ParameterInfo", "read_drives", "read_parameter_info", "drive_indices", "role_names", "spring_laws",
-           "linear_stiffness_indices", "spring_scale_groups", "joint_coefficients", "model_springs",
+           "linear_springs", "linear_stiffness_indices", "spring_scale_groups", "joint_coefficients", "model_springs",
            "DRIVE_ROLES"]
 
 #: The per-joint roles :func:`drive_indices` selects (``"stiffness"``: the spring's small-deflection
@@ -147,6 +147,11 @@ def role_names(model, role: str) -> List[str]:
 def spring_laws(model) -> Tuple[str, ...]:
     """Each elastic joint's spring law name, shape (n,) (``"linear"``, ``"cubic"``, ``"three_segment"``)."""
     return tuple(d.spring_law for d in model.drives)
+
+
+def linear_springs(model) -> List[int]:
+    """Indices of ``K`` of the joints whose spring is linear, in q order (nonlinear laws' joints left out)."""
+    return [d.stiffness for d in model.drives if d.spring_law == "linear"]
 
 
 def linear_stiffness_indices(model, purpose: str) -> np.ndarray:

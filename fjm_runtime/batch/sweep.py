@@ -30,6 +30,7 @@ from typing import Callable, Dict, List, Optional
 import numpy as np
 
 from ..control.defaults import PAPER_K_RANGE
+from ..drives import linear_springs
 from ..validation import FjmValueError
 
 
@@ -129,7 +130,7 @@ def sample_parameters(model, n_samples: int, seed: int = 0, k_range=PAPER_K_RANG
     rng = np.random.default_rng(seed)
     base = np.array([model.default_params[k] for k in model.param_names])
     P = np.tile(base, (int(n_samples), 1))
-    linear_K = {d.stiffness for d in model.drives if d.spring_law == "linear"}
+    linear_K = set(linear_springs(model))
     for j, name in enumerate(model.param_names):
         if j in linear_K:
             P[:, j] = rng.uniform(lo, hi, len(P)) * (1.0 if k_relative is None else base[j])

@@ -14,7 +14,7 @@ from typing import Dict, List, Optional, Tuple
 import numpy as np
 
 from ...control.laws import coefficients_from_pole
-from ...drives import linear_stiffness_indices, role_names
+from ...drives import linear_springs, linear_stiffness_indices, role_names
 
 # ---------------------------------------------------------------------------------------------
 # inputs
@@ -225,7 +225,7 @@ def box_maximize(fg, v0: np.ndarray, maxiter: int = 60, tol: float = 1e-12) -> n
 def stiffness_names(model) -> List[str]:
     """Names of the linear joint stiffnesses of ``model`` (``model.drives``): ``['K']`` (link1) or
     ``['K1', ..., 'Kn']``; empty for nonlinear springs."""
-    return [model.param_names[d.stiffness] for d in model.drives if d.spring_law == "linear"]
+    return [model.param_names[i] for i in linear_springs(model)]
 
 
 
