@@ -18,6 +18,7 @@ import numpy as np
 from ..sim.interface import interface_from_spec
 from ..sim.loops import BACKENDS
 from ..sim.metrics import Metrics, compute_metrics
+from ..sim.plot import DPI
 from ..sim.sample_step import check_loop_settings, initial_measurement, initial_step_state
 from ..sim.sensor import SensorModel, noise_array
 from ..sim.step import casadi_functions
@@ -75,7 +76,7 @@ class SimulationResult:
     u_max: Optional[np.ndarray] = None
     settings: dict = dc_field(default_factory=dict)
 
-    def plot(self, path=None, title: str = "", dpi: int = 110):
+    def plot(self, path=None, title: str = "", dpi: int = DPI):
         """Angles, error, torque and sliding variable of this run (:func:`fjm_runtime.sim.plot.plot_run`).
 
         Parameters
