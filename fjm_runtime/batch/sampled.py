@@ -177,7 +177,11 @@ def sampled_metric_step(model, ctrl, L: StepLayout, max_state: float, width: int
     ok = (ca.mmax(absw) <= max_state) * (ca.sum1(absw) <= 1e308)  # NaN compares false
     was_bad = g["first_bad"][0] >= 0
     bad_now = (1 - ok) * (1 - was_bad) * (1 - last)
-    w_next = ca.if_else(last + was_bad + bad_now > 0, w, w_step)
+    freeze = last + was_bad + bad_now > 0
+    # an entry the step passes through unchanged (the riding gains) stays the input itself, so the SIMD
+    # emitter sees it constant along the run and hoists what depends on it
+    w_next = ca.vertcat(*[w[i] if ca.is_equal(w_step[i], w[i]) else ca.if_else(freeze, w[i], w_step[i])
+                          for i in range(L.nw)])
     acc_next = ca.vertcat(
         w_next,
         g["e2_half_j"] + half * e2, g["e2_all"] + ca.sum1(e2), g["e2_half_all"] + half * ca.sum1(e2),

@@ -14,7 +14,7 @@ import math
 
 from importlib import resources
 from string import Template
-from typing import Dict, List, Optional, Sequence, Tuple
+from typing import Dict, Iterable, List, Optional, Sequence, Tuple
 
 import casadi as ca
 import numpy as np
@@ -61,9 +61,11 @@ class SoaProgram:
     work slot lives: ``("inv", j)`` or ``("w", slot)``.
     """
 
-    def __init__(self, varying: Sequence[int], invariant_from: Optional[int], callees: Optional[dict] = None,
-                 io: Optional[Tuple[Sequence[int], Sequence[int]]] = None):
-        self.varying, self.invariant_from = tuple(varying), invariant_from
+    def __init__(self, varying: Sequence[int], invariant: Iterable[int] = (), callees: Optional[dict] = None,
+                 io: Optional[Tuple[Sequence[int], Sequence[int]]] = None, passthrough: Iterable[int] = ()):
+        #: Entries of input 0 constant along a run (loaded once, in the prologue); ``passthrough``: the
+        #: entries of output 0 that are input 0's same entry (never stored: both buffers hold them).
+        self.varying, self.invariant, self.passthrough = tuple(varying), frozenset(invariant), frozenset(passthrough)
         #: Called Functions emitted so far, shared with nested programs: name -> (C name, C text), in
         #: definition order (a callee's own callees first).
         self.callees: Dict[str, Tuple[str, str]] = {} if callees is None else callees
@@ -101,7 +103,7 @@ class SoaProgram:
         """``OP_INPUT``: entry ``i[1]`` of input ``i[0]`` into slot ``o[0]``."""
         if self.io is not None:
             self._set_w(o[0], f"w{o[0]} = in[{self.io[0][i[0]] + i[1]}];")
-        elif self.invariant_from is not None and i[0] == 0 and i[1] >= self.invariant_from:
+        elif i[0] == 0 and i[1] in self.invariant:
             self._set_inv(o[0], lambda j: f"memcpy(&inv[{j}], acc + {i[1]}*LANES, sizeof(vd));")
         elif i[0] in self.varying:
             self._set_w(o[0], f"memcpy(&w{o[0]}, arg[{i[0]}] + {i[1]}*LANES, sizeof(vd));")
@@ -140,6 +142,8 @@ class SoaProgram:
             self.add_input(i, o)
         elif op == ca.OP_OUTPUT and self.io is not None:
             self.body.append(f"out[{self.io[1][o[0]] + o[1]}] = {self.ref(i[0])};")
+        elif op == ca.OP_OUTPUT and o[0] == 0 and o[1] in self.passthrough:
+            pass
         elif op == ca.OP_OUTPUT:
             self.body.append(f"{{ vd t = {self.ref(i[0])}; memcpy(res[{o[0]}] + {o[1]}*LANES, &t, sizeof(vd)); }}")
         elif op == ca.OP_CALL:
@@ -186,7 +190,7 @@ def callee_source(fn: ca.Function, callees: dict) -> str:
     if not fn.is_a("SXFunction"):
         raise ValueError(f"soa_source: call of {key}, not an SX Function")
     io = (_offsets([fn.nnz_in(j) for j in range(fn.n_in())]), _offsets([fn.nnz_out(j) for j in range(fn.n_out())]))
-    prog = SoaProgram((), None, callees, io)
+    prog = SoaProgram((), (), callees, io)
     for j in range(fn.n_instructions()):
         prog.add(fn, j)
     cname = f"fjm_fn{len(callees)}"
@@ -204,6 +208,28 @@ def simd_template() -> Template:
     return Template(resources.files(__package__).joinpath("simd_template.c").read_text(encoding="utf-8"))
 
 
+def passthrough_entries(step: ca.Function) -> List[int]:
+    """The entries ``i`` of output 0 that are input 0's entry ``i`` itself (no operation between them).
+
+    Found on the instruction list: a work slot remembers which entry of input 0 it holds until another
+    instruction overwrites it. In the sampled step these are the TRUE parameters and the gains riding
+    in the controller state: constant along a run.
+    """
+    holds: Dict[int, int] = {}
+    out = []
+    for k in range(step.n_instructions()):
+        op, i, o = step.instruction_id(k), step.instruction_input(k), step.instruction_output(k)
+        if op == ca.OP_OUTPUT:
+            if o[0] == 0 and holds.get(i[0]) == o[1]:
+                out.append(int(o[1]))
+            continue
+        for slot in o:
+            holds.pop(slot, None)
+        if op == ca.OP_INPUT and i[0] == 0:
+            holds[o[0]] = int(i[1])
+    return out
+
+
 def soa_source(step: ca.Function, lanes: int, varying=(0,), invariant_from: int = None) -> str:
     """C source of ``step`` evaluated on ``lanes`` runs at once (inputs in ``varying`` per lane).
 
@@ -213,13 +239,17 @@ def soa_source(step: ca.Function, lanes: int, varying=(0,), invariant_from: int 
     Defines ``fjm_prologue(acc, inv)``, ``fjm_step_soa(inv, arg, res)`` and the driver
     ``fjm_sampled_batch_soa`` (the noise of each lane generated in C); varying inputs and every
     output are laid out ``[nz][lane]``.
-    Entries ``>= invariant_from`` of input 0 are constant along a run (the TRUE
-    parameters riding in the accumulator): every instruction that depends on them and
-    constants only is hoisted into the prologue (once per run group, not once per
-    step), and a division by such a value becomes a multiplication by its reciprocal
-    (rounding may differ by one ulp).
+    Entries ``>= invariant_from`` of input 0 (the TRUE parameters riding in the accumulator)
+    and the entries the step passes through unchanged (:func:`passthrough_entries`: the
+    parameters, the gains riding in the controller state) are constant along a run: every
+    instruction that depends on them and constants only is hoisted into the prologue (once
+    per run group, not once per step), a division by such a value becomes a multiplication
+    by its reciprocal (rounding may differ by one ulp), and a passed-through entry is never
+    stored (the driver starts both accumulator buffers equal).
     """
-    prog = SoaProgram(varying, invariant_from)
+    same = passthrough_entries(step)
+    tail = range(invariant_from, step.nnz_in(0)) if invariant_from is not None else ()
+    prog = SoaProgram(varying, set(tail) | set(same), passthrough=same)
     for k in range(step.n_instructions()):
         prog.add(step, k)
     return simd_template().substitute(

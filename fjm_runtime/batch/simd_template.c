@@ -43,7 +43,8 @@ static void fjm_step_soa(const vd* restrict inv, const double** arg, double** re
 int fjm_sampled_batch_soa(int n_groups, int n_samples, int nacc, int nr, int nm, int nf, double* acc,
                           const double* R, const double* FL, const double* levels, const long long* chan,
                           const unsigned long long* seeds, int n_threads, int* threads_used) {
-  int used = 1, nt = 1;
+  int used = 1, nt = 1, noisy = 0;
+  for (int j = 0; j < nm; ++j) noisy |= levels[j] != 0.0;
 #ifdef _OPENMP
   nt = n_threads > 0 ? n_threads : omp_get_max_threads();
 #endif
@@ -63,11 +64,13 @@ int fjm_sampled_batch_soa(int n_groups, int n_samples, int nacc, int nr, int nm,
       uint64_t key[LANES];
       for (int l = 0; l < LANES; ++l) key[l] = fjm_splitmix64((uint64_t)seeds[(size_t)g * LANES + l]);
       memcpy(cur, acc + (size_t)g * nacc * LANES, sizeof(double) * nacc * LANES);
+      memcpy(nxt, cur, sizeof(double) * nacc * LANES);  /* the step never stores a passed-through entry */
+      memset(noise, 0, sizeof(double) * nm * LANES);
       fjm_prologue(cur, inv);
       const double* arg[4];
       double* res[1];
       for (int k = 0; k < n_samples; ++k) {
-        for (int l = 0; l < LANES; ++l) {
+        for (int l = 0; l < LANES && noisy; ++l) {  /* an ideal sensor's rows stay zero */
           fjm_noise_row(key[l], (uint64_t)k, nm, levels, chan, row);
           for (int j = 0; j < nm; ++j) noise[j * LANES + l] = row[j];
         }
