@@ -167,12 +167,15 @@ def sampled_metric_step(model, ctrl, L: StepLayout, max_state: float, width: int
     # at the rate limit: the applied torque moved by the whole allowed step (sample 0 has no u_prev)
     at_rate = (ca.fabs(u - g["u_prev"]) >= ca.DM(list(L.rate_step)) * (1.0 - 1e-9)) * (1 - first) \
         if L.rate_step else ca.DM.zeros(n)
-    ring = ca.if_else(applied, ca.vertcat(g["ring"][n:], u), g["ring"]) if width > 1 else u
+    # the ring shifts at every sample: after the last one (applied = 0) it is never read again (jit_full = 0)
+    ring = ca.vertcat(g["ring"][n:], u) if width > 1 else u
     mean = sum(ring[i * n:(i + 1) * n] for i in range(width)) / width
     h = (width - 1) // 2
     dev = ring[h * n:(h + 1) * n] - mean
-    sz = L.slices()[1]
-    keep = [i for i in range(L.nw) if not (isinstance(ctrl, GainInput) and sz.start + ctrl.n_law <= i < sz.stop)]
+    # the divergence check skips an entry the step copies from w (a riding gain, a delay-buffer shift): its
+    # value was checked when it was computed
+    copied = {w[j].name() for j in range(L.nw)}
+    keep = [i for i in range(L.nw) if not (w_step[i].is_symbolic() and w_step[i].name() in copied)]
     absw = ca.fabs(w_step[keep])
     ok = (ca.mmax(absw) <= max_state) * (ca.sum1(absw) <= 1e308)  # NaN compares false
     was_bad = g["first_bad"][0] >= 0

@@ -8,7 +8,9 @@
 typedef double vd __attribute__((vector_size(8 * LANES)));
 typedef long long vl __attribute__((vector_size(8 * LANES)));
 static const vd V0 = {0};
-static inline vd v_b(vl m) { return __builtin_convertvector(-m, vd); }
+/* a comparison's mask (-1 or 0 per lane) as 1.0 or 0.0: one AND with the bits of 1.0 (no int-to-double
+ * conversion, which AVX2 and SSE2 lack for 64-bit lanes) */
+static inline vd v_b(vl m) { return (vd)(m & (vl)(V0 + 1.)); }
 static inline vd v_sel(vl m, vd a, vd b) { return (vd)(((vl)a & m) | ((vl)b & ~m)); }
 static inline vd v_sign(vd x) { return v_sel(x < 0., V0 - 1., v_sel(x > 0., V0 + 1., x)); }
 static inline vd v_sin(vd x) { double a[LANES], r[LANES]; memcpy(a, &x, sizeof x); for (int l = 0; l < LANES; ++l) r[l] = sin(a[l]); memcpy(&x, r, sizeof x); return x; }
