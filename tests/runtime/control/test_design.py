@@ -19,8 +19,7 @@ def test_shipped_designs_round_trip_key_for_key(name, tmp_path):
     """Every shipped file reads into a Design whose JSON is the file's, key for key and in order; a saved
     copy reads back equal."""
     raw = json.loads(resources.files("fjm_runtime.control").joinpath("designed", name).read_text())
-    model, rest = name.split("_ismc_")
-    design = Design.shipped(model, "ismc", "torque", 1000.0, 1)
+    design = Design.shipped(raw["model"], raw["kind"], raw["sensing"], raw["rate"], raw["delay"])
     assert design is not None and design.file.endswith(name)
     assert design.as_dict() == raw and list(design.as_dict()) == list(raw)
     design.save(tmp_path / "copy.json")

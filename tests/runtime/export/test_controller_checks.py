@@ -137,9 +137,8 @@ def test_every_shipped_design_exports_and_its_step_is_the_simulators(tmp_path, f
     """Each shipped design (panda_hd: seven nonlinear springs, predicted through psi^-1) exports, as does
     the same design without prediction (fjm design's default; no K_i needed); the exported step Function,
     evaluated from the simulator's controller state at each of 20 samples, gives the run's torques to 1e-12."""
-    model_name = file.split("_ismc")[0]
-    model = fjm_runtime.load(model_name)
     spec = Design.load(fjm_runtime.__path__[0] + f"/control/designed/{file}").as_dict()
+    model = fjm_runtime.load(spec["model"])
     for predict in (True, False):
         design = design_controller(model, Design.from_dict({**spec, "predict": predict}))
         files = export_controller(design, tmp_path / f"lib_{predict}")

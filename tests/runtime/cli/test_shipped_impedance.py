@@ -1,0 +1,56 @@
+"""The shipped Panda motor-side impedance designs under franka_like sensing, and fjm simulate picking them.
+
+``fjm simulate panda --noise franka_like`` (no gains, law or sensing asked) runs the shipped design made with
+that sensor (1 kHz, one sample of delay, prediction, full sensing), as ``--gains FILE`` would: the same
+torques and errors as the design's controller simulated directly, tracking within the design's own
+thresholds. Each shipped impedance file records that it met them on its final check and its re-check
+(200 + 200 draws), with a worst RMS at most 0.5 mrad.
+"""
+import json
+from importlib import resources
+
+import numpy as np
+import pytest
+
+import fjm_runtime
+from fjm_runtime.cli.main import main
+from fjm_runtime.control.design import Design
+from fjm_runtime.sim.sensor import SensorModel
+
+SHIPPED = sorted(p.name for p in resources.files("fjm_runtime.control").joinpath("designed").iterdir()
+                 if p.name.startswith("panda_impedance_"))
+
+
+@pytest.mark.parametrize("name", SHIPPED)
+def test_shipped_impedance_designs_met_on_400_draws(name):
+    d = Design.load(resources.files("fjm_runtime.control").joinpath("designed", name))
+    rep = d.report
+    assert d.kind == "impedance" and d.sensing == "full" and d.meets is True and d.predict is True
+    assert d.same_sensor(SensorModel.franka_like())[0]
+    assert rep["draws"] == 200 and rep["recheck"]["draws"] == 200 and rep["recheck"]["meets"] is True
+    worst = max(rep["worst_case"]["rms_second_half"] + rep["recheck"]["worst_case"]["rms_second_half"])
+    assert worst <= 0.5e-3
+    row = [r for r in rep["comparison"] if r["law"] == "impedance"][0]
+    assert row["rms"] == worst and row["diverged"] == 0 and row["runs"] == 400
+
+
+@pytest.mark.slow  # builds the Panda's impedance loop (C) on a cold cache
+def test_simulate_under_franka_like_picks_the_shipped_design(capsys):
+    assert main(["simulate", "panda", "--noise", "franka_like", "--duration", "2", "--json", "--seed", "3"]) == 0
+    captured = capsys.readouterr()
+    rep = json.loads(captured.out)
+    s = rep["settings"]
+    assert s["gains"] == "fjm_runtime/control/designed/panda_impedance_1000hz_d1.json"
+    assert (s["controller"], s["sensing"], s["rate"], s["delay_samples"], s["predict"]) == \
+        ("impedance", "full", 1000.0, 1, True)
+    assert rep["designed_for_these_conditions"] is True and rep["diverged"] is False
+    d = Design.shipped_for_sensor("panda", SensorModel.franka_like(), 1000.0, 1)
+    m = fjm_runtime.load("panda")
+    from fjm_runtime.sim.metrics import rms_second_half
+    from fjm_runtime.sim.simulate import simulate
+    ref = d.reference(m)
+    r = simulate(m, d.controller(m), ref, duration=2.0, dt=1e-3, x0=d.start_state(m),
+                 sensor=SensorModel.franka_like(seed=3), delay_samples=1, predict=True)
+    assert np.allclose(rep["rms_second_half"], rms_second_half(r), rtol=1e-9, atol=0)
+    assert max(rep["rms_second_half"]) <= 0.5e-3 and max(rep["time_at_limit"]) == 0.0
+    assert "using the shipped design" in captured.err
