@@ -66,9 +66,9 @@ class SoaProgram:
         #: Entries of input 0 constant along a run (loaded once, in the prologue); ``passthrough``: the
         #: entries of output 0 that are input 0's same entry (never stored: both buffers hold them).
         self.varying, self.invariant, self.passthrough = tuple(varying), frozenset(invariant), frozenset(passthrough)
-        #: Called Functions emitted so far, shared with nested programs: name -> (C name, C text), in
-        #: definition order (a callee's own callees first).
-        self.callees: Dict[str, Tuple[str, str]] = {} if callees is None else callees
+        #: Called Functions emitted so far, shared with nested programs: (name, invariant inputs) -> (C name,
+        #: C text, invariant slots), in definition order (a callee's own callees first).
+        self.callees: Dict[tuple, Tuple[str, str, int]] = {} if callees is None else callees
         #: For a callee: the offsets of its inputs and outputs in the flat ``in`` / ``out`` vectors.
         self.io = io
         self._sx = None
@@ -78,6 +78,8 @@ class SoaProgram:
         self.recip: Dict[int, int] = {}
         self.used: set = set()
         self.n_inv = 0
+        #: Prologue blocks of the callees' invariant parts: (callee, invariant argument refs) -> offset in ``inv``.
+        self.blocks: Dict[tuple, int] = {}
 
     def new_inv(self) -> int:
         """A fresh slot of the invariant array ``inv``."""
@@ -101,7 +103,9 @@ class SoaProgram:
 
     def add_input(self, i, o) -> None:
         """``OP_INPUT``: entry ``i[1]`` of input ``i[0]`` into slot ``o[0]``."""
-        if self.io is not None:
+        if self.io is not None and self.io[0][i[0]] + i[1] in self.invariant:
+            self._set_inv(o[0], lambda j: f"inv[{j}] = in[{self.io[0][i[0]] + i[1]}];")
+        elif self.io is not None:
             self._set_w(o[0], f"w{o[0]} = in[{self.io[0][i[0]] + i[1]}];")
         elif i[0] == 0 and i[1] in self.invariant:
             self._set_inv(o[0], lambda j: f"memcpy(&inv[{j}], acc + {i[1]}*LANES, sizeof(vd));")
@@ -157,17 +161,28 @@ class SoaProgram:
     def add_call(self, step: ca.Function, k: int, i, o) -> None:
         """``OP_CALL`` (an SX call node of a ``never_inline`` Function): one call of its SIMD form.
 
-        The callee is emitted once as ``static void fjm_fnJ(const vd* in, vd* out)`` (its inputs'
-        and outputs' nonzeros flattened); here its arguments are gathered, it is called, and each
-        used output lands in its work slot. Nothing is hoisted across the call.
+        The callee is emitted once per pattern of invariant arguments (:func:`callee_source`: its inputs'
+        and outputs' nonzeros flattened). What it computes from its invariant arguments and constants
+        only (the parameters' products, the reciprocals of the inertias it divides by) is evaluated by
+        its ``_pro`` part in this program's prologue into a block of ``inv`` (one block per distinct
+        invariant arguments: the substeps of a sample share it); here its arguments are gathered, it
+        is called with that block, and each used output lands in its work slot.
         """
         if self._sx is None:
             self._sx = step.instructions_sx()
         fn = self._sx[k].which_function()
-        cname = callee_source(fn, self.callees)
+        fixed = [j for j, a in enumerate(i) if self.src[a][0] == "inv"]
+        cname, n_inv = callee_source(fn, self.callees, fixed)
+        block = (cname,) + tuple(self.ref(i[j]) for j in fixed)
+        if block not in self.blocks:
+            self.blocks[block] = self.n_inv
+            self.n_inv += n_inv
+            pro_ins = ", ".join(self.ref(a) if self.src[a][0] == "inv" else "V0" for a in i)
+            self.prologue.append(f"{{ vd ci[{max(1, len(i))}] = {{{pro_ins}}}; {cname}_pro(ci, inv + {self.blocks[block]}); }}")
         ins = ", ".join(self.ref(a) for a in i)
         outs = "".join(f" w{slot} = co[{j}];" for j, slot in enumerate(o) if slot >= 0)
-        self.body.append(f"{{ vd ci[{max(1, len(i))}] = {{{ins}}}; vd co[{max(1, len(o))}]; {cname}(ci, co);{outs} }}")
+        self.body.append(f"{{ vd ci[{max(1, len(i))}] = {{{ins}}}; vd co[{max(1, len(o))}]; "
+                         f"{cname}(ci, co, inv + {self.blocks[block]});{outs} }}")
         for slot in o:
             if slot >= 0:
                 self.src[slot] = ("w", slot)
@@ -182,24 +197,30 @@ def _offsets(sizes) -> List[int]:
     return out
 
 
-def callee_source(fn: ca.Function, callees: dict) -> str:
-    """The C name of ``fn``'s SIMD form, emitting its definition into ``callees`` on first use."""
-    key = fn.name()
+def callee_source(fn: ca.Function, callees: dict, fixed: Sequence[int] = ()) -> Tuple[str, int]:
+    """``(C name, invariant slots)`` of ``fn``'s SIMD form with the flat inputs ``fixed`` constant along a
+    run, emitting its definition into ``callees`` on first use.
+
+    Two functions: ``NAME_pro(in, inv)`` fills the ``inv`` block (constants and what depends on the
+    ``fixed`` inputs only; called once per run group) and ``NAME(in, out, inv)`` the rest.
+    """
+    key = (fn.name(), tuple(sorted(fixed)))
     if key in callees:
-        return callees[key][0]
+        return callees[key][0], callees[key][2]
     if not fn.is_a("SXFunction"):
-        raise ValueError(f"soa_source: call of {key}, not an SX Function")
+        raise ValueError(f"soa_source: call of {fn.name()}, not an SX Function")
     io = (_offsets([fn.nnz_in(j) for j in range(fn.n_in())]), _offsets([fn.nnz_out(j) for j in range(fn.n_out())]))
-    prog = SoaProgram((), (), callees, io)
+    prog = SoaProgram((), fixed, callees, io)
     for j in range(fn.n_instructions()):
         prog.add(fn, j)
     cname = f"fjm_fn{len(callees)}"
     decl = ", ".join(f"w{j}" for j in sorted(prog.used)) or "w_unused"
-    text = (f"/* {key} */\nstatic void {cname}(const vd* restrict in, vd* restrict out) {{\n"
-            f"  vd inv[{max(1, prog.n_inv)}];\n  vd {decl};"
-            + "".join("\n  " + ln for ln in prog.prologue + prog.body) + "\n}\n")
-    callees[key] = (cname, text)
-    return cname
+    text = (f"/* {fn.name()} */\nstatic void {cname}_pro(const vd* restrict in, vd* restrict inv) {{\n  (void)in;"
+            + "".join("\n  " + ln for ln in prog.prologue) + "\n}\n"
+            f"static void {cname}(const vd* restrict in, vd* restrict out, const vd* restrict inv) {{\n"
+            f"  vd {decl};" + "".join("\n  " + ln for ln in prog.body) + "\n}\n")
+    callees[key] = (cname, text, prog.n_inv)
+    return cname, prog.n_inv
 
 
 def simd_template() -> Template:
@@ -254,7 +275,7 @@ def soa_source(step: ca.Function, lanes: int, varying=(0,), invariant_from: int 
         prog.add(step, k)
     return simd_template().substitute(
         lanes=int(lanes), noise=noise_source(), n_inv=max(1, prog.n_inv),
-        callees="".join(text for _, text in prog.callees.values()),
+        callees="".join(entry[1] for entry in prog.callees.values()),
         prologue="".join("\n  " + ln for ln in prog.prologue),
         declarations=", ".join(f"w{j}" for j in sorted(prog.used)) or "w_unused",
         body="".join("\n  " + ln for ln in prog.body))

@@ -46,4 +46,4 @@ def test_soa_source_emits_each_callee_once(case, interface):
     callees = 1 if interface.is_ideal() else 2
     for i in range(callees):
         assert src.count(f"static void fjm_fn{i}(") == 1
-    assert sum(src.count(f"fjm_fn{i}(ci, co);") for i in range(callees)) == 4 * (1 + 2)  # plant and predictor
+    assert sum(src.count(f"fjm_fn{i}(ci, co, inv + ") for i in range(callees)) == 4 * (1 + 2)  # plant and predictor
