@@ -96,7 +96,7 @@ HEAVY_FIRST = (
 def pytest_collection_modifyitems(config, items):
     """Exhaustive tests only when asked for; under pytest-xdist, the files of ``HEAVY_FIRST`` first.
 
-    ``@pytest.mark.exhaustive`` tests (a minute or more each) are deselected unless the ``-m``
+    ``@pytest.mark.exhaustive`` tests (tens of seconds or more each) are deselected unless the ``-m``
     expression names them (``.ci/run`` runs ``pytest -m exhaustive`` after ``make test``), so that
     ``make test`` and ``pytest -m 'not slow'`` leave them out alike. The heavy-first order is stable:
     the rest keeps its order.

@@ -67,7 +67,7 @@ def test_chosen_substeps_meet_the_bound_and_one_fewer_does_not(planar2):
     assert _worst_over_tolerance(planar2, p, X, U, sensor, T, s - 1) > 1.0
 
 
-@pytest.mark.slow
+@pytest.mark.exhaustive  # about 22 s of CPU: with the exhaustive checks of .ci/run (planar2's case runs in make test)
 def test_panda_shipped_design_records_its_choice(panda):
     """The Panda's shipped design (panda_white noise, 1 kHz, delay 1): the recorded count is the choice,
     within 1e-3 of the noise level of every slot, and one fewer is not; the plant's rule needs more."""

@@ -77,8 +77,9 @@ def _simulate_rest(m, cond, ctrl, duration=2.0):
                     sensor=cond.sensor.with_seed(0), delay_samples=cond.delay, predict=cond.predict)
 
 
-@pytest.mark.parametrize("name", ["panda", pytest.param("panda_hd", marks=pytest.mark.slow),
-                                  pytest.param("baxter", marks=pytest.mark.slow)])
+# panda_hd and baxter (20-25 s of CPU each) run with the exhaustive checks of .ci/run; the Panda in make test
+@pytest.mark.parametrize("name", ["panda", pytest.param("panda_hd", marks=pytest.mark.exhaustive),
+                                  pytest.param("baxter", marks=pytest.mark.exhaustive)])
 def test_shipped_design_verdict_and_jitter_match_simulate(name):
     """At rest with the design's sensor: the analysis says stable (small-signal unstable on the Panda designs)
     and the loop holds (2 s, seed 0: no divergence, error < 1e-2 rad); the predicted jitter is within 25 %
