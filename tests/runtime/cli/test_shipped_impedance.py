@@ -32,6 +32,11 @@ def test_shipped_impedance_designs_met_on_400_draws(name):
     assert worst <= 0.5e-3
     row = [r for r in rep["comparison"] if r["law"] == "impedance"][0]
     assert row["rms"] == worst and row["diverged"] == 0 and row["runs"] == 400
+    # what fjm simulate panda --noise franka_like --rate R --delay-samples D picks
+    picked = Design.shipped_for_sensor("panda", SensorModel.franka_like(seed=7), d.rate, d.delay)
+    assert picked is not None and picked.file.endswith(name) and picked == d
+    assert Design.shipped_for_sensor("panda", SensorModel.panda_white(), d.rate, d.delay) is None or \
+        Design.shipped_for_sensor("panda", SensorModel.panda_white(), d.rate, d.delay).kind != "impedance"
 
 
 @pytest.mark.slow  # builds the Panda's impedance loop (C) on a cold cache
