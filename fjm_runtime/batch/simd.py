@@ -51,6 +51,10 @@ BINARY = {
     ca.OP_COPYSIGN: "v_copysign({a},{b})",
 }
 
+#: The vector mask (-1 / 0 per lane) of each comparison, for an ``OP_IF_ELSE_ZERO`` it feeds.
+MASKS = {ca.OP_LT: "(({a})<({b}))", ca.OP_LE: "(({a})<=({b}))", ca.OP_EQ: "(({a})==({b}))",
+         ca.OP_NE: "(({a})!=({b}))", ca.OP_NOT: "(({a})==0.)"}
+
 
 class SoaProgram:
     """The statements of one SX Function in SIMD form, split into prologue and step body.
@@ -78,6 +82,8 @@ class SoaProgram:
         self.recip: Dict[int, int] = {}
         self.used: set = set()
         self.n_inv = 0
+        #: Work vectors holding a comparison (1.0 / 0.0): slot -> the C variable of its mask.
+        self.masks: Dict[int, str] = {}
         #: Prologue blocks of the callees' invariant parts: (callee, invariant argument refs) -> offset in ``inv``.
         self.blocks: Dict[tuple, int] = {}
 
@@ -100,6 +106,11 @@ class SoaProgram:
         self.body.append(line)
         self.src[slot] = ("w", slot)
         self.used.add(slot)
+        self._wrote(slot)
+
+    def _wrote(self, slot: int) -> None:
+        """Forget the comparison held in work vector ``slot``: it was overwritten."""
+        self.masks.pop(slot, None)
 
     def add_input(self, i, o) -> None:
         """``OP_INPUT``: entry ``i[1]`` of input ``i[0]`` into slot ``o[0]``."""
@@ -128,6 +139,14 @@ class SoaProgram:
                 self.recip[d] = self.new_inv()
                 self.prologue.append(f"inv[{self.recip[d]}] = 1./inv[{d}];")
             expr = f"({self.ref(args[0])})*inv[{self.recip[d]}]"
+        elif op == ca.OP_IF_ELSE_ZERO and args[0] in self.masks:   # the comparison's own mask, not 1.0 != 0.
+            expr = f"(vd)((vl)({self.ref(args[1])}) & {self.masks[args[0]]})"
+        elif op in MASKS:   # the mask kept in a variable of its own (m<k>) for the if_else_zero it may feed
+            mask = f"m{len(self.body)}"
+            self.body.append(f"vl {mask} = {MASKS[op].format(a=self.ref(args[0]), b=self.ref(args[-1]))};")
+            self._set_w(o[0], f"w{o[0]} = v_b({mask});")
+            self.masks[o[0]] = mask
+            return
         else:
             expr = fmt.format(a=self.ref(args[0]), b=self.ref(args[-1]))
         self._set_w(o[0], f"w{o[0]} = {expr};")
@@ -187,6 +206,7 @@ class SoaProgram:
             if slot >= 0:
                 self.src[slot] = ("w", slot)
                 self.used.add(slot)
+                self._wrote(slot)
 
 
 def _offsets(sizes) -> List[int]:

@@ -47,3 +47,21 @@ def test_soa_source_emits_each_callee_once(case, interface):
     for i in range(callees):
         assert src.count(f"static void fjm_fn{i}(") == 1
     assert sum(src.count(f"fjm_fn{i}(ci, co, inv + ") for i in range(callees)) == 4 * (1 + 2)  # plant and predictor
+
+
+def test_passthrough_entries_are_the_riding_gains_and_the_true_parameters(case):
+    """The entries the batch step passes through unchanged (hoisted, never stored by the SIMD form) are exactly
+    the gains riding in the controller state, the rate-limit counts (no rate limit here: they stay 0) and the
+    TRUE parameters at the end of the accumulator."""
+    from fjm_runtime.batch.simd import passthrough_entries
+    m, ctrl = case
+    gi = GainInput(ctrl)
+    L = make_layout(m, gi, 1e-3, 2, SensorModel.panda_white(), 1, False)
+    step, A = sampled_metric_step(m, gi, L, 1e6, 21)
+    z = L.slices()[1]
+    p0 = A.offsets()["p"][0]
+    r0 = A.offsets()["rate_j"][0]
+    assert not L.rate_step
+    expected = list(range(z.start + gi.n_law, z.stop)) + list(range(r0, r0 + m.n)) + list(range(p0, A.nacc))
+    assert len(expected) == gi.n_gains + m.n + len(m.param_names)
+    assert sorted(passthrough_entries(step)) == expected
