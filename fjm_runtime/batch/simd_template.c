@@ -51,7 +51,7 @@ int fjm_sampled_batch_soa(int n_groups, int n_samples, int nacc, int nr, int nm,
   nt = n_threads > 0 ? n_threads : omp_get_max_threads();
 #endif
   (void)nt; (void)n_threads;
-  #pragma omp parallel num_threads(nt)
+  #pragma omp parallel num_threads(nt) if (nt > 1)  /* one thread: no team to wake or to wait for */
   {
 #ifdef _OPENMP
     #pragma omp single
