@@ -40,22 +40,28 @@ def test_shipped_impedance_designs_met_on_400_draws(name):
 
 
 @pytest.mark.slow  # builds the Panda's impedance loop (C) on a cold cache
-def test_simulate_under_franka_like_picks_the_shipped_design(capsys):
-    assert main(["simulate", "panda", "--noise", "franka_like", "--duration", "2", "--json", "--seed", "3"]) == 0
+@pytest.mark.parametrize("rate,delay", [(None, None), (1000, 2), (500, 1)])
+def test_simulate_under_franka_like_picks_the_shipped_design(capsys, rate, delay):
+    """Without --rate / --delay-samples the 1 kHz delay-1 design; with them the design for those."""
+    name = f"panda_impedance_{rate or 1000}hz_d{delay or 1}.json"
+    if name not in SHIPPED:
+        pytest.skip(f"{name} is not shipped")
+    flags = [] if rate is None else ["--rate", str(rate), "--delay-samples", str(delay)]
+    assert main(["simulate", "panda", "--noise", "franka_like", "--duration", "2", "--json", "--seed", "3", *flags]) == 0
     captured = capsys.readouterr()
     rep = json.loads(captured.out)
     s = rep["settings"]
-    assert s["gains"] == "fjm_runtime/control/designed/panda_impedance_1000hz_d1.json"
+    assert s["gains"] == f"fjm_runtime/control/designed/{name}"
     assert (s["controller"], s["sensing"], s["rate"], s["delay_samples"], s["predict"]) == \
-        ("impedance", "full", 1000.0, 1, True)
+        ("impedance", "full", float(rate or 1000), delay or 1, True)
     assert rep["designed_for_these_conditions"] is True and rep["diverged"] is False
-    d = Design.shipped_for_sensor("panda", SensorModel.franka_like(), 1000.0, 1)
+    d = Design.shipped_for_sensor("panda", SensorModel.franka_like(), rate or 1000.0, delay or 1)
     m = fjm_runtime.load("panda")
     from fjm_runtime.sim.metrics import rms_second_half
     from fjm_runtime.sim.simulate import simulate
     ref = d.reference(m)
-    r = simulate(m, d.controller(m), ref, duration=2.0, dt=1e-3, x0=d.start_state(m),
-                 sensor=SensorModel.franka_like(seed=3), delay_samples=1, predict=True)
+    r = simulate(m, d.controller(m), ref, duration=2.0, dt=1.0 / d.rate, x0=d.start_state(m),
+                 sensor=SensorModel.franka_like(seed=3), delay_samples=d.delay, predict=True)
     assert np.allclose(rep["rms_second_half"], rms_second_half(r), rtol=1e-9, atol=0)
     assert max(rep["rms_second_half"]) <= 0.5e-3 and max(rep["time_at_limit"]) == 0.0
     assert "using the shipped design" in captured.err
