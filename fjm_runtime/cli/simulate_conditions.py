@@ -89,24 +89,21 @@ def take_design_conditions(args, design) -> Optional[str]:
 
 def shipped_for_sensor(args, m):
     """The shipped design made with ``--noise`` (a preset or sensor file) for this model, at ``--rate`` and
-    ``--delay-samples`` when given and for ``--interface`` when given, when no gains, law or sensing is asked
-    for (None otherwise): a run under that sensor then takes the design's conditions as from ``--gains``."""
+    ``--delay-samples`` when given, for ``--interface`` (default: a ``motor`` one), when no gains, law or
+    sensing is asked for (None otherwise): the run then takes the design's conditions as from ``--gains``."""
     from pathlib import Path
 
     from ..control.design import Design
-    from ..sim.interface import interface_from_record, interface_from_spec
+    from ..sim.interface import interface_from_spec
     from ..sim.sensor import sensor_from_spec
     if args.noise is None or args.gains is not None or args.controller is not None or args.sensing is not None \
             or args.lam is not None or args.k_s is not None or args.delta is not None or args.dt is not None \
             or Path(args.noise).suffix == ".json":
         return None
     sensor = sensor_from_spec(args.noise, seed=args.seed, what="--noise")
-    design = Design.shipped_for_sensor(m.name, sensor, args.rate, args.delay_samples)
-    if design is not None and getattr(args, "interface", None) is not None:
-        want = interface_from_spec(args.interface, what="--interface")
-        got = interface_from_record({"interface": design.interface, "sensor": design.sensor}, design.source)
-        return design if got.as_dict() == want.as_dict() else None
-    return design
+    given = getattr(args, "interface", None)
+    interface = None if given is None else interface_from_spec(given, what="--interface")
+    return Design.shipped_for_sensor(m.name, sensor, args.rate, args.delay_samples, interface)
 
 
 def _same(key: str, a, b) -> bool:

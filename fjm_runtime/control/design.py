@@ -224,11 +224,13 @@ class Design:
         return None
 
     @classmethod
-    def shipped_for_sensor(cls, model: str, sensor, rate: Optional[float] = None,
-                           delay: Optional[int] = None) -> Optional["Design"]:
+    def shipped_for_sensor(cls, model: str, sensor, rate: Optional[float] = None, delay: Optional[int] = None,
+                           interface=None) -> Optional["Design"]:
         """The shipped design for ``model`` made with ``sensor`` (a SensorModel; its fields compared, seed and
-        name aside), at ``rate`` (Hz) and ``delay`` (samples) when given; of several, the highest rate, then
-        the shortest delay, then the first file by name. ``None`` when none is shipped."""
+        name aside), at ``rate`` (Hz) and ``delay`` (samples) when given, for ``interface`` (a CommandInterface:
+        its fields compared; None: any of kind ``motor``); of several, the highest rate, then the shortest
+        delay, then the first file by name. ``None`` when none is shipped."""
+        from ..sim.interface import interface_from_record
         folder = resources.files(__package__).joinpath("designed")
         found = []
         for path in sorted(folder.iterdir(), key=lambda p: p.name):
@@ -242,6 +244,9 @@ class Design:
             if rate is not None and not math.isclose(float(design.rate), float(rate), rel_tol=1e-9):
                 continue
             if (delay is not None and int(design.delay) != int(delay)) or not design.same_sensor(sensor)[0]:
+                continue
+            made_for = interface_from_record({"interface": design.interface, "sensor": design.sensor}, design.source)
+            if made_for.kind != "motor" if interface is None else made_for.as_dict() != interface.as_dict():
                 continue
             found.append(design)
         found.sort(key=lambda dsg: (-float(dsg.rate), int(dsg.delay)))
