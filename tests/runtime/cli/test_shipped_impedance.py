@@ -35,6 +35,11 @@ def test_shipped_impedance_designs_met_on_400_draws(name):
     # what fjm simulate panda --noise franka_like --rate R --delay-samples D picks
     picked = Design.shipped_for_sensor("panda", SensorModel.franka_like(seed=7), d.rate, d.delay)
     assert picked is not None and picked.file.endswith(name) and picked == d
+    from fjm_runtime.sim.interface import interface_from_spec
+    assert Design.shipped_for_sensor("panda", SensorModel.franka_like(), d.rate, d.delay,
+                                     interface_from_spec("motor")) == d
+    franka = Design.shipped_for_sensor("panda", SensorModel.franka_like(), d.rate, d.delay, interface_from_spec("franka"))
+    assert franka is None or franka.kind == "joint_impedance"          # a motor design is not a franka one
     assert Design.shipped_for_sensor("panda", SensorModel.panda_white(), d.rate, d.delay) is None or \
         Design.shipped_for_sensor("panda", SensorModel.panda_white(), d.rate, d.delay).kind != "impedance"
 
