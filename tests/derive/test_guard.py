@@ -156,8 +156,10 @@ def test_sixty_joint_chain_derives_within_the_limits_and_its_estimate(tmp_path):
     toml, _ = write_synthetic_chain(60, tmp_path / "model")
     est = cost.estimate(60, "spatial")
     assert cost.check_limits("chain60", est) is None
-    run = run_measured([sys.executable, "-m", "derive", "--model-file", str(toml), "--out", str(tmp_path / "out")],
-                       tmp_path, _env())
+    # the idle estimate is within the limits (checked above); the run itself must not depend on the load
+    # average of the moment, by which the command's own guard scales its estimate (cost.slowdown)
+    run = run_measured([sys.executable, "-m", "derive", "--model-file", str(toml), "--out", str(tmp_path / "out"),
+                        "--no-cost-limit"], tmp_path, _env())
     assert run["returncode"] == 0, run["stderr"][-2000:]
     assert run["peak_bytes"] < cost.MAX_PEAK_BYTES and run["seconds"] < cost.MAX_SECONDS, run
     assert 0.5 < est.peak_bytes / run["peak_bytes"] < 2, (est, run["peak_bytes"])
