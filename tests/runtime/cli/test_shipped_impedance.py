@@ -70,3 +70,24 @@ def test_simulate_under_franka_like_picks_the_shipped_design(capsys, rate, delay
     assert np.allclose(rep["rms_second_half"], rms_second_half(r), rtol=1e-9, atol=0)
     assert max(rep["rms_second_half"]) <= 0.5e-3 and max(rep["time_at_limit"]) == 0.0
     assert "using the shipped design" in captured.err
+
+
+JOINT = "panda_joint_impedance_1000hz_d1.json"
+
+
+@pytest.mark.slow  # builds the Panda's joint-impedance loop (C) on a cold cache
+def test_franka_interface_picks_the_shipped_joint_impedance_design(capsys):
+    """The joint impedance for the franka interface (libfranka's filter and 1 N m per tick limit) met on 400
+    draws within 0.5 mrad; fjm simulate panda --interface franka --noise franka_like runs it as designed."""
+    if JOINT not in {p.name for p in resources.files("fjm_runtime.control").joinpath("designed").iterdir()}:
+        pytest.skip(f"{JOINT} is not shipped")
+    d = Design.load(resources.files("fjm_runtime.control").joinpath("designed", JOINT))
+    rep = d.report
+    worst = max(rep["worst_case"]["rms_second_half"] + rep["recheck"]["worst_case"]["rms_second_half"])
+    assert d.kind == "joint_impedance" and d.meets is True and rep["recheck"]["draws"] == 200 and worst <= 0.5e-3
+    assert main(["simulate", "panda", "--interface", "franka", "--noise", "franka_like", "--duration", "2", "--json",
+                 "--seed", "3"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["settings"]["gains"] == f"fjm_runtime/control/designed/{JOINT}"
+    assert out["settings"]["controller"] == "joint_impedance" and out["designed_for_these_conditions"] is True
+    assert max(out["rms_second_half"]) <= 0.5e-3 and max(out["time_at_limit"]) == 0.0

@@ -126,9 +126,12 @@ def test_accepted_edges_and_default_names():
 
 
 def _shipped():
+    """The shipped designs whose step outputs the motor torque (a joint-torque design's step outputs the desired
+    link torque tau_d before the robot's layer: test_controller_impedance checks its library against the law)."""
     from importlib import resources
     folder = resources.files("fjm_runtime.control").joinpath("designed")
-    return sorted(p.name for p in folder.iterdir() if p.name.endswith(".json"))
+    return sorted(p.name for p in folder.iterdir() if p.name.endswith(".json")
+                  and (json.loads(p.read_text()).get("interface") or {}).get("kind", "motor") == "motor")
 
 
 @pytest.mark.slow
