@@ -49,8 +49,7 @@ def test_shipped_impedance_designs_met_on_400_draws(name):
 def test_simulate_under_franka_like_picks_the_shipped_design(capsys, rate, delay):
     """Without --rate / --delay-samples the 1 kHz delay-1 design; with them the design for those."""
     name = f"panda_impedance_{rate or 1000}hz_d{delay or 1}.json"
-    if name not in SHIPPED:
-        pytest.skip(f"{name} is not shipped")
+    assert name in SHIPPED, f"fjm_runtime/control/designed/{name} is not shipped"
     flags = [] if rate is None else ["--rate", str(rate), "--delay-samples", str(delay)]
     assert main(["simulate", "panda", "--noise", "franka_like", "--duration", "2", "--json", "--seed", "3", *flags]) == 0
     captured = capsys.readouterr()
@@ -79,8 +78,8 @@ JOINT = "panda_joint_impedance_1000hz_d1.json"
 def test_franka_interface_picks_the_shipped_joint_impedance_design(capsys):
     """The joint impedance for the franka interface (libfranka's filter and 1 N m per tick limit) met on 400
     draws within 0.5 mrad; fjm simulate panda --interface franka --noise franka_like runs it as designed."""
-    if JOINT not in {p.name for p in resources.files("fjm_runtime.control").joinpath("designed").iterdir()}:
-        pytest.skip(f"{JOINT} is not shipped")
+    assert JOINT in {p.name for p in resources.files("fjm_runtime.control").joinpath("designed").iterdir()}, \
+        f"fjm_runtime/control/designed/{JOINT} is not shipped"
     d = Design.load(resources.files("fjm_runtime.control").joinpath("designed", JOINT))
     rep = d.report
     worst = max(rep["worst_case"]["rms_second_half"] + rep["recheck"]["worst_case"]["rms_second_half"])

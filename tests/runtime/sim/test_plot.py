@@ -11,7 +11,7 @@ from fjm_runtime.control.references import Sinusoid
 from fjm_runtime.sim.simulate import simulate
 from fjm_runtime.validation import FjmValueError
 
-pytest.importorskip("matplotlib")
+import matplotlib  # noqa: F401  (the dev extra: a missing install fails here instead of skipping)
 
 
 def _run(model, duration=0.2):
