@@ -32,7 +32,7 @@ from .step_layout import StepLayout, controller_model, make_layout
 
 __all__ = ["FLOOR", "NOISE_FRACTION", "NOISE_SEED", "REFERENCE_SUBSTEPS", "TASK_POINTS", "TASK_SECONDS",
            "choose_predict_substeps",
-           "loop_predict_substeps", "prediction_errors", "prediction_tolerance", "task_points"]
+           "loop_predict_substeps", "prediction_tolerance", "task_points"]
 
 #: Substeps per sample of the reference prediction (and the most the choice returns).
 REFERENCE_SUBSTEPS = 64
@@ -104,14 +104,6 @@ def _predictions(model, L: StepLayout, p_nom, M, U, substeps: int) -> np.ndarray
     Ls = replace(L, predict_substeps=int(substeps))
     U = np.vstack([U, U])
     return np.array([predicted_measurement(model, Ls, m, u, p_nom) for m, u in zip(M, U)])
-
-
-def prediction_errors(model, L: StepLayout, p_nom, X, U, sensor: SensorModel, substeps) -> np.ndarray:
-    """Per count of ``substeps`` and slot, the largest ``|prediction - prediction on REFERENCE_SUBSTEPS|`` over
-    the task points ``(X, U)`` (:func:`task_points`), exact and noisy, shape (len(substeps), nm)."""
-    M = _starts(model, L, p_nom, X, sensor)
-    ref = _predictions(model, L, p_nom, M, U, REFERENCE_SUBSTEPS)
-    return np.array([np.max(np.abs(_predictions(model, L, p_nom, M, U, s) - ref), axis=0) for s in substeps])
 
 
 def choose_predict_substeps(model, L: StepLayout, p_nom, X, U, sensor: SensorModel) -> int:
