@@ -211,9 +211,11 @@ class Design:
         if not (is_real(rate) and math.isfinite(rate) and rate > 0):
             return None
         folder = resources.files(__package__).joinpath("designed")
+        # The kinds shipped for the model are read from the files, not parsed from their names: a kind
+        # may hold an underscore (joint_impedance), a model name may prefix another's (panda, panda_hd).
         kinds = [kind] if kind is not None else sorted(
-            {p.name[len(model) + 1:].split("_")[0] for p in folder.iterdir()
-             if p.name.endswith(".json") and p.name.startswith(model + "_")})
+            {json.loads(p.read_text(encoding="utf-8")).get("kind") for p in folder.iterdir()
+             if p.name.endswith(".json") and p.name.startswith(model + "_")} - {None})
         for k in kinds:
             name = design_file_name(model, k, sensing, rate, delay)
             path = folder.joinpath(name)

@@ -8,8 +8,10 @@ with an exact prediction far below the noise of the measurement it stands for. T
 
     reference  = the prediction on REFERENCE_SUBSTEPS (64) RK4 substeps per sample
     tolerance  = max(NOISE_FRACTION sigma, FLOOR) per measurement slot
-                 (sigma: the sensor's noise level of that slot's signal; 1e-3 of it; FLOOR 1e-9 in
-                 the slot's SI unit, e.g. rad, when the sensor is noise-free)
+                 (sigma: the noise std of the slot as the controller reads it,
+                 :func:`fjm_runtime.sim.sensor.read_noise_levels`: a differentiated velocity or a
+                 filtered dtau_J carries the filtered difference of its source's noise; 1e-3 of it;
+                 FLOOR 1e-9 in the slot's SI unit, e.g. rad, when the sensor is noise-free)
     substeps   = the smallest s in 1..64 whose prediction differs from the reference by at most the
                  tolerance in every slot from every start: each task point's exact measurement and the
                  same with one draw of the sensor's noise (the noise excites the fast elastic modes)
@@ -27,7 +29,7 @@ import numpy as np
 
 from ..validation import FjmValueError
 from .sample_step import initial_measurement, predicted_measurement
-from .sensor import SensorModel, measurement_blocks
+from .sensor import SensorModel, read_noise_levels
 from .step_layout import StepLayout, controller_model, make_layout
 
 __all__ = ["FLOOR", "NOISE_FRACTION", "NOISE_SEED", "REFERENCE_SUBSTEPS", "TASK_POINTS", "TASK_SECONDS",
@@ -48,14 +50,14 @@ NOISE_SEED = 0
 TASK_SECONDS = 10.0
 
 
-def prediction_tolerance(sensor: SensorModel, sensing: str, n: int) -> np.ndarray:
+def prediction_tolerance(sensor: SensorModel, sensing: str, n: int, T: float) -> np.ndarray:
     """The bound on each slot of the predicted measurement: ``max(NOISE_FRACTION sigma, FLOOR)``, shape (nm,).
 
-    ``sigma`` is the sensor's level of the slot's signal (``q``, ``dq``, ``q_m``, ``dq_m``, ``tau_J``,
-    ``dtau_J``) whatever the loop makes of it (filtered or differentiated slots keep their signal's level).
+    ``sigma`` is the noise std of the slot as the controller reads it at the sample period ``T``
+    (:func:`fjm_runtime.sim.sensor.read_noise_levels`): a velocity the loop differentiates from a noisy
+    encoder is that noisy, not noise-free, so it is held to the same fraction of its noise as a measured one.
     """
-    levels = [np.broadcast_to(np.asarray(getattr(sensor, b), dtype=float), (n,)) for b in measurement_blocks(sensing)]
-    return np.maximum(NOISE_FRACTION * np.concatenate(levels), FLOOR)
+    return np.maximum(NOISE_FRACTION * read_noise_levels(sensor, sensing, n, T), FLOOR)
 
 
 def _holding_torque(model, x, p) -> np.ndarray:
@@ -117,7 +119,7 @@ def choose_predict_substeps(model, L: StepLayout, p_nom, X, U, sensor: SensorMod
                             "predicting loop")
     M = _starts(model, L, p_nom, X, sensor)
     ref = _predictions(model, L, p_nom, M, U, REFERENCE_SUBSTEPS)
-    tol = prediction_tolerance(sensor, L.sensing, L.n)
+    tol = prediction_tolerance(sensor, L.sensing, L.n, L.T)
     for s in range(1, REFERENCE_SUBSTEPS):
         if np.all(np.abs(_predictions(model, L, p_nom, M, U, s) - ref) <= tol):
             return s

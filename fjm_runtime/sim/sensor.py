@@ -37,6 +37,7 @@ from .preset_file import read_preset_file
 
 __all__ = ["DTAU_MODES", "PRESETS", "SIGNALS", "VELOCITY_MODES", "SensorModel", "linear_noise_levels",
            "load_sensor_file", "measurement_blocks", "noise_array", "noise_slots", "offset_normals",
+           "read_noise_levels",
            "sensor_from_spec", "splitmix64", "standard_normals"]
 
 #: Signal blocks of the noise channels, in channel order.
@@ -420,6 +421,41 @@ def linear_noise_levels(sensor: SensorModel, sensing: str, n: int) -> np.ndarray
         if step and angle_slot:
             lev[j] = math.sqrt(lev[j] ** 2 + step ** 2 / 12.0)
     return lev
+
+
+def read_noise_levels(sensor: SensorModel, sensing: str, n: int, T: float) -> np.ndarray:
+    """Noise std of each measurement slot as the controller reads it, shape (nm,).
+
+    A measured slot carries its own level (angles with quantization folded in, as
+    :func:`linear_noise_levels`). A slot the loop computes as a first-order filtered difference
+    ``v_k = v_{k-1} + a ((x_k - x_{k-1}) / T - v_{k-1})`` (differentiated velocities, a filtered dtau_J)
+    carries what that filter makes of its source's white noise of std ``s`` (the difference is MA(1)
+    with variance ``2 s^2 / T^2`` and lag-one covariance ``-s^2 / T^2``)::
+
+        std = (a s / T) sqrt(2 / (2 - a)),    a = 1 - exp(-cutoff T)
+
+    A constant offset (the tau_J offset) cancels in the difference.
+    """
+    blocks = measurement_blocks(sensing)
+    steps = {"q": sensor.q_quant, "q_m": sensor.q_m_quant}
+    out = []
+    for name in blocks:
+        level = _per_joint(getattr(sensor, name), n, name).astype(float)
+        src, cutoff = None, 0.0
+        if name in ("dq", "dq_m") and sensor.velocity_mode == "differentiated":
+            src, cutoff = name[1:], sensor.velocity_cutoff
+        elif name == "dtau_J" and sensor.dtau_mode == "filtered":
+            src, cutoff = "tau_J", sensor.dtau_cutoff
+        if name in steps:
+            level = np.sqrt(level ** 2 + steps[name] ** 2 / 12.0)
+        if src is not None:
+            s = _per_joint(getattr(sensor, src), n, src).astype(float)
+            if src in steps:
+                s = np.sqrt(s ** 2 + steps[src] ** 2 / 12.0)
+            a = 1.0 - math.exp(-float(cutoff) * float(T))
+            level = (a * s / float(T)) * math.sqrt(2.0 / (2.0 - a))
+        out.append(np.broadcast_to(level, (n,)))
+    return np.concatenate(out)
 
 
 def offset_normals(seed: int, n: int) -> np.ndarray:

@@ -35,6 +35,37 @@ def test_shipped_lookup_rounds_the_rate_and_refuses_what_is_not_shipped():
     assert Design.shipped("panda", None, "torque", float("nan"), 1) is None
 
 
+def test_shipped_lookup_of_any_kind_reads_the_kinds_from_the_files():
+    """Every shipped file is found by its own conditions, with its kind or with none; with none, the kind
+    is the first by name among the files at those conditions (a kind may hold an underscore, and the
+    panda's files share a prefix with panda_hd's)."""
+    from importlib import resources
+    folder = resources.files("fjm_runtime.control").joinpath("designed")
+    raws = [json.loads(p.read_text()) for p in folder.iterdir() if p.name.endswith(".json")]
+    for raw in raws:
+        cond = (raw["sensing"], raw["rate"], raw["delay"])
+        own = Design.shipped(raw["model"], raw["kind"], *cond)
+        assert own is not None and own.kind == raw["kind"] and own.model == raw["model"]
+        same = sorted(r["kind"] for r in raws if r["model"] == raw["model"] and (r["sensing"], r["rate"],
+                                                                                   r["delay"]) == cond)
+        assert Design.shipped(raw["model"], None, *cond).kind == same[0]
+    assert any("_" in r["kind"] for r in raws)  # the case a name split got wrong is shipped
+
+
+def test_shipped_lookup_of_any_kind_finds_a_kind_with_an_underscore_alone(tmp_path, monkeypatch):
+    """A folder holding only the joint impedance design: found with no kind given."""
+    import shutil
+    import types
+    from importlib import resources
+    import fjm_runtime.control.design as design_module
+    name = "panda_joint_impedance_1000hz_d1.json"
+    (tmp_path / "designed").mkdir()
+    shutil.copy(resources.files("fjm_runtime.control").joinpath("designed", name), tmp_path / "designed" / name)
+    monkeypatch.setattr(design_module, "resources", types.SimpleNamespace(files=lambda package: tmp_path))
+    found = Design.shipped("panda", None, "full", 1000.0, 1)
+    assert found is not None and found.kind == "joint_impedance"
+
+
 def test_start_state_holds_gravity_at_the_tasks_first_sample(panda):
     """The shipped Panda task starts at READY - A (sines with phase -pi/2) at rest: the links do not
     accelerate (the spring torque carries gravity) and the motors are wound up."""

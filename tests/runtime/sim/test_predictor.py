@@ -7,6 +7,8 @@ torque measurement ``[q; dq; K (q_m - q); K (dq_m - dq); dq_m]`` of the result, 
 import numpy as np
 import pytest
 
+import fjm_runtime
+
 from fjm_runtime.control.design import Design
 from fjm_runtime.control.factory import make_controller
 from fjm_runtime.control.references import Sinusoid
@@ -126,10 +128,21 @@ def test_layout_refuses_a_bad_predictor_count(link1):
 
 
 def test_tolerance_is_a_thousandth_of_the_noise_with_a_floor():
-    tol = predictor.prediction_tolerance(SensorModel.panda_white(), "torque", 2)
+    tol = predictor.prediction_tolerance(SensorModel.panda_white(), "torque", 2, 1e-3)
     sensor = SensorModel.panda_white()
     assert np.allclose(tol[:2], 1e-3 * sensor.q) and np.allclose(tol[4:6], 1e-3 * sensor.tau_J)
-    assert np.all(predictor.prediction_tolerance(SensorModel.ideal(), "state", 3) == 1e-9)
+    assert np.all(predictor.prediction_tolerance(SensorModel.ideal(), "state", 3, 1e-3) == 1e-9)
+
+
+def test_tolerance_of_differentiated_slots_is_their_read_noise_not_the_floor():
+    """franka_like measures no velocity and no dtau_J: the loop differentiates noisy angles and tau_J. Those
+    slots hold a thousandth of that noise (about 5.6e-3 rad/s on dq at 1 kHz), not the noise-free floor
+    that only the finest prediction can meet."""
+    from fjm_runtime.sim.sensor import read_noise_levels
+    sensor, T = SensorModel.franka_like(), 1e-3
+    tol = predictor.prediction_tolerance(sensor, "full", 2, T)
+    assert np.allclose(tol, 1e-3 * read_noise_levels(sensor, "full", 2, T))
+    assert np.all(tol[2:4] > 1e-6) and np.all(tol[10:12] > 1e-5)
 
 
 @pytest.mark.slow
@@ -149,3 +162,35 @@ def test_design_search_records_the_choice(link1):
     assert design.predict_substeps == predictor.loop_predict_substeps(link1, ctrl, design.sensor_model(), 1e-3, 1,
                                                                       ref, x0)
     assert "predict_substeps" not in run_search(link1, delay=1, predict=False, **TINY)
+
+
+def _shipped_files():
+    from importlib import resources
+    folder = resources.files("fjm_runtime.control").joinpath("designed")
+    return sorted(p.name for p in folder.iterdir() if p.name.endswith(".json"))
+
+
+def _recorded_is_the_choice(name):
+    import json
+    from importlib import resources
+    raw = json.loads(resources.files("fjm_runtime.control").joinpath("designed", name).read_text())
+    design = Design.from_dict(raw, name)
+    model = fjm_runtime.load(design.model)
+    ctrl = design.controller(model)
+    x0 = design.start_state(model, ctrl.p_nom)
+    s = predictor.loop_predict_substeps(model, ctrl, design.sensor_model(), 1.0 / design.rate, design.delay,
+                                        design.reference(model), x0)
+    assert design.predict_substeps == s, name
+    assert s < predictor.REFERENCE_SUBSTEPS, f"{name}: the choice hit the reference's count"
+
+
+def test_the_shipped_impedance_design_records_its_choice():
+    """franka_like's differentiated slots are held to their read noise: the choice is a few substeps,
+    not the 64 of the reference."""
+    _recorded_is_the_choice("panda_impedance_1000hz_d1.json")
+
+
+@pytest.mark.exhaustive  # 2-3 s of CPU per file
+@pytest.mark.parametrize("name", _shipped_files())
+def test_every_shipped_design_records_its_choice(name):
+    _recorded_is_the_choice(name)

@@ -74,3 +74,27 @@ def test_bad_levels_are_one_line_errors(kw):
     with pytest.raises(FjmValueError) as exc:
         SensorModel(**kw)
     assert "\n" not in str(exc.value) and "SensorModel." in str(exc.value)
+
+
+def test_read_noise_of_a_filtered_difference_matches_the_filter_run_on_noise():
+    """read_noise_levels' closed form against the filter run on 200k samples of the source's noise
+    (white normal plus uniform quantization error, the offset left out: it cancels in the difference)."""
+    from fjm_runtime.sim.sensor import read_noise_levels
+    sensor, T, n = SensorModel.franka_like(), 1e-3, 1
+    rng = np.random.default_rng(3)
+
+    def filtered_difference_std(s_white, step, cutoff):
+        x = s_white * rng.standard_normal(200_000) + step * (rng.random(200_000) - 0.5)
+        a, v, out = 1.0 - np.exp(-cutoff * T), 0.0, np.empty(x.size - 1)
+        d = np.diff(x) / T
+        for k in range(d.size):  # the loop's recursion v_k = v_{k-1} + a (d_k - v_{k-1})
+            v += a * (d[k] - v)
+            out[k] = v
+        return out[1000:].std()
+
+    lev = read_noise_levels(sensor, "full", n, T)  # q, dq, q_m, dq_m, tau_J, dtau_J
+    assert lev[1] == pytest.approx(filtered_difference_std(sensor.q, sensor.q_quant, sensor.velocity_cutoff), rel=0.03)
+    assert lev[3] == pytest.approx(filtered_difference_std(sensor.q_m, sensor.q_m_quant, sensor.velocity_cutoff),
+                                   rel=0.03)
+    assert lev[5] == pytest.approx(filtered_difference_std(sensor.tau_J, 0.0, sensor.dtau_cutoff), rel=0.03)
+    assert lev[4] == sensor.tau_J and lev[0] == pytest.approx(np.hypot(sensor.q, sensor.q_quant / np.sqrt(12)))
