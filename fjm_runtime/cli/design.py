@@ -22,7 +22,7 @@ def add_arguments(p) -> None:
     p.add_argument("model", help=MODEL_HELP)
     laws = tuple(dict.fromkeys(law for group in LAWS_BY_INTERFACE.values() for law in group))
     p.add_argument("--law", default="auto", choices=("auto",) + laws,
-                   help="auto: search every law of the --interface (motor: ismc, fl, impedance; joint_torque: "
+                   help="auto: search every law of the --interface (motor: impedance, ismc, fl; joint_torque: "
                         "joint_impedance) on the same draws and thresholds, print them side by side and keep the best "
                         "that meets; a name: that law only (default auto)")
     p.add_argument("--controller", default=None, choices=laws, help="the same as --law NAME")

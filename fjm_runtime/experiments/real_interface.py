@@ -7,12 +7,14 @@ and an offset on tau_J), on the two command interfaces of :mod:`fjm_runtime.sim.
 ``motor``
     the law commands motor torque through the 2 kHz current loop (series-elastic actuators,
     DLR-type drives, Kinova in current mode). Laws: the torque-sensed integral SMC with the shipped
-    design's gains (``ismc_tau``), the torque-sensed feedback linearization (``fl_tau``, stated
-    pole), the motor-side impedance with torque feedback (``impedance``, default gains from the
-    nominal model) and the motor PD + gravity (``pdg``, the real-arm section's stated gains).
+    design's gains (``ismc_tau``, designed under white noise), the torque-sensed feedback
+    linearization (``fl_tau``, stated pole), the motor-side impedance with torque feedback
+    (``impedance``, the shipped design made under ``franka_like`` at this rate and delay) and the
+    motor PD + gravity (``pdg``, the real-arm section's stated gains).
 ``franka``
     libfranka's layer (100 Hz command filter, 1 N m per tick, gravity added by the robot, its inner
-    torque loop): the joint impedance (``joint_impedance``, default gains), the one law here made for a
+    torque loop): the joint impedance (``joint_impedance``, the shipped design made on this interface
+    under ``franka_like``), the one law here made for a
     desired link-side torque (a motor-torque law's output sent as ``tau_d`` means nothing).
 
 Every law knows only the NOMINAL parameters and runs the same TRUE plants (:func:`plants`: the nominal
@@ -53,9 +55,9 @@ FL_LAM = 40.0
 LAWS = {
     "ismc_tau (shipped design)": ("ismc", "motor"),
     "fl_tau": ("fl", "motor"),
-    "impedance": ("impedance", "motor"),
+    "impedance (shipped design)": ("impedance", "motor"),
     "pdg": ("pdg", "motor"),
-    "joint_impedance": ("joint_impedance", "franka"),
+    "joint_impedance (shipped design)": ("joint_impedance", "franka"),
 }
 
 
@@ -80,7 +82,8 @@ def controller(label: str, model):
         return make_controller("fl", model, p_nom, sensing="torque", lam=FL_LAM, u_max=u_max), interface
     if kind == "pdg":
         return make_controller("pdg", model, p_nom, u_max=u_max, **PDG_GAINS), interface
-    return make_controller(kind, model, p_nom, sensing="full", u_max=u_max), interface
+    design = Design.shipped(model.name, kind, "full", RATE, DELAY)  # made under franka_like on `interface`
+    return design.controller(model), interface
 
 
 def run_all(model, cases: List[dict], duration: float, progress: Optional[Callable[[str], None]] = None,
@@ -222,8 +225,9 @@ def real_interface_section(ctx) -> Tuple[List[str], list]:
           "and 1 N m per tick, gravity added by the robot, its inner torque loop (the column u is then the "
           "command after filter and limit). Laws: `ismc_tau` with the shipped design's gains "
           "(panda_ismc_tau_1000hz_d1, designed under the white `panda` sensor), `fl_tau` with its quadruple "
-          f"pole at {FL_LAM:g} rad/s, `impedance` and `joint_impedance` with their default gains from the "
-          f"nominal model, `pdg` with k_p = {list(PDG_GAINS['k_p'])} N m/rad, k_d = {list(PDG_GAINS['k_d'])} "
+          f"pole at {FL_LAM:g} rad/s, `impedance` and `joint_impedance` with the shipped designs' gains "
+          "(panda_impedance_1000hz_d1 on `motor`, panda_joint_impedance_1000hz_d1 on `franka`, both searched "
+          "under `franka_like` on other draws than these), `pdg` with k_p = {list(PDG_GAINS['k_p'])} N m/rad, k_d = {list(PDG_GAINS['k_d'])} "
           "N m s/rad. A motor-torque law's output sent as tau_d means nothing, so the franka interface runs "
           "only the law made for it.", "", *table(rows), "",
           "Worst RMS: the largest per-joint RMS of e1 over the run, over the plants that did not diverge. "

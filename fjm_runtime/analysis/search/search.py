@@ -330,7 +330,7 @@ def _design(model, s: SearchSettings, say, client) -> dict:
     draws, duration, screen_draws, screen_duration = s.draws, s.duration, s.screen_draws, s.screen_duration
     P_all = draw_params(model, max(draws, screen_draws), seed, spread)
     best, worst, b = _search(search, model, P_all, draws, screen_draws, screen_duration, duration, s.rounds,
-                             s.active_sets, seed, say)
+                             0 if s.compare_only else s.active_sets, seed, say)
     seconds = {"search": time.perf_counter() - t0}
     misses = find_misses(b, thresholds, range(draws), "final")
     recheck = {"draws": 0, "skipped": "the final check missed a threshold" if misses else "recheck_draws = 0"}
@@ -338,17 +338,20 @@ def _design(model, s: SearchSettings, say, client) -> dict:
         t1 = time.perf_counter()
         recheck, misses = _recheck(prob, best, spread, s.recheck_draws, duration, seed, say)
         seconds["recheck"] = time.perf_counter() - t1
-    t1 = time.perf_counter()
-    margins = {"delay": _delay_margin(prob, best, P_all[:screen_draws], screen_duration, seed, s.max_extra_delay,
-                                      say),
-               "input_gain_range": _gain_range(prob, best, screen_duration, seed, say)}
-    seconds["margins"] = time.perf_counter() - t1
+    compared_only = s.compare_only and bool(misses)  # a row of the comparison, not a record anyone keeps
+    margins = {"delay": None, "input_gain_range": None}
+    if not compared_only:
+        t1 = time.perf_counter()
+        margins = {"delay": _delay_margin(prob, best, P_all[:screen_draws], screen_duration, seed,
+                                          s.max_extra_delay, say),
+                   "input_gain_range": _gain_range(prob, best, screen_duration, seed, say)}
+        seconds["margins"] = time.perf_counter() - t1
     for m in misses:
         m["message"] = describe_miss(m)
         say(f"MISSES: {m['message']}")
     limited_by = screen.explain(best) if (misses and screen is not None and hasattr(screen, "explain")) else None
     binding, attribution = binding_miss(misses), {}
-    if binding is not None and limited_by is None:
+    if binding is not None and limited_by is None and not compared_only:
         limited_by, attribution = _attribution(prob, best, binding, P_all, spread, recheck, duration, seed, say)
     out = report(model, prob, best, worst, b, margins, draws, seed, duration)
     out.update({"meets": not misses, "misses": misses, "binding": binding, "limited_by": limited_by,

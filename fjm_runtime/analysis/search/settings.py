@@ -62,6 +62,9 @@ class SearchSettings:
     screen : optional
         None, ``'linear'`` (the linear sampled-data analysis) or a
         :class:`~fjm_runtime.analysis.search.screen.Screen`: rejects candidates first.
+    compare_only : bool
+        The law is only compared with one that already met (``--law auto``): no active-set pass, and
+        when it misses, no margins and no attribution (its record is then only a row of the comparison).
     """
 
     kind: str = "ismc"
@@ -90,3 +93,4 @@ class SearchSettings:
     recheck_draws: Optional[int] = None
     scheduler: Any = None
     screen: Any = None
+    compare_only: bool = False

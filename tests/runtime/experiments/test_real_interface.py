@@ -34,7 +34,12 @@ def test_laws_are_built_for_their_interface_on_the_nominal_model(panda):
     ismc, _ = ri.controller("ismc_tau (shipped design)", panda)
     np.testing.assert_allclose(ismc.delta, design.gains["delta"], rtol=1e-12)
     assert ismc.sensing == "torque"
-    assert ri.LAWS["joint_impedance"][1] == "franka"
+    assert ri.LAWS["joint_impedance (shipped design)"][1] == "franka"
+    for label in ("impedance (shipped design)", "joint_impedance (shipped design)"):
+        kind = ri.LAWS[label][0]
+        shipped = Design.shipped("panda", kind, "full", ri.RATE, ri.DELAY)
+        for name, value in shipped.law_gains().items():
+            np.testing.assert_allclose(getattr(ri.controller(label, panda)[0], name), value, rtol=1e-12)
     assert {i for k, i in ri.LAWS.values() if k != "joint_impedance"} == {"motor"}
 
 
@@ -50,7 +55,7 @@ def test_quick_section_rows_are_sane(section):
     ctx, md, figs = section
     rows = ctx.results["real_interface"]
     assert list(rows) == list(ri.LAWS)
-    for label in ("impedance", "joint_impedance"):
+    for label in ("impedance (shipped design)", "joint_impedance (shipped design)"):
         assert rows[label]["diverged"] == 0, label
     for label, r in rows.items():
         assert r["runs"] == 2
@@ -65,11 +70,12 @@ def test_quick_section_rows_are_sane(section):
     assert sens["ismc_tau (shipped design), ideal"]["diverged"] == 0  # the design holds without noise
     assert np.isfinite(sens["ismc_tau (shipped design), ideal"]["rms"])
     # the impedance laws hold the task from rest: well below a degree over 0.3 s
-    assert rows["impedance"]["rms"] < 2e-3 and rows["joint_impedance"]["rms"] < 5e-3
+    assert rows["impedance (shipped design)"]["rms"] < 2e-3 and rows["joint_impedance (shipped design)"]["rms"] < 5e-3
     assert figs[0].name == "real_arm_laws.png" and figs[0].stat().st_size > 5_000
     table = [line for line in md if line.startswith("| ")]
     assert len(table) == 2 + len(ri.LAWS) + len(ri.SENSORS) * len(ri.FOURTH_ORDER)
-    assert table[1 + list(rows).index("impedance")].split(" | ")[2] == f"{1e3 * rows['impedance']['rms']:.3g}"
+    imp = "impedance (shipped design)"
+    assert table[1 + list(rows).index(imp)].split(" | ")[2] == f"{1e3 * rows[imp]['rms']:.3g}"
 
 
 def test_metrics_are_the_worst_over_plants(panda):

@@ -95,8 +95,8 @@ def test_law_auto_prints_the_table_and_ships_the_best(tmp_path, capsys):
     err = capsys.readouterr().err
     rec = json.loads(out.read_text())
     rows = rec["comparison"]
-    assert [r["law"] for r in rows] == ["ismc", "fl", "impedance"]
-    assert rec["law_choice"] == {"asked": "auto", "laws": ["ismc", "fl", "impedance"], "chosen": rec["kind"]}
+    assert [r["law"] for r in rows] == ["impedance", "ismc", "fl"]
+    assert rec["law_choice"] == {"asked": "auto", "laws": ["impedance", "ismc", "fl"], "chosen": rec["kind"]}
     meeting = [r for r in rows if r["meets"]]
     assert meeting and rc == 0 and rec["meets"] is True
     best = min(meeting, key=lambda r: r["rms"])

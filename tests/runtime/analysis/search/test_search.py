@@ -50,6 +50,44 @@ def test_a_failed_design_says_which_threshold_joint_and_draw():
     json.dumps(a, allow_nan=False)
 
 
+@pytest.mark.slow  # builds the batch step (C) on a cold cache
+def test_a_law_only_compared_gets_no_second_pass_margins_or_attribution_when_it_misses():
+    """The same failing search as above, once in full and once compare_only: the first final check is the
+    same (same gains, same worst case); the compared one ran no active-set pass, no margin, no attribution."""
+    m = fjm_runtime.load("link1")
+    lines = {True: [], False: []}
+    recs = {c: run_search(m, sensor=SensorModel.panda_white(seed=5), compare_only=c, active_sets=1,
+                          **{**TINY, "draws": 8, "progress": lines[c].append}) for c in (False, True)}
+    full, compared = recs[False], recs[True]
+    assert full["meets"] is False and compared["meets"] is False
+    assert any(ln.startswith("active set") for ln in lines[False])
+    assert not any(ln.startswith(("active set", "delay margin", "input-gain range", "binding draw"))
+                   for ln in lines[True])
+    assert full["margins"]["delay"] is not None and compared["margins"] == {"delay": None, "input_gain_range": None}
+    assert compared["attribution"] == {} and compared["misses"]
+    first_final = [ln for ln in lines[False] if ln.startswith("final:")][0]
+    assert [ln for ln in lines[True] if ln.startswith("final:")] == [first_final]
+
+
+def test_law_auto_compares_only_the_laws_after_one_that_meets(monkeypatch):
+    """design_laws: a law searched after one that met runs compare_only; before that, in full."""
+    from fjm_runtime.analysis.search import compare, search
+    seen = []
+
+    def fake_design(model, settings, progress=None):
+        seen.append((settings.kind, settings.compare_only))
+        meets = settings.kind == "fl"
+        return {"meets": meets, "kind": settings.kind, "thresholds": {"jitter_joints": [1]}, "draws": 1,
+                "recheck": {"draws": 0}, "evaluations": {"seconds": {"search": 1.0}},
+                "worst_case": {"cost": 0.1 if meets else 5.0, "diverged": 0, "rms_second_half": [1e-3],
+                               "torque_jitter": [0.1], "time_at_limit": [0.0]}}
+    monkeypatch.setattr(search, "design", fake_design)
+    rec = compare.design_laws(fjm_runtime.load("link1"), search.SearchSettings(), ["ismc", "fl", "impedance"],
+                              progress=lambda msg: None)
+    assert seen == [("ismc", False), ("fl", False), ("impedance", True)]
+    assert rec["kind"] == "fl" and rec["law_choice"]["chosen"] == "fl"
+
+
 def _local_and_on_two_workers(draws, recheck_draws, processes):
     """The planar2 search run here and on a dask LocalCluster of 2 workers (threads or processes)."""
     from dask.distributed import Client, LocalCluster
