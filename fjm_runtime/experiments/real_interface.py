@@ -40,6 +40,7 @@ from ..sim.step import SimulationDivergedError
 from .panda import DIVERGED_ERROR
 from .plots import write_figure
 from .real_arm import PDG_GAINS, draws, diverged as real_arm_diverged
+from .shipped_designs import table as shipped_table
 
 RATE = 1000.0          # Hz, the Panda's control rate
 DELAY = 1              # samples of computation delay (predicted with the nominal model)
@@ -236,6 +237,9 @@ def real_interface_section(ctx) -> Tuple[List[str], list]:
           "What the sensing alone does to the fourth-order laws: the nominal plant, the same seed, the motor "
           "interface, under no noise (`ideal`), white noise on every signal including the velocities "
           "(`panda_white`, the shipped design's) and `franka_like`:", "", *table(by_sensor), "",
+          "The shipped designs made under realistic sensing (`fjm_runtime/control/designed/`; each row read "
+          "from its file: the final check and the re-check on fresh draws together, as `fjm design` prints them):",
+          "", *shipped_table(), "",
           ("QUICK MODE: a smoke test, not the documented numbers. " if ctx.quick else "")
           + f"Figure: `{fig.name}`. Wall time of this section: {wall:.0f} s.", ""]
     return md, [fig]

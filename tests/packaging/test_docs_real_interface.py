@@ -84,3 +84,11 @@ def test_blocks_equal_the_section_at_its_documented_scale(tmp_path):
     assert block(text, "real-interface") == ri.table(ctx.results["real_interface"]), \
         "docs/real-interface.md: copy the table of out/summary.md (section 'Which law on which interface')"
     assert block(text, "real-interface-sensing") == ri.table(ctx.results["real_interface_sensing"])
+
+
+def test_shipped_designs_block_is_read_from_the_files():
+    """The page's table of shipped designs is the one rendered from the design files, row for row."""
+    from fjm_runtime.experiments import shipped_designs
+    text = PAGE.read_text(encoding="utf-8")
+    assert block(text, "shipped-designs") == shipped_designs.table(), \
+        "docs/real-interface.md: copy the shipped-designs table of out/summary.md"

@@ -1,4 +1,5 @@
-"""The shipped Panda motor-side impedance designs under franka_like sensing, and fjm simulate picking them.
+"""The shipped motor-side impedance designs under franka_like sensing (the Panda, panda_hd, Baxter), and fjm
+simulate picking them.
 
 ``fjm simulate panda --noise franka_like`` (no gains, law or sensing asked) runs the shipped design made with
 that sensor (1 kHz, one sample of delay, prediction, full sensing), as ``--gains FILE`` would: the same
@@ -18,7 +19,11 @@ from fjm_runtime.control.design import Design
 from fjm_runtime.sim.sensor import SensorModel
 
 SHIPPED = sorted(p.name for p in resources.files("fjm_runtime.control").joinpath("designed").iterdir()
-                 if p.name.startswith("panda_impedance_"))
+                 if "_impedance_" in p.name and "_joint_impedance_" not in p.name)
+
+
+def test_the_arms_of_the_real_interface_have_their_impedance_design():
+    assert {n.split("_impedance_")[0] for n in SHIPPED} == {"panda", "panda_hd", "baxter"}
 
 
 @pytest.mark.parametrize("name", SHIPPED)
@@ -33,15 +38,16 @@ def test_shipped_impedance_designs_met_on_400_draws(name):
     row = [r for r in rep["comparison"] if r["law"] == "impedance"][0]
     assert row["rms"] == worst and row["diverged"] == 0 and row["runs"] == 400
     # what fjm simulate panda --noise franka_like --rate R --delay-samples D picks
-    picked = Design.shipped_for_sensor("panda", SensorModel.franka_like(seed=7), d.rate, d.delay)
+    picked = Design.shipped_for_sensor(d.model, SensorModel.franka_like(seed=7), d.rate, d.delay)
     assert picked is not None and picked.file.endswith(name) and picked == d
     from fjm_runtime.sim.interface import interface_from_spec
-    assert Design.shipped_for_sensor("panda", SensorModel.franka_like(), d.rate, d.delay,
+    assert Design.shipped_for_sensor(d.model, SensorModel.franka_like(), d.rate, d.delay,
                                      interface_from_spec("motor")) == d
-    franka = Design.shipped_for_sensor("panda", SensorModel.franka_like(), d.rate, d.delay, interface_from_spec("franka"))
+    franka = Design.shipped_for_sensor(d.model, SensorModel.franka_like(), d.rate, d.delay,
+                                       interface_from_spec("franka"))
     assert franka is None or franka.kind == "joint_impedance"          # a motor design is not a franka one
-    assert Design.shipped_for_sensor("panda", SensorModel.panda_white(), d.rate, d.delay) is None or \
-        Design.shipped_for_sensor("panda", SensorModel.panda_white(), d.rate, d.delay).kind != "impedance"
+    white = Design.shipped_for_sensor(d.model, SensorModel.panda_white(), d.rate, d.delay)
+    assert white is None or white.kind != "impedance"
 
 
 @pytest.mark.slow  # builds the Panda's impedance loop (C) on a cold cache

@@ -1,0 +1,58 @@
+"""Every shipped design that records a re-check holds again when a user runs it: the first fresh draws of its
+re-check (the same TRUE plants and noise seeds ``fjm design`` drew) through ``simulate``, the single-run loop
+a user calls (not the batch engine the search ran), with the design's own conditions: its sensor, delay,
+prediction with its recorded predictor substeps, command interface and task from its start state.
+
+Each run meets the design's thresholds, and its worst-joint RMS stays within 5 % of the worst the re-check
+recorded over its 200 draws (the single-run loop predicts on the recorded substeps, the search on the
+plant's: the two predictions agree to 1e-3 of the noise, not bit for bit).
+"""
+import json
+from importlib import resources
+
+import numpy as np
+import pytest
+
+import fjm_runtime
+from fjm_runtime.analysis.search.draws import default_spread, draw_params
+from fjm_runtime.analysis.search.search import RECHECK_SEED_OFFSET
+from fjm_runtime.control.design import Design
+from fjm_runtime.sim.interface import interface_from_record
+from fjm_runtime.sim.metrics import rms_second_half, time_at_limit, torque_jitter
+from fjm_runtime.sim.simulate import simulate
+
+FOLDER = resources.files("fjm_runtime.control").joinpath("designed")
+RECHECKED = sorted(p.name for p in FOLDER.iterdir() if p.name.endswith(".json")
+                   and json.loads(p.read_text()).get("recheck", {}).get("draws", 0) > 0)
+#: Fresh draws re-run per design (the re-check's first ones).
+DRAWS = 3
+
+
+def test_the_real_interface_designs_are_rechecked_ones():
+    assert {"panda_impedance_1000hz_d1.json", "panda_joint_impedance_1000hz_d1.json",
+            "panda_hd_impedance_1000hz_d1.json", "baxter_impedance_1000hz_d1.json"} <= set(RECHECKED)
+
+
+@pytest.mark.exhaustive  # a C build per design and 3 runs of 10 s: 20-60 s each
+@pytest.mark.parametrize("name", RECHECKED)
+def test_shipped_design_holds_on_its_first_fresh_draws(name):
+    d = Design.load(FOLDER.joinpath(name))
+    rep = d.report
+    model = fjm_runtime.load(d.model)
+    assert d.params["source"] == "default", "a design with a parameter file: re-run with its spread"
+    P = draw_params(model, DRAWS, int(rep["seed"]), default_spread(model, d.nominal(model)), fresh=True)
+    ctrl, interface = d.controller(model), interface_from_record({"interface": d.interface, "sensor": d.sensor})
+    thr = rep["thresholds"]
+    joints = [j - 1 for j in thr["jitter_joints"]]
+    recorded = max(rep["recheck"]["worst_case"]["rms_second_half"])
+    for i in range(DRAWS):
+        seed = int(rep["seed"]) + RECHECK_SEED_OFFSET + i
+        r = simulate(model, ctrl, d.reference(model), duration=float(rep["duration"]), dt=1.0 / d.rate,
+                     true_params=dict(zip(model.param_names, P[i])), x0=d.start_state(model),
+                     sensor=d.sensor_model().with_seed(seed), delay_samples=d.delay, predict=bool(d.predict),
+                     predict_substeps=d.predict_substeps, interface=interface, backend="compiled")
+        rms = rms_second_half(r)
+        assert np.all(np.isfinite(rms)) and np.max(rms) <= thr["max_rms"], (name, i, rms)
+        assert np.max(rms) <= 1.05 * recorded, (name, i, float(np.max(rms)), recorded)
+        assert np.max(torque_jitter(r)[joints]) <= thr["max_jitter"], (name, i)
+        assert np.max(time_at_limit(r, ctrl.u_max)) <= thr["max_at_limit"], (name, i)
