@@ -11,10 +11,11 @@ The best law: among those that meet every threshold (final check and re-check), 
 if none meets, the smallest worst cost of the final check (the record then says ``meets: false``).
 
 The laws are searched in the order given. Once one meets, each law after it is only compared
-(``SearchSettings.compare_only``): the same grid, pattern search, final check and re-check, but no
-active-set pass (a second pass only matters to a law that could still meet with a smaller RMS than the
-one that met; its first final check already says how far it is), and no margins and no attribution
-when it misses (its record is dropped; only its row is kept). The motor interface's laws are listed
+(``SearchSettings.compare_only``): the same grid, final check and re-check on the same draws, but one
+round of the pattern search (``COMPARED_ROUNDS``) and no active-set pass (further rounds only matter to a
+law that could still meet with a smaller RMS than the one that met; its final check says how far it is),
+and no margins and no attribution when it misses (its record is dropped; only its row is kept, marked
+``compared``). The motor interface's laws are listed
 with ``impedance`` first, the law that needs no jerk: under realistic sensing it is the one that meets
 (the Panda and panda_hd under franka_like sensing: ismc and fl spend 70-91 % of the time at a torque limit,
 against a threshold of 2 %).
@@ -63,7 +64,8 @@ def _worst(values, joints=None) -> Optional[float]:
 
 def comparison_row(law: str, rec: dict) -> dict:
     """One law's row: ``law, meets, rms (rad), jitter (N m), at_limit, at_rate_limit (fractions), diverged,
-    runs, cost, seconds``: worst over the final check and the re-check (where it ran)."""
+    runs, cost, seconds, compared`` (True: only compared with a law that met first): worst over the final
+    check and the re-check (where it ran)."""
     cases = [rec["worst_case"]] + ([rec["recheck"]["worst_case"]] if rec["recheck"].get("worst_case") else [])
     joints = [j - 1 for j in rec["thresholds"]["jitter_joints"]]
 
@@ -75,7 +77,7 @@ def comparison_row(law: str, rec: dict) -> dict:
             "jitter": worst("torque_jitter", joints), "at_limit": worst("time_at_limit"),
             "at_rate_limit": worst("time_at_rate_limit"), "diverged": int(sum(c["diverged"] for c in cases)),
             "runs": int(rec["draws"] + rec["recheck"].get("draws", 0)), "cost": float(rec["worst_case"]["cost"]),
-            "seconds": float(sum(rec["evaluations"]["seconds"].values()))}
+            "seconds": float(sum(rec["evaluations"]["seconds"].values())), "compared": bool(rec.get("compare_only"))}
 
 
 def _best(rows: List[dict]) -> int:
@@ -137,7 +139,7 @@ def comparison_lines(rows: List[dict], chosen: str) -> List[str]:
             f"{'at rate limit':>13} {'diverged':>9}")
     out = [head]
     for r in rows:
-        mark = " <- shipped" if r["law"] == chosen else ""
+        mark = " <- shipped" if r["law"] == chosen else " (compared only)" if r.get("compared") else ""
         out.append(f"{r['law']:<16} {'yes' if r['meets'] else 'no':<5} {_cell(r['rms'], 1e3, '{:.3g}', ' mrad'):>12} "
                    f"{_cell(r['jitter'], 1.0, '{:.3g}', ' N m'):>10} {_cell(r['at_limit'], 100.0, '{:.3g}', ' %'):>15} "
                    f"{_cell(r['at_rate_limit'], 100.0, '{:.3g}', ' %'):>13} {r['diverged']:>4}/{r['runs']:<4}{mark}")

@@ -63,8 +63,9 @@ class SearchSettings:
         None, ``'linear'`` (the linear sampled-data analysis) or a
         :class:`~fjm_runtime.analysis.search.screen.Screen`: rejects candidates first.
     compare_only : bool
-        The law is only compared with one that already met (``--law auto``): no active-set pass, and
-        when it misses, no margins and no attribution (its record is then only a row of the comparison).
+        The law is only compared with one that already met (``--law auto``): at most ``COMPARED_ROUNDS``
+        (1) pattern-search rounds, no active-set pass, and when it misses, no margins and no attribution
+        (its record is then only a row of the comparison).
     """
 
     kind: str = "ismc"
