@@ -132,7 +132,7 @@ def target_rows(runs: List[Dict[str, object]], panda: Optional[Dict[str, float]]
             continue
         rows.append({"what": f"n = {n} {q}", "limit": limit, "measured": v,
                      "ok": None if v is None else bool(v <= limit)})
-    for key, limit in (("alpha_beta_ops", 5000.0), ("alpha_beta_us", 2.0)):
+    for key, limit in (("alpha_beta_ops", 5000.0), ("alpha_beta_us", 1.0)):
         v = (panda or {}).get(key)
         rows.append({"what": f"panda {key}", "limit": limit, "measured": v,
                      "ok": None if v is None else bool(v <= limit)})

@@ -20,12 +20,15 @@ from fjm_runtime.control.design import Design
 from fjm_runtime.sim.interface import interface_from_record
 from fjm_runtime.sim.metrics import rms_second_half, time_at_limit, torque_jitter
 from fjm_runtime.sim.simulate import simulate
+from support.paths import REPO
 
 FOLDER = resources.files("fjm_runtime.control").joinpath("designed")
 RECHECKED = sorted(p.name for p in FOLDER.iterdir() if p.name.endswith(".json")
                    and json.loads(p.read_text()).get("recheck", {}).get("draws", 0) > 0)
 #: Fresh draws re-run per design (the re-check's first ones).
 DRAWS = 3
+#: The design of the user-arm example (a model file, not a built-in model).
+UR5E_DESIGN = REPO / "examples" / "ur5e" / "ur5e_impedance_1000hz_d1.json"
 
 
 def test_the_real_interface_designs_are_rechecked_ones():
@@ -37,8 +40,21 @@ def test_the_real_interface_designs_are_rechecked_ones():
 @pytest.mark.parametrize("name", RECHECKED)
 def test_shipped_design_holds_on_its_first_fresh_draws(name):
     d = Design.load(FOLDER.joinpath(name))
+    _holds_on_first_fresh_draws(d, fjm_runtime.load(d.model), name)
+
+
+@pytest.mark.exhaustive  # derives the UR5e, a C build and 3 runs of 10 s
+def test_the_user_arm_example_design_holds_on_its_first_fresh_draws(tmp_path):
+    """examples/ur5e/'s design (the model file derived as a user derives it) holds as the shipped ones do."""
+    from fjm_runtime.cli.main import main
+    assert main(["derive", "--model-file", str(REPO / "examples" / "ur5e.toml"), "--out", str(tmp_path)]) == 0
+    d = Design.load(UR5E_DESIGN)
+    assert d.model == "ur5e" and d.meets is True and d.kind == "impedance"
+    _holds_on_first_fresh_draws(d, fjm_runtime.load(str(tmp_path / "ur5e")), UR5E_DESIGN.name)
+
+
+def _holds_on_first_fresh_draws(d, model, name):
     rep = d.report
-    model = fjm_runtime.load(d.model)
     assert d.params["source"] == "default", "a design with a parameter file: re-run with its spread"
     P = draw_params(model, DRAWS, int(rep["seed"]), default_spread(model, d.nominal(model)), fresh=True)
     ctrl, interface = d.controller(model), interface_from_record({"interface": d.interface, "sensor": d.sensor})
