@@ -92,3 +92,17 @@ def test_shipped_designs_block_is_read_from_the_files():
     text = PAGE.read_text(encoding="utf-8")
     assert block(text, "shipped-designs") == shipped_designs.table(), \
         "docs/real-interface.md: copy the shipped-designs table of out/summary.md"
+
+
+def test_user_arm_design_block_is_read_from_the_example_file():
+    """The UR5e row is the example design file's record; the time the page quotes is the file's own."""
+    from fjm_runtime.experiments import shipped_designs
+    path = REPO / "examples" / "ur5e" / "ur5e_impedance_1000hz_d1.json"
+    text = PAGE.read_text(encoding="utf-8")
+    assert block(text, "user-arm-design") == shipped_designs.table([path])
+    rec = __import__("json").loads(path.read_text())
+    assert f"{rec['wall_seconds']:.0f} s on a cold cache" in text
+    assert f"needs {rec['predict_substeps']} RK4 substeps" in text
+    compared = [r for r in rec["comparison"] if r["law"] in ("ismc", "fl")]
+    assert all(r["compared"] and not r["meets"] for r in compared)
+    assert f"{max(100 * r['at_limit'] for r in compared):.0f} % of the time at a torque limit" in text

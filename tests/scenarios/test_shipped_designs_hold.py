@@ -72,3 +72,16 @@ def _holds_on_first_fresh_draws(d, model, name):
         assert np.max(rms) <= 1.05 * recorded, (name, i, float(np.max(rms)), recorded)
         assert np.max(torque_jitter(r)[joints]) <= thr["max_jitter"], (name, i)
         assert np.max(time_at_limit(r, ctrl.u_max)) <= thr["max_at_limit"], (name, i)
+
+
+def test_the_user_arm_wrist_mode_is_above_the_nyquist_frequency(tmp_path):
+    """docs/real-interface.md: the UR5e's fastest open-loop mode at q = 0 is about 5.5e3 rad/s, above pi / T at
+    1 kHz (central differences of the derived f; the mode's imaginary part)."""
+    from fjm_runtime.cli.main import main
+    assert main(["derive", "--model-file", str(REPO / "examples" / "ur5e.toml"), "--out", str(tmp_path)]) == 0
+    m = fjm_runtime.load(str(tmp_path / "ur5e"))
+    p, nx, eps = m.params_array(None), 4 * m.n, 1e-7
+    f = lambda x: np.asarray(m.f(x, p), dtype=float).ravel()  # noqa: E731
+    A = np.column_stack([(f(eps * e) - f(-eps * e)) / (2 * eps) for e in np.eye(nx)])
+    fastest = float(np.max(np.abs(np.linalg.eigvals(A).imag)))
+    assert fastest == pytest.approx(5.5e3, rel=0.02) and fastest > np.pi * 1000.0
