@@ -221,7 +221,8 @@ class LinearAnalyzer:
         if point == 0:
             self._chords.setdefault(self.cond.delay, lin)
         fig = assess(lin, self.levels, self.h, self.names, attribution, self._layer(ctrl, g, lin), self._sigma0)
-        fig["s_over_delta"] = (np.abs(lin.s) / np.asarray(ctrl.delta, dtype=float)).tolist()
+        if getattr(ctrl, "delta", None) is not None:  # a law with a boundary layer (ismc, smc, adaptive)
+            fig["s_over_delta"] = (np.abs(lin.s) / np.asarray(ctrl.delta, dtype=float)).tolist()
         return fig
 
     def analyze(self, gains: dict, margins: bool = True, attribution: bool = True,

@@ -177,3 +177,19 @@ def test_design_warns_when_its_task_leaves_the_position_limits(arm, tmp_path, ca
     lines = [ln for ln in err.splitlines() if "position limits" in ln]
     assert len(lines) == 1 and lines[0].startswith("fjm design: warning:") and "joint 2" in lines[0]
     assert f"[0, {0.5 * math.sin(0.5):.3g}] rad" in lines[0]
+
+
+@pytest.mark.parametrize("name", ["panda_impedance_1000hz_d1.json", "panda_joint_impedance_1000hz_d1.json"])
+def test_analyze_reads_a_shipped_design_of_a_law_without_a_boundary_layer(capsys, name):
+    """fjm analyze of the impedance designs (a law with no k_s / delta): a verdict, no traceback; the design's
+    interface and franka_like sensor in the settings."""
+    from importlib import resources
+    path = resources.files("fjm_runtime.control").joinpath("designed", name)
+    status, out, err = _run(capsys, ["analyze", "panda", "--gains", str(path), "--json", "--no-margins",
+                                     "--task-times", "none", "--plants", "nominal"])
+    rep = json.loads(out)
+    assert status == 0 and "Traceback" not in err
+    rest = rep["plants"][0]["points"]["rest"]
+    assert rest["stable"] is True and rest["rho"] < 1.0 and "s_over_delta" not in rest
+    assert rep["settings"]["sensor"] == "franka_like" and rep["settings"]["sensing"] == "full"
+    assert rep["settings"]["interface"] == json.loads(path.read_text())["interface"]["name"]
