@@ -14,9 +14,10 @@ import numpy as np
 import pytest
 
 import fjm_runtime
-from fjm_runtime.analysis.search.draws import default_spread, draw_params
+from fjm_runtime.analysis.search.draws import default_spread, draw_params, load_params_file
 from fjm_runtime.analysis.search.search import RECHECK_SEED_OFFSET
 from fjm_runtime.control.design import Design
+from fjm_runtime.control.references import make_reference
 from fjm_runtime.sim.interface import interface_from_record
 from fjm_runtime.sim.metrics import rms_second_half, time_at_limit, torque_jitter
 from fjm_runtime.sim.simulate import simulate
@@ -55,16 +56,22 @@ def test_the_user_arm_example_design_holds_on_its_first_fresh_draws(tmp_path):
 
 def _holds_on_first_fresh_draws(d, model, name):
     rep = d.report
-    assert d.params["source"] == "default", "a design with a parameter file: re-run with its spread"
-    P = draw_params(model, DRAWS, int(rep["seed"]), default_spread(model, d.nominal(model)), fresh=True)
+    source = d.params["source"]   # the spread the design drew from: the default box or its parameter file
+    spread = default_spread(model, d.nominal(model)) if source == "default" else load_params_file(REPO / source, model)
+    P = draw_params(model, DRAWS, int(rep["seed"]), spread, fresh=True)
     ctrl, interface = d.controller(model), interface_from_record({"interface": d.interface, "sensor": d.sensor})
+    # a design searched without a task of the model's ran fjm design's default: 0.5 rad sines at 1 rad/s about
+    # q = 0 from rest (its record {"kind": "sine", ...}; Design.reference leaves it to simulate's flags)
+    reference = d.reference(model) or make_reference("sine", int(model.n), amplitude=float(d.task["amplitude"]),
+                                                     omega=float(d.task["omega"]))
+    x0 = d.start_state(model) if d.reference(model) is not None else None
     thr = rep["thresholds"]
     joints = [j - 1 for j in thr["jitter_joints"]]
     recorded = max(rep["recheck"]["worst_case"]["rms_second_half"])
     for i in range(DRAWS):
         seed = int(rep["seed"]) + RECHECK_SEED_OFFSET + i
-        r = simulate(model, ctrl, d.reference(model), duration=float(rep["duration"]), dt=1.0 / d.rate,
-                     true_params=dict(zip(model.param_names, P[i])), x0=d.start_state(model),
+        r = simulate(model, ctrl, reference, duration=float(rep["duration"]), dt=1.0 / d.rate,
+                     true_params=dict(zip(model.param_names, P[i])), x0=x0,
                      sensor=d.sensor_model().with_seed(seed), delay_samples=d.delay, predict=bool(d.predict),
                      predict_substeps=d.predict_substeps, interface=interface, backend="compiled")
         rms = rms_second_half(r)
