@@ -150,39 +150,17 @@ def _window_jitter(res, k: int, half: int = 150, h: int = 10) -> np.ndarray:
     return np.std(v[k - half - h:k + half - h], axis=0)
 
 
-@pytest.mark.slow  # the task run and three task points of the Panda (about 30 s on 2 loaded cores)
-def test_panda_design_along_the_task_matches_simulate():
-    """Along the design's task (nominal plant, its sensor, seed 0): the analysis says stable at t = 0.5 and 2 s
-    (equivalent gain), the loop holds (error < 2e-3 rad, never at a torque limit), and the predicted jitter is
-    within 25 % of the simulated one over the 0.3 s around each point on every joint (measured: within 8 %;
-    the small-signal prediction at 0.5 s was 5.7 x the simulated on joint 4)."""
+@pytest.mark.slow  # the task run and two task points of the Panda per design (about 30 s on 2 loaded cores)
+@pytest.mark.parametrize("kind,sensing,method", [("ismc", "torque", "equivalent gain"),
+                                                 ("impedance", "full", "small-signal")])
+def test_panda_design_along_the_task_matches_simulate(kind, sensing, method):
+    """Along the shipped design's task (nominal plant, its sensor and interface, seed 0): the analysis says stable
+    at t = 0.5 and 2 s (the sliding-mode design by its layer's equivalent gain, the impedance design, which has
+    no layer, small-signal), the loop holds (error < 2e-3 rad, never at a torque limit), and the predicted
+    jitter is within 25 % of the simulated one over the 0.3 s around each point on every joint (measured:
+    within 8 % and 5.4 %; the ismc design's small-signal prediction at 0.5 s was 5.7 x the simulated on joint 4)."""
     m = fjm_runtime.load("panda")
-    design = Design.shipped("panda", "ismc", "torque", 1000, 1)
-    args = SimpleNamespace(rate=None, delay_samples=None, predict=None, sensing=None, noise=None, gains="panda")
-    cond = conditions_from_design(m, design, args)
-    ctrl = cond.controller(dict(design.law_gains(), u_max=cond.u_max))
-    an = LinearAnalyzer(cond, plants=[("nominal", np.asarray(m.params_array({}), dtype=float))],
-                        task_times=(0.5, 2.0))
-    out = an.analyze(ctrl, margins=False, attribution=False)
-    assert out["summary"]["stable_everywhere"] is True
-    res = simulate(m, ctrl, cond.reference, duration=2.3, dt=cond.dt, x0=cond.x0, sensor=cond.sensor.with_seed(0),
-                   delay_samples=cond.delay, predict=cond.predict)
-    assert np.max(np.abs(res.e1)) < 2e-3 and not np.any(np.abs(res.u) >= np.asarray(cond.u_max) - 1e-9)
-    for name, t in (("t=0.5s", 0.5), ("t=2s", 2.0)):
-        fig = out["plants"][0]["points"][name]
-        sim = _window_jitter(res, int(round(t / cond.dt)))
-        assert fig["method"] == "equivalent gain"
-        assert np.all(np.abs(np.asarray(fig["torque_jitter"]) / sim - 1.0) < 0.25), (name, fig["torque_jitter"], sim)
-
-
-@pytest.mark.slow  # the task run and two task points of the Panda
-def test_panda_impedance_design_along_the_task_matches_simulate():
-    """The shipped motor-side impedance design (franka_like, the motor interface) along its task, nominal plant,
-    seed 0: the analysis says stable at t = 0.5 and 2 s (small-signal: the law has no layer), the loop holds
-    (error < 2e-3 rad, never at a torque limit), and the predicted jitter is within 25 % of the simulated one
-    over the 0.3 s around each point on every joint (measured: within 5.4 %)."""
-    m = fjm_runtime.load("panda")
-    design = Design.shipped("panda", "impedance", "full", 1000, 1)
+    design = Design.shipped("panda", kind, sensing, 1000, 1)
     args = SimpleNamespace(rate=None, delay_samples=None, predict=None, sensing=None, noise=None, gains="panda",
                            interface=None)
     cond = conditions_from_design(m, design, args)
@@ -197,4 +175,5 @@ def test_panda_impedance_design_along_the_task_matches_simulate():
     for name, t in (("t=0.5s", 0.5), ("t=2s", 2.0)):
         fig = out["plants"][0]["points"][name]
         sim = _window_jitter(res, int(round(t / cond.dt)))
+        assert fig["method"] == method
         assert np.all(np.abs(np.asarray(fig["torque_jitter"]) / sim - 1.0) < 0.25), (name, fig["torque_jitter"], sim)
