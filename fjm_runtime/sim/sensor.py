@@ -436,25 +436,24 @@ def read_noise_levels(sensor: SensorModel, sensing: str, n: int, T: float) -> np
 
     A constant offset (the tau_J offset) cancels in the difference.
     """
-    blocks = measurement_blocks(sensing)
     steps = {"q": sensor.q_quant, "q_m": sensor.q_m_quant}
+
+    def white(signal):  # the signal's own noise, an angle's quantization folded in as uniform (step^2 / 12)
+        level = _per_joint(getattr(sensor, signal), n, signal)
+        return np.sqrt(level ** 2 + steps.get(signal, 0.0) ** 2 / 12.0)
+
     out = []
-    for name in blocks:
-        level = _per_joint(getattr(sensor, name), n, name).astype(float)
-        src, cutoff = None, 0.0
+    for name in measurement_blocks(sensing):
+        src, cutoff = name, None
         if name in ("dq", "dq_m") and sensor.velocity_mode == "differentiated":
             src, cutoff = name[1:], sensor.velocity_cutoff
         elif name == "dtau_J" and sensor.dtau_mode == "filtered":
             src, cutoff = "tau_J", sensor.dtau_cutoff
-        if name in steps:
-            level = np.sqrt(level ** 2 + steps[name] ** 2 / 12.0)
-        if src is not None:
-            s = _per_joint(getattr(sensor, src), n, src).astype(float)
-            if src in steps:
-                s = np.sqrt(s ** 2 + steps[src] ** 2 / 12.0)
+        level = white(src)
+        if cutoff is not None:
             a = 1.0 - math.exp(-float(cutoff) * float(T))
-            level = (a * s / float(T)) * math.sqrt(2.0 / (2.0 - a))
-        out.append(np.broadcast_to(level, (n,)))
+            level = (a * level / float(T)) * math.sqrt(2.0 / (2.0 - a))
+        out.append(level)
     return np.concatenate(out)
 
 
