@@ -33,6 +33,7 @@ from typing import Dict, Optional, Tuple
 import numpy as np
 
 from ...drives import drive_indices, spring_scale_groups
+from ...sim.preset_file import read_toml_file
 from ...validation import FjmValueError, check_domains, check_magnitudes
 
 __all__ = ["GROUPS", "PlantSpread", "default_spread", "draw_params", "load_params_file"]
@@ -284,18 +285,8 @@ def load_params_file(path, model) -> PlantSpread:
     FjmValueError
         One line ``FILE:LINE: table.key: problem; expected ...`` (or ``FILE: ...`` without a line).
     """
-    try:
-        import tomllib
-    except ImportError:  # Python < 3.11
-        import tomli as tomllib
-    p = Path(path)
-    if not p.is_file():
-        raise FjmValueError(f"--params {p}: not found; expected a TOML parameter file (docs/design-command.md)")
-    try:
-        text = p.read_text()
-        data = tomllib.loads(text)
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-        raise FjmValueError(f"{p}: not valid TOML ({exc})") from None
+    p, text, data = read_toml_file(path, lambda p: f"--params {p}: not found; expected a TOML parameter file "
+                                                   "(docs/design-command.md)")
     where = _Where(p, text)
     extra = sorted(set(data) - {"parameters", "spread"})
     if extra:
