@@ -151,10 +151,10 @@ def _kernel(model, route: str) -> ca.Function:
     if route == "jets":
         bodies = _body_numbers(model, _converter(model, q, dq, p))
         g0 = p[list(model.param_names).index("g0")]
-        h = rnea_jets(bodies, q, dq, [0.0] * n, None, g0, 0)[0]  # shares the velocity terms with the jets
+        h = rnea_jets(bodies, q, [dq], g0, 0)[0]  # shares the velocity terms with the jets
         y3 = ldl_solve(L, inv_d, s - h)
-        y4 = ldl_solve(L, inv_d, ds - rnea_jets(bodies, q, dq, y3, None, g0, 1)[1])
-        w = rnea_jets(bodies, q, dq, y3, y4, g0, 2)[2]
+        y4 = ldl_solve(L, inv_d, ds - rnea_jets(bodies, q, [dq, y3], g0, 1)[1])
+        w = rnea_jets(bodies, q, [dq, y3, y4], g0, 2)[2]
     elif route == "ad":
         y3 = ldl_solve(L, inv_d, s - h)
         d1, d2 = time_derivatives(model)
@@ -188,8 +188,7 @@ def inverse_dynamics_jets(model, route: str = None) -> ca.Function:
     (``route`` forces one):
 
     * ``"jets"`` (``model.bodies``): the RNEA's Taylor recursion (:func:`derive.emit.rnea_jets.rnea_jets`)
-      at ``a_rate = da``, whose second derivative takes ``dda = 0``; ``D dda`` is added by one RNEA at
-      zero velocity and gravity (the composite-inertia product, no ``D`` formed);
+      along ``(dq, a, da, dda)``;
     * ``"ad"``: forward-mode AD of the programme, :func:`time_derivatives` with ``v = [dq; a; da]``,
       ``w = [a; da; dda]``, exact;
     * ``"symbolic"``: the SymPy ``R1 = D' a + h'``, ``W = D'' a + 2 D' da + h''``
@@ -206,8 +205,7 @@ def inverse_dynamics_jets(model, route: str = None) -> ca.Function:
     if route == "jets":
         bodies = _body_numbers(model, _converter(model, q, dq, p))
         g0 = p[list(model.param_names).index("g0")]
-        tau, dtau, ddtau = rnea_jets(bodies, q, dq, a, da, g0, 2)
-        ddtau = ddtau + rnea_jets(bodies, q, [0.0] * n, dda, None, 0.0, 0)[0]
+        tau, dtau, ddtau = rnea_jets(bodies, q, [dq, a, da, dda], g0, 2)
     elif route == "ad":
         d1, d2 = time_derivatives(model)
         z, v = ca.vertcat(q, dq, a), ca.vertcat(dq, a, da)
