@@ -232,14 +232,14 @@ def build_core(model, functions: Dict[str, ca.Function], body=None) -> ca.Functi
     """``<model>_control_core(x, p_hat) -> (y_hat, alpha, beta)``: the model part every law shares.
 
     One SX Function, ``T``, ``alpha`` and ``beta`` inlined and jointly CSE'd; the laws
-    call it. ``beta`` is ``(n, n)`` as ``<model>_beta``. ``body(x, p) -> (y_hat, alpha)``, if
-    given, computes the first two in one go (one kernel call, :mod:`derive.emit.dynamics`)
-    instead of inlining ``T`` and ``alpha`` separately.
+    call it. ``beta`` is ``(n, n)`` as ``<model>_beta``. ``body(x, p) -> (y_hat, alpha, beta)``,
+    if given, computes the three in one go (one kernel call, :mod:`derive.emit.dynamics`)
+    instead of inlining ``T``, ``alpha`` and ``beta`` separately.
     """
     x = ca.SX.sym("x", 4 * model.n)
     p = ca.SX.sym("p_hat", len(model.params))
-    first = body(x, p) if body is not None else (functions["T"](x, p), functions["alpha"](x, p))
-    outs = ca.cse([*first, functions["beta"](x, p)])
+    outs = ca.cse(list(body(x, p)) if body is not None else
+                  [functions["T"](x, p), functions["alpha"](x, p), functions["beta"](x, p)])
     return ca.Function(f"{model.name}_control_core", [x, p], outs,
                        ["x", "p_hat"], ["y_hat", "alpha", "beta"])
 

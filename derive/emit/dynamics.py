@@ -3,12 +3,13 @@
 One SX Function, the *kernel*, holds everything ``T``, ``alpha`` and their torque-sensed
 counterparts need (docs/derivation.md, "Time derivatives of the inverse dynamics")::
 
-    <model>_accel_kernel(q, dq, s, ds, p) -> (y3, y4, w)
+    <model>_accel_kernel(q, dq, s, ds, p) -> (y3, y4, w, D)
     y3 = D^-1 (s - h)                        D y3 + h = s   (s: the link-side spring torque)
     y4 = D^-1 (ds - r1),   r1 = D' y3 + h'   (the time derivative of D y3 + h = s)
     w  = D'' y3 + 2 D' y4 + h''
 
-with one LDL^T of ``D(q)``. ``r1`` and ``w`` are first and second time derivatives of the
+with one LDL^T of ``D(q)``, which it also returns: ``beta = J_m K^-1 D`` of a law's core then
+costs n^2 products, not a second ``D``. ``r1`` and ``w`` are first and second time derivatives of the
 inverse dynamics ``tau(q, dq, a) = D(q) a + h(q, dq)`` along ``q' = dq``, ``dq' = y3``,
 ``a' = y4`` (``a`` frozen at ``y3``, no ``a''`` term)::
 
@@ -19,16 +20,17 @@ the RNEA (:mod:`derive.emit.rnea_jets`); :func:`time_derivatives`, CasADi forwar
 model's straight-line RNEA with the acceleration as an input (``model.inverse_dynamics``), is the
 tests' reference; planar chains differentiate ``D a + h`` in SymPy (:func:`build_kernel`).
 The state laws use ``s = K (q_m - q)``, ``ds = K (dq_m - dq)``; the torque-sensed laws
-the measured ``tau_J``, ``dtau_J``. Then::
+the measured ``tau_J``, ``dtau_J``. Then (:func:`elastic_kernel`, the kernel with these, for linear springs)::
 
     T     = [q; dq; y3; y4]
     alpha = J_m K^-1 (w + K (y3 - ddq_m)),    ddq_m = J_m^-1 (K (q - q_m) - B_m dq_m)
           = J_m K^-1 w + J_m y3 + K (q_m - q) + B_m dq_m   (as emitted)
     alpha_tau = tau_J + B_m dq_m + J_m y3 + J_m K^-1 w
+    beta  = J_m K^-1 D                                       (the cores, from the kernel's D)
 
 The same bodies build the SX Functions written to ``.casadi`` (the kernel inlined and CSE'd,
-fast from Python) and their MX twins for the C file, which call the one kernel: the C holds
-the model part once instead of once per function (:func:`c_twins`).
+fast from Python) and their MX twins for the C file, which call the one elastic kernel: the C
+holds the model part once instead of once per function (:func:`derive.emit.writer.c_functions`).
 """
 
 from __future__ import annotations
@@ -118,7 +120,7 @@ def _body_numbers(model, conv: SympyToSX) -> list:
 
 
 def build_kernel(model) -> ca.Function:
-    """``<model>_accel_kernel(q, dq, s, ds, p) -> (y3, y4, w)`` (SX, CSE'd; see the module docstring).
+    """``<model>_accel_kernel(q, dq, s, ds, p) -> (y3, y4, w, D)`` (SX, CSE'd; see the module docstring).
 
     Three routes to ``h``, ``r1`` and ``w``, by what the model has:
 
@@ -170,9 +172,8 @@ def _kernel(model, route: str) -> ca.Function:
         for i in range(n):
             conv.bind(Y4[i], y4[i])
         w = ca.vec(conv(W))
-    y3, y4, w = ca.cse([y3, y4, w])
-    return ca.Function(f"{model.name}_accel_kernel", [q, dq, s, ds, p], [y3, y4, w],
-                       ["q", "dq", "s", "ds", "p"], ["y3", "y4", "w"])
+    return ca.Function(f"{model.name}_accel_kernel", [q, dq, s, ds, p], ca.cse([y3, y4, w, D]),
+                       ["q", "dq", "s", "ds", "p"], ["y3", "y4", "w", "D"])
 
 
 #: Routes of :func:`inverse_dynamics_jets`, each checked against the others by the tests.
@@ -257,32 +258,57 @@ def motor_acceleration(K, Jm, Bm, q, qm, dqm):
     return (K * (q - qm) - Bm * dqm) / Jm
 
 
+def _beta(Jm, K, D):
+    """``J_m K^-1 D`` (SX or MX)."""
+    return ca.repmat(Jm / K, 1, D.shape[1]) * D
+
+
+def elastic_kernel(model, kernel: ca.Function) -> ca.Function:
+    """``<model>_elastic_kernel(q, dq, s, ds, dq_m, p) -> (y3, y4, alpha, beta)``: the kernel with the linear springs' laws.
+
+    SX, ``kernel`` (:func:`build_kernel`) inlined and CSE'd with::
+
+        alpha = J_m K^-1 w + J_m y3 + s + B_m dq_m,    beta = J_m K^-1 D
+
+    the same for the state (``s = K (q_m - q)``, ``ds = K (dq_m - dq)``) and the torque-sensed
+    (``s = tau_J``, ``ds = dtau_J``) laws, so the C's cores are thin calls of it. The state form is
+    ``J_m K^-1 (w + K (y3 - ddq_m))`` with ``J_m ddq_m = K (q - q_m) - B_m dq_m`` written out: the
+    spring torque is the input, and no division by ``J_m`` (7 operations a joint instead of 10).
+    """
+    n = model.n
+    q, dq, s, ds, dqm = (ca.SX.sym(nm, n) for nm in ("q", "dq", "s", "ds", "dq_m"))
+    p = ca.SX.sym("p", len(model.params))
+    K, Jm, Bm = elastic_diagonals(model, p)
+    y3, y4, w, D = kernel(q, dq, s, ds, p)
+    outs = ca.cse([y3, y4, Jm / K * w + Jm * y3 + s + Bm * dqm, _beta(Jm, K, D)])
+    return ca.Function(f"{model.name}_elastic_kernel", [q, dq, s, ds, dqm, p], outs,
+                       ["q", "dq", "s", "ds", "dq_m", "p"], ["y3", "y4", "alpha", "beta"])
+
+
 def state_bodies(model, kernel: ca.Function) -> Dict[str, Callable]:
-    """``T``, ``alpha`` of ``(x, p)`` (SX or MX arguments), calling ``kernel``."""
+    """``T``, ``alpha`` and the law's ``core`` ``(y_hat, alpha, beta)`` of ``(x, p)`` (SX or MX), calling
+    ``kernel`` (:func:`elastic_kernel`) once."""
     n = model.n
 
-    def core(x, p):  # (y_hat, alpha) of one kernel call
+    def core(x, p):
         q, dq, qm, dqm = state_blocks(x, n)
-        K, Jm, Bm = elastic_diagonals(model, p)
-        spring = K * (qm - q)
-        y3, y4, w = kernel(q, dq, spring, K * (dqm - dq), p)
-        # J_m K^-1 (w + K (y3 - ddq_m)) with J_m ddq_m = K (q - q_m) - B_m dq_m written out: the spring torque
-        # is the kernel's input, and no division by J_m (7 operations a joint instead of 10)
-        return ca.vertcat(q, dq, y3, y4), Jm / K * w + Jm * y3 + spring + Bm * dqm
+        K, _, _ = elastic_diagonals(model, p)
+        y3, y4, alpha, beta = kernel(q, dq, K * (qm - q), K * (dqm - dq), dqm, p)
+        return ca.vertcat(q, dq, y3, y4), alpha, beta
 
     # a Function keeps only what its output depends on: T drops alpha's products and vice versa
     return {"T": lambda x, p: core(x, p)[0], "alpha": lambda x, p: core(x, p)[1], "core": core}
 
 
 def torque_bodies(model, kernel: ca.Function) -> Dict[str, Callable]:
-    """``T_tau``, ``alpha_tau`` of ``(m, p)``, ``m = [q; dq; tau_J; dtau_J; dq_m]``, calling ``kernel``."""
+    """``T_tau``, ``alpha_tau`` and the law's ``core`` ``(y_hat, alpha, beta)`` of ``(m, p)``,
+    ``m = [q; dq; tau_J; dtau_J; dq_m]``, calling ``kernel`` (:func:`elastic_kernel`) once."""
     n = model.n
 
     def core(m, p):
         q, dq, tau, dtau, dqm = (m[i * n:(i + 1) * n] for i in range(5))
-        K, Jm, Bm = elastic_diagonals(model, p)
-        y3, y4, w = kernel(q, dq, tau, dtau, p)
-        return ca.vertcat(q, dq, y3, y4), tau + Bm * dqm + Jm * y3 + Jm / K * w
+        y3, y4, alpha, beta = kernel(q, dq, tau, dtau, dqm, p)
+        return ca.vertcat(q, dq, y3, y4), alpha, beta
 
     return {"T_tau": lambda m, p: core(m, p)[0], "alpha_tau": lambda m, p: core(m, p)[1], "core": core}
 
@@ -293,7 +319,7 @@ def beta_twin(model, inertia: ca.Function) -> ca.Function:
 
     def body(x, p):
         K, Jm, _ = elastic_diagonals(model, p)
-        return ca.repmat(Jm / K, 1, n) * inertia(x, p)
+        return _beta(Jm, K, inertia(x, p))
 
     return mx_function(f"{model.name}_beta", body, [4 * n, len(model.params)], ["x", "p"], ["beta"])
 

@@ -4,8 +4,8 @@ Every Function has the signature ``(x, p) -> (value,)`` with ``x`` of length
 4n (``[q; dq; q_m; dq_m]``) and ``p`` of length ``len(param_names)``.
 The implicit symbols of the derivation are bound here to numeric linear
 algebra on D(q): ``y3 = D^-1 r3`` through one LDL^T factorization. ``T`` and
-``alpha`` call the model's kernel (:mod:`derive.emit.dynamics`: ``y3``, ``y4`` and
-the second time derivative of the inverse dynamics by CasADi AD); the SymPy route
+``alpha`` call the model's elastic kernel (:mod:`derive.emit.dynamics`: ``y3``, ``y4``,
+``alpha`` and ``beta`` from the time derivatives of the inverse dynamics); the SymPy route
 (``y4 = D^-1 rhs4``, the implicit ``alpha``) is ``route="symbolic"``, for cross-checks.
 
 The brackets ``ad = [g, ad_f g, ad_f^2 g, ad_f^3 g]`` are their closed form for the reduced
@@ -22,7 +22,7 @@ import casadi as ca
 
 from ..core.linearize import Linearization
 from .brackets import closed_form_brackets
-from .dynamics import build_kernel, state_bodies, sx_function
+from .dynamics import build_kernel, elastic_kernel, state_bodies, sx_function
 from .sx import SympyToSX, ldl_factor, ldl_solve, state_symbols
 
 #: Quantities emitted for every model, in file order, with their meaning.
@@ -90,7 +90,7 @@ def ad_by_ad(x: ca.SX, D: ca.SX, r3: ca.SX, acc_m: ca.SX, g: ca.SX, factors, k: 
 
 def build_model_functions(lin: Linearization, cse: bool = True,
                           route: str = "ad") -> Tuple[Dict[str, ca.Function], ca.Function]:
-    """:func:`build_functions` and the kernel its ``T`` and ``alpha`` call (:mod:`derive.emit.dynamics`).
+    """:func:`build_functions` and the elastic kernel its ``T`` and ``alpha`` call (:mod:`derive.emit.dynamics`).
 
     ``route="symbolic"`` converts the implicit SymPy ``T`` and ``alpha`` instead (needs
     ``linearize(..., symbolic=True)``): the independent route the tests compare with.
@@ -118,7 +118,7 @@ def build_model_functions(lin: Linearization, cse: bool = True,
         implicit[lin.Y4[i]] = lambda i=i: solved("y4", lin.rhs4)[i]
     conv = SympyToSX(bindings, dict(m.program.definitions), implicit)
 
-    kernel = None if route == "symbolic" else build_kernel(m)
+    kernel = None if route == "symbolic" else elastic_kernel(m, build_kernel(m))
     by_ad = {} if kernel is None else state_bodies(m, kernel)
     out = {}
     for name, _ in QUANTITIES:

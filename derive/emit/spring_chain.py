@@ -2,7 +2,7 @@
 
 A one-joint drive is derived in SymPy (:func:`derive.core.spring.linearize_spring`). With several joints
 ``D^-1`` stays implicit, as for the linear models (:mod:`derive.emit.dynamics`): every quantity is built
-from the model's kernel ``(y3, y4, w) = kernel(q, dq, s, ds, p)`` (the time derivatives of the inverse
+from the model's kernel ``(y3, y4, w, D) = kernel(q, dq, s, ds, p)`` (the time derivatives of the inverse
 dynamics ``D a + h = s``), called with the spring torque ``s = psi(phi)`` and its rate
 ``ds = psi'(phi) dphi``, ``phi = q_m - q``, ``dphi = dq_m - dq``, per joint. Differentiating
 ``D y4 + r1 = ds`` once more along the motion gives ``D y5 + w = psi''(phi) dphi^2 + psi'(phi) ddphi``
@@ -114,10 +114,10 @@ def chain_bodies(model, parts: Dict[str, ca.Function]) -> Dict[str, Callable]:
         _, Jm, Bm = elastic_diagonals(model, p)
         psi, dpsi, ddpsi = spring(qm - q, p)
         dphi = dqm - dq
-        y3, y4, w = kernel(q, dq, psi, dpsi * dphi, p)
+        y3, y4, w, D = kernel(q, dq, psi, dpsi * dphi, p)
         F = friction(dqm, p)
         alpha = psi + Bm * dqm + F + Jm * y3 + Jm / dpsi * (w - ddpsi * dphi * dphi)
-        return {"T": ca.vertcat(q, dq, y3, y4), "alpha": alpha, "dpsi": dpsi,
+        return {"T": ca.vertcat(q, dq, y3, y4), "alpha": alpha, "dpsi": dpsi, "D": D,
                 "f": ca.vertcat(dq, y3, dqm, (-psi - Bm * dqm - F) / Jm)}
 
     def torque(m, p):
@@ -125,24 +125,27 @@ def chain_bodies(model, parts: Dict[str, ca.Function]) -> Dict[str, Callable]:
         _, Jm, Bm = elastic_diagonals(model, p)
         _, dpsi, ddpsi = spring(inverse(tau, p), p)
         dphi = dtau / dpsi
-        y3, y4, w = kernel(q, dq, tau, dtau, p)
+        y3, y4, w, D = kernel(q, dq, tau, dtau, p)
         alpha = tau + Bm * dqm + friction(dqm, p) + Jm * y3 + Jm / dpsi * (w - ddpsi * dphi * dphi)
-        return {"T_tau": ca.vertcat(q, dq, y3, y4), "alpha_tau": alpha, "dpsi": dpsi}
+        return {"T_tau": ca.vertcat(q, dq, y3, y4), "alpha_tau": alpha, "dpsi": dpsi, "D": D}
 
-    def beta(arg, p, dpsi):
+    def beta(arg, p, dpsi, D=None):  # D: the kernel's, in a core (else D(q) by the inertia Function)
         _, Jm, _ = elastic_diagonals(model, p)
-        return ca.repmat(Jm / dpsi, 1, n) * inertia(ca.vertcat(arg[:n], type(arg).zeros(3 * n)), p)
+        if D is None:
+            D = inertia(ca.vertcat(arg[:n], type(arg).zeros(3 * n)), p)
+        return ca.repmat(Jm / dpsi, 1, n) * D
 
     return {
         "f": lambda x, p: state(x, p)["f"],
         "T": lambda x, p: state(x, p)["T"],
         "alpha": lambda x, p: state(x, p)["alpha"],
         "beta": lambda x, p: beta(x, p, state(x, p)["dpsi"]),
-        "core": lambda x, p: (lambda s: (s["T"], s["alpha"], beta(x, p, s["dpsi"])))(state(x, p)),
+        "core": lambda x, p: (lambda s: (s["T"], s["alpha"], beta(x, p, s["dpsi"], s["D"])))(state(x, p)),
         "T_tau": lambda m, p: torque(m, p)["T_tau"],
         "alpha_tau": lambda m, p: torque(m, p)["alpha_tau"],
         "beta_tau": lambda m, p: beta(m, p, torque(m, p)["dpsi"]),
-        "core_tau": lambda m, p: (lambda t: (t["T_tau"], t["alpha_tau"], beta(m, p, t["dpsi"])))(torque(m, p)),
+        "core_tau": lambda m, p: (lambda t: (t["T_tau"], t["alpha_tau"], beta(m, p, t["dpsi"], t["D"])))(
+            torque(m, p)),
     }
 
 

@@ -8,9 +8,10 @@ For a model (the equations of :mod:`derive.core.torque`)::
     <model>_control_core_tau(m, p_hat) -> (y_hat, alpha, beta): the three jointly CSE'd, the
                                                              model part of the ``control_<kind>_tau`` laws
 
-with ``m = [q; dq; tau_J; dtau_J; dq_m]`` (5n). ``T_tau`` and ``alpha_tau`` call the model's
-kernel (:mod:`derive.emit.dynamics`, shared with the state laws: ``y3``, ``y4`` and
-``w = D'' y3 + 2 D' y4 + h''`` by CasADi AD of the inverse dynamics, one LDL^T of D(q)).
+with ``m = [q; dq; tau_J; dtau_J; dq_m]`` (5n). ``T_tau``, ``alpha_tau`` and the core call the
+model's elastic kernel with ``s = tau_J``, ``ds = dtau_J`` (:func:`derive.emit.dynamics.elastic_kernel`,
+shared with the state laws: ``y3``, ``y4``, ``alpha``, ``beta`` from the time derivatives of the
+inverse dynamics, one LDL^T of D(q)).
 The SymPy route of :func:`derive.core.torque.torque_linearize` is kept for cross-checks
 (:func:`build_torque_functions_symbolic`).
 
@@ -117,14 +118,14 @@ def build_torque_functions(lin: Linearization, kernel: ca.Function,
                            beta: ca.Function = None) -> Dict[str, ca.Function]:
     """SX Functions ``<model>_<name>`` of :data:`TORQUE_QUANTITIES` and ``<model>_control_core_tau``.
 
-    ``T_tau`` and ``alpha_tau`` call the model's ``kernel`` (:func:`derive.emit.dynamics.build_kernel`,
+    ``T_tau`` and ``alpha_tau`` call the model's ``kernel`` (:func:`derive.emit.dynamics.elastic_kernel`,
     inlined here, CSE'd); ``beta_tau`` is ``J_m K^-1 D(q)``.
 
     Parameters
     ----------
     lin : Linearization
     kernel : casadi.Function
-        ``<model>_accel_kernel``.
+        ``<model>_elastic_kernel``.
     beta : casadi.Function, optional
         The state law's ``<model>_beta`` (``beta_tau`` calls it instead of converting D again).
 
@@ -140,10 +141,8 @@ def build_torque_functions(lin: Linearization, kernel: ca.Function,
     out = {name: sx_function(f"{model.name}_{name}", bodies[name], [5 * n, n_p], ["m", "p"], [name], cse=False)
            for name in ("T_tau", "alpha_tau")}  # one kernel call (CSE'd) and a few products each
     out["beta_tau"] = _beta_tau(lin, beta)
-    beta = out["beta_tau"]
     out["control_core_tau"] = sx_function(f"{model.name}_control_core_tau", bodies["core"], [5 * n, n_p],
-                                          ["m", "p_hat"], ["y_hat", "alpha", "beta"],
-                                          extra=lambda m, p: [beta(m, p)])
+                                          ["m", "p_hat"], ["y_hat", "alpha", "beta"])
     return out
 
 
@@ -161,10 +160,8 @@ def torque_twins(lin: Linearization, kernel: ca.Function, beta: ca.Function) -> 
     out["beta_tau"] = mx_function(f"{model.name}_beta_tau",
                                   lambda m, p: beta(ca.vertcat(m[:n], ca.MX.zeros(3 * n)), p),
                                   [5 * n, n_p], ["m", "p"], ["beta_tau"])
-    beta_tau = out["beta_tau"]
     out["control_core_tau"] = mx_function(f"{model.name}_control_core_tau", bodies["core"], [5 * n, n_p],
-                                          ["m", "p_hat"], ["y_hat", "alpha", "beta"],
-                                          extra=lambda m, p: [beta_tau(m, p)])
+                                          ["m", "p_hat"], ["y_hat", "alpha", "beta"])
     return out
 
 

@@ -170,8 +170,9 @@ def c_functions(lin: Linearization, functions, controls, kernel: ca.Function,
     """The Functions the C file is generated from: same names, signatures and values as the ``.casadi`` ones.
 
     The ``.casadi`` ``T``, ``alpha``, cores and torque functions are SX with the kernel inlined (fastest
-    from Python, and counted in the manifest); here they are MX twins calling the one kernel
-    (:mod:`derive.emit.dynamics`) and the cores also ``beta``, so that the C holds each model part once;
+    from Python, and counted in the manifest); here they are MX twins calling the one elastic kernel
+    (:func:`derive.emit.dynamics.elastic_kernel`: ``y3``, ``y4``, ``alpha``, ``beta``), so that the C holds each
+    model part once;
     the laws call the twin cores. ``f``, ``beta``, ``energy`` and ``ad`` call ``inertia`` (``ad`` maps one column's
     arithmetic over the n columns, :func:`derive.emit.brackets.bracket_twin`). ``feedforward`` (SX) comes last; the
     impedance law calls it.
@@ -188,7 +189,7 @@ def c_functions(lin: Linearization, functions, controls, kernel: ca.Function,
     out["energy"] = energy_twin(m, inertia)
     out["f"] = f_twin(m, inertia)
     core = mx_function(f"{m.name}_control_core", bodies["core"], [4 * n, n_p], ["x", "p_hat"],
-                       ["y_hat", "alpha", "beta"], extra=lambda x, p: [beta(x, p)])
+                       ["y_hat", "alpha", "beta"])
     torque = torque_twins(lin, kernel, beta)
     torque["control_pdg"] = controls["control_pdg"]
     laws = build_controls(m, out, torque, core=core, feedforward=feedforward)

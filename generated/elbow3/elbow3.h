@@ -152,10 +152,10 @@ const casadi_int* elbow3_T_sparsity_in(casadi_int i);
 const casadi_int* elbow3_T_sparsity_out(casadi_int i);
 int elbow3_T_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int elbow3_T_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define elbow3_T_SZ_ARG 7
-#define elbow3_T_SZ_RES 4
+#define elbow3_T_SZ_ARG 8
+#define elbow3_T_SZ_RES 5
 #define elbow3_T_SZ_IW 0
-#define elbow3_T_SZ_W 190
+#define elbow3_T_SZ_W 202
 int elbow3_alpha(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int elbow3_alpha_alloc_mem(void);
 int elbow3_alpha_init_mem(int mem);
@@ -173,8 +173,8 @@ const casadi_int* elbow3_alpha_sparsity_in(casadi_int i);
 const casadi_int* elbow3_alpha_sparsity_out(casadi_int i);
 int elbow3_alpha_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int elbow3_alpha_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define elbow3_alpha_SZ_ARG 7
-#define elbow3_alpha_SZ_RES 4
+#define elbow3_alpha_SZ_ARG 8
+#define elbow3_alpha_SZ_RES 5
 #define elbow3_alpha_SZ_IW 0
 #define elbow3_alpha_SZ_W 199
 int elbow3_beta(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
@@ -257,10 +257,10 @@ const casadi_int* elbow3_control_core_sparsity_in(casadi_int i);
 const casadi_int* elbow3_control_core_sparsity_out(casadi_int i);
 int elbow3_control_core_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int elbow3_control_core_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define elbow3_control_core_SZ_ARG 7
-#define elbow3_control_core_SZ_RES 6
+#define elbow3_control_core_SZ_ARG 8
+#define elbow3_control_core_SZ_RES 7
 #define elbow3_control_core_SZ_IW 0
-#define elbow3_control_core_SZ_W 208
+#define elbow3_control_core_SZ_W 214
 int elbow3_control_smc(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int elbow3_control_smc_alloc_mem(void);
 int elbow3_control_smc_init_mem(int mem);
@@ -278,10 +278,10 @@ const casadi_int* elbow3_control_smc_sparsity_in(casadi_int i);
 const casadi_int* elbow3_control_smc_sparsity_out(casadi_int i);
 int elbow3_control_smc_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int elbow3_control_smc_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define elbow3_control_smc_SZ_ARG 12
-#define elbow3_control_smc_SZ_RES 11
+#define elbow3_control_smc_SZ_ARG 13
+#define elbow3_control_smc_SZ_RES 12
 #define elbow3_control_smc_SZ_IW 0
-#define elbow3_control_smc_SZ_W 332
+#define elbow3_control_smc_SZ_W 338
 int elbow3_control_ismc(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int elbow3_control_ismc_alloc_mem(void);
 int elbow3_control_ismc_init_mem(int mem);
@@ -299,10 +299,10 @@ const casadi_int* elbow3_control_ismc_sparsity_in(casadi_int i);
 const casadi_int* elbow3_control_ismc_sparsity_out(casadi_int i);
 int elbow3_control_ismc_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int elbow3_control_ismc_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define elbow3_control_ismc_SZ_ARG 12
-#define elbow3_control_ismc_SZ_RES 11
+#define elbow3_control_ismc_SZ_ARG 13
+#define elbow3_control_ismc_SZ_RES 12
 #define elbow3_control_ismc_SZ_IW 0
-#define elbow3_control_ismc_SZ_W 334
+#define elbow3_control_ismc_SZ_W 340
 int elbow3_control_ismc_zdot(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int elbow3_control_ismc_zdot_alloc_mem(void);
 int elbow3_control_ismc_zdot_init_mem(int mem);
@@ -341,10 +341,10 @@ const casadi_int* elbow3_control_fl_sparsity_in(casadi_int i);
 const casadi_int* elbow3_control_fl_sparsity_out(casadi_int i);
 int elbow3_control_fl_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int elbow3_control_fl_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define elbow3_control_fl_SZ_ARG 12
-#define elbow3_control_fl_SZ_RES 11
+#define elbow3_control_fl_SZ_ARG 13
+#define elbow3_control_fl_SZ_RES 12
 #define elbow3_control_fl_SZ_IW 0
-#define elbow3_control_fl_SZ_W 324
+#define elbow3_control_fl_SZ_W 330
 int elbow3_control_adaptive(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int elbow3_control_adaptive_alloc_mem(void);
 int elbow3_control_adaptive_init_mem(int mem);
@@ -363,9 +363,9 @@ const casadi_int* elbow3_control_adaptive_sparsity_out(casadi_int i);
 int elbow3_control_adaptive_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int elbow3_control_adaptive_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 #define elbow3_control_adaptive_SZ_ARG 15
-#define elbow3_control_adaptive_SZ_RES 11
+#define elbow3_control_adaptive_SZ_RES 12
 #define elbow3_control_adaptive_SZ_IW 0
-#define elbow3_control_adaptive_SZ_W 389
+#define elbow3_control_adaptive_SZ_W 395
 int elbow3_control_adaptive_zdot(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int elbow3_control_adaptive_zdot_alloc_mem(void);
 int elbow3_control_adaptive_zdot_init_mem(int mem);
@@ -404,10 +404,10 @@ const casadi_int* elbow3_control_core_tau_sparsity_in(casadi_int i);
 const casadi_int* elbow3_control_core_tau_sparsity_out(casadi_int i);
 int elbow3_control_core_tau_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int elbow3_control_core_tau_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define elbow3_control_core_tau_SZ_ARG 9
-#define elbow3_control_core_tau_SZ_RES 6
+#define elbow3_control_core_tau_SZ_ARG 8
+#define elbow3_control_core_tau_SZ_RES 7
 #define elbow3_control_core_tau_SZ_IW 0
-#define elbow3_control_core_tau_SZ_W 205
+#define elbow3_control_core_tau_SZ_W 214
 int elbow3_control_smc_tau(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int elbow3_control_smc_tau_alloc_mem(void);
 int elbow3_control_smc_tau_init_mem(int mem);
@@ -425,10 +425,10 @@ const casadi_int* elbow3_control_smc_tau_sparsity_in(casadi_int i);
 const casadi_int* elbow3_control_smc_tau_sparsity_out(casadi_int i);
 int elbow3_control_smc_tau_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int elbow3_control_smc_tau_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define elbow3_control_smc_tau_SZ_ARG 14
-#define elbow3_control_smc_tau_SZ_RES 11
+#define elbow3_control_smc_tau_SZ_ARG 13
+#define elbow3_control_smc_tau_SZ_RES 12
 #define elbow3_control_smc_tau_SZ_IW 0
-#define elbow3_control_smc_tau_SZ_W 317
+#define elbow3_control_smc_tau_SZ_W 326
 int elbow3_control_ismc_tau(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int elbow3_control_ismc_tau_alloc_mem(void);
 int elbow3_control_ismc_tau_init_mem(int mem);
@@ -446,10 +446,10 @@ const casadi_int* elbow3_control_ismc_tau_sparsity_in(casadi_int i);
 const casadi_int* elbow3_control_ismc_tau_sparsity_out(casadi_int i);
 int elbow3_control_ismc_tau_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int elbow3_control_ismc_tau_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define elbow3_control_ismc_tau_SZ_ARG 14
-#define elbow3_control_ismc_tau_SZ_RES 11
+#define elbow3_control_ismc_tau_SZ_ARG 13
+#define elbow3_control_ismc_tau_SZ_RES 12
 #define elbow3_control_ismc_tau_SZ_IW 0
-#define elbow3_control_ismc_tau_SZ_W 334
+#define elbow3_control_ismc_tau_SZ_W 343
 int elbow3_control_ismc_tau_zdot(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int elbow3_control_ismc_tau_zdot_alloc_mem(void);
 int elbow3_control_ismc_tau_zdot_init_mem(int mem);
@@ -488,10 +488,10 @@ const casadi_int* elbow3_control_fl_tau_sparsity_in(casadi_int i);
 const casadi_int* elbow3_control_fl_tau_sparsity_out(casadi_int i);
 int elbow3_control_fl_tau_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int elbow3_control_fl_tau_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define elbow3_control_fl_tau_SZ_ARG 14
-#define elbow3_control_fl_tau_SZ_RES 11
+#define elbow3_control_fl_tau_SZ_ARG 13
+#define elbow3_control_fl_tau_SZ_RES 12
 #define elbow3_control_fl_tau_SZ_IW 0
-#define elbow3_control_fl_tau_SZ_W 309
+#define elbow3_control_fl_tau_SZ_W 318
 int elbow3_control_pdg(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int elbow3_control_pdg_alloc_mem(void);
 int elbow3_control_pdg_init_mem(int mem);
@@ -614,10 +614,10 @@ const casadi_int* elbow3_T_tau_sparsity_in(casadi_int i);
 const casadi_int* elbow3_T_tau_sparsity_out(casadi_int i);
 int elbow3_T_tau_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int elbow3_T_tau_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define elbow3_T_tau_SZ_ARG 7
-#define elbow3_T_tau_SZ_RES 4
+#define elbow3_T_tau_SZ_ARG 8
+#define elbow3_T_tau_SZ_RES 5
 #define elbow3_T_tau_SZ_IW 0
-#define elbow3_T_tau_SZ_W 190
+#define elbow3_T_tau_SZ_W 202
 int elbow3_alpha_tau(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int elbow3_alpha_tau_alloc_mem(void);
 int elbow3_alpha_tau_init_mem(int mem);
@@ -635,8 +635,8 @@ const casadi_int* elbow3_alpha_tau_sparsity_in(casadi_int i);
 const casadi_int* elbow3_alpha_tau_sparsity_out(casadi_int i);
 int elbow3_alpha_tau_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int elbow3_alpha_tau_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define elbow3_alpha_tau_SZ_ARG 7
-#define elbow3_alpha_tau_SZ_RES 4
+#define elbow3_alpha_tau_SZ_ARG 8
+#define elbow3_alpha_tau_SZ_RES 5
 #define elbow3_alpha_tau_SZ_IW 0
 #define elbow3_alpha_tau_SZ_W 199
 int elbow3_beta_tau(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);

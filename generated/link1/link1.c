@@ -740,46 +740,59 @@ CASADI_SYMBOL_EXPORT int link1_ad_work_bytes(casadi_int *sz_arg, casadi_int* sz_
   return 0;
 }
 
-/* link1_accel_kernel:(q,dq,s,ds,p[7])->(y3,y4,w) */
+/* link1_elastic_kernel:(q,dq,s,ds,dq_m,p[7])->(y3,y4,alpha,beta) */
 static int casadi_f9(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)arg; (void)iw; (void)w; (void)mem;
-  casadi_real a0, a1, a2, a3, a4, a5, a6, a7, a8;
+  casadi_real a0, a1, a2, a3, a4, a5, a6, a7, a8, a9;
   a0=arg[2]? arg[2][0] : 0;
-  a1=arg[4]? arg[4][5] : 0;
-  a2=arg[4]? arg[4][3] : 0;
+  a1=arg[5]? arg[5][5] : 0;
+  a2=arg[5]? arg[5][3] : 0;
   a1=(a1*a2);
-  a2=arg[4]? arg[4][4] : 0;
+  a2=arg[5]? arg[5][4] : 0;
   a3=(a1*a2);
   a4=arg[0]? arg[0][0] : 0;
   a5=sin(a4);
   a6=(a3*a5);
-  a0=(a0-a6);
-  a6=arg[4]? arg[4][0] : 0;
-  a0=(a0/a6);
-  if (res[0]!=0) res[0][0]=a0;
-  a7=arg[3]? arg[3][0] : 0;
-  a8=arg[1]? arg[1][0] : 0;
-  a1=(a1*a8);
+  a6=(a0-a6);
+  a7=arg[5]? arg[5][0] : 0;
+  a6=(a6/a7);
+  if (res[0]!=0) res[0][0]=a6;
+  a8=arg[3]? arg[3][0] : 0;
+  a9=arg[1]? arg[1][0] : 0;
+  a1=(a1*a9);
   a1=(a1*a2);
   a4=cos(a4);
   a1=(a1*a4);
-  a7=(a7-a1);
-  a7=(a7/a6);
-  if (res[1]!=0) res[1][0]=a7;
-  a0=(a3*a0);
-  a0=(a0*a4);
-  a8=casadi_sq(a8);
-  a3=(a3*a8);
+  a8=(a8-a1);
+  a8=(a8/a7);
+  if (res[1]!=0) res[1][0]=a8;
+  a8=arg[5]? arg[5][1] : 0;
+  a1=arg[5]? arg[5][2] : 0;
+  a1=(a8/a1);
+  a2=(a3*a6);
+  a2=(a2*a4);
+  a9=casadi_sq(a9);
+  a3=(a3*a9);
   a3=(a3*a5);
-  a0=(a0-a3);
-  if (res[2]!=0) res[2][0]=a0;
+  a2=(a2-a3);
+  a2=(a1*a2);
+  a8=(a8*a6);
+  a2=(a2+a8);
+  a2=(a2+a0);
+  a0=arg[5]? arg[5][6] : 0;
+  a8=arg[4]? arg[4][0] : 0;
+  a0=(a0*a8);
+  a2=(a2+a0);
+  if (res[2]!=0) res[2][0]=a2;
+  a1=(a1*a7);
+  if (res[3]!=0) res[3][0]=a1;
   return 0;
 }
 
 /* link1_T:(x[4],p[7])->(T[4]) */
 static int casadi_f8(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)arg; (void)iw; (void)w; (void)mem;
-  casadi_real **res1=res+1, *rr, *w0=w+9, w1, w2, *w3=w+15, w4, w5, w6, w7;
+  casadi_real **res1=res+1, *rr, *w0=w+10, w1, w2, *w3=w+16, w4, w5, w6, w7, w8;
   const casadi_real **arg1=arg+2, *cs;
   /* #0: @0 = input[0][0] */
   casadi_copy(arg[0], 4, w0);
@@ -803,24 +816,26 @@ static int casadi_f8(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   w5  = (w4*w5);
   /* #10: @6 = @0[3] */
   for (rr=(&w6), cs=w0+3; cs!=w0+4; cs+=1) *rr++ = *cs;
-  /* #11: @6 = (@6-@2) */
-  w6 -= w2;
-  /* #12: @4 = (@4*@6) */
-  w4 *= w6;
-  /* #13: {@6, @7, NULL} = link1_accel_kernel(@1, @2, @5, @4, @3) */
+  /* #11: @7 = (@6-@2) */
+  w7  = (w6-w2);
+  /* #12: @4 = (@4*@7) */
+  w4 *= w7;
+  /* #13: {@7, @8, NULL, NULL} = link1_elastic_kernel(@1, @2, @5, @4, @6, @3) */
   arg1[0]=(&w1);
   arg1[1]=(&w2);
   arg1[2]=(&w5);
   arg1[3]=(&w4);
-  arg1[4]=w3;
-  res1[0]=(&w6);
-  res1[1]=(&w7);
+  arg1[4]=(&w6);
+  arg1[5]=w3;
+  res1[0]=(&w7);
+  res1[1]=(&w8);
   res1[2]=0;
+  res1[3]=0;
   if (casadi_f9(arg1, res1, iw, w, 0)) return 1;
-  /* #14: output[0][2] = @6 */
-  if (res[0]) res[0][2] = w6;
-  /* #15: output[0][3] = @7 */
-  if (res[0]) res[0][3] = w7;
+  /* #14: output[0][2] = @7 */
+  if (res[0]) res[0][2] = w7;
+  /* #15: output[0][3] = @8 */
+  if (res[0]) res[0][3] = w8;
   return 0;
 }
 
@@ -896,79 +911,62 @@ CASADI_SYMBOL_EXPORT const casadi_int* link1_T_sparsity_out(casadi_int i) {
 }
 
 CASADI_SYMBOL_EXPORT int link1_T_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 7;
-  if (sz_res) *sz_res = 4;
+  if (sz_arg) *sz_arg = 8;
+  if (sz_res) *sz_res = 5;
   if (sz_iw) *sz_iw = 0;
-  if (sz_w) *sz_w = 26;
+  if (sz_w) *sz_w = 28;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT int link1_T_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 7*sizeof(const casadi_real*);
-  if (sz_res) *sz_res = 4*sizeof(casadi_real*);
+  if (sz_arg) *sz_arg = 8*sizeof(const casadi_real*);
+  if (sz_res) *sz_res = 5*sizeof(casadi_real*);
   if (sz_iw) *sz_iw = 0*sizeof(casadi_int);
-  if (sz_w) *sz_w = 26*sizeof(casadi_real);
+  if (sz_w) *sz_w = 28*sizeof(casadi_real);
   return 0;
 }
 
 /* link1_alpha:(x[4],p[7])->(alpha) */
 static int casadi_f10(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)arg; (void)iw; (void)w; (void)mem;
-  casadi_real **res1=res+1, *rr, *w00=w+9, w01, w02, w03, *w04=w+19, w05, w06, w07, w08, w09;
-  casadi_real w10;
+  casadi_real **res1=res+1, *rr, *w0=w+10, w1, w2, *w3=w+16, w4, w5, w6, w7;
   const casadi_real **arg1=arg+2, *cs;
-  /* #0: @0 = input[1][0] */
-  casadi_copy(arg[1], 7, w00);
-  /* #1: @1 = @0[1] */
-  for (rr=(&w01), cs=w00+1; cs!=w00+2; cs+=1) *rr++ = *cs;
-  /* #2: @2 = @0[2] */
-  for (rr=(&w02), cs=w00+2; cs!=w00+3; cs+=1) *rr++ = *cs;
-  /* #3: @3 = (@1/@2) */
-  w03  = (w01/w02);
-  /* #4: @4 = input[0][0] */
-  casadi_copy(arg[0], 4, w04);
-  /* #5: @5 = @4[0] */
-  for (rr=(&w05), cs=w04+0; cs!=w04+1; cs+=1) *rr++ = *cs;
-  /* #6: @6 = @4[1] */
-  for (rr=(&w06), cs=w04+1; cs!=w04+2; cs+=1) *rr++ = *cs;
-  /* #7: @7 = @4[2] */
-  for (rr=(&w07), cs=w04+2; cs!=w04+3; cs+=1) *rr++ = *cs;
-  /* #8: @7 = (@7-@5) */
-  w07 -= w05;
-  /* #9: @7 = (@2*@7) */
-  w07  = (w02*w07);
-  /* #10: @8 = @4[3] */
-  for (rr=(&w08), cs=w04+3; cs!=w04+4; cs+=1) *rr++ = *cs;
-  /* #11: @9 = (@8-@6) */
-  w09  = (w08-w06);
-  /* #12: @2 = (@2*@9) */
-  w02 *= w09;
-  /* #13: {@9, NULL, @10} = link1_accel_kernel(@5, @6, @7, @2, @0) */
-  arg1[0]=(&w05);
-  arg1[1]=(&w06);
-  arg1[2]=(&w07);
-  arg1[3]=(&w02);
-  arg1[4]=w00;
-  res1[0]=(&w09);
+  /* #0: @0 = input[0][0] */
+  casadi_copy(arg[0], 4, w0);
+  /* #1: @1 = @0[0] */
+  for (rr=(&w1), cs=w0+0; cs!=w0+1; cs+=1) *rr++ = *cs;
+  /* #2: @2 = @0[1] */
+  for (rr=(&w2), cs=w0+1; cs!=w0+2; cs+=1) *rr++ = *cs;
+  /* #3: @3 = input[1][0] */
+  casadi_copy(arg[1], 7, w3);
+  /* #4: @4 = @3[2] */
+  for (rr=(&w4), cs=w3+2; cs!=w3+3; cs+=1) *rr++ = *cs;
+  /* #5: @5 = @0[2] */
+  for (rr=(&w5), cs=w0+2; cs!=w0+3; cs+=1) *rr++ = *cs;
+  /* #6: @5 = (@5-@1) */
+  w5 -= w1;
+  /* #7: @5 = (@4*@5) */
+  w5  = (w4*w5);
+  /* #8: @6 = @0[3] */
+  for (rr=(&w6), cs=w0+3; cs!=w0+4; cs+=1) *rr++ = *cs;
+  /* #9: @7 = (@6-@2) */
+  w7  = (w6-w2);
+  /* #10: @4 = (@4*@7) */
+  w4 *= w7;
+  /* #11: {NULL, NULL, @7, NULL} = link1_elastic_kernel(@1, @2, @5, @4, @6, @3) */
+  arg1[0]=(&w1);
+  arg1[1]=(&w2);
+  arg1[2]=(&w5);
+  arg1[3]=(&w4);
+  arg1[4]=(&w6);
+  arg1[5]=w3;
+  res1[0]=0;
   res1[1]=0;
-  res1[2]=(&w10);
+  res1[2]=(&w7);
+  res1[3]=0;
   if (casadi_f9(arg1, res1, iw, w, 0)) return 1;
-  /* #14: @3 = (@3*@10) */
-  w03 *= w10;
-  /* #15: @1 = (@1*@9) */
-  w01 *= w09;
-  /* #16: @3 = (@3+@1) */
-  w03 += w01;
-  /* #17: @3 = (@3+@7) */
-  w03 += w07;
-  /* #18: @7 = @0[6] */
-  for (rr=(&w07), cs=w00+6; cs!=w00+7; cs+=1) *rr++ = *cs;
-  /* #19: @7 = (@7*@8) */
-  w07 *= w08;
-  /* #20: @3 = (@3+@7) */
-  w03 += w07;
-  /* #21: output[0][0] = @3 */
-  if (res[0]) res[0][0] = w03;
+  /* #12: output[0][0] = @7 */
+  if (res[0]) res[0][0] = w7;
   return 0;
 }
 
@@ -1044,18 +1042,18 @@ CASADI_SYMBOL_EXPORT const casadi_int* link1_alpha_sparsity_out(casadi_int i) {
 }
 
 CASADI_SYMBOL_EXPORT int link1_alpha_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 7;
-  if (sz_res) *sz_res = 4;
+  if (sz_arg) *sz_arg = 8;
+  if (sz_res) *sz_res = 5;
   if (sz_iw) *sz_iw = 0;
-  if (sz_w) *sz_w = 29;
+  if (sz_w) *sz_w = 27;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT int link1_alpha_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 7*sizeof(const casadi_real*);
-  if (sz_res) *sz_res = 4*sizeof(casadi_real*);
+  if (sz_arg) *sz_arg = 8*sizeof(const casadi_real*);
+  if (sz_res) *sz_res = 5*sizeof(casadi_real*);
   if (sz_iw) *sz_iw = 0*sizeof(casadi_int);
-  if (sz_w) *sz_w = 29*sizeof(casadi_real);
+  if (sz_w) *sz_w = 27*sizeof(casadi_real);
   return 0;
 }
 
@@ -1427,7 +1425,7 @@ CASADI_SYMBOL_EXPORT int link1_inertia_work_bytes(casadi_int *sz_arg, casadi_int
 /* link1_control_core:(x[4],p_hat[7])->(y_hat[4],alpha,beta) */
 static int casadi_f14(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)arg; (void)iw; (void)w; (void)mem;
-  casadi_real **res1=res+3, *rr, *w00=w+14, w01, w02, *w03=w+20, w04, w05, w06, w07, w08, w09;
+  casadi_real **res1=res+3, *rr, *w00=w+10, w01, w02, *w03=w+16, w04, w05, w06, w07, w08, w09;
   casadi_real w10;
   const casadi_real **arg1=arg+2, *cs;
   /* #0: @0 = input[0][0] */
@@ -1454,49 +1452,28 @@ static int casadi_f14(const casadi_real** arg, casadi_real** res, casadi_int* iw
   for (rr=(&w06), cs=w00+3; cs!=w00+4; cs+=1) *rr++ = *cs;
   /* #11: @7 = (@6-@2) */
   w07  = (w06-w02);
-  /* #12: @7 = (@4*@7) */
-  w07  = (w04*w07);
-  /* #13: {@8, @9, @10} = link1_accel_kernel(@1, @2, @5, @7, @3) */
+  /* #12: @4 = (@4*@7) */
+  w04 *= w07;
+  /* #13: {@7, @8, @9, @10} = link1_elastic_kernel(@1, @2, @5, @4, @6, @3) */
   arg1[0]=(&w01);
   arg1[1]=(&w02);
   arg1[2]=(&w05);
-  arg1[3]=(&w07);
-  arg1[4]=w03;
-  res1[0]=(&w08);
-  res1[1]=(&w09);
-  res1[2]=(&w10);
+  arg1[3]=(&w04);
+  arg1[4]=(&w06);
+  arg1[5]=w03;
+  res1[0]=(&w07);
+  res1[1]=(&w08);
+  res1[2]=(&w09);
+  res1[3]=(&w10);
   if (casadi_f9(arg1, res1, iw, w, 0)) return 1;
-  /* #14: output[0][2] = @8 */
-  if (res[0]) res[0][2] = w08;
-  /* #15: output[0][3] = @9 */
-  if (res[0]) res[0][3] = w09;
-  /* #16: @9 = @3[1] */
-  for (rr=(&w09), cs=w03+1; cs!=w03+2; cs+=1) *rr++ = *cs;
-  /* #17: @4 = (@9/@4) */
-  w04  = (w09/w04);
-  /* #18: @4 = (@4*@10) */
-  w04 *= w10;
-  /* #19: @9 = (@9*@8) */
-  w09 *= w08;
-  /* #20: @4 = (@4+@9) */
-  w04 += w09;
-  /* #21: @4 = (@4+@5) */
-  w04 += w05;
-  /* #22: @5 = @3[6] */
-  for (rr=(&w05), cs=w03+6; cs!=w03+7; cs+=1) *rr++ = *cs;
-  /* #23: @5 = (@5*@6) */
-  w05 *= w06;
-  /* #24: @4 = (@4+@5) */
-  w04 += w05;
-  /* #25: output[1][0] = @4 */
-  if (res[1]) res[1][0] = w04;
-  /* #26: @4 = link1_beta(@0, @3) */
-  arg1[0]=w00;
-  arg1[1]=w03;
-  res1[0]=(&w04);
-  if (casadi_f11(arg1, res1, iw, w, 0)) return 1;
-  /* #27: output[2][0] = @4 */
-  if (res[2]) res[2][0] = w04;
+  /* #14: output[0][2] = @7 */
+  if (res[0]) res[0][2] = w07;
+  /* #15: output[0][3] = @8 */
+  if (res[0]) res[0][3] = w08;
+  /* #16: output[1][0] = @9 */
+  if (res[1]) res[1][0] = w09;
+  /* #17: output[2][0] = @10 */
+  if (res[2]) res[2][0] = w10;
   return 0;
 }
 
@@ -1576,25 +1553,25 @@ CASADI_SYMBOL_EXPORT const casadi_int* link1_control_core_sparsity_out(casadi_in
 }
 
 CASADI_SYMBOL_EXPORT int link1_control_core_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 7;
-  if (sz_res) *sz_res = 6;
+  if (sz_arg) *sz_arg = 8;
+  if (sz_res) *sz_res = 7;
   if (sz_iw) *sz_iw = 0;
-  if (sz_w) *sz_w = 34;
+  if (sz_w) *sz_w = 30;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT int link1_control_core_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 7*sizeof(const casadi_real*);
-  if (sz_res) *sz_res = 6*sizeof(casadi_real*);
+  if (sz_arg) *sz_arg = 8*sizeof(const casadi_real*);
+  if (sz_res) *sz_res = 7*sizeof(casadi_real*);
   if (sz_iw) *sz_iw = 0*sizeof(casadi_int);
-  if (sz_w) *sz_w = 34*sizeof(casadi_real);
+  if (sz_w) *sz_w = 30*sizeof(casadi_real);
   return 0;
 }
 
 /* link1_control_smc:(x[4],z[0],r[5],p[7],gains[11])->(u,s,z_dot[0],u_cmd,y_hat[4]) */
 static int casadi_f15(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)arg; (void)iw; (void)w; (void)mem;
-  casadi_real **res1=res+5, *rr, w01, *w02=w+46, *w03=w+50, *w04=w+57, w05, w06, w07, w08, *w09=w+65, w10;
+  casadi_real **res1=res+5, *rr, w01, *w02=w+42, *w03=w+46, *w04=w+53, w05, w06, w07, w08, *w09=w+61, w10;
   casadi_real w11, w12, w13, w14, w15, w16;
   const casadi_real **arg1=arg+5, *cs, *wr00;
   /* #0: @0 = input[4][0] */
@@ -1841,25 +1818,25 @@ CASADI_SYMBOL_EXPORT const casadi_int* link1_control_smc_sparsity_out(casadi_int
 }
 
 CASADI_SYMBOL_EXPORT int link1_control_smc_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 12;
-  if (sz_res) *sz_res = 11;
+  if (sz_arg) *sz_arg = 13;
+  if (sz_res) *sz_res = 12;
   if (sz_iw) *sz_iw = 0;
-  if (sz_w) *sz_w = 77;
+  if (sz_w) *sz_w = 73;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT int link1_control_smc_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 12*sizeof(const casadi_real*);
-  if (sz_res) *sz_res = 11*sizeof(casadi_real*);
+  if (sz_arg) *sz_arg = 13*sizeof(const casadi_real*);
+  if (sz_res) *sz_res = 12*sizeof(casadi_real*);
   if (sz_iw) *sz_iw = 0*sizeof(casadi_int);
-  if (sz_w) *sz_w = 77*sizeof(casadi_real);
+  if (sz_w) *sz_w = 73*sizeof(casadi_real);
   return 0;
 }
 
 /* link1_control_ismc:(x[4],z,r[5],p[7],gains[13])->(u,s,z_dot,u_cmd,y_hat[4]) */
 static int casadi_f16(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)arg; (void)iw; (void)w; (void)mem;
-  casadi_real **res1=res+5, *rr, w01, *w02=w+48, *w03=w+52, *w04=w+59, w05, w06, w07, w08, *w09=w+67, w10;
+  casadi_real **res1=res+5, *rr, w01, *w02=w+44, *w03=w+48, *w04=w+55, w05, w06, w07, w08, *w09=w+63, w10;
   casadi_real w11, w12, w13, w14, w15, w16;
   const casadi_real **arg1=arg+5, *cs, *wr00;
   /* #0: @0 = input[4][0] */
@@ -2158,18 +2135,18 @@ CASADI_SYMBOL_EXPORT const casadi_int* link1_control_ismc_sparsity_out(casadi_in
 }
 
 CASADI_SYMBOL_EXPORT int link1_control_ismc_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 12;
-  if (sz_res) *sz_res = 11;
+  if (sz_arg) *sz_arg = 13;
+  if (sz_res) *sz_res = 12;
   if (sz_iw) *sz_iw = 0;
-  if (sz_w) *sz_w = 79;
+  if (sz_w) *sz_w = 75;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT int link1_control_ismc_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 12*sizeof(const casadi_real*);
-  if (sz_res) *sz_res = 11*sizeof(casadi_real*);
+  if (sz_arg) *sz_arg = 13*sizeof(const casadi_real*);
+  if (sz_res) *sz_res = 12*sizeof(casadi_real*);
   if (sz_iw) *sz_iw = 0*sizeof(casadi_int);
-  if (sz_w) *sz_w = 79*sizeof(casadi_real);
+  if (sz_w) *sz_w = 75*sizeof(casadi_real);
   return 0;
 }
 
@@ -2301,7 +2278,7 @@ CASADI_SYMBOL_EXPORT int link1_control_ismc_zdot_work_bytes(casadi_int *sz_arg, 
 /* link1_control_fl:(x[4],z[0],r[5],p[7],gains[8])->(u,s,z_dot[0],u_cmd,y_hat[4]) */
 static int casadi_f18(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)arg; (void)iw; (void)w; (void)mem;
-  casadi_real **res1=res+5, *rr, w01, *w02=w+43, *w03=w+47, *w04=w+54, w05, w06, w07, w08, *w09=w+62, w10;
+  casadi_real **res1=res+5, *rr, w01, *w02=w+39, *w03=w+43, *w04=w+50, w05, w06, w07, w08, *w09=w+58, w10;
   casadi_real w11, w12, w13, w14, w15;
   const casadi_real **arg1=arg+5, *cs, *wr00;
   /* #0: @0 = input[4][0] */
@@ -2518,26 +2495,26 @@ CASADI_SYMBOL_EXPORT const casadi_int* link1_control_fl_sparsity_out(casadi_int 
 }
 
 CASADI_SYMBOL_EXPORT int link1_control_fl_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 12;
-  if (sz_res) *sz_res = 11;
+  if (sz_arg) *sz_arg = 13;
+  if (sz_res) *sz_res = 12;
   if (sz_iw) *sz_iw = 0;
-  if (sz_w) *sz_w = 73;
+  if (sz_w) *sz_w = 69;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT int link1_control_fl_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 12*sizeof(const casadi_real*);
-  if (sz_res) *sz_res = 11*sizeof(casadi_real*);
+  if (sz_arg) *sz_arg = 13*sizeof(const casadi_real*);
+  if (sz_res) *sz_res = 12*sizeof(casadi_real*);
   if (sz_iw) *sz_iw = 0*sizeof(casadi_int);
-  if (sz_w) *sz_w = 73*sizeof(casadi_real);
+  if (sz_w) *sz_w = 69*sizeof(casadi_real);
   return 0;
 }
 
 /* link1_control_adaptive:(x[4],z[6],r[5],p[7],gains[16])->(u,s,z_dot[6],u_cmd,y_hat[4]) */
 static int casadi_f19(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)arg; (void)iw; (void)w; (void)mem;
-  casadi_real **res1=res+5, *rr, w01, *w02=w+51, *w03=w+55, w04, w05, *w06=w+64, w07, w08, w09, w10;
-  casadi_real w11, w12, w13, *w14=w+77, *w15=w+84, *w16=w+88, w17, w18, w19, w20;
+  casadi_real **res1=res+5, *rr, w01, *w02=w+47, *w03=w+51, w04, w05, *w06=w+60, w07, w08, w09, w10;
+  casadi_real w11, w12, w13, *w14=w+73, *w15=w+80, *w16=w+84, w17, w18, w19, w20;
   const casadi_real **arg1=arg+5, *cs, *wr00;
   /* #0: @0 = input[4][0] */
   wr00 = arg[4] ? arg[4] : casadi_zeros;
@@ -2970,18 +2947,18 @@ CASADI_SYMBOL_EXPORT const casadi_int* link1_control_adaptive_sparsity_out(casad
 }
 
 CASADI_SYMBOL_EXPORT int link1_control_adaptive_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 12;
-  if (sz_res) *sz_res = 11;
+  if (sz_arg) *sz_arg = 13;
+  if (sz_res) *sz_res = 12;
   if (sz_iw) *sz_iw = 0;
-  if (sz_w) *sz_w = 97;
+  if (sz_w) *sz_w = 93;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT int link1_control_adaptive_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 12*sizeof(const casadi_real*);
-  if (sz_res) *sz_res = 11*sizeof(casadi_real*);
+  if (sz_arg) *sz_arg = 13*sizeof(const casadi_real*);
+  if (sz_res) *sz_res = 12*sizeof(casadi_real*);
   if (sz_iw) *sz_iw = 0*sizeof(casadi_int);
-  if (sz_w) *sz_w = 97*sizeof(casadi_real);
+  if (sz_w) *sz_w = 93*sizeof(casadi_real);
   return 0;
 }
 
@@ -3161,100 +3138,50 @@ CASADI_SYMBOL_EXPORT int link1_control_adaptive_zdot_work_bytes(casadi_int *sz_a
   return 0;
 }
 
-/* link1_beta_tau:(m[5],p[7])->(beta_tau) */
-static int casadi_f22(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)arg; (void)iw; (void)w; (void)mem;
-  casadi_int i;
-  casadi_real **res1=res+1, *rr, *w0=w+14, w1, *w2=w+20, *w3=w+23, *w4=w+27;
-  const casadi_real **arg1=arg+2, *cs;
-  /* #0: @0 = input[0][0] */
-  casadi_copy(arg[0], 5, w0);
-  /* #1: @1 = @0[0] */
-  for (rr=(&w1), cs=w0+0; cs!=w0+1; cs+=1) *rr++ = *cs;
-  /* #2: @2 = zeros(3x1) */
-  casadi_clear(w2, 3);
-  /* #3: @3 = vertcat(@1, @2) */
-  rr=w3;
-  *rr++ = w1;
-  for (i=0, cs=w2; i<3; ++i) *rr++ = *cs++;
-  /* #4: @4 = input[1][0] */
-  casadi_copy(arg[1], 7, w4);
-  /* #5: @1 = link1_beta(@3, @4) */
-  arg1[0]=w3;
-  arg1[1]=w4;
-  res1[0]=(&w1);
-  if (casadi_f11(arg1, res1, iw, w, 0)) return 1;
-  /* #6: output[0][0] = @1 */
-  if (res[0]) res[0][0] = w1;
-  return 0;
-}
-
 /* link1_control_core_tau:(m[5],p_hat[7])->(y_hat[4],alpha,beta) */
 static int casadi_f21(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)arg; (void)iw; (void)w; (void)mem;
-  casadi_real **res1=res+3, *rr, *w0=w+34, w1, w2, w3, w4, *w5=w+43, w6, w7, w8;
+  casadi_real **res1=res+3, *rr, *w00=w+10, w01, w02, w03, w04, w05, *w06=w+20, w07, w08, w09;
+  casadi_real w10;
   const casadi_real **arg1=arg+2, *cs;
   /* #0: @0 = input[0][0] */
-  casadi_copy(arg[0], 5, w0);
+  casadi_copy(arg[0], 5, w00);
   /* #1: @1 = @0[0] */
-  for (rr=(&w1), cs=w0+0; cs!=w0+1; cs+=1) *rr++ = *cs;
+  for (rr=(&w01), cs=w00+0; cs!=w00+1; cs+=1) *rr++ = *cs;
   /* #2: output[0][0] = @1 */
-  if (res[0]) res[0][0] = w1;
+  if (res[0]) res[0][0] = w01;
   /* #3: @2 = @0[1] */
-  for (rr=(&w2), cs=w0+1; cs!=w0+2; cs+=1) *rr++ = *cs;
+  for (rr=(&w02), cs=w00+1; cs!=w00+2; cs+=1) *rr++ = *cs;
   /* #4: output[0][1] = @2 */
-  if (res[0]) res[0][1] = w2;
+  if (res[0]) res[0][1] = w02;
   /* #5: @3 = @0[2] */
-  for (rr=(&w3), cs=w0+2; cs!=w0+3; cs+=1) *rr++ = *cs;
+  for (rr=(&w03), cs=w00+2; cs!=w00+3; cs+=1) *rr++ = *cs;
   /* #6: @4 = @0[3] */
-  for (rr=(&w4), cs=w0+3; cs!=w0+4; cs+=1) *rr++ = *cs;
-  /* #7: @5 = input[1][0] */
-  casadi_copy(arg[1], 7, w5);
-  /* #8: {@6, @7, @8} = link1_accel_kernel(@1, @2, @3, @4, @5) */
-  arg1[0]=(&w1);
-  arg1[1]=(&w2);
-  arg1[2]=(&w3);
-  arg1[3]=(&w4);
-  arg1[4]=w5;
-  res1[0]=(&w6);
-  res1[1]=(&w7);
-  res1[2]=(&w8);
+  for (rr=(&w04), cs=w00+3; cs!=w00+4; cs+=1) *rr++ = *cs;
+  /* #7: @5 = @0[4] */
+  for (rr=(&w05), cs=w00+4; cs!=w00+5; cs+=1) *rr++ = *cs;
+  /* #8: @6 = input[1][0] */
+  casadi_copy(arg[1], 7, w06);
+  /* #9: {@7, @8, @9, @10} = link1_elastic_kernel(@1, @2, @3, @4, @5, @6) */
+  arg1[0]=(&w01);
+  arg1[1]=(&w02);
+  arg1[2]=(&w03);
+  arg1[3]=(&w04);
+  arg1[4]=(&w05);
+  arg1[5]=w06;
+  res1[0]=(&w07);
+  res1[1]=(&w08);
+  res1[2]=(&w09);
+  res1[3]=(&w10);
   if (casadi_f9(arg1, res1, iw, w, 0)) return 1;
-  /* #9: output[0][2] = @6 */
-  if (res[0]) res[0][2] = w6;
-  /* #10: output[0][3] = @7 */
-  if (res[0]) res[0][3] = w7;
-  /* #11: @7 = @5[6] */
-  for (rr=(&w7), cs=w5+6; cs!=w5+7; cs+=1) *rr++ = *cs;
-  /* #12: @1 = @0[4] */
-  for (rr=(&w1), cs=w0+4; cs!=w0+5; cs+=1) *rr++ = *cs;
-  /* #13: @7 = (@7*@1) */
-  w7 *= w1;
-  /* #14: @3 = (@3+@7) */
-  w3 += w7;
-  /* #15: @7 = @5[1] */
-  for (rr=(&w7), cs=w5+1; cs!=w5+2; cs+=1) *rr++ = *cs;
-  /* #16: @6 = (@7*@6) */
-  w6  = (w7*w6);
-  /* #17: @3 = (@3+@6) */
-  w3 += w6;
-  /* #18: @6 = @5[2] */
-  for (rr=(&w6), cs=w5+2; cs!=w5+3; cs+=1) *rr++ = *cs;
-  /* #19: @7 = (@7/@6) */
-  w7 /= w6;
-  /* #20: @7 = (@7*@8) */
-  w7 *= w8;
-  /* #21: @3 = (@3+@7) */
-  w3 += w7;
-  /* #22: output[1][0] = @3 */
-  if (res[1]) res[1][0] = w3;
-  /* #23: @3 = link1_beta_tau(@0, @5) */
-  arg1[0]=w0;
-  arg1[1]=w5;
-  res1[0]=(&w3);
-  if (casadi_f22(arg1, res1, iw, w, 0)) return 1;
-  /* #24: output[2][0] = @3 */
-  if (res[2]) res[2][0] = w3;
+  /* #10: output[0][2] = @7 */
+  if (res[0]) res[0][2] = w07;
+  /* #11: output[0][3] = @8 */
+  if (res[0]) res[0][3] = w08;
+  /* #12: output[1][0] = @9 */
+  if (res[1]) res[1][0] = w09;
+  /* #13: output[2][0] = @10 */
+  if (res[2]) res[2][0] = w10;
   return 0;
 }
 
@@ -3335,24 +3262,24 @@ CASADI_SYMBOL_EXPORT const casadi_int* link1_control_core_tau_sparsity_out(casad
 
 CASADI_SYMBOL_EXPORT int link1_control_core_tau_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
   if (sz_arg) *sz_arg = 8;
-  if (sz_res) *sz_res = 6;
+  if (sz_res) *sz_res = 7;
   if (sz_iw) *sz_iw = 0;
-  if (sz_w) *sz_w = 53;
+  if (sz_w) *sz_w = 31;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT int link1_control_core_tau_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
   if (sz_arg) *sz_arg = 8*sizeof(const casadi_real*);
-  if (sz_res) *sz_res = 6*sizeof(casadi_real*);
+  if (sz_res) *sz_res = 7*sizeof(casadi_real*);
   if (sz_iw) *sz_iw = 0*sizeof(casadi_int);
-  if (sz_w) *sz_w = 53*sizeof(casadi_real);
+  if (sz_w) *sz_w = 31*sizeof(casadi_real);
   return 0;
 }
 
 /* link1_control_smc_tau:(m[5],z[0],r[5],p[7],gains[11])->(u,s,z_dot[0],u_cmd,y_hat[4]) */
-static int casadi_f23(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f22(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)arg; (void)iw; (void)w; (void)mem;
-  casadi_real **res1=res+5, *rr, w01, *w02=w+65, *w03=w+70, *w04=w+77, w05, w06, w07, w08, w09, w10;
+  casadi_real **res1=res+5, *rr, w01, *w02=w+43, *w03=w+48, *w04=w+55, w05, w06, w07, w08, w09, w10;
   casadi_real w11, w12, w13, w14, w15;
   const casadi_real **arg1=arg+5, *cs, *wr00;
   /* #0: @0 = input[4][0] */
@@ -3514,7 +3441,7 @@ static int casadi_f23(const casadi_real** arg, casadi_real** res, casadi_int* iw
 }
 
 CASADI_SYMBOL_EXPORT int link1_control_smc_tau(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f23(arg, res, iw, w, mem);
+  return casadi_f22(arg, res, iw, w, mem);
 }
 
 CASADI_SYMBOL_EXPORT int link1_control_smc_tau_alloc_mem(void) {
@@ -3600,24 +3527,24 @@ CASADI_SYMBOL_EXPORT const casadi_int* link1_control_smc_tau_sparsity_out(casadi
 
 CASADI_SYMBOL_EXPORT int link1_control_smc_tau_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
   if (sz_arg) *sz_arg = 13;
-  if (sz_res) *sz_res = 11;
+  if (sz_res) *sz_res = 12;
   if (sz_iw) *sz_iw = 0;
-  if (sz_w) *sz_w = 92;
+  if (sz_w) *sz_w = 70;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT int link1_control_smc_tau_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
   if (sz_arg) *sz_arg = 13*sizeof(const casadi_real*);
-  if (sz_res) *sz_res = 11*sizeof(casadi_real*);
+  if (sz_res) *sz_res = 12*sizeof(casadi_real*);
   if (sz_iw) *sz_iw = 0*sizeof(casadi_int);
-  if (sz_w) *sz_w = 92*sizeof(casadi_real);
+  if (sz_w) *sz_w = 70*sizeof(casadi_real);
   return 0;
 }
 
 /* link1_control_ismc_tau:(m[5],z,r[5],p[7],gains[13])->(u,s,z_dot,u_cmd,y_hat[4]) */
-static int casadi_f24(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f23(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)arg; (void)iw; (void)w; (void)mem;
-  casadi_real **res1=res+5, *rr, w01, *w02=w+67, *w03=w+72, *w04=w+79, w05, w06, w07, w08, *w09=w+87, w10;
+  casadi_real **res1=res+5, *rr, w01, *w02=w+45, *w03=w+50, *w04=w+57, w05, w06, w07, w08, *w09=w+65, w10;
   casadi_real w11, w12, w13, w14, w15, w16;
   const casadi_real **arg1=arg+5, *cs, *wr00;
   /* #0: @0 = input[4][0] */
@@ -3831,7 +3758,7 @@ static int casadi_f24(const casadi_real** arg, casadi_real** res, casadi_int* iw
 }
 
 CASADI_SYMBOL_EXPORT int link1_control_ismc_tau(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f24(arg, res, iw, w, mem);
+  return casadi_f23(arg, res, iw, w, mem);
 }
 
 CASADI_SYMBOL_EXPORT int link1_control_ismc_tau_alloc_mem(void) {
@@ -3917,22 +3844,22 @@ CASADI_SYMBOL_EXPORT const casadi_int* link1_control_ismc_tau_sparsity_out(casad
 
 CASADI_SYMBOL_EXPORT int link1_control_ismc_tau_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
   if (sz_arg) *sz_arg = 13;
-  if (sz_res) *sz_res = 11;
+  if (sz_res) *sz_res = 12;
   if (sz_iw) *sz_iw = 0;
-  if (sz_w) *sz_w = 99;
+  if (sz_w) *sz_w = 77;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT int link1_control_ismc_tau_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
   if (sz_arg) *sz_arg = 13*sizeof(const casadi_real*);
-  if (sz_res) *sz_res = 11*sizeof(casadi_real*);
+  if (sz_res) *sz_res = 12*sizeof(casadi_real*);
   if (sz_iw) *sz_iw = 0*sizeof(casadi_int);
-  if (sz_w) *sz_w = 99*sizeof(casadi_real);
+  if (sz_w) *sz_w = 77*sizeof(casadi_real);
   return 0;
 }
 
 /* link1_control_ismc_tau_zdot:(m[5],z,r[5],p[7],gains[13],u_cmd,u)->(z_dot) */
-static int casadi_f25(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f24(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a0, a1, a2, a3, a4, a5, a6;
   a0=arg[4]? arg[4][9] : 0;
@@ -3960,7 +3887,7 @@ static int casadi_f25(const casadi_real** arg, casadi_real** res, casadi_int* iw
 }
 
 CASADI_SYMBOL_EXPORT int link1_control_ismc_tau_zdot(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f25(arg, res, iw, w, mem);
+  return casadi_f24(arg, res, iw, w, mem);
 }
 
 CASADI_SYMBOL_EXPORT int link1_control_ismc_tau_zdot_alloc_mem(void) {
@@ -4057,9 +3984,9 @@ CASADI_SYMBOL_EXPORT int link1_control_ismc_tau_zdot_work_bytes(casadi_int *sz_a
 }
 
 /* link1_control_fl_tau:(m[5],z[0],r[5],p[7],gains[8])->(u,s,z_dot[0],u_cmd,y_hat[4]) */
-static int casadi_f26(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f25(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)arg; (void)iw; (void)w; (void)mem;
-  casadi_real **res1=res+5, *rr, w01, *w02=w+62, *w03=w+67, *w04=w+74, w05, w06, w07, w08, w09, w10;
+  casadi_real **res1=res+5, *rr, w01, *w02=w+40, *w03=w+45, *w04=w+52, w05, w06, w07, w08, w09, w10;
   casadi_real w11, w12, w13, w14;
   const casadi_real **arg1=arg+5, *cs, *wr00;
   /* #0: @0 = input[4][0] */
@@ -4191,7 +4118,7 @@ static int casadi_f26(const casadi_real** arg, casadi_real** res, casadi_int* iw
 }
 
 CASADI_SYMBOL_EXPORT int link1_control_fl_tau(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f26(arg, res, iw, w, mem);
+  return casadi_f25(arg, res, iw, w, mem);
 }
 
 CASADI_SYMBOL_EXPORT int link1_control_fl_tau_alloc_mem(void) {
@@ -4277,22 +4204,22 @@ CASADI_SYMBOL_EXPORT const casadi_int* link1_control_fl_tau_sparsity_out(casadi_
 
 CASADI_SYMBOL_EXPORT int link1_control_fl_tau_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
   if (sz_arg) *sz_arg = 13;
-  if (sz_res) *sz_res = 11;
+  if (sz_res) *sz_res = 12;
   if (sz_iw) *sz_iw = 0;
-  if (sz_w) *sz_w = 88;
+  if (sz_w) *sz_w = 66;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT int link1_control_fl_tau_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
   if (sz_arg) *sz_arg = 13*sizeof(const casadi_real*);
-  if (sz_res) *sz_res = 11*sizeof(casadi_real*);
+  if (sz_res) *sz_res = 12*sizeof(casadi_real*);
   if (sz_iw) *sz_iw = 0*sizeof(casadi_int);
-  if (sz_w) *sz_w = 88*sizeof(casadi_real);
+  if (sz_w) *sz_w = 66*sizeof(casadi_real);
   return 0;
 }
 
 /* link1_control_pdg:(x[4],z[0],r[5],p[7],gains[4])->(u,s,z_dot[0],u_cmd,y_hat[4]) */
-static int casadi_f27(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f26(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a0, a1, a2, a3, a4, a5;
   a0=arg[4]? arg[4][3] : 0;
@@ -4338,7 +4265,7 @@ static int casadi_f27(const casadi_real** arg, casadi_real** res, casadi_int* iw
 }
 
 CASADI_SYMBOL_EXPORT int link1_control_pdg(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f27(arg, res, iw, w, mem);
+  return casadi_f26(arg, res, iw, w, mem);
 }
 
 CASADI_SYMBOL_EXPORT int link1_control_pdg_alloc_mem(void) {
@@ -4439,7 +4366,7 @@ CASADI_SYMBOL_EXPORT int link1_control_pdg_work_bytes(casadi_int *sz_arg, casadi
 }
 
 /* link1_feedforward:(r[5],p[7])->(tau_Jd,theta_d,dtheta_d,ddtheta_d,u_ff) */
-static int casadi_f29(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f28(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a0, a1, a2, a3, a4, a5, a6, a7, a8, a9;
   a0=arg[1]? arg[1][0] : 0;
@@ -4493,7 +4420,7 @@ static int casadi_f29(const casadi_real** arg, casadi_real** res, casadi_int* iw
 }
 
 /* link1_control_impedance:(m[6],z,r[5],p[7],gains[7])->(u,s,z_dot,u_cmd,y_hat[4]) */
-static int casadi_f28(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f27(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real **res1=res+5, *rr, *w00=w+10, w01, *w02=w+18, *w03=w+23, w04, w05, w06, w07, w08, *w09=w+35;
   casadi_real w10, w11, *w12=w+43;
@@ -4514,7 +4441,7 @@ static int casadi_f28(const casadi_real** arg, casadi_real** res, casadi_int* iw
   res1[2]=(&w06);
   res1[3]=0;
   res1[4]=(&w07);
-  if (casadi_f29(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f28(arg1, res1, iw, w, 0)) return 1;
   /* #5: @8 = @0[0] */
   for (rr=(&w08), cs=w00+0; cs!=w00+1; cs+=1) *rr++ = *cs;
   /* #6: @9 = input[0][0] */
@@ -4629,7 +4556,7 @@ static int casadi_f28(const casadi_real** arg, casadi_real** res, casadi_int* iw
 }
 
 CASADI_SYMBOL_EXPORT int link1_control_impedance(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f28(arg, res, iw, w, mem);
+  return casadi_f27(arg, res, iw, w, mem);
 }
 
 CASADI_SYMBOL_EXPORT int link1_control_impedance_alloc_mem(void) {
@@ -4730,7 +4657,7 @@ CASADI_SYMBOL_EXPORT int link1_control_impedance_work_bytes(casadi_int *sz_arg, 
 }
 
 /* link1_control_impedance_zdot:(m[6],z,r[5],p[7],gains[7],u_cmd,u)->(z_dot) */
-static int casadi_f30(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f29(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a0, a1, a2, a3, a4, a5, a6;
   a0=arg[4]? arg[4][5] : 0;
@@ -4758,7 +4685,7 @@ static int casadi_f30(const casadi_real** arg, casadi_real** res, casadi_int* iw
 }
 
 CASADI_SYMBOL_EXPORT int link1_control_impedance_zdot(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f30(arg, res, iw, w, mem);
+  return casadi_f29(arg, res, iw, w, mem);
 }
 
 CASADI_SYMBOL_EXPORT int link1_control_impedance_zdot_alloc_mem(void) {
@@ -4855,7 +4782,7 @@ CASADI_SYMBOL_EXPORT int link1_control_impedance_zdot_work_bytes(casadi_int *sz_
 }
 
 /* link1_rigid_feedforward:(r[5],p[7])->(tau) */
-static int casadi_f32(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f31(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a0, a1;
   a0=arg[1]? arg[1][0] : 0;
@@ -4866,7 +4793,7 @@ static int casadi_f32(const casadi_real** arg, casadi_real** res, casadi_int* iw
 }
 
 /* link1_control_joint_impedance:(m[6],z,r[5],p[7],gains[6])->(u,s,z_dot,u_cmd,y_hat[4]) */
-static int casadi_f31(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f30(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real **res1=res+5, *rr, *w00=w+2, w01, *w02=w+9, *w03=w+14, w04, w05, w06, *w07=w+24, w08, w09;
   casadi_real w10, *w11=w+33;
@@ -4883,7 +4810,7 @@ static int casadi_f31(const casadi_real** arg, casadi_real** res, casadi_int* iw
   arg1[0]=w02;
   arg1[1]=w03;
   res1[0]=(&w04);
-  if (casadi_f32(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f31(arg1, res1, iw, w, 0)) return 1;
   /* #5: @5 = @0[0] */
   for (rr=(&w05), cs=w00+0; cs!=w00+1; cs+=1) *rr++ = *cs;
   /* #6: @6 = @2[0] */
@@ -4990,7 +4917,7 @@ static int casadi_f31(const casadi_real** arg, casadi_real** res, casadi_int* iw
 }
 
 CASADI_SYMBOL_EXPORT int link1_control_joint_impedance(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f31(arg, res, iw, w, mem);
+  return casadi_f30(arg, res, iw, w, mem);
 }
 
 CASADI_SYMBOL_EXPORT int link1_control_joint_impedance_alloc_mem(void) {
@@ -5091,7 +5018,7 @@ CASADI_SYMBOL_EXPORT int link1_control_joint_impedance_work_bytes(casadi_int *sz
 }
 
 /* link1_control_joint_impedance_zdot:(m[6],z,r[5],p[7],gains[6],u_cmd,u)->(z_dot) */
-static int casadi_f33(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f32(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a0, a1, a2, a3, a4, a5, a6;
   a0=arg[4]? arg[4][4] : 0;
@@ -5119,7 +5046,7 @@ static int casadi_f33(const casadi_real** arg, casadi_real** res, casadi_int* iw
 }
 
 CASADI_SYMBOL_EXPORT int link1_control_joint_impedance_zdot(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f33(arg, res, iw, w, mem);
+  return casadi_f32(arg, res, iw, w, mem);
 }
 
 CASADI_SYMBOL_EXPORT int link1_control_joint_impedance_zdot_alloc_mem(void) {
@@ -5216,9 +5143,9 @@ CASADI_SYMBOL_EXPORT int link1_control_joint_impedance_zdot_work_bytes(casadi_in
 }
 
 /* link1_T_tau:(m[5],p[7])->(T_tau[4]) */
-static int casadi_f34(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f33(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)arg; (void)iw; (void)w; (void)mem;
-  casadi_real **res1=res+1, *rr, *w0=w+9, w1, w2, w3, w4, *w5=w+18, w6, w7;
+  casadi_real **res1=res+1, *rr, *w0=w+10, w1, w2, w3, w4, w5, *w6=w+20, w7, w8;
   const casadi_real **arg1=arg+2, *cs;
   /* #0: @0 = input[0][0] */
   casadi_copy(arg[0], 5, w0);
@@ -5234,27 +5161,31 @@ static int casadi_f34(const casadi_real** arg, casadi_real** res, casadi_int* iw
   for (rr=(&w3), cs=w0+2; cs!=w0+3; cs+=1) *rr++ = *cs;
   /* #6: @4 = @0[3] */
   for (rr=(&w4), cs=w0+3; cs!=w0+4; cs+=1) *rr++ = *cs;
-  /* #7: @5 = input[1][0] */
-  casadi_copy(arg[1], 7, w5);
-  /* #8: {@6, @7, NULL} = link1_accel_kernel(@1, @2, @3, @4, @5) */
+  /* #7: @5 = @0[4] */
+  for (rr=(&w5), cs=w0+4; cs!=w0+5; cs+=1) *rr++ = *cs;
+  /* #8: @6 = input[1][0] */
+  casadi_copy(arg[1], 7, w6);
+  /* #9: {@7, @8, NULL, NULL} = link1_elastic_kernel(@1, @2, @3, @4, @5, @6) */
   arg1[0]=(&w1);
   arg1[1]=(&w2);
   arg1[2]=(&w3);
   arg1[3]=(&w4);
-  arg1[4]=w5;
-  res1[0]=(&w6);
-  res1[1]=(&w7);
+  arg1[4]=(&w5);
+  arg1[5]=w6;
+  res1[0]=(&w7);
+  res1[1]=(&w8);
   res1[2]=0;
+  res1[3]=0;
   if (casadi_f9(arg1, res1, iw, w, 0)) return 1;
-  /* #9: output[0][2] = @6 */
-  if (res[0]) res[0][2] = w6;
-  /* #10: output[0][3] = @7 */
-  if (res[0]) res[0][3] = w7;
+  /* #10: output[0][2] = @7 */
+  if (res[0]) res[0][2] = w7;
+  /* #11: output[0][3] = @8 */
+  if (res[0]) res[0][3] = w8;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT int link1_T_tau(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f34(arg, res, iw, w, mem);
+  return casadi_f33(arg, res, iw, w, mem);
 }
 
 CASADI_SYMBOL_EXPORT int link1_T_tau_alloc_mem(void) {
@@ -5325,77 +5256,59 @@ CASADI_SYMBOL_EXPORT const casadi_int* link1_T_tau_sparsity_out(casadi_int i) {
 }
 
 CASADI_SYMBOL_EXPORT int link1_T_tau_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 7;
-  if (sz_res) *sz_res = 4;
+  if (sz_arg) *sz_arg = 8;
+  if (sz_res) *sz_res = 5;
   if (sz_iw) *sz_iw = 0;
-  if (sz_w) *sz_w = 27;
+  if (sz_w) *sz_w = 29;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT int link1_T_tau_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 7*sizeof(const casadi_real*);
-  if (sz_res) *sz_res = 4*sizeof(casadi_real*);
+  if (sz_arg) *sz_arg = 8*sizeof(const casadi_real*);
+  if (sz_res) *sz_res = 5*sizeof(casadi_real*);
   if (sz_iw) *sz_iw = 0*sizeof(casadi_int);
-  if (sz_w) *sz_w = 27*sizeof(casadi_real);
+  if (sz_w) *sz_w = 29*sizeof(casadi_real);
   return 0;
 }
 
 /* link1_alpha_tau:(m[5],p[7])->(alpha_tau) */
-static int casadi_f35(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f34(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)arg; (void)iw; (void)w; (void)mem;
-  casadi_real **res1=res+1, *rr, *w0=w+9, w1, *w2=w+15, w3, w4, w5, w6, w7, w8, w9;
+  casadi_real **res1=res+1, *rr, *w0=w+10, w1, w2, w3, w4, w5, *w6=w+20, w7;
   const casadi_real **arg1=arg+2, *cs;
   /* #0: @0 = input[0][0] */
   casadi_copy(arg[0], 5, w0);
-  /* #1: @1 = @0[2] */
-  for (rr=(&w1), cs=w0+2; cs!=w0+3; cs+=1) *rr++ = *cs;
-  /* #2: @2 = input[1][0] */
-  casadi_copy(arg[1], 7, w2);
-  /* #3: @3 = @2[6] */
-  for (rr=(&w3), cs=w2+6; cs!=w2+7; cs+=1) *rr++ = *cs;
-  /* #4: @4 = @0[4] */
-  for (rr=(&w4), cs=w0+4; cs!=w0+5; cs+=1) *rr++ = *cs;
-  /* #5: @3 = (@3*@4) */
-  w3 *= w4;
-  /* #6: @3 = (@1+@3) */
-  w3  = (w1+w3);
-  /* #7: @4 = @2[1] */
-  for (rr=(&w4), cs=w2+1; cs!=w2+2; cs+=1) *rr++ = *cs;
-  /* #8: @5 = @0[0] */
-  for (rr=(&w5), cs=w0+0; cs!=w0+1; cs+=1) *rr++ = *cs;
-  /* #9: @6 = @0[1] */
-  for (rr=(&w6), cs=w0+1; cs!=w0+2; cs+=1) *rr++ = *cs;
-  /* #10: @7 = @0[3] */
-  for (rr=(&w7), cs=w0+3; cs!=w0+4; cs+=1) *rr++ = *cs;
-  /* #11: {@8, NULL, @9} = link1_accel_kernel(@5, @6, @1, @7, @2) */
-  arg1[0]=(&w5);
-  arg1[1]=(&w6);
-  arg1[2]=(&w1);
-  arg1[3]=(&w7);
-  arg1[4]=w2;
-  res1[0]=(&w8);
+  /* #1: @1 = @0[0] */
+  for (rr=(&w1), cs=w0+0; cs!=w0+1; cs+=1) *rr++ = *cs;
+  /* #2: @2 = @0[1] */
+  for (rr=(&w2), cs=w0+1; cs!=w0+2; cs+=1) *rr++ = *cs;
+  /* #3: @3 = @0[2] */
+  for (rr=(&w3), cs=w0+2; cs!=w0+3; cs+=1) *rr++ = *cs;
+  /* #4: @4 = @0[3] */
+  for (rr=(&w4), cs=w0+3; cs!=w0+4; cs+=1) *rr++ = *cs;
+  /* #5: @5 = @0[4] */
+  for (rr=(&w5), cs=w0+4; cs!=w0+5; cs+=1) *rr++ = *cs;
+  /* #6: @6 = input[1][0] */
+  casadi_copy(arg[1], 7, w6);
+  /* #7: {NULL, NULL, @7, NULL} = link1_elastic_kernel(@1, @2, @3, @4, @5, @6) */
+  arg1[0]=(&w1);
+  arg1[1]=(&w2);
+  arg1[2]=(&w3);
+  arg1[3]=(&w4);
+  arg1[4]=(&w5);
+  arg1[5]=w6;
+  res1[0]=0;
   res1[1]=0;
-  res1[2]=(&w9);
+  res1[2]=(&w7);
+  res1[3]=0;
   if (casadi_f9(arg1, res1, iw, w, 0)) return 1;
-  /* #12: @8 = (@4*@8) */
-  w8  = (w4*w8);
-  /* #13: @3 = (@3+@8) */
-  w3 += w8;
-  /* #14: @8 = @2[2] */
-  for (rr=(&w8), cs=w2+2; cs!=w2+3; cs+=1) *rr++ = *cs;
-  /* #15: @4 = (@4/@8) */
-  w4 /= w8;
-  /* #16: @4 = (@4*@9) */
-  w4 *= w9;
-  /* #17: @3 = (@3+@4) */
-  w3 += w4;
-  /* #18: output[0][0] = @3 */
-  if (res[0]) res[0][0] = w3;
+  /* #8: output[0][0] = @7 */
+  if (res[0]) res[0][0] = w7;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT int link1_alpha_tau(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f35(arg, res, iw, w, mem);
+  return casadi_f34(arg, res, iw, w, mem);
 }
 
 CASADI_SYMBOL_EXPORT int link1_alpha_tau_alloc_mem(void) {
@@ -5466,23 +5379,51 @@ CASADI_SYMBOL_EXPORT const casadi_int* link1_alpha_tau_sparsity_out(casadi_int i
 }
 
 CASADI_SYMBOL_EXPORT int link1_alpha_tau_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 7;
-  if (sz_res) *sz_res = 4;
+  if (sz_arg) *sz_arg = 8;
+  if (sz_res) *sz_res = 5;
   if (sz_iw) *sz_iw = 0;
-  if (sz_w) *sz_w = 29;
+  if (sz_w) *sz_w = 28;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT int link1_alpha_tau_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 7*sizeof(const casadi_real*);
-  if (sz_res) *sz_res = 4*sizeof(casadi_real*);
+  if (sz_arg) *sz_arg = 8*sizeof(const casadi_real*);
+  if (sz_res) *sz_res = 5*sizeof(casadi_real*);
   if (sz_iw) *sz_iw = 0*sizeof(casadi_int);
-  if (sz_w) *sz_w = 29*sizeof(casadi_real);
+  if (sz_w) *sz_w = 28*sizeof(casadi_real);
+  return 0;
+}
+
+/* link1_beta_tau:(m[5],p[7])->(beta_tau) */
+static int casadi_f35(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  (void)arg; (void)iw; (void)w; (void)mem;
+  casadi_int i;
+  casadi_real **res1=res+1, *rr, *w0=w+14, w1, *w2=w+20, *w3=w+23, *w4=w+27;
+  const casadi_real **arg1=arg+2, *cs;
+  /* #0: @0 = input[0][0] */
+  casadi_copy(arg[0], 5, w0);
+  /* #1: @1 = @0[0] */
+  for (rr=(&w1), cs=w0+0; cs!=w0+1; cs+=1) *rr++ = *cs;
+  /* #2: @2 = zeros(3x1) */
+  casadi_clear(w2, 3);
+  /* #3: @3 = vertcat(@1, @2) */
+  rr=w3;
+  *rr++ = w1;
+  for (i=0, cs=w2; i<3; ++i) *rr++ = *cs++;
+  /* #4: @4 = input[1][0] */
+  casadi_copy(arg[1], 7, w4);
+  /* #5: @1 = link1_beta(@3, @4) */
+  arg1[0]=w3;
+  arg1[1]=w4;
+  res1[0]=(&w1);
+  if (casadi_f11(arg1, res1, iw, w, 0)) return 1;
+  /* #6: output[0][0] = @1 */
+  if (res[0]) res[0][0] = w1;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT int link1_beta_tau(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f22(arg, res, iw, w, mem);
+  return casadi_f35(arg, res, iw, w, mem);
 }
 
 CASADI_SYMBOL_EXPORT int link1_beta_tau_alloc_mem(void) {
@@ -5569,7 +5510,7 @@ CASADI_SYMBOL_EXPORT int link1_beta_tau_work_bytes(casadi_int *sz_arg, casadi_in
 }
 
 CASADI_SYMBOL_EXPORT int link1_feedforward(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f29(arg, res, iw, w, mem);
+  return casadi_f28(arg, res, iw, w, mem);
 }
 
 CASADI_SYMBOL_EXPORT int link1_feedforward_alloc_mem(void) {

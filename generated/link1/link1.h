@@ -152,10 +152,10 @@ const casadi_int* link1_T_sparsity_in(casadi_int i);
 const casadi_int* link1_T_sparsity_out(casadi_int i);
 int link1_T_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int link1_T_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define link1_T_SZ_ARG 7
-#define link1_T_SZ_RES 4
+#define link1_T_SZ_ARG 8
+#define link1_T_SZ_RES 5
 #define link1_T_SZ_IW 0
-#define link1_T_SZ_W 26
+#define link1_T_SZ_W 28
 int link1_alpha(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int link1_alpha_alloc_mem(void);
 int link1_alpha_init_mem(int mem);
@@ -173,10 +173,10 @@ const casadi_int* link1_alpha_sparsity_in(casadi_int i);
 const casadi_int* link1_alpha_sparsity_out(casadi_int i);
 int link1_alpha_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int link1_alpha_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define link1_alpha_SZ_ARG 7
-#define link1_alpha_SZ_RES 4
+#define link1_alpha_SZ_ARG 8
+#define link1_alpha_SZ_RES 5
 #define link1_alpha_SZ_IW 0
-#define link1_alpha_SZ_W 29
+#define link1_alpha_SZ_W 27
 int link1_beta(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int link1_beta_alloc_mem(void);
 int link1_beta_init_mem(int mem);
@@ -257,10 +257,10 @@ const casadi_int* link1_control_core_sparsity_in(casadi_int i);
 const casadi_int* link1_control_core_sparsity_out(casadi_int i);
 int link1_control_core_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int link1_control_core_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define link1_control_core_SZ_ARG 7
-#define link1_control_core_SZ_RES 6
+#define link1_control_core_SZ_ARG 8
+#define link1_control_core_SZ_RES 7
 #define link1_control_core_SZ_IW 0
-#define link1_control_core_SZ_W 34
+#define link1_control_core_SZ_W 30
 int link1_control_smc(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int link1_control_smc_alloc_mem(void);
 int link1_control_smc_init_mem(int mem);
@@ -278,10 +278,10 @@ const casadi_int* link1_control_smc_sparsity_in(casadi_int i);
 const casadi_int* link1_control_smc_sparsity_out(casadi_int i);
 int link1_control_smc_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int link1_control_smc_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define link1_control_smc_SZ_ARG 12
-#define link1_control_smc_SZ_RES 11
+#define link1_control_smc_SZ_ARG 13
+#define link1_control_smc_SZ_RES 12
 #define link1_control_smc_SZ_IW 0
-#define link1_control_smc_SZ_W 77
+#define link1_control_smc_SZ_W 73
 int link1_control_ismc(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int link1_control_ismc_alloc_mem(void);
 int link1_control_ismc_init_mem(int mem);
@@ -299,10 +299,10 @@ const casadi_int* link1_control_ismc_sparsity_in(casadi_int i);
 const casadi_int* link1_control_ismc_sparsity_out(casadi_int i);
 int link1_control_ismc_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int link1_control_ismc_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define link1_control_ismc_SZ_ARG 12
-#define link1_control_ismc_SZ_RES 11
+#define link1_control_ismc_SZ_ARG 13
+#define link1_control_ismc_SZ_RES 12
 #define link1_control_ismc_SZ_IW 0
-#define link1_control_ismc_SZ_W 79
+#define link1_control_ismc_SZ_W 75
 int link1_control_ismc_zdot(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int link1_control_ismc_zdot_alloc_mem(void);
 int link1_control_ismc_zdot_init_mem(int mem);
@@ -341,10 +341,10 @@ const casadi_int* link1_control_fl_sparsity_in(casadi_int i);
 const casadi_int* link1_control_fl_sparsity_out(casadi_int i);
 int link1_control_fl_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int link1_control_fl_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define link1_control_fl_SZ_ARG 12
-#define link1_control_fl_SZ_RES 11
+#define link1_control_fl_SZ_ARG 13
+#define link1_control_fl_SZ_RES 12
 #define link1_control_fl_SZ_IW 0
-#define link1_control_fl_SZ_W 73
+#define link1_control_fl_SZ_W 69
 int link1_control_adaptive(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int link1_control_adaptive_alloc_mem(void);
 int link1_control_adaptive_init_mem(int mem);
@@ -362,10 +362,10 @@ const casadi_int* link1_control_adaptive_sparsity_in(casadi_int i);
 const casadi_int* link1_control_adaptive_sparsity_out(casadi_int i);
 int link1_control_adaptive_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int link1_control_adaptive_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define link1_control_adaptive_SZ_ARG 12
-#define link1_control_adaptive_SZ_RES 11
+#define link1_control_adaptive_SZ_ARG 13
+#define link1_control_adaptive_SZ_RES 12
 #define link1_control_adaptive_SZ_IW 0
-#define link1_control_adaptive_SZ_W 97
+#define link1_control_adaptive_SZ_W 93
 int link1_control_adaptive_zdot(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int link1_control_adaptive_zdot_alloc_mem(void);
 int link1_control_adaptive_zdot_init_mem(int mem);
@@ -405,9 +405,9 @@ const casadi_int* link1_control_core_tau_sparsity_out(casadi_int i);
 int link1_control_core_tau_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int link1_control_core_tau_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 #define link1_control_core_tau_SZ_ARG 8
-#define link1_control_core_tau_SZ_RES 6
+#define link1_control_core_tau_SZ_RES 7
 #define link1_control_core_tau_SZ_IW 0
-#define link1_control_core_tau_SZ_W 53
+#define link1_control_core_tau_SZ_W 31
 int link1_control_smc_tau(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int link1_control_smc_tau_alloc_mem(void);
 int link1_control_smc_tau_init_mem(int mem);
@@ -426,9 +426,9 @@ const casadi_int* link1_control_smc_tau_sparsity_out(casadi_int i);
 int link1_control_smc_tau_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int link1_control_smc_tau_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 #define link1_control_smc_tau_SZ_ARG 13
-#define link1_control_smc_tau_SZ_RES 11
+#define link1_control_smc_tau_SZ_RES 12
 #define link1_control_smc_tau_SZ_IW 0
-#define link1_control_smc_tau_SZ_W 92
+#define link1_control_smc_tau_SZ_W 70
 int link1_control_ismc_tau(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int link1_control_ismc_tau_alloc_mem(void);
 int link1_control_ismc_tau_init_mem(int mem);
@@ -447,9 +447,9 @@ const casadi_int* link1_control_ismc_tau_sparsity_out(casadi_int i);
 int link1_control_ismc_tau_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int link1_control_ismc_tau_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 #define link1_control_ismc_tau_SZ_ARG 13
-#define link1_control_ismc_tau_SZ_RES 11
+#define link1_control_ismc_tau_SZ_RES 12
 #define link1_control_ismc_tau_SZ_IW 0
-#define link1_control_ismc_tau_SZ_W 99
+#define link1_control_ismc_tau_SZ_W 77
 int link1_control_ismc_tau_zdot(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int link1_control_ismc_tau_zdot_alloc_mem(void);
 int link1_control_ismc_tau_zdot_init_mem(int mem);
@@ -489,9 +489,9 @@ const casadi_int* link1_control_fl_tau_sparsity_out(casadi_int i);
 int link1_control_fl_tau_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int link1_control_fl_tau_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 #define link1_control_fl_tau_SZ_ARG 13
-#define link1_control_fl_tau_SZ_RES 11
+#define link1_control_fl_tau_SZ_RES 12
 #define link1_control_fl_tau_SZ_IW 0
-#define link1_control_fl_tau_SZ_W 88
+#define link1_control_fl_tau_SZ_W 66
 int link1_control_pdg(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int link1_control_pdg_alloc_mem(void);
 int link1_control_pdg_init_mem(int mem);
@@ -614,10 +614,10 @@ const casadi_int* link1_T_tau_sparsity_in(casadi_int i);
 const casadi_int* link1_T_tau_sparsity_out(casadi_int i);
 int link1_T_tau_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int link1_T_tau_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define link1_T_tau_SZ_ARG 7
-#define link1_T_tau_SZ_RES 4
+#define link1_T_tau_SZ_ARG 8
+#define link1_T_tau_SZ_RES 5
 #define link1_T_tau_SZ_IW 0
-#define link1_T_tau_SZ_W 27
+#define link1_T_tau_SZ_W 29
 int link1_alpha_tau(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int link1_alpha_tau_alloc_mem(void);
 int link1_alpha_tau_init_mem(int mem);
@@ -635,10 +635,10 @@ const casadi_int* link1_alpha_tau_sparsity_in(casadi_int i);
 const casadi_int* link1_alpha_tau_sparsity_out(casadi_int i);
 int link1_alpha_tau_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int link1_alpha_tau_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define link1_alpha_tau_SZ_ARG 7
-#define link1_alpha_tau_SZ_RES 4
+#define link1_alpha_tau_SZ_ARG 8
+#define link1_alpha_tau_SZ_RES 5
 #define link1_alpha_tau_SZ_IW 0
-#define link1_alpha_tau_SZ_W 29
+#define link1_alpha_tau_SZ_W 28
 int link1_beta_tau(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int link1_beta_tau_alloc_mem(void);
 int link1_beta_tau_init_mem(int mem);

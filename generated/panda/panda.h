@@ -153,9 +153,9 @@ const casadi_int* panda_T_sparsity_out(casadi_int i);
 int panda_T_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int panda_T_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 #define panda_T_SZ_ARG 9
-#define panda_T_SZ_RES 4
+#define panda_T_SZ_RES 5
 #define panda_T_SZ_IW 0
-#define panda_T_SZ_W 513
+#define panda_T_SZ_W 554
 int panda_alpha(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int panda_alpha_alloc_mem(void);
 int panda_alpha_init_mem(int mem);
@@ -174,9 +174,9 @@ const casadi_int* panda_alpha_sparsity_out(casadi_int i);
 int panda_alpha_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int panda_alpha_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 #define panda_alpha_SZ_ARG 9
-#define panda_alpha_SZ_RES 4
+#define panda_alpha_SZ_RES 5
 #define panda_alpha_SZ_IW 0
-#define panda_alpha_SZ_W 534
+#define panda_alpha_SZ_W 547
 int panda_beta(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int panda_beta_alloc_mem(void);
 int panda_beta_init_mem(int mem);
@@ -257,10 +257,10 @@ const casadi_int* panda_control_core_sparsity_in(casadi_int i);
 const casadi_int* panda_control_core_sparsity_out(casadi_int i);
 int panda_control_core_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int panda_control_core_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define panda_control_core_SZ_ARG 11
-#define panda_control_core_SZ_RES 6
+#define panda_control_core_SZ_ARG 9
+#define panda_control_core_SZ_RES 7
 #define panda_control_core_SZ_IW 0
-#define panda_control_core_SZ_W 583
+#define panda_control_core_SZ_W 610
 int panda_control_smc(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int panda_control_smc_alloc_mem(void);
 int panda_control_smc_init_mem(int mem);
@@ -278,10 +278,10 @@ const casadi_int* panda_control_smc_sparsity_in(casadi_int i);
 const casadi_int* panda_control_smc_sparsity_out(casadi_int i);
 int panda_control_smc_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int panda_control_smc_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define panda_control_smc_SZ_ARG 16
-#define panda_control_smc_SZ_RES 11
+#define panda_control_smc_SZ_ARG 14
+#define panda_control_smc_SZ_RES 12
 #define panda_control_smc_SZ_IW 0
-#define panda_control_smc_SZ_W 947
+#define panda_control_smc_SZ_W 974
 int panda_control_ismc(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int panda_control_ismc_alloc_mem(void);
 int panda_control_ismc_init_mem(int mem);
@@ -299,10 +299,10 @@ const casadi_int* panda_control_ismc_sparsity_in(casadi_int i);
 const casadi_int* panda_control_ismc_sparsity_out(casadi_int i);
 int panda_control_ismc_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int panda_control_ismc_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define panda_control_ismc_SZ_ARG 16
-#define panda_control_ismc_SZ_RES 11
+#define panda_control_ismc_SZ_ARG 14
+#define panda_control_ismc_SZ_RES 12
 #define panda_control_ismc_SZ_IW 0
-#define panda_control_ismc_SZ_W 949
+#define panda_control_ismc_SZ_W 976
 int panda_control_ismc_zdot(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int panda_control_ismc_zdot_alloc_mem(void);
 int panda_control_ismc_zdot_init_mem(int mem);
@@ -341,10 +341,10 @@ const casadi_int* panda_control_fl_sparsity_in(casadi_int i);
 const casadi_int* panda_control_fl_sparsity_out(casadi_int i);
 int panda_control_fl_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int panda_control_fl_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define panda_control_fl_SZ_ARG 16
-#define panda_control_fl_SZ_RES 11
+#define panda_control_fl_SZ_ARG 14
+#define panda_control_fl_SZ_RES 12
 #define panda_control_fl_SZ_IW 0
-#define panda_control_fl_SZ_W 931
+#define panda_control_fl_SZ_W 958
 int panda_control_adaptive(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int panda_control_adaptive_alloc_mem(void);
 int panda_control_adaptive_init_mem(int mem);
@@ -363,9 +363,9 @@ const casadi_int* panda_control_adaptive_sparsity_out(casadi_int i);
 int panda_control_adaptive_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int panda_control_adaptive_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 #define panda_control_adaptive_SZ_ARG 31
-#define panda_control_adaptive_SZ_RES 11
+#define panda_control_adaptive_SZ_RES 12
 #define panda_control_adaptive_SZ_IW 0
-#define panda_control_adaptive_SZ_W 1084
+#define panda_control_adaptive_SZ_W 1111
 int panda_control_adaptive_zdot(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int panda_control_adaptive_zdot_alloc_mem(void);
 int panda_control_adaptive_zdot_init_mem(int mem);
@@ -404,10 +404,10 @@ const casadi_int* panda_control_core_tau_sparsity_in(casadi_int i);
 const casadi_int* panda_control_core_tau_sparsity_out(casadi_int i);
 int panda_control_core_tau_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int panda_control_core_tau_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define panda_control_core_tau_SZ_ARG 13
-#define panda_control_core_tau_SZ_RES 6
+#define panda_control_core_tau_SZ_ARG 8
+#define panda_control_core_tau_SZ_RES 7
 #define panda_control_core_tau_SZ_IW 0
-#define panda_control_core_tau_SZ_W 577
+#define panda_control_core_tau_SZ_W 610
 int panda_control_smc_tau(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int panda_control_smc_tau_alloc_mem(void);
 int panda_control_smc_tau_init_mem(int mem);
@@ -425,10 +425,10 @@ const casadi_int* panda_control_smc_tau_sparsity_in(casadi_int i);
 const casadi_int* panda_control_smc_tau_sparsity_out(casadi_int i);
 int panda_control_smc_tau_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int panda_control_smc_tau_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define panda_control_smc_tau_SZ_ARG 18
-#define panda_control_smc_tau_SZ_RES 11
+#define panda_control_smc_tau_SZ_ARG 13
+#define panda_control_smc_tau_SZ_RES 12
 #define panda_control_smc_tau_SZ_IW 0
-#define panda_control_smc_tau_SZ_W 913
+#define panda_control_smc_tau_SZ_W 946
 int panda_control_ismc_tau(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int panda_control_ismc_tau_alloc_mem(void);
 int panda_control_ismc_tau_init_mem(int mem);
@@ -446,10 +446,10 @@ const casadi_int* panda_control_ismc_tau_sparsity_in(casadi_int i);
 const casadi_int* panda_control_ismc_tau_sparsity_out(casadi_int i);
 int panda_control_ismc_tau_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int panda_control_ismc_tau_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define panda_control_ismc_tau_SZ_ARG 18
-#define panda_control_ismc_tau_SZ_RES 11
+#define panda_control_ismc_tau_SZ_ARG 13
+#define panda_control_ismc_tau_SZ_RES 12
 #define panda_control_ismc_tau_SZ_IW 0
-#define panda_control_ismc_tau_SZ_W 950
+#define panda_control_ismc_tau_SZ_W 983
 int panda_control_ismc_tau_zdot(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int panda_control_ismc_tau_zdot_alloc_mem(void);
 int panda_control_ismc_tau_zdot_init_mem(int mem);
@@ -488,10 +488,10 @@ const casadi_int* panda_control_fl_tau_sparsity_in(casadi_int i);
 const casadi_int* panda_control_fl_tau_sparsity_out(casadi_int i);
 int panda_control_fl_tau_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int panda_control_fl_tau_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define panda_control_fl_tau_SZ_ARG 18
-#define panda_control_fl_tau_SZ_RES 11
+#define panda_control_fl_tau_SZ_ARG 13
+#define panda_control_fl_tau_SZ_RES 12
 #define panda_control_fl_tau_SZ_IW 0
-#define panda_control_fl_tau_SZ_W 897
+#define panda_control_fl_tau_SZ_W 930
 int panda_control_pdg(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int panda_control_pdg_alloc_mem(void);
 int panda_control_pdg_init_mem(int mem);
@@ -614,10 +614,10 @@ const casadi_int* panda_T_tau_sparsity_in(casadi_int i);
 const casadi_int* panda_T_tau_sparsity_out(casadi_int i);
 int panda_T_tau_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int panda_T_tau_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define panda_T_tau_SZ_ARG 7
-#define panda_T_tau_SZ_RES 4
+#define panda_T_tau_SZ_ARG 8
+#define panda_T_tau_SZ_RES 5
 #define panda_T_tau_SZ_IW 0
-#define panda_T_tau_SZ_W 513
+#define panda_T_tau_SZ_W 554
 int panda_alpha_tau(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int panda_alpha_tau_alloc_mem(void);
 int panda_alpha_tau_init_mem(int mem);
@@ -635,10 +635,10 @@ const casadi_int* panda_alpha_tau_sparsity_in(casadi_int i);
 const casadi_int* panda_alpha_tau_sparsity_out(casadi_int i);
 int panda_alpha_tau_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int panda_alpha_tau_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define panda_alpha_tau_SZ_ARG 9
-#define panda_alpha_tau_SZ_RES 4
+#define panda_alpha_tau_SZ_ARG 8
+#define panda_alpha_tau_SZ_RES 5
 #define panda_alpha_tau_SZ_IW 0
-#define panda_alpha_tau_SZ_W 534
+#define panda_alpha_tau_SZ_W 547
 int panda_beta_tau(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int panda_beta_tau_alloc_mem(void);
 int panda_beta_tau_init_mem(int mem);

@@ -47,9 +47,9 @@ const casadi_int* panda_hd_f_sparsity_out(casadi_int i);
 int panda_hd_f_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int panda_hd_f_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 #define panda_hd_f_SZ_ARG 9
-#define panda_hd_f_SZ_RES 4
+#define panda_hd_f_SZ_RES 5
 #define panda_hd_f_SZ_IW 0
-#define panda_hd_f_SZ_W 576
+#define panda_hd_f_SZ_W 602
 int panda_hd_T(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int panda_hd_T_alloc_mem(void);
 int panda_hd_T_init_mem(int mem);
@@ -68,9 +68,9 @@ const casadi_int* panda_hd_T_sparsity_out(casadi_int i);
 int panda_hd_T_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int panda_hd_T_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 #define panda_hd_T_SZ_ARG 7
-#define panda_hd_T_SZ_RES 4
+#define panda_hd_T_SZ_RES 5
 #define panda_hd_T_SZ_IW 0
-#define panda_hd_T_SZ_W 569
+#define panda_hd_T_SZ_W 595
 int panda_hd_alpha(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int panda_hd_alpha_alloc_mem(void);
 int panda_hd_alpha_init_mem(int mem);
@@ -89,9 +89,9 @@ const casadi_int* panda_hd_alpha_sparsity_out(casadi_int i);
 int panda_hd_alpha_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int panda_hd_alpha_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 #define panda_hd_alpha_SZ_ARG 9
-#define panda_hd_alpha_SZ_RES 4
+#define panda_hd_alpha_SZ_RES 5
 #define panda_hd_alpha_SZ_IW 0
-#define panda_hd_alpha_SZ_W 611
+#define panda_hd_alpha_SZ_W 637
 int panda_hd_beta(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int panda_hd_beta_alloc_mem(void);
 int panda_hd_beta_init_mem(int mem);
@@ -215,9 +215,9 @@ const casadi_int* panda_hd_T_tau_sparsity_out(casadi_int i);
 int panda_hd_T_tau_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int panda_hd_T_tau_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 #define panda_hd_T_tau_SZ_ARG 7
-#define panda_hd_T_tau_SZ_RES 4
+#define panda_hd_T_tau_SZ_RES 5
 #define panda_hd_T_tau_SZ_IW 0
-#define panda_hd_T_tau_SZ_W 576
+#define panda_hd_T_tau_SZ_W 602
 int panda_hd_alpha_tau(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int panda_hd_alpha_tau_alloc_mem(void);
 int panda_hd_alpha_tau_init_mem(int mem);
@@ -236,9 +236,9 @@ const casadi_int* panda_hd_alpha_tau_sparsity_out(casadi_int i);
 int panda_hd_alpha_tau_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int panda_hd_alpha_tau_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 #define panda_hd_alpha_tau_SZ_ARG 9
-#define panda_hd_alpha_tau_SZ_RES 4
+#define panda_hd_alpha_tau_SZ_RES 5
 #define panda_hd_alpha_tau_SZ_IW 0
-#define panda_hd_alpha_tau_SZ_W 597
+#define panda_hd_alpha_tau_SZ_W 623
 int panda_hd_beta_tau(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int panda_hd_beta_tau_alloc_mem(void);
 int panda_hd_beta_tau_init_mem(int mem);
@@ -320,9 +320,9 @@ const casadi_int* panda_hd_control_core_sparsity_out(casadi_int i);
 int panda_hd_control_core_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int panda_hd_control_core_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 #define panda_hd_control_core_SZ_ARG 9
-#define panda_hd_control_core_SZ_RES 6
+#define panda_hd_control_core_SZ_RES 7
 #define panda_hd_control_core_SZ_IW 0
-#define panda_hd_control_core_SZ_W 730
+#define panda_hd_control_core_SZ_W 735
 int panda_hd_control_core_tau(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int panda_hd_control_core_tau_alloc_mem(void);
 int panda_hd_control_core_tau_init_mem(int mem);
@@ -341,9 +341,9 @@ const casadi_int* panda_hd_control_core_tau_sparsity_out(casadi_int i);
 int panda_hd_control_core_tau_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int panda_hd_control_core_tau_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 #define panda_hd_control_core_tau_SZ_ARG 9
-#define panda_hd_control_core_tau_SZ_RES 6
+#define panda_hd_control_core_tau_SZ_RES 7
 #define panda_hd_control_core_tau_SZ_IW 0
-#define panda_hd_control_core_tau_SZ_W 737
+#define panda_hd_control_core_tau_SZ_W 714
 int panda_hd_control_smc(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int panda_hd_control_smc_alloc_mem(void);
 int panda_hd_control_smc_init_mem(int mem);
@@ -362,9 +362,9 @@ const casadi_int* panda_hd_control_smc_sparsity_out(casadi_int i);
 int panda_hd_control_smc_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int panda_hd_control_smc_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 #define panda_hd_control_smc_SZ_ARG 14
-#define panda_hd_control_smc_SZ_RES 11
+#define panda_hd_control_smc_SZ_RES 12
 #define panda_hd_control_smc_SZ_IW 0
-#define panda_hd_control_smc_SZ_W 1157
+#define panda_hd_control_smc_SZ_W 1162
 int panda_hd_control_ismc(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int panda_hd_control_ismc_alloc_mem(void);
 int panda_hd_control_ismc_init_mem(int mem);
@@ -383,9 +383,9 @@ const casadi_int* panda_hd_control_ismc_sparsity_out(casadi_int i);
 int panda_hd_control_ismc_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int panda_hd_control_ismc_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 #define panda_hd_control_ismc_SZ_ARG 14
-#define panda_hd_control_ismc_SZ_RES 11
+#define panda_hd_control_ismc_SZ_RES 12
 #define panda_hd_control_ismc_SZ_IW 0
-#define panda_hd_control_ismc_SZ_W 1159
+#define panda_hd_control_ismc_SZ_W 1164
 int panda_hd_control_ismc_zdot(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int panda_hd_control_ismc_zdot_alloc_mem(void);
 int panda_hd_control_ismc_zdot_init_mem(int mem);
@@ -425,9 +425,9 @@ const casadi_int* panda_hd_control_fl_sparsity_out(casadi_int i);
 int panda_hd_control_fl_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int panda_hd_control_fl_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 #define panda_hd_control_fl_SZ_ARG 14
-#define panda_hd_control_fl_SZ_RES 11
+#define panda_hd_control_fl_SZ_RES 12
 #define panda_hd_control_fl_SZ_IW 0
-#define panda_hd_control_fl_SZ_W 1141
+#define panda_hd_control_fl_SZ_W 1146
 int panda_hd_control_smc_tau(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int panda_hd_control_smc_tau_alloc_mem(void);
 int panda_hd_control_smc_tau_init_mem(int mem);
@@ -446,9 +446,9 @@ const casadi_int* panda_hd_control_smc_tau_sparsity_out(casadi_int i);
 int panda_hd_control_smc_tau_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int panda_hd_control_smc_tau_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 #define panda_hd_control_smc_tau_SZ_ARG 14
-#define panda_hd_control_smc_tau_SZ_RES 11
+#define panda_hd_control_smc_tau_SZ_RES 12
 #define panda_hd_control_smc_tau_SZ_IW 0
-#define panda_hd_control_smc_tau_SZ_W 1136
+#define panda_hd_control_smc_tau_SZ_W 1113
 int panda_hd_control_ismc_tau(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int panda_hd_control_ismc_tau_alloc_mem(void);
 int panda_hd_control_ismc_tau_init_mem(int mem);
@@ -467,9 +467,9 @@ const casadi_int* panda_hd_control_ismc_tau_sparsity_out(casadi_int i);
 int panda_hd_control_ismc_tau_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int panda_hd_control_ismc_tau_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 #define panda_hd_control_ismc_tau_SZ_ARG 14
-#define panda_hd_control_ismc_tau_SZ_RES 11
+#define panda_hd_control_ismc_tau_SZ_RES 12
 #define panda_hd_control_ismc_tau_SZ_IW 0
-#define panda_hd_control_ismc_tau_SZ_W 1173
+#define panda_hd_control_ismc_tau_SZ_W 1150
 int panda_hd_control_ismc_tau_zdot(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int panda_hd_control_ismc_tau_zdot_alloc_mem(void);
 int panda_hd_control_ismc_tau_zdot_init_mem(int mem);
@@ -509,9 +509,9 @@ const casadi_int* panda_hd_control_fl_tau_sparsity_out(casadi_int i);
 int panda_hd_control_fl_tau_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int panda_hd_control_fl_tau_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 #define panda_hd_control_fl_tau_SZ_ARG 14
-#define panda_hd_control_fl_tau_SZ_RES 11
+#define panda_hd_control_fl_tau_SZ_RES 12
 #define panda_hd_control_fl_tau_SZ_IW 0
-#define panda_hd_control_fl_tau_SZ_W 1120
+#define panda_hd_control_fl_tau_SZ_W 1097
 int panda_hd_control_impedance(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int panda_hd_control_impedance_alloc_mem(void);
 int panda_hd_control_impedance_init_mem(int mem);

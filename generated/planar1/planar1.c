@@ -745,47 +745,60 @@ CASADI_SYMBOL_EXPORT int planar1_ad_work_bytes(casadi_int *sz_arg, casadi_int* s
   return 0;
 }
 
-/* planar1_accel_kernel:(q,dq,s,ds,p[8])->(y3,y4,w) */
+/* planar1_elastic_kernel:(q,dq,s,ds,dq_m,p[8])->(y3,y4,alpha,beta) */
 static int casadi_f9(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)arg; (void)iw; (void)w; (void)mem;
-  casadi_real a0, a1, a2, a3, a4, a5, a6, a7;
+  casadi_real a0, a1, a2, a3, a4, a5, a6, a7, a8;
   a0=arg[2]? arg[2][0] : 0;
-  a1=arg[4]? arg[4][0] : 0;
-  a2=arg[4]? arg[4][2] : 0;
+  a1=arg[5]? arg[5][0] : 0;
+  a2=arg[5]? arg[5][2] : 0;
   a3=(a1*a2);
-  a4=arg[4]? arg[4][7] : 0;
+  a4=arg[5]? arg[5][7] : 0;
   a3=(a3*a4);
   a4=arg[0]? arg[0][0] : 0;
   a5=sin(a4);
   a6=(a3*a5);
-  a0=(a0-a6);
-  a6=arg[4]? arg[4][3] : 0;
+  a6=(a0-a6);
+  a7=arg[5]? arg[5][3] : 0;
   a2=casadi_sq(a2);
   a1=(a1*a2);
-  a6=(a6+a1);
-  a0=(a0/a6);
-  if (res[0]!=0) res[0][0]=a0;
+  a7=(a7+a1);
+  a6=(a6/a7);
+  if (res[0]!=0) res[0][0]=a6;
   a1=arg[3]? arg[3][0] : 0;
   a2=arg[1]? arg[1][0] : 0;
   a4=cos(a4);
-  a7=(a2*a4);
-  a7=(a3*a7);
-  a1=(a1-a7);
-  a1=(a1/a6);
+  a8=(a2*a4);
+  a8=(a3*a8);
+  a1=(a1-a8);
+  a1=(a1/a7);
   if (res[1]!=0) res[1][0]=a1;
-  a0=(a0*a4);
+  a1=arg[5]? arg[5][5] : 0;
+  a8=arg[5]? arg[5][4] : 0;
+  a8=(a1/a8);
+  a4=(a6*a4);
   a2=casadi_sq(a2);
   a2=(a2*a5);
-  a0=(a0-a2);
-  a3=(a3*a0);
+  a4=(a4-a2);
+  a3=(a3*a4);
+  a3=(a8*a3);
+  a1=(a1*a6);
+  a3=(a3+a1);
+  a3=(a3+a0);
+  a0=arg[5]? arg[5][6] : 0;
+  a1=arg[4]? arg[4][0] : 0;
+  a0=(a0*a1);
+  a3=(a3+a0);
   if (res[2]!=0) res[2][0]=a3;
+  a8=(a8*a7);
+  if (res[3]!=0) res[3][0]=a8;
   return 0;
 }
 
 /* planar1_T:(x[4],p[8])->(T[4]) */
 static int casadi_f8(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)arg; (void)iw; (void)w; (void)mem;
-  casadi_real **res1=res+1, *rr, *w0=w+8, w1, w2, w4, w5, w6, w7;
+  casadi_real **res1=res+1, *rr, *w0=w+9, w1, w2, w4, w5, w6, w7, w8;
   const casadi_real **arg1=arg+2, *cs, *wr3;
   /* #0: @0 = input[0][0] */
   casadi_copy(arg[0], 4, w0);
@@ -809,24 +822,26 @@ static int casadi_f8(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   w5  = (w4*w5);
   /* #10: @6 = @0[3] */
   for (rr=(&w6), cs=w0+3; cs!=w0+4; cs+=1) *rr++ = *cs;
-  /* #11: @6 = (@6-@2) */
-  w6 -= w2;
-  /* #12: @4 = (@4*@6) */
-  w4 *= w6;
-  /* #13: {@6, @7, NULL} = planar1_accel_kernel(@1, @2, @5, @4, @3) */
+  /* #11: @7 = (@6-@2) */
+  w7  = (w6-w2);
+  /* #12: @4 = (@4*@7) */
+  w4 *= w7;
+  /* #13: {@7, @8, NULL, NULL} = planar1_elastic_kernel(@1, @2, @5, @4, @6, @3) */
   arg1[0]=(&w1);
   arg1[1]=(&w2);
   arg1[2]=(&w5);
   arg1[3]=(&w4);
-  arg1[4]=wr3;
-  res1[0]=(&w6);
-  res1[1]=(&w7);
+  arg1[4]=(&w6);
+  arg1[5]=wr3;
+  res1[0]=(&w7);
+  res1[1]=(&w8);
   res1[2]=0;
+  res1[3]=0;
   if (casadi_f9(arg1, res1, iw, w, 0)) return 1;
-  /* #14: output[0][2] = @6 */
-  if (res[0]) res[0][2] = w6;
-  /* #15: output[0][3] = @7 */
-  if (res[0]) res[0][3] = w7;
+  /* #14: output[0][2] = @7 */
+  if (res[0]) res[0][2] = w7;
+  /* #15: output[0][3] = @8 */
+  if (res[0]) res[0][3] = w8;
   return 0;
 }
 
@@ -902,78 +917,62 @@ CASADI_SYMBOL_EXPORT const casadi_int* planar1_T_sparsity_out(casadi_int i) {
 }
 
 CASADI_SYMBOL_EXPORT int planar1_T_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 7;
-  if (sz_res) *sz_res = 4;
+  if (sz_arg) *sz_arg = 8;
+  if (sz_res) *sz_res = 5;
   if (sz_iw) *sz_iw = 0;
-  if (sz_w) *sz_w = 26;
+  if (sz_w) *sz_w = 28;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT int planar1_T_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 7*sizeof(const casadi_real*);
-  if (sz_res) *sz_res = 4*sizeof(casadi_real*);
+  if (sz_arg) *sz_arg = 8*sizeof(const casadi_real*);
+  if (sz_res) *sz_res = 5*sizeof(casadi_real*);
   if (sz_iw) *sz_iw = 0*sizeof(casadi_int);
-  if (sz_w) *sz_w = 26*sizeof(casadi_real);
+  if (sz_w) *sz_w = 28*sizeof(casadi_real);
   return 0;
 }
 
 /* planar1_alpha:(x[4],p[8])->(alpha) */
 static int casadi_f10(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)arg; (void)iw; (void)w; (void)mem;
-  casadi_real **res1=res+1, *rr, w01, w02, w03, *w04=w+19, w05, w06, w07, w08, w09, w10;
-  const casadi_real **arg1=arg+2, *cs, *wr00;
-  /* #0: @0 = input[1][0] */
-  wr00 = arg[1] ? arg[1] : casadi_zeros;
-  /* #1: @1 = @0[5] */
-  w01 = wr00[5];
-  /* #2: @2 = @0[4] */
-  w02 = wr00[4];
-  /* #3: @3 = (@1/@2) */
-  w03  = (w01/w02);
-  /* #4: @4 = input[0][0] */
-  casadi_copy(arg[0], 4, w04);
-  /* #5: @5 = @4[0] */
-  for (rr=(&w05), cs=w04+0; cs!=w04+1; cs+=1) *rr++ = *cs;
-  /* #6: @6 = @4[1] */
-  for (rr=(&w06), cs=w04+1; cs!=w04+2; cs+=1) *rr++ = *cs;
-  /* #7: @7 = @4[2] */
-  for (rr=(&w07), cs=w04+2; cs!=w04+3; cs+=1) *rr++ = *cs;
-  /* #8: @7 = (@7-@5) */
-  w07 -= w05;
-  /* #9: @7 = (@2*@7) */
-  w07  = (w02*w07);
-  /* #10: @8 = @4[3] */
-  for (rr=(&w08), cs=w04+3; cs!=w04+4; cs+=1) *rr++ = *cs;
-  /* #11: @9 = (@8-@6) */
-  w09  = (w08-w06);
-  /* #12: @2 = (@2*@9) */
-  w02 *= w09;
-  /* #13: {@9, NULL, @10} = planar1_accel_kernel(@5, @6, @7, @2, @0) */
-  arg1[0]=(&w05);
-  arg1[1]=(&w06);
-  arg1[2]=(&w07);
-  arg1[3]=(&w02);
-  arg1[4]=wr00;
-  res1[0]=(&w09);
+  casadi_real **res1=res+1, *rr, *w0=w+9, w1, w2, w4, w5, w6, w7;
+  const casadi_real **arg1=arg+2, *cs, *wr3;
+  /* #0: @0 = input[0][0] */
+  casadi_copy(arg[0], 4, w0);
+  /* #1: @1 = @0[0] */
+  for (rr=(&w1), cs=w0+0; cs!=w0+1; cs+=1) *rr++ = *cs;
+  /* #2: @2 = @0[1] */
+  for (rr=(&w2), cs=w0+1; cs!=w0+2; cs+=1) *rr++ = *cs;
+  /* #3: @3 = input[1][0] */
+  wr3 = arg[1] ? arg[1] : casadi_zeros;
+  /* #4: @4 = @3[4] */
+  w4 = wr3[4];
+  /* #5: @5 = @0[2] */
+  for (rr=(&w5), cs=w0+2; cs!=w0+3; cs+=1) *rr++ = *cs;
+  /* #6: @5 = (@5-@1) */
+  w5 -= w1;
+  /* #7: @5 = (@4*@5) */
+  w5  = (w4*w5);
+  /* #8: @6 = @0[3] */
+  for (rr=(&w6), cs=w0+3; cs!=w0+4; cs+=1) *rr++ = *cs;
+  /* #9: @7 = (@6-@2) */
+  w7  = (w6-w2);
+  /* #10: @4 = (@4*@7) */
+  w4 *= w7;
+  /* #11: {NULL, NULL, @7, NULL} = planar1_elastic_kernel(@1, @2, @5, @4, @6, @3) */
+  arg1[0]=(&w1);
+  arg1[1]=(&w2);
+  arg1[2]=(&w5);
+  arg1[3]=(&w4);
+  arg1[4]=(&w6);
+  arg1[5]=wr3;
+  res1[0]=0;
   res1[1]=0;
-  res1[2]=(&w10);
+  res1[2]=(&w7);
+  res1[3]=0;
   if (casadi_f9(arg1, res1, iw, w, 0)) return 1;
-  /* #14: @3 = (@3*@10) */
-  w03 *= w10;
-  /* #15: @1 = (@1*@9) */
-  w01 *= w09;
-  /* #16: @3 = (@3+@1) */
-  w03 += w01;
-  /* #17: @3 = (@3+@7) */
-  w03 += w07;
-  /* #18: @7 = @0[6] */
-  w07 = wr00[6];
-  /* #19: @7 = (@7*@8) */
-  w07 *= w08;
-  /* #20: @3 = (@3+@7) */
-  w03 += w07;
-  /* #21: output[0][0] = @3 */
-  if (res[0]) res[0][0] = w03;
+  /* #12: output[0][0] = @7 */
+  if (res[0]) res[0][0] = w7;
   return 0;
 }
 
@@ -1049,18 +1048,18 @@ CASADI_SYMBOL_EXPORT const casadi_int* planar1_alpha_sparsity_out(casadi_int i) 
 }
 
 CASADI_SYMBOL_EXPORT int planar1_alpha_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 7;
-  if (sz_res) *sz_res = 4;
+  if (sz_arg) *sz_arg = 8;
+  if (sz_res) *sz_res = 5;
   if (sz_iw) *sz_iw = 0;
-  if (sz_w) *sz_w = 29;
+  if (sz_w) *sz_w = 27;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT int planar1_alpha_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 7*sizeof(const casadi_real*);
-  if (sz_res) *sz_res = 4*sizeof(casadi_real*);
+  if (sz_arg) *sz_arg = 8*sizeof(const casadi_real*);
+  if (sz_res) *sz_res = 5*sizeof(casadi_real*);
   if (sz_iw) *sz_iw = 0*sizeof(casadi_int);
-  if (sz_w) *sz_w = 29*sizeof(casadi_real);
+  if (sz_w) *sz_w = 27*sizeof(casadi_real);
   return 0;
 }
 
@@ -1432,7 +1431,7 @@ CASADI_SYMBOL_EXPORT int planar1_inertia_work_bytes(casadi_int *sz_arg, casadi_i
 /* planar1_control_core:(x[4],p_hat[8])->(y_hat[4],alpha,beta) */
 static int casadi_f14(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)arg; (void)iw; (void)w; (void)mem;
-  casadi_real **res1=res+3, *rr, *w00=w+17, w01, w02, w04, w05, w06, w07, w08, w09, w10;
+  casadi_real **res1=res+3, *rr, *w00=w+9, w01, w02, w04, w05, w06, w07, w08, w09, w10;
   const casadi_real **arg1=arg+2, *cs, *wr03;
   /* #0: @0 = input[0][0] */
   casadi_copy(arg[0], 4, w00);
@@ -1458,49 +1457,28 @@ static int casadi_f14(const casadi_real** arg, casadi_real** res, casadi_int* iw
   for (rr=(&w06), cs=w00+3; cs!=w00+4; cs+=1) *rr++ = *cs;
   /* #11: @7 = (@6-@2) */
   w07  = (w06-w02);
-  /* #12: @7 = (@4*@7) */
-  w07  = (w04*w07);
-  /* #13: {@8, @9, @10} = planar1_accel_kernel(@1, @2, @5, @7, @3) */
+  /* #12: @4 = (@4*@7) */
+  w04 *= w07;
+  /* #13: {@7, @8, @9, @10} = planar1_elastic_kernel(@1, @2, @5, @4, @6, @3) */
   arg1[0]=(&w01);
   arg1[1]=(&w02);
   arg1[2]=(&w05);
-  arg1[3]=(&w07);
-  arg1[4]=wr03;
-  res1[0]=(&w08);
-  res1[1]=(&w09);
-  res1[2]=(&w10);
+  arg1[3]=(&w04);
+  arg1[4]=(&w06);
+  arg1[5]=wr03;
+  res1[0]=(&w07);
+  res1[1]=(&w08);
+  res1[2]=(&w09);
+  res1[3]=(&w10);
   if (casadi_f9(arg1, res1, iw, w, 0)) return 1;
-  /* #14: output[0][2] = @8 */
-  if (res[0]) res[0][2] = w08;
-  /* #15: output[0][3] = @9 */
-  if (res[0]) res[0][3] = w09;
-  /* #16: @9 = @3[5] */
-  w09 = wr03[5];
-  /* #17: @4 = (@9/@4) */
-  w04  = (w09/w04);
-  /* #18: @4 = (@4*@10) */
-  w04 *= w10;
-  /* #19: @9 = (@9*@8) */
-  w09 *= w08;
-  /* #20: @4 = (@4+@9) */
-  w04 += w09;
-  /* #21: @4 = (@4+@5) */
-  w04 += w05;
-  /* #22: @5 = @3[6] */
-  w05 = wr03[6];
-  /* #23: @5 = (@5*@6) */
-  w05 *= w06;
-  /* #24: @4 = (@4+@5) */
-  w04 += w05;
-  /* #25: output[1][0] = @4 */
-  if (res[1]) res[1][0] = w04;
-  /* #26: @4 = planar1_beta(@0, @3) */
-  arg1[0]=w00;
-  arg1[1]=wr03;
-  res1[0]=(&w04);
-  if (casadi_f11(arg1, res1, iw, w, 0)) return 1;
-  /* #27: output[2][0] = @4 */
-  if (res[2]) res[2][0] = w04;
+  /* #14: output[0][2] = @7 */
+  if (res[0]) res[0][2] = w07;
+  /* #15: output[0][3] = @8 */
+  if (res[0]) res[0][3] = w08;
+  /* #16: output[1][0] = @9 */
+  if (res[1]) res[1][0] = w09;
+  /* #17: output[2][0] = @10 */
+  if (res[2]) res[2][0] = w10;
   return 0;
 }
 
@@ -1580,25 +1558,25 @@ CASADI_SYMBOL_EXPORT const casadi_int* planar1_control_core_sparsity_out(casadi_
 }
 
 CASADI_SYMBOL_EXPORT int planar1_control_core_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 7;
-  if (sz_res) *sz_res = 6;
+  if (sz_arg) *sz_arg = 8;
+  if (sz_res) *sz_res = 7;
   if (sz_iw) *sz_iw = 0;
-  if (sz_w) *sz_w = 38;
+  if (sz_w) *sz_w = 30;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT int planar1_control_core_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 7*sizeof(const casadi_real*);
-  if (sz_res) *sz_res = 6*sizeof(casadi_real*);
+  if (sz_arg) *sz_arg = 8*sizeof(const casadi_real*);
+  if (sz_res) *sz_res = 7*sizeof(casadi_real*);
   if (sz_iw) *sz_iw = 0*sizeof(casadi_int);
-  if (sz_w) *sz_w = 38*sizeof(casadi_real);
+  if (sz_w) *sz_w = 30*sizeof(casadi_real);
   return 0;
 }
 
 /* planar1_control_smc:(x[4],z[0],r[5],p[8],gains[11])->(u,s,z_dot[0],u_cmd,y_hat[4]) */
 static int casadi_f15(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)arg; (void)iw; (void)w; (void)mem;
-  casadi_real **res1=res+5, *rr, w01, *w02=w+50, *w04=w+62, w05, w06, w07, w08, *w09=w+70, w10, w11;
+  casadi_real **res1=res+5, *rr, w01, *w02=w+42, *w04=w+54, w05, w06, w07, w08, *w09=w+62, w10, w11;
   casadi_real w12, w13, w14, w15, w16;
   const casadi_real **arg1=arg+5, *cs, *wr00, *wr03;
   /* #0: @0 = input[4][0] */
@@ -1845,25 +1823,25 @@ CASADI_SYMBOL_EXPORT const casadi_int* planar1_control_smc_sparsity_out(casadi_i
 }
 
 CASADI_SYMBOL_EXPORT int planar1_control_smc_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 12;
-  if (sz_res) *sz_res = 11;
+  if (sz_arg) *sz_arg = 13;
+  if (sz_res) *sz_res = 12;
   if (sz_iw) *sz_iw = 0;
-  if (sz_w) *sz_w = 82;
+  if (sz_w) *sz_w = 74;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT int planar1_control_smc_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 12*sizeof(const casadi_real*);
-  if (sz_res) *sz_res = 11*sizeof(casadi_real*);
+  if (sz_arg) *sz_arg = 13*sizeof(const casadi_real*);
+  if (sz_res) *sz_res = 12*sizeof(casadi_real*);
   if (sz_iw) *sz_iw = 0*sizeof(casadi_int);
-  if (sz_w) *sz_w = 82*sizeof(casadi_real);
+  if (sz_w) *sz_w = 74*sizeof(casadi_real);
   return 0;
 }
 
 /* planar1_control_ismc:(x[4],z,r[5],p[8],gains[13])->(u,s,z_dot,u_cmd,y_hat[4]) */
 static int casadi_f16(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)arg; (void)iw; (void)w; (void)mem;
-  casadi_real **res1=res+5, *rr, w01, *w02=w+52, *w04=w+64, w05, w06, w07, w08, *w09=w+72, w10, w11;
+  casadi_real **res1=res+5, *rr, w01, *w02=w+44, *w04=w+56, w05, w06, w07, w08, *w09=w+64, w10, w11;
   casadi_real w12, w13, w14, w15, w16;
   const casadi_real **arg1=arg+5, *cs, *wr00, *wr03;
   /* #0: @0 = input[4][0] */
@@ -2162,18 +2140,18 @@ CASADI_SYMBOL_EXPORT const casadi_int* planar1_control_ismc_sparsity_out(casadi_
 }
 
 CASADI_SYMBOL_EXPORT int planar1_control_ismc_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 12;
-  if (sz_res) *sz_res = 11;
+  if (sz_arg) *sz_arg = 13;
+  if (sz_res) *sz_res = 12;
   if (sz_iw) *sz_iw = 0;
-  if (sz_w) *sz_w = 84;
+  if (sz_w) *sz_w = 76;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT int planar1_control_ismc_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 12*sizeof(const casadi_real*);
-  if (sz_res) *sz_res = 11*sizeof(casadi_real*);
+  if (sz_arg) *sz_arg = 13*sizeof(const casadi_real*);
+  if (sz_res) *sz_res = 12*sizeof(casadi_real*);
   if (sz_iw) *sz_iw = 0*sizeof(casadi_int);
-  if (sz_w) *sz_w = 84*sizeof(casadi_real);
+  if (sz_w) *sz_w = 76*sizeof(casadi_real);
   return 0;
 }
 
@@ -2305,7 +2283,7 @@ CASADI_SYMBOL_EXPORT int planar1_control_ismc_zdot_work_bytes(casadi_int *sz_arg
 /* planar1_control_fl:(x[4],z[0],r[5],p[8],gains[8])->(u,s,z_dot[0],u_cmd,y_hat[4]) */
 static int casadi_f18(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)arg; (void)iw; (void)w; (void)mem;
-  casadi_real **res1=res+5, *rr, w01, *w02=w+47, *w04=w+59, w05, w06, w07, w08, *w09=w+67, w10, w11;
+  casadi_real **res1=res+5, *rr, w01, *w02=w+39, *w04=w+51, w05, w06, w07, w08, *w09=w+59, w10, w11;
   casadi_real w12, w13, w14, w15;
   const casadi_real **arg1=arg+5, *cs, *wr00, *wr03;
   /* #0: @0 = input[4][0] */
@@ -2522,26 +2500,26 @@ CASADI_SYMBOL_EXPORT const casadi_int* planar1_control_fl_sparsity_out(casadi_in
 }
 
 CASADI_SYMBOL_EXPORT int planar1_control_fl_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 12;
-  if (sz_res) *sz_res = 11;
+  if (sz_arg) *sz_arg = 13;
+  if (sz_res) *sz_res = 12;
   if (sz_iw) *sz_iw = 0;
-  if (sz_w) *sz_w = 78;
+  if (sz_w) *sz_w = 70;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT int planar1_control_fl_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 12*sizeof(const casadi_real*);
-  if (sz_res) *sz_res = 11*sizeof(casadi_real*);
+  if (sz_arg) *sz_arg = 13*sizeof(const casadi_real*);
+  if (sz_res) *sz_res = 12*sizeof(casadi_real*);
   if (sz_iw) *sz_iw = 0*sizeof(casadi_int);
-  if (sz_w) *sz_w = 78*sizeof(casadi_real);
+  if (sz_w) *sz_w = 70*sizeof(casadi_real);
   return 0;
 }
 
 /* planar1_control_adaptive:(x[4],z[6],r[5],p[8],gains[16])->(u,s,z_dot[6],u_cmd,y_hat[4]) */
 static int casadi_f19(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)arg; (void)iw; (void)w; (void)mem;
-  casadi_real **res1=res+5, *rr, w01, *w02=w+55, w04, w05, w06, w07, *w08=w+71, w09, w10, w11;
-  casadi_real w12, w13, w14, *w15=w+83, *w16=w+91, *w17=w+95, w18, w19, w20;
+  casadi_real **res1=res+5, *rr, w01, *w02=w+47, w04, w05, w06, w07, *w08=w+63, w09, w10, w11;
+  casadi_real w12, w13, w14, *w15=w+75, *w16=w+83, *w17=w+87, w18, w19, w20;
   const casadi_real **arg1=arg+5, *cs, *wr00, *wr03;
   /* #0: @0 = input[4][0] */
   wr00 = arg[4] ? arg[4] : casadi_zeros;
@@ -2978,17 +2956,17 @@ CASADI_SYMBOL_EXPORT const casadi_int* planar1_control_adaptive_sparsity_out(cas
 
 CASADI_SYMBOL_EXPORT int planar1_control_adaptive_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
   if (sz_arg) *sz_arg = 13;
-  if (sz_res) *sz_res = 11;
+  if (sz_res) *sz_res = 12;
   if (sz_iw) *sz_iw = 0;
-  if (sz_w) *sz_w = 103;
+  if (sz_w) *sz_w = 95;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT int planar1_control_adaptive_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
   if (sz_arg) *sz_arg = 13*sizeof(const casadi_real*);
-  if (sz_res) *sz_res = 11*sizeof(casadi_real*);
+  if (sz_res) *sz_res = 12*sizeof(casadi_real*);
   if (sz_iw) *sz_iw = 0*sizeof(casadi_int);
-  if (sz_w) *sz_w = 103*sizeof(casadi_real);
+  if (sz_w) *sz_w = 95*sizeof(casadi_real);
   return 0;
 }
 
@@ -3168,100 +3146,49 @@ CASADI_SYMBOL_EXPORT int planar1_control_adaptive_zdot_work_bytes(casadi_int *sz
   return 0;
 }
 
-/* planar1_beta_tau:(m[5],p[8])->(beta_tau) */
-static int casadi_f22(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)arg; (void)iw; (void)w; (void)mem;
-  casadi_int i;
-  casadi_real **res1=res+1, *rr, *w0=w+17, w1, *w2=w+23, *w3=w+26;
-  const casadi_real **arg1=arg+2, *cs, *wr4;
-  /* #0: @0 = input[0][0] */
-  casadi_copy(arg[0], 5, w0);
-  /* #1: @1 = @0[0] */
-  for (rr=(&w1), cs=w0+0; cs!=w0+1; cs+=1) *rr++ = *cs;
-  /* #2: @2 = zeros(3x1) */
-  casadi_clear(w2, 3);
-  /* #3: @3 = vertcat(@1, @2) */
-  rr=w3;
-  *rr++ = w1;
-  for (i=0, cs=w2; i<3; ++i) *rr++ = *cs++;
-  /* #4: @4 = input[1][0] */
-  wr4 = arg[1] ? arg[1] : casadi_zeros;
-  /* #5: @1 = planar1_beta(@3, @4) */
-  arg1[0]=w3;
-  arg1[1]=wr4;
-  res1[0]=(&w1);
-  if (casadi_f11(arg1, res1, iw, w, 0)) return 1;
-  /* #6: output[0][0] = @1 */
-  if (res[0]) res[0][0] = w1;
-  return 0;
-}
-
 /* planar1_control_core_tau:(m[5],p_hat[8])->(y_hat[4],alpha,beta) */
 static int casadi_f21(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)arg; (void)iw; (void)w; (void)mem;
-  casadi_real **res1=res+3, *rr, *w0=w+38, w1, w2, w3, w4, w6, w7, w8;
-  const casadi_real **arg1=arg+2, *cs, *wr5;
+  casadi_real **res1=res+3, *rr, *w00=w+9, w01, w02, w03, w04, w05, w07, w08, w09, w10;
+  const casadi_real **arg1=arg+2, *cs, *wr06;
   /* #0: @0 = input[0][0] */
-  casadi_copy(arg[0], 5, w0);
+  casadi_copy(arg[0], 5, w00);
   /* #1: @1 = @0[0] */
-  for (rr=(&w1), cs=w0+0; cs!=w0+1; cs+=1) *rr++ = *cs;
+  for (rr=(&w01), cs=w00+0; cs!=w00+1; cs+=1) *rr++ = *cs;
   /* #2: output[0][0] = @1 */
-  if (res[0]) res[0][0] = w1;
+  if (res[0]) res[0][0] = w01;
   /* #3: @2 = @0[1] */
-  for (rr=(&w2), cs=w0+1; cs!=w0+2; cs+=1) *rr++ = *cs;
+  for (rr=(&w02), cs=w00+1; cs!=w00+2; cs+=1) *rr++ = *cs;
   /* #4: output[0][1] = @2 */
-  if (res[0]) res[0][1] = w2;
+  if (res[0]) res[0][1] = w02;
   /* #5: @3 = @0[2] */
-  for (rr=(&w3), cs=w0+2; cs!=w0+3; cs+=1) *rr++ = *cs;
+  for (rr=(&w03), cs=w00+2; cs!=w00+3; cs+=1) *rr++ = *cs;
   /* #6: @4 = @0[3] */
-  for (rr=(&w4), cs=w0+3; cs!=w0+4; cs+=1) *rr++ = *cs;
-  /* #7: @5 = input[1][0] */
-  wr5 = arg[1] ? arg[1] : casadi_zeros;
-  /* #8: {@6, @7, @8} = planar1_accel_kernel(@1, @2, @3, @4, @5) */
-  arg1[0]=(&w1);
-  arg1[1]=(&w2);
-  arg1[2]=(&w3);
-  arg1[3]=(&w4);
-  arg1[4]=wr5;
-  res1[0]=(&w6);
-  res1[1]=(&w7);
-  res1[2]=(&w8);
+  for (rr=(&w04), cs=w00+3; cs!=w00+4; cs+=1) *rr++ = *cs;
+  /* #7: @5 = @0[4] */
+  for (rr=(&w05), cs=w00+4; cs!=w00+5; cs+=1) *rr++ = *cs;
+  /* #8: @6 = input[1][0] */
+  wr06 = arg[1] ? arg[1] : casadi_zeros;
+  /* #9: {@7, @8, @9, @10} = planar1_elastic_kernel(@1, @2, @3, @4, @5, @6) */
+  arg1[0]=(&w01);
+  arg1[1]=(&w02);
+  arg1[2]=(&w03);
+  arg1[3]=(&w04);
+  arg1[4]=(&w05);
+  arg1[5]=wr06;
+  res1[0]=(&w07);
+  res1[1]=(&w08);
+  res1[2]=(&w09);
+  res1[3]=(&w10);
   if (casadi_f9(arg1, res1, iw, w, 0)) return 1;
-  /* #9: output[0][2] = @6 */
-  if (res[0]) res[0][2] = w6;
-  /* #10: output[0][3] = @7 */
-  if (res[0]) res[0][3] = w7;
-  /* #11: @7 = @5[6] */
-  w7 = wr5[6];
-  /* #12: @1 = @0[4] */
-  for (rr=(&w1), cs=w0+4; cs!=w0+5; cs+=1) *rr++ = *cs;
-  /* #13: @7 = (@7*@1) */
-  w7 *= w1;
-  /* #14: @3 = (@3+@7) */
-  w3 += w7;
-  /* #15: @7 = @5[5] */
-  w7 = wr5[5];
-  /* #16: @6 = (@7*@6) */
-  w6  = (w7*w6);
-  /* #17: @3 = (@3+@6) */
-  w3 += w6;
-  /* #18: @6 = @5[4] */
-  w6 = wr5[4];
-  /* #19: @7 = (@7/@6) */
-  w7 /= w6;
-  /* #20: @7 = (@7*@8) */
-  w7 *= w8;
-  /* #21: @3 = (@3+@7) */
-  w3 += w7;
-  /* #22: output[1][0] = @3 */
-  if (res[1]) res[1][0] = w3;
-  /* #23: @3 = planar1_beta_tau(@0, @5) */
-  arg1[0]=w0;
-  arg1[1]=wr5;
-  res1[0]=(&w3);
-  if (casadi_f22(arg1, res1, iw, w, 0)) return 1;
-  /* #24: output[2][0] = @3 */
-  if (res[2]) res[2][0] = w3;
+  /* #10: output[0][2] = @7 */
+  if (res[0]) res[0][2] = w07;
+  /* #11: output[0][3] = @8 */
+  if (res[0]) res[0][3] = w08;
+  /* #12: output[1][0] = @9 */
+  if (res[1]) res[1][0] = w09;
+  /* #13: output[2][0] = @10 */
+  if (res[2]) res[2][0] = w10;
   return 0;
 }
 
@@ -3342,24 +3269,24 @@ CASADI_SYMBOL_EXPORT const casadi_int* planar1_control_core_tau_sparsity_out(cas
 
 CASADI_SYMBOL_EXPORT int planar1_control_core_tau_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
   if (sz_arg) *sz_arg = 8;
-  if (sz_res) *sz_res = 6;
+  if (sz_res) *sz_res = 7;
   if (sz_iw) *sz_iw = 0;
-  if (sz_w) *sz_w = 58;
+  if (sz_w) *sz_w = 31;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT int planar1_control_core_tau_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
   if (sz_arg) *sz_arg = 8*sizeof(const casadi_real*);
-  if (sz_res) *sz_res = 6*sizeof(casadi_real*);
+  if (sz_res) *sz_res = 7*sizeof(casadi_real*);
   if (sz_iw) *sz_iw = 0*sizeof(casadi_int);
-  if (sz_w) *sz_w = 58*sizeof(casadi_real);
+  if (sz_w) *sz_w = 31*sizeof(casadi_real);
   return 0;
 }
 
 /* planar1_control_smc_tau:(m[5],z[0],r[5],p[8],gains[11])->(u,s,z_dot[0],u_cmd,y_hat[4]) */
-static int casadi_f23(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f22(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)arg; (void)iw; (void)w; (void)mem;
-  casadi_real **res1=res+5, *rr, w01, *w02=w+70, *w04=w+83, w05, w06, w07, w08, w09, w10, w11;
+  casadi_real **res1=res+5, *rr, w01, *w02=w+43, *w04=w+56, w05, w06, w07, w08, w09, w10, w11;
   casadi_real w12, w13, w14, w15;
   const casadi_real **arg1=arg+5, *cs, *wr00, *wr03;
   /* #0: @0 = input[4][0] */
@@ -3521,7 +3448,7 @@ static int casadi_f23(const casadi_real** arg, casadi_real** res, casadi_int* iw
 }
 
 CASADI_SYMBOL_EXPORT int planar1_control_smc_tau(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f23(arg, res, iw, w, mem);
+  return casadi_f22(arg, res, iw, w, mem);
 }
 
 CASADI_SYMBOL_EXPORT int planar1_control_smc_tau_alloc_mem(void) {
@@ -3607,24 +3534,24 @@ CASADI_SYMBOL_EXPORT const casadi_int* planar1_control_smc_tau_sparsity_out(casa
 
 CASADI_SYMBOL_EXPORT int planar1_control_smc_tau_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
   if (sz_arg) *sz_arg = 13;
-  if (sz_res) *sz_res = 11;
+  if (sz_res) *sz_res = 12;
   if (sz_iw) *sz_iw = 0;
-  if (sz_w) *sz_w = 98;
+  if (sz_w) *sz_w = 71;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT int planar1_control_smc_tau_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
   if (sz_arg) *sz_arg = 13*sizeof(const casadi_real*);
-  if (sz_res) *sz_res = 11*sizeof(casadi_real*);
+  if (sz_res) *sz_res = 12*sizeof(casadi_real*);
   if (sz_iw) *sz_iw = 0*sizeof(casadi_int);
-  if (sz_w) *sz_w = 98*sizeof(casadi_real);
+  if (sz_w) *sz_w = 71*sizeof(casadi_real);
   return 0;
 }
 
 /* planar1_control_ismc_tau:(m[5],z,r[5],p[8],gains[13])->(u,s,z_dot,u_cmd,y_hat[4]) */
-static int casadi_f24(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f23(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)arg; (void)iw; (void)w; (void)mem;
-  casadi_real **res1=res+5, *rr, w01, *w02=w+72, *w04=w+85, w05, w06, w07, w08, *w09=w+93, w10, w11;
+  casadi_real **res1=res+5, *rr, w01, *w02=w+45, *w04=w+58, w05, w06, w07, w08, *w09=w+66, w10, w11;
   casadi_real w12, w13, w14, w15, w16;
   const casadi_real **arg1=arg+5, *cs, *wr00, *wr03;
   /* #0: @0 = input[4][0] */
@@ -3838,7 +3765,7 @@ static int casadi_f24(const casadi_real** arg, casadi_real** res, casadi_int* iw
 }
 
 CASADI_SYMBOL_EXPORT int planar1_control_ismc_tau(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f24(arg, res, iw, w, mem);
+  return casadi_f23(arg, res, iw, w, mem);
 }
 
 CASADI_SYMBOL_EXPORT int planar1_control_ismc_tau_alloc_mem(void) {
@@ -3924,22 +3851,22 @@ CASADI_SYMBOL_EXPORT const casadi_int* planar1_control_ismc_tau_sparsity_out(cas
 
 CASADI_SYMBOL_EXPORT int planar1_control_ismc_tau_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
   if (sz_arg) *sz_arg = 13;
-  if (sz_res) *sz_res = 11;
+  if (sz_res) *sz_res = 12;
   if (sz_iw) *sz_iw = 0;
-  if (sz_w) *sz_w = 105;
+  if (sz_w) *sz_w = 78;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT int planar1_control_ismc_tau_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
   if (sz_arg) *sz_arg = 13*sizeof(const casadi_real*);
-  if (sz_res) *sz_res = 11*sizeof(casadi_real*);
+  if (sz_res) *sz_res = 12*sizeof(casadi_real*);
   if (sz_iw) *sz_iw = 0*sizeof(casadi_int);
-  if (sz_w) *sz_w = 105*sizeof(casadi_real);
+  if (sz_w) *sz_w = 78*sizeof(casadi_real);
   return 0;
 }
 
 /* planar1_control_ismc_tau_zdot:(m[5],z,r[5],p[8],gains[13],u_cmd,u)->(z_dot) */
-static int casadi_f25(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f24(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a0, a1, a2, a3, a4, a5, a6;
   a0=arg[4]? arg[4][9] : 0;
@@ -3967,7 +3894,7 @@ static int casadi_f25(const casadi_real** arg, casadi_real** res, casadi_int* iw
 }
 
 CASADI_SYMBOL_EXPORT int planar1_control_ismc_tau_zdot(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f25(arg, res, iw, w, mem);
+  return casadi_f24(arg, res, iw, w, mem);
 }
 
 CASADI_SYMBOL_EXPORT int planar1_control_ismc_tau_zdot_alloc_mem(void) {
@@ -4064,9 +3991,9 @@ CASADI_SYMBOL_EXPORT int planar1_control_ismc_tau_zdot_work_bytes(casadi_int *sz
 }
 
 /* planar1_control_fl_tau:(m[5],z[0],r[5],p[8],gains[8])->(u,s,z_dot[0],u_cmd,y_hat[4]) */
-static int casadi_f26(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f25(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)arg; (void)iw; (void)w; (void)mem;
-  casadi_real **res1=res+5, *rr, w01, *w02=w+67, *w04=w+80, w05, w06, w07, w08, w09, w10, w11;
+  casadi_real **res1=res+5, *rr, w01, *w02=w+40, *w04=w+53, w05, w06, w07, w08, w09, w10, w11;
   casadi_real w12, w13, w14;
   const casadi_real **arg1=arg+5, *cs, *wr00, *wr03;
   /* #0: @0 = input[4][0] */
@@ -4198,7 +4125,7 @@ static int casadi_f26(const casadi_real** arg, casadi_real** res, casadi_int* iw
 }
 
 CASADI_SYMBOL_EXPORT int planar1_control_fl_tau(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f26(arg, res, iw, w, mem);
+  return casadi_f25(arg, res, iw, w, mem);
 }
 
 CASADI_SYMBOL_EXPORT int planar1_control_fl_tau_alloc_mem(void) {
@@ -4284,22 +4211,22 @@ CASADI_SYMBOL_EXPORT const casadi_int* planar1_control_fl_tau_sparsity_out(casad
 
 CASADI_SYMBOL_EXPORT int planar1_control_fl_tau_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
   if (sz_arg) *sz_arg = 13;
-  if (sz_res) *sz_res = 11;
+  if (sz_res) *sz_res = 12;
   if (sz_iw) *sz_iw = 0;
-  if (sz_w) *sz_w = 94;
+  if (sz_w) *sz_w = 67;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT int planar1_control_fl_tau_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
   if (sz_arg) *sz_arg = 13*sizeof(const casadi_real*);
-  if (sz_res) *sz_res = 11*sizeof(casadi_real*);
+  if (sz_res) *sz_res = 12*sizeof(casadi_real*);
   if (sz_iw) *sz_iw = 0*sizeof(casadi_int);
-  if (sz_w) *sz_w = 94*sizeof(casadi_real);
+  if (sz_w) *sz_w = 67*sizeof(casadi_real);
   return 0;
 }
 
 /* planar1_control_pdg:(x[4],z[0],r[5],p[8],gains[4])->(u,s,z_dot[0],u_cmd,y_hat[4]) */
-static int casadi_f27(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f26(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a0, a1, a2, a3, a4, a5;
   a0=arg[4]? arg[4][3] : 0;
@@ -4345,7 +4272,7 @@ static int casadi_f27(const casadi_real** arg, casadi_real** res, casadi_int* iw
 }
 
 CASADI_SYMBOL_EXPORT int planar1_control_pdg(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f27(arg, res, iw, w, mem);
+  return casadi_f26(arg, res, iw, w, mem);
 }
 
 CASADI_SYMBOL_EXPORT int planar1_control_pdg_alloc_mem(void) {
@@ -4446,7 +4373,7 @@ CASADI_SYMBOL_EXPORT int planar1_control_pdg_work_bytes(casadi_int *sz_arg, casa
 }
 
 /* planar1_feedforward:(r[5],p[8])->(tau_Jd,theta_d,dtheta_d,ddtheta_d,u_ff) */
-static int casadi_f29(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f28(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a0, a1, a2, a3, a4, a5, a6, a7, a8, a9;
   a0=arg[1]? arg[1][3] : 0;
@@ -4501,7 +4428,7 @@ static int casadi_f29(const casadi_real** arg, casadi_real** res, casadi_int* iw
 }
 
 /* planar1_control_impedance:(m[6],z,r[5],p[8],gains[7])->(u,s,z_dot,u_cmd,y_hat[4]) */
-static int casadi_f28(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f27(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real **res1=res+5, *rr, *w00=w+10, w01, *w02=w+18, w04, w05, w06, w07, w08, *w09=w+36, w10;
   casadi_real w11, *w12=w+44;
@@ -4522,7 +4449,7 @@ static int casadi_f28(const casadi_real** arg, casadi_real** res, casadi_int* iw
   res1[2]=(&w06);
   res1[3]=0;
   res1[4]=(&w07);
-  if (casadi_f29(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f28(arg1, res1, iw, w, 0)) return 1;
   /* #5: @8 = @0[0] */
   for (rr=(&w08), cs=w00+0; cs!=w00+1; cs+=1) *rr++ = *cs;
   /* #6: @9 = input[0][0] */
@@ -4637,7 +4564,7 @@ static int casadi_f28(const casadi_real** arg, casadi_real** res, casadi_int* iw
 }
 
 CASADI_SYMBOL_EXPORT int planar1_control_impedance(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f28(arg, res, iw, w, mem);
+  return casadi_f27(arg, res, iw, w, mem);
 }
 
 CASADI_SYMBOL_EXPORT int planar1_control_impedance_alloc_mem(void) {
@@ -4738,7 +4665,7 @@ CASADI_SYMBOL_EXPORT int planar1_control_impedance_work_bytes(casadi_int *sz_arg
 }
 
 /* planar1_control_impedance_zdot:(m[6],z,r[5],p[8],gains[7],u_cmd,u)->(z_dot) */
-static int casadi_f30(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f29(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a0, a1, a2, a3, a4, a5, a6;
   a0=arg[4]? arg[4][5] : 0;
@@ -4766,7 +4693,7 @@ static int casadi_f30(const casadi_real** arg, casadi_real** res, casadi_int* iw
 }
 
 CASADI_SYMBOL_EXPORT int planar1_control_impedance_zdot(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f30(arg, res, iw, w, mem);
+  return casadi_f29(arg, res, iw, w, mem);
 }
 
 CASADI_SYMBOL_EXPORT int planar1_control_impedance_zdot_alloc_mem(void) {
@@ -4863,7 +4790,7 @@ CASADI_SYMBOL_EXPORT int planar1_control_impedance_zdot_work_bytes(casadi_int *s
 }
 
 /* planar1_rigid_feedforward:(r[5],p[8])->(tau) */
-static int casadi_f32(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f31(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a0, a1, a2;
   a0=arg[1]? arg[1][3] : 0;
@@ -4879,7 +4806,7 @@ static int casadi_f32(const casadi_real** arg, casadi_real** res, casadi_int* iw
 }
 
 /* planar1_control_joint_impedance:(m[6],z,r[5],p[8],gains[6])->(u,s,z_dot,u_cmd,y_hat[4]) */
-static int casadi_f31(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f30(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real **res1=res+5, *rr, *w00=w+3, w01, *w02=w+10, w04, w05, w06, *w07=w+26, w08, w09, w10;
   casadi_real *w11=w+35;
@@ -4896,7 +4823,7 @@ static int casadi_f31(const casadi_real** arg, casadi_real** res, casadi_int* iw
   arg1[0]=w02;
   arg1[1]=wr03;
   res1[0]=(&w04);
-  if (casadi_f32(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f31(arg1, res1, iw, w, 0)) return 1;
   /* #5: @5 = @0[0] */
   for (rr=(&w05), cs=w00+0; cs!=w00+1; cs+=1) *rr++ = *cs;
   /* #6: @6 = @2[0] */
@@ -5003,7 +4930,7 @@ static int casadi_f31(const casadi_real** arg, casadi_real** res, casadi_int* iw
 }
 
 CASADI_SYMBOL_EXPORT int planar1_control_joint_impedance(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f31(arg, res, iw, w, mem);
+  return casadi_f30(arg, res, iw, w, mem);
 }
 
 CASADI_SYMBOL_EXPORT int planar1_control_joint_impedance_alloc_mem(void) {
@@ -5104,7 +5031,7 @@ CASADI_SYMBOL_EXPORT int planar1_control_joint_impedance_work_bytes(casadi_int *
 }
 
 /* planar1_control_joint_impedance_zdot:(m[6],z,r[5],p[8],gains[6],u_cmd,u)->(z_dot) */
-static int casadi_f33(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f32(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a0, a1, a2, a3, a4, a5, a6;
   a0=arg[4]? arg[4][4] : 0;
@@ -5132,7 +5059,7 @@ static int casadi_f33(const casadi_real** arg, casadi_real** res, casadi_int* iw
 }
 
 CASADI_SYMBOL_EXPORT int planar1_control_joint_impedance_zdot(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f33(arg, res, iw, w, mem);
+  return casadi_f32(arg, res, iw, w, mem);
 }
 
 CASADI_SYMBOL_EXPORT int planar1_control_joint_impedance_zdot_alloc_mem(void) {
@@ -5229,10 +5156,10 @@ CASADI_SYMBOL_EXPORT int planar1_control_joint_impedance_zdot_work_bytes(casadi_
 }
 
 /* planar1_T_tau:(m[5],p[8])->(T_tau[4]) */
-static int casadi_f34(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f33(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)arg; (void)iw; (void)w; (void)mem;
-  casadi_real **res1=res+1, *rr, *w0=w+8, w1, w2, w3, w4, w6, w7;
-  const casadi_real **arg1=arg+2, *cs, *wr5;
+  casadi_real **res1=res+1, *rr, *w0=w+9, w1, w2, w3, w4, w5, w7, w8;
+  const casadi_real **arg1=arg+2, *cs, *wr6;
   /* #0: @0 = input[0][0] */
   casadi_copy(arg[0], 5, w0);
   /* #1: @1 = @0[0] */
@@ -5247,27 +5174,31 @@ static int casadi_f34(const casadi_real** arg, casadi_real** res, casadi_int* iw
   for (rr=(&w3), cs=w0+2; cs!=w0+3; cs+=1) *rr++ = *cs;
   /* #6: @4 = @0[3] */
   for (rr=(&w4), cs=w0+3; cs!=w0+4; cs+=1) *rr++ = *cs;
-  /* #7: @5 = input[1][0] */
-  wr5 = arg[1] ? arg[1] : casadi_zeros;
-  /* #8: {@6, @7, NULL} = planar1_accel_kernel(@1, @2, @3, @4, @5) */
+  /* #7: @5 = @0[4] */
+  for (rr=(&w5), cs=w0+4; cs!=w0+5; cs+=1) *rr++ = *cs;
+  /* #8: @6 = input[1][0] */
+  wr6 = arg[1] ? arg[1] : casadi_zeros;
+  /* #9: {@7, @8, NULL, NULL} = planar1_elastic_kernel(@1, @2, @3, @4, @5, @6) */
   arg1[0]=(&w1);
   arg1[1]=(&w2);
   arg1[2]=(&w3);
   arg1[3]=(&w4);
-  arg1[4]=wr5;
-  res1[0]=(&w6);
-  res1[1]=(&w7);
+  arg1[4]=(&w5);
+  arg1[5]=wr6;
+  res1[0]=(&w7);
+  res1[1]=(&w8);
   res1[2]=0;
+  res1[3]=0;
   if (casadi_f9(arg1, res1, iw, w, 0)) return 1;
-  /* #9: output[0][2] = @6 */
-  if (res[0]) res[0][2] = w6;
-  /* #10: output[0][3] = @7 */
-  if (res[0]) res[0][3] = w7;
+  /* #10: output[0][2] = @7 */
+  if (res[0]) res[0][2] = w7;
+  /* #11: output[0][3] = @8 */
+  if (res[0]) res[0][3] = w8;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT int planar1_T_tau(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f34(arg, res, iw, w, mem);
+  return casadi_f33(arg, res, iw, w, mem);
 }
 
 CASADI_SYMBOL_EXPORT int planar1_T_tau_alloc_mem(void) {
@@ -5338,77 +5269,59 @@ CASADI_SYMBOL_EXPORT const casadi_int* planar1_T_tau_sparsity_out(casadi_int i) 
 }
 
 CASADI_SYMBOL_EXPORT int planar1_T_tau_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 7;
-  if (sz_res) *sz_res = 4;
+  if (sz_arg) *sz_arg = 8;
+  if (sz_res) *sz_res = 5;
   if (sz_iw) *sz_iw = 0;
-  if (sz_w) *sz_w = 27;
+  if (sz_w) *sz_w = 29;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT int planar1_T_tau_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 7*sizeof(const casadi_real*);
-  if (sz_res) *sz_res = 4*sizeof(casadi_real*);
+  if (sz_arg) *sz_arg = 8*sizeof(const casadi_real*);
+  if (sz_res) *sz_res = 5*sizeof(casadi_real*);
   if (sz_iw) *sz_iw = 0*sizeof(casadi_int);
-  if (sz_w) *sz_w = 27*sizeof(casadi_real);
+  if (sz_w) *sz_w = 29*sizeof(casadi_real);
   return 0;
 }
 
 /* planar1_alpha_tau:(m[5],p[8])->(alpha_tau) */
-static int casadi_f35(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f34(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)arg; (void)iw; (void)w; (void)mem;
-  casadi_real **res1=res+1, *rr, *w0=w+8, w1, w3, w4, w5, w6, w7, w8, w9;
-  const casadi_real **arg1=arg+2, *cs, *wr2;
+  casadi_real **res1=res+1, *rr, *w0=w+9, w1, w2, w3, w4, w5, w7;
+  const casadi_real **arg1=arg+2, *cs, *wr6;
   /* #0: @0 = input[0][0] */
   casadi_copy(arg[0], 5, w0);
-  /* #1: @1 = @0[2] */
-  for (rr=(&w1), cs=w0+2; cs!=w0+3; cs+=1) *rr++ = *cs;
-  /* #2: @2 = input[1][0] */
-  wr2 = arg[1] ? arg[1] : casadi_zeros;
-  /* #3: @3 = @2[6] */
-  w3 = wr2[6];
-  /* #4: @4 = @0[4] */
-  for (rr=(&w4), cs=w0+4; cs!=w0+5; cs+=1) *rr++ = *cs;
-  /* #5: @3 = (@3*@4) */
-  w3 *= w4;
-  /* #6: @3 = (@1+@3) */
-  w3  = (w1+w3);
-  /* #7: @4 = @2[5] */
-  w4 = wr2[5];
-  /* #8: @5 = @0[0] */
-  for (rr=(&w5), cs=w0+0; cs!=w0+1; cs+=1) *rr++ = *cs;
-  /* #9: @6 = @0[1] */
-  for (rr=(&w6), cs=w0+1; cs!=w0+2; cs+=1) *rr++ = *cs;
-  /* #10: @7 = @0[3] */
-  for (rr=(&w7), cs=w0+3; cs!=w0+4; cs+=1) *rr++ = *cs;
-  /* #11: {@8, NULL, @9} = planar1_accel_kernel(@5, @6, @1, @7, @2) */
-  arg1[0]=(&w5);
-  arg1[1]=(&w6);
-  arg1[2]=(&w1);
-  arg1[3]=(&w7);
-  arg1[4]=wr2;
-  res1[0]=(&w8);
+  /* #1: @1 = @0[0] */
+  for (rr=(&w1), cs=w0+0; cs!=w0+1; cs+=1) *rr++ = *cs;
+  /* #2: @2 = @0[1] */
+  for (rr=(&w2), cs=w0+1; cs!=w0+2; cs+=1) *rr++ = *cs;
+  /* #3: @3 = @0[2] */
+  for (rr=(&w3), cs=w0+2; cs!=w0+3; cs+=1) *rr++ = *cs;
+  /* #4: @4 = @0[3] */
+  for (rr=(&w4), cs=w0+3; cs!=w0+4; cs+=1) *rr++ = *cs;
+  /* #5: @5 = @0[4] */
+  for (rr=(&w5), cs=w0+4; cs!=w0+5; cs+=1) *rr++ = *cs;
+  /* #6: @6 = input[1][0] */
+  wr6 = arg[1] ? arg[1] : casadi_zeros;
+  /* #7: {NULL, NULL, @7, NULL} = planar1_elastic_kernel(@1, @2, @3, @4, @5, @6) */
+  arg1[0]=(&w1);
+  arg1[1]=(&w2);
+  arg1[2]=(&w3);
+  arg1[3]=(&w4);
+  arg1[4]=(&w5);
+  arg1[5]=wr6;
+  res1[0]=0;
   res1[1]=0;
-  res1[2]=(&w9);
+  res1[2]=(&w7);
+  res1[3]=0;
   if (casadi_f9(arg1, res1, iw, w, 0)) return 1;
-  /* #12: @8 = (@4*@8) */
-  w8  = (w4*w8);
-  /* #13: @3 = (@3+@8) */
-  w3 += w8;
-  /* #14: @8 = @2[4] */
-  w8 = wr2[4];
-  /* #15: @4 = (@4/@8) */
-  w4 /= w8;
-  /* #16: @4 = (@4*@9) */
-  w4 *= w9;
-  /* #17: @3 = (@3+@4) */
-  w3 += w4;
-  /* #18: output[0][0] = @3 */
-  if (res[0]) res[0][0] = w3;
+  /* #8: output[0][0] = @7 */
+  if (res[0]) res[0][0] = w7;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT int planar1_alpha_tau(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f35(arg, res, iw, w, mem);
+  return casadi_f34(arg, res, iw, w, mem);
 }
 
 CASADI_SYMBOL_EXPORT int planar1_alpha_tau_alloc_mem(void) {
@@ -5479,23 +5392,51 @@ CASADI_SYMBOL_EXPORT const casadi_int* planar1_alpha_tau_sparsity_out(casadi_int
 }
 
 CASADI_SYMBOL_EXPORT int planar1_alpha_tau_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 7;
-  if (sz_res) *sz_res = 4;
+  if (sz_arg) *sz_arg = 8;
+  if (sz_res) *sz_res = 5;
   if (sz_iw) *sz_iw = 0;
-  if (sz_w) *sz_w = 29;
+  if (sz_w) *sz_w = 28;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT int planar1_alpha_tau_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 7*sizeof(const casadi_real*);
-  if (sz_res) *sz_res = 4*sizeof(casadi_real*);
+  if (sz_arg) *sz_arg = 8*sizeof(const casadi_real*);
+  if (sz_res) *sz_res = 5*sizeof(casadi_real*);
   if (sz_iw) *sz_iw = 0*sizeof(casadi_int);
-  if (sz_w) *sz_w = 29*sizeof(casadi_real);
+  if (sz_w) *sz_w = 28*sizeof(casadi_real);
+  return 0;
+}
+
+/* planar1_beta_tau:(m[5],p[8])->(beta_tau) */
+static int casadi_f35(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  (void)arg; (void)iw; (void)w; (void)mem;
+  casadi_int i;
+  casadi_real **res1=res+1, *rr, *w0=w+17, w1, *w2=w+23, *w3=w+26;
+  const casadi_real **arg1=arg+2, *cs, *wr4;
+  /* #0: @0 = input[0][0] */
+  casadi_copy(arg[0], 5, w0);
+  /* #1: @1 = @0[0] */
+  for (rr=(&w1), cs=w0+0; cs!=w0+1; cs+=1) *rr++ = *cs;
+  /* #2: @2 = zeros(3x1) */
+  casadi_clear(w2, 3);
+  /* #3: @3 = vertcat(@1, @2) */
+  rr=w3;
+  *rr++ = w1;
+  for (i=0, cs=w2; i<3; ++i) *rr++ = *cs++;
+  /* #4: @4 = input[1][0] */
+  wr4 = arg[1] ? arg[1] : casadi_zeros;
+  /* #5: @1 = planar1_beta(@3, @4) */
+  arg1[0]=w3;
+  arg1[1]=wr4;
+  res1[0]=(&w1);
+  if (casadi_f11(arg1, res1, iw, w, 0)) return 1;
+  /* #6: output[0][0] = @1 */
+  if (res[0]) res[0][0] = w1;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT int planar1_beta_tau(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f22(arg, res, iw, w, mem);
+  return casadi_f35(arg, res, iw, w, mem);
 }
 
 CASADI_SYMBOL_EXPORT int planar1_beta_tau_alloc_mem(void) {
@@ -5582,7 +5523,7 @@ CASADI_SYMBOL_EXPORT int planar1_beta_tau_work_bytes(casadi_int *sz_arg, casadi_
 }
 
 CASADI_SYMBOL_EXPORT int planar1_feedforward(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f29(arg, res, iw, w, mem);
+  return casadi_f28(arg, res, iw, w, mem);
 }
 
 CASADI_SYMBOL_EXPORT int planar1_feedforward_alloc_mem(void) {

@@ -1137,17 +1137,18 @@ CASADI_SYMBOL_EXPORT int planar2_ad_work_bytes(casadi_int *sz_arg, casadi_int* s
   return 0;
 }
 
-/* planar2_accel_kernel:(q[2],dq[2],s[2],ds[2],p[15])->(y3[2],y4[2],w[2]) */
+/* planar2_elastic_kernel:(q[2],dq[2],s[2],ds[2],dq_m[2],p[15])->(y3[2],y4[2],alpha[2],beta[2x2]) */
 static int casadi_f10(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14, a15, a16, a17, a18, a19, a20, a21, a22, a23;
-  casadi_real a24, a25, a26, a27, a28, a29, a30, a31;
+  casadi_real a24, a25, a26, a27, a28, a29, a30, a31, a32, a33, a34, a35;
+  casadi_real a36;
   a00=arg[2]? arg[2][0] : 0;
-  a01=arg[4]? arg[4][1] : 0;
-  a02=arg[4]? arg[4][5] : 0;
+  a01=arg[5]? arg[5][1] : 0;
+  a02=arg[5]? arg[5][5] : 0;
   a03=(a01*a02);
-  a04=arg[4]? arg[4][2] : 0;
+  a04=arg[5]? arg[5][2] : 0;
   a05=(a03*a04);
   a06=arg[0]? arg[0][0] : 0;
   a07=cos(a06);
@@ -1163,13 +1164,13 @@ static int casadi_f10(const casadi_real** arg, casadi_real** res, casadi_int* iw
   a12=arg[1]? arg[1][0] : 0;
   a13=casadi_sq(a12);
   a14=(a11*a13);
-  a15=arg[4]? arg[4][14] : 0;
+  a15=arg[5]? arg[5][14] : 0;
   a03=(a03*a15);
   a16=(a03*a09);
   a14=(a14+a16);
   a16=(a04*a01);
-  a17=arg[4]? arg[4][0] : 0;
-  a18=arg[4]? arg[4][4] : 0;
+  a17=arg[5]? arg[5][0] : 0;
+  a18=arg[5]? arg[5][4] : 0;
   a19=(a17*a18);
   a16=(a16+a19);
   a16=(a16*a15);
@@ -1180,140 +1181,170 @@ static int casadi_f10(const casadi_real** arg, casadi_real** res, casadi_int* iw
   a21=casadi_sq(a20);
   a22=(a11*a21);
   a15=(a15-a22);
-  a00=(a00-a15);
-  a15=(a07*a08);
-  a22=(a06*a09);
-  a15=(a15+a22);
-  a22=(a05*a15);
-  a23=arg[4]? arg[4][6] : 0;
+  a15=(a00-a15);
+  a22=(a07*a08);
+  a23=(a06*a09);
+  a22=(a22+a23);
+  a23=(a05*a22);
+  a24=arg[5]? arg[5][6] : 0;
   a18=casadi_sq(a18);
   a17=(a17*a18);
-  a23=(a23+a17);
+  a24=(a24+a17);
   a04=casadi_sq(a04);
   a04=(a01*a04);
-  a23=(a23+a04);
-  a23=(a22+a23);
-  a04=arg[4]? arg[4][7] : 0;
+  a24=(a24+a04);
+  a24=(a23+a24);
+  a04=arg[5]? arg[5][7] : 0;
   a02=casadi_sq(a02);
   a01=(a01*a02);
   a04=(a04+a01);
-  a22=(a04+a22);
-  a23=(a23+a22);
-  a01=(a00/a23);
-  a02=(a22/a23);
+  a23=(a04+a23);
+  a24=(a24+a23);
+  a01=(a15/a24);
+  a02=(a23/a24);
   a17=arg[2]? arg[2][1] : 0;
-  a17=(a17-a14);
-  a00=(a02*a00);
-  a17=(a17-a00);
-  a22=(a02*a22);
-  a04=(a04-a22);
-  a17=(a17/a04);
-  a22=(a02*a17);
-  a01=(a01-a22);
+  a14=(a17-a14);
+  a15=(a02*a15);
+  a14=(a14-a15);
+  a15=(a02*a23);
+  a15=(a04-a15);
+  a14=(a14/a15);
+  a18=(a02*a14);
+  a01=(a01-a18);
   if (res[0]!=0) res[0][0]=a01;
-  if (res[0]!=0) res[0][1]=a17;
-  a22=arg[3]? arg[3][0] : 0;
-  a00=2.;
-  a14=(a00*a12);
-  a18=(a14*a01);
-  a24=(a11*a18);
-  a25=(a15*a19);
-  a26=(a05*a25);
-  a27=(a26*a13);
-  a24=(a24+a27);
-  a27=(a20*a08);
-  a27=(a03*a27);
-  a24=(a24+a27);
+  if (res[0]!=0) res[0][1]=a14;
+  a18=arg[3]? arg[3][0] : 0;
+  a25=2.;
+  a26=(a25*a12);
+  a27=(a26*a01);
+  a28=(a11*a27);
+  a29=(a22*a19);
+  a30=(a05*a29);
+  a31=(a30*a13);
+  a28=(a28+a31);
+  a31=(a20*a08);
+  a31=(a03*a31);
+  a28=(a28+a31);
   a12=(a12*a07);
   a12=(a16*a12);
-  a12=(a24+a12);
-  a20=(a00*a20);
-  a27=(a01+a17);
-  a28=(a20*a27);
-  a29=(a11*a28);
-  a12=(a12-a29);
-  a26=(a26*a21);
-  a12=(a12-a26);
-  a26=(a10*a19);
-  a29=(a05*a26);
-  a30=(a29+a29);
-  a31=(a30*a01);
-  a12=(a12-a31);
-  a31=(a29*a17);
-  a12=(a12-a31);
-  a22=(a22-a12);
-  a23=(a22/a23);
-  a12=arg[3]? arg[3][1] : 0;
-  a31=(a29*a01);
-  a24=(a24-a31);
-  a12=(a12-a24);
-  a22=(a02*a22);
-  a12=(a12-a22);
-  a12=(a12/a04);
-  a02=(a02*a12);
-  a23=(a23-a02);
-  if (res[1]!=0) res[1][0]=a23;
-  if (res[1]!=0) res[1][1]=a12;
-  a02=casadi_sq(a01);
-  a02=(a00*a02);
-  a14=(a14*a23);
-  a02=(a02+a14);
-  a02=(a11*a02);
-  a15=(a15*a17);
-  a26=(a26*a19);
-  a15=(a15-a26);
-  a15=(a05*a15);
-  a26=(a15*a13);
-  a02=(a02+a26);
-  a08=(a27*a08);
+  a12=(a28+a12);
+  a20=(a25*a20);
+  a31=(a01+a14);
+  a32=(a20*a31);
+  a33=(a11*a32);
+  a12=(a12-a33);
+  a30=(a30*a21);
+  a12=(a12-a30);
+  a30=(a10*a19);
+  a33=(a05*a30);
+  a34=(a33+a33);
+  a35=(a34*a01);
+  a12=(a12-a35);
+  a35=(a33*a14);
+  a12=(a12-a35);
+  a18=(a18-a12);
+  a12=(a18/a24);
+  a35=arg[3]? arg[3][1] : 0;
+  a36=(a33*a01);
+  a28=(a28-a36);
+  a35=(a35-a28);
+  a18=(a02*a18);
+  a35=(a35-a18);
+  a35=(a35/a15);
+  a02=(a02*a35);
+  a12=(a12-a02);
+  if (res[1]!=0) res[1][0]=a12;
+  if (res[1]!=0) res[1][1]=a35;
+  a02=arg[5]? arg[5][10] : 0;
+  a15=arg[5]? arg[5][8] : 0;
+  a15=(a02/a15);
+  a18=casadi_sq(a01);
+  a18=(a25*a18);
+  a26=(a26*a12);
+  a18=(a18+a26);
+  a18=(a11*a18);
+  a22=(a22*a14);
+  a30=(a30*a19);
+  a22=(a22-a30);
+  a22=(a05*a22);
+  a30=(a22*a13);
+  a18=(a18+a30);
+  a08=(a31*a08);
   a09=(a21*a09);
   a08=(a08-a09);
   a03=(a03*a08);
-  a02=(a02+a03);
-  a03=(a00*a05);
-  a03=(a03*a25);
-  a03=(a03*a18);
-  a02=(a02+a03);
+  a18=(a18+a03);
+  a03=(a25*a05);
+  a03=(a03*a29);
+  a03=(a03*a27);
+  a18=(a18+a03);
   a07=(a01*a07);
   a13=(a13*a06);
   a07=(a07-a13);
   a16=(a16*a07);
-  a16=(a02+a16);
-  a27=casadi_sq(a27);
-  a27=(a00*a27);
-  a07=(a23+a12);
+  a16=(a18+a16);
+  a31=casadi_sq(a31);
+  a31=(a25*a31);
+  a07=(a12+a35);
   a20=(a20*a07);
-  a27=(a27+a20);
-  a11=(a11*a27);
+  a31=(a31+a20);
+  a11=(a11*a31);
   a16=(a16-a11);
-  a15=(a15*a21);
-  a16=(a16-a15);
-  a15=-2.;
-  a15=(a15*a05);
-  a15=(a15*a25);
-  a15=(a15*a28);
-  a16=(a16+a15);
-  a10=(a10*a17);
-  a25=(a25*a19);
-  a10=(a10+a25);
+  a22=(a22*a21);
+  a16=(a16-a22);
+  a22=-2.;
+  a22=(a22*a05);
+  a22=(a22*a29);
+  a22=(a22*a32);
+  a16=(a16+a22);
+  a10=(a10*a14);
+  a29=(a29*a19);
+  a10=(a10+a29);
   a05=(a05*a10);
   a10=(a05+a05);
   a10=(a10*a01);
   a16=(a16-a10);
-  a17=(a05*a17);
-  a16=(a16-a17);
-  a30=(a00*a30);
-  a30=(a30*a23);
-  a16=(a16-a30);
-  a00=(a00*a29);
-  a12=(a00*a12);
-  a16=(a16-a12);
+  a10=(a05*a14);
+  a16=(a16-a10);
+  a34=(a25*a34);
+  a34=(a34*a12);
+  a16=(a16-a34);
+  a25=(a25*a33);
+  a35=(a25*a35);
+  a16=(a16-a35);
+  a16=(a15*a16);
+  a02=(a02*a01);
+  a16=(a16+a02);
+  a16=(a16+a00);
+  a00=arg[5]? arg[5][12] : 0;
+  a02=arg[4]? arg[4][0] : 0;
+  a00=(a00*a02);
+  a16=(a16+a00);
   if (res[2]!=0) res[2][0]=a16;
+  a16=arg[5]? arg[5][11] : 0;
+  a00=arg[5]? arg[5][9] : 0;
+  a00=(a16/a00);
   a05=(a05*a01);
-  a02=(a02-a05);
-  a00=(a00*a23);
-  a02=(a02-a00);
-  if (res[2]!=0) res[2][1]=a02;
+  a18=(a18-a05);
+  a25=(a25*a12);
+  a18=(a18-a25);
+  a18=(a00*a18);
+  a16=(a16*a14);
+  a18=(a18+a16);
+  a18=(a18+a17);
+  a17=arg[5]? arg[5][13] : 0;
+  a16=arg[4]? arg[4][1] : 0;
+  a17=(a17*a16);
+  a18=(a18+a17);
+  if (res[2]!=0) res[2][1]=a18;
+  a24=(a15*a24);
+  if (res[3]!=0) res[3][0]=a24;
+  a24=(a00*a23);
+  if (res[3]!=0) res[3][1]=a24;
+  a15=(a15*a23);
+  if (res[3]!=0) res[3][2]=a15;
+  a00=(a00*a04);
+  if (res[3]!=0) res[3][3]=a00;
   return 0;
 }
 
@@ -1321,54 +1352,56 @@ static int casadi_f10(const casadi_real** arg, casadi_real** res, casadi_int* iw
 static int casadi_f9(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i;
-  casadi_real **res1=res+1, *rr, w4, w5, *w6=w+61, *w7=w+63, *w8=w+65, *w9=w+67;
-  const casadi_real **arg1=arg+2, *cr, *cs, *wr0, *wr1, *wr2, *wr3, *wr7, *wr8;
+  casadi_real **res1=res+1, *rr, w04, w05, *w06=w+66, *w07=w+68, *w09=w+72, *w10=w+74;
+  const casadi_real **arg1=arg+2, *cr, *cs, *wr00, *wr01, *wr02, *wr03, *wr07, *wr08;
   /* #0: @0 = input[0][0] */
-  wr0 = arg[0] ? arg[0] : casadi_zeros;
+  wr00 = arg[0] ? arg[0] : casadi_zeros;
   /* #1: @1 = @0[:2] */
-  wr1 = wr0+0;
+  wr01 = wr00+0;
   /* #2: output[0][0] = @1 */
-  casadi_copy(wr1, 2, res[0]);
+  casadi_copy(wr01, 2, res[0]);
   /* #3: @2 = @0[2:4] */
-  wr2 = wr0+2;
+  wr02 = wr00+2;
   /* #4: output[0][1] = @2 */
-  if (res[0]) casadi_copy(wr2, 2, res[0]+2);
+  if (res[0]) casadi_copy(wr02, 2, res[0]+2);
   /* #5: @3 = input[1][0] */
-  wr3 = arg[1] ? arg[1] : casadi_zeros;
+  wr03 = arg[1] ? arg[1] : casadi_zeros;
   /* #6: @4 = @3[8] */
-  w4 = wr3[8];
+  w04 = wr03[8];
   /* #7: @5 = @3[9] */
-  w5 = wr3[9];
+  w05 = wr03[9];
   /* #8: @6 = vertcat(@4, @5) */
-  rr=w6;
-  *rr++ = w4;
-  *rr++ = w5;
+  rr=w06;
+  *rr++ = w04;
+  *rr++ = w05;
   /* #9: @7 = @0[4:6] */
-  wr7 = wr0+4;
+  wr07 = wr00+4;
   /* #10: @7 = (@7-@1) */
-  for (i=0, rr=w7, cr=wr7, cs=wr1; i<2; ++i) (*rr++)  = ((*cr++)-(*cs++));
+  for (i=0, rr=w07, cr=wr07, cs=wr01; i<2; ++i) (*rr++)  = ((*cr++)-(*cs++));
   /* #11: @7 = (@6*@7) */
-  for (i=0, rr=w7, cr=w6, cs=w7; i<2; ++i) (*rr++)  = ((*cr++)*(*cs++));
+  for (i=0, rr=w07, cr=w06, cs=w07; i<2; ++i) (*rr++)  = ((*cr++)*(*cs++));
   /* #12: @8 = @0[6:8] */
-  wr8 = wr0+6;
-  /* #13: @8 = (@8-@2) */
-  for (i=0, rr=w8, cr=wr8, cs=wr2; i<2; ++i) (*rr++)  = ((*cr++)-(*cs++));
-  /* #14: @6 = (@6*@8) */
-  for (i=0, rr=w6, cs=w8; i<2; ++i) (*rr++) *= (*cs++);
-  /* #15: {@8, @9, NULL} = planar2_accel_kernel(@1, @2, @7, @6, @3) */
-  arg1[0]=wr1;
-  arg1[1]=wr2;
-  arg1[2]=w7;
-  arg1[3]=w6;
-  arg1[4]=wr3;
-  res1[0]=w8;
-  res1[1]=w9;
+  wr08 = wr00+6;
+  /* #13: @9 = (@8-@2) */
+  for (i=0, rr=w09, cr=wr08, cs=wr02; i<2; ++i) (*rr++)  = ((*cr++)-(*cs++));
+  /* #14: @6 = (@6*@9) */
+  for (i=0, rr=w06, cs=w09; i<2; ++i) (*rr++) *= (*cs++);
+  /* #15: {@9, @10, NULL, NULL} = planar2_elastic_kernel(@1, @2, @7, @6, @8, @3) */
+  arg1[0]=wr01;
+  arg1[1]=wr02;
+  arg1[2]=w07;
+  arg1[3]=w06;
+  arg1[4]=wr08;
+  arg1[5]=wr03;
+  res1[0]=w09;
+  res1[1]=w10;
   res1[2]=0;
+  res1[3]=0;
   if (casadi_f10(arg1, res1, iw, w, 0)) return 1;
-  /* #16: output[0][2] = @8 */
-  if (res[0]) casadi_copy(w8, 2, res[0]+4);
-  /* #17: output[0][3] = @9 */
-  if (res[0]) casadi_copy(w9, 2, res[0]+6);
+  /* #16: output[0][2] = @9 */
+  if (res[0]) casadi_copy(w09, 2, res[0]+4);
+  /* #17: output[0][3] = @10 */
+  if (res[0]) casadi_copy(w10, 2, res[0]+6);
   return 0;
 }
 
@@ -1444,18 +1477,18 @@ CASADI_SYMBOL_EXPORT const casadi_int* planar2_T_sparsity_out(casadi_int i) {
 }
 
 CASADI_SYMBOL_EXPORT int planar2_T_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 7;
-  if (sz_res) *sz_res = 4;
+  if (sz_arg) *sz_arg = 8;
+  if (sz_res) *sz_res = 5;
   if (sz_iw) *sz_iw = 0;
-  if (sz_w) *sz_w = 69;
+  if (sz_w) *sz_w = 76;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT int planar2_T_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 7*sizeof(const casadi_real*);
-  if (sz_res) *sz_res = 4*sizeof(casadi_real*);
+  if (sz_arg) *sz_arg = 8*sizeof(const casadi_real*);
+  if (sz_res) *sz_res = 5*sizeof(casadi_real*);
   if (sz_iw) *sz_iw = 0*sizeof(casadi_int);
-  if (sz_w) *sz_w = 69*sizeof(casadi_real);
+  if (sz_w) *sz_w = 76*sizeof(casadi_real);
   return 0;
 }
 
@@ -1463,78 +1496,50 @@ CASADI_SYMBOL_EXPORT int planar2_T_work_bytes(casadi_int *sz_arg, casadi_int* sz
 static int casadi_f11(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i;
-  casadi_real **res1=res+1, *rr, w01, w02, *w03=w+49, *w04=w+51, *w05=w+53, *w09=w+67, *w11=w+71, *w12=w+73;
-  const casadi_real **arg1=arg+2, *cr, *cs, *wr00, *wr06, *wr07, *wr08, *wr09, *wr10;
-  /* #0: @0 = input[1][0] */
-  wr00 = arg[1] ? arg[1] : casadi_zeros;
-  /* #1: @1 = @0[10] */
-  w01 = wr00[10];
-  /* #2: @2 = @0[11] */
-  w02 = wr00[11];
-  /* #3: @3 = vertcat(@1, @2) */
-  rr=w03;
-  *rr++ = w01;
-  *rr++ = w02;
-  /* #4: @1 = @0[8] */
-  w01 = wr00[8];
-  /* #5: @2 = @0[9] */
-  w02 = wr00[9];
-  /* #6: @4 = vertcat(@1, @2) */
-  rr=w04;
-  *rr++ = w01;
-  *rr++ = w02;
-  /* #7: @5 = (@3/@4) */
-  for (i=0, rr=w05, cr=w03, cs=w04; i<2; ++i) (*rr++)  = ((*cr++)/(*cs++));
-  /* #8: @6 = input[0][0] */
-  wr06 = arg[0] ? arg[0] : casadi_zeros;
-  /* #9: @7 = @6[:2] */
-  wr07 = wr06+0;
-  /* #10: @8 = @6[2:4] */
-  wr08 = wr06+2;
-  /* #11: @9 = @6[4:6] */
-  wr09 = wr06+4;
-  /* #12: @9 = (@9-@7) */
-  for (i=0, rr=w09, cr=wr09, cs=wr07; i<2; ++i) (*rr++)  = ((*cr++)-(*cs++));
-  /* #13: @9 = (@4*@9) */
-  for (i=0, rr=w09, cr=w04, cs=w09; i<2; ++i) (*rr++)  = ((*cr++)*(*cs++));
-  /* #14: @10 = @6[6:8] */
-  wr10 = wr06+6;
-  /* #15: @11 = (@10-@8) */
-  for (i=0, rr=w11, cr=wr10, cs=wr08; i<2; ++i) (*rr++)  = ((*cr++)-(*cs++));
-  /* #16: @4 = (@4*@11) */
-  for (i=0, rr=w04, cs=w11; i<2; ++i) (*rr++) *= (*cs++);
-  /* #17: {@11, NULL, @12} = planar2_accel_kernel(@7, @8, @9, @4, @0) */
-  arg1[0]=wr07;
-  arg1[1]=wr08;
-  arg1[2]=w09;
-  arg1[3]=w04;
-  arg1[4]=wr00;
-  res1[0]=w11;
+  casadi_real **res1=res+1, *rr, w4, w5, *w6=w+66, *w7=w+68, *w9=w+72;
+  const casadi_real **arg1=arg+2, *cr, *cs, *wr0, *wr1, *wr2, *wr3, *wr7, *wr8;
+  /* #0: @0 = input[0][0] */
+  wr0 = arg[0] ? arg[0] : casadi_zeros;
+  /* #1: @1 = @0[:2] */
+  wr1 = wr0+0;
+  /* #2: @2 = @0[2:4] */
+  wr2 = wr0+2;
+  /* #3: @3 = input[1][0] */
+  wr3 = arg[1] ? arg[1] : casadi_zeros;
+  /* #4: @4 = @3[8] */
+  w4 = wr3[8];
+  /* #5: @5 = @3[9] */
+  w5 = wr3[9];
+  /* #6: @6 = vertcat(@4, @5) */
+  rr=w6;
+  *rr++ = w4;
+  *rr++ = w5;
+  /* #7: @7 = @0[4:6] */
+  wr7 = wr0+4;
+  /* #8: @7 = (@7-@1) */
+  for (i=0, rr=w7, cr=wr7, cs=wr1; i<2; ++i) (*rr++)  = ((*cr++)-(*cs++));
+  /* #9: @7 = (@6*@7) */
+  for (i=0, rr=w7, cr=w6, cs=w7; i<2; ++i) (*rr++)  = ((*cr++)*(*cs++));
+  /* #10: @8 = @0[6:8] */
+  wr8 = wr0+6;
+  /* #11: @9 = (@8-@2) */
+  for (i=0, rr=w9, cr=wr8, cs=wr2; i<2; ++i) (*rr++)  = ((*cr++)-(*cs++));
+  /* #12: @6 = (@6*@9) */
+  for (i=0, rr=w6, cs=w9; i<2; ++i) (*rr++) *= (*cs++);
+  /* #13: {NULL, NULL, @9, NULL} = planar2_elastic_kernel(@1, @2, @7, @6, @8, @3) */
+  arg1[0]=wr1;
+  arg1[1]=wr2;
+  arg1[2]=w7;
+  arg1[3]=w6;
+  arg1[4]=wr8;
+  arg1[5]=wr3;
+  res1[0]=0;
   res1[1]=0;
-  res1[2]=w12;
+  res1[2]=w9;
+  res1[3]=0;
   if (casadi_f10(arg1, res1, iw, w, 0)) return 1;
-  /* #18: @5 = (@5*@12) */
-  for (i=0, rr=w05, cs=w12; i<2; ++i) (*rr++) *= (*cs++);
-  /* #19: @3 = (@3*@11) */
-  for (i=0, rr=w03, cs=w11; i<2; ++i) (*rr++) *= (*cs++);
-  /* #20: @5 = (@5+@3) */
-  for (i=0, rr=w05, cs=w03; i<2; ++i) (*rr++) += (*cs++);
-  /* #21: @5 = (@5+@9) */
-  for (i=0, rr=w05, cs=w09; i<2; ++i) (*rr++) += (*cs++);
-  /* #22: @1 = @0[12] */
-  w01 = wr00[12];
-  /* #23: @2 = @0[13] */
-  w02 = wr00[13];
-  /* #24: @9 = vertcat(@1, @2) */
-  rr=w09;
-  *rr++ = w01;
-  *rr++ = w02;
-  /* #25: @9 = (@9*@10) */
-  for (i=0, rr=w09, cs=wr10; i<2; ++i) (*rr++) *= (*cs++);
-  /* #26: @5 = (@5+@9) */
-  for (i=0, rr=w05, cs=w09; i<2; ++i) (*rr++) += (*cs++);
-  /* #27: output[0][0] = @5 */
-  casadi_copy(w05, 2, res[0]);
+  /* #14: output[0][0] = @9 */
+  casadi_copy(w9, 2, res[0]);
   return 0;
 }
 
@@ -1610,18 +1615,18 @@ CASADI_SYMBOL_EXPORT const casadi_int* planar2_alpha_sparsity_out(casadi_int i) 
 }
 
 CASADI_SYMBOL_EXPORT int planar2_alpha_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 7;
-  if (sz_res) *sz_res = 4;
+  if (sz_arg) *sz_arg = 8;
+  if (sz_res) *sz_res = 5;
   if (sz_iw) *sz_iw = 0;
-  if (sz_w) *sz_w = 75;
+  if (sz_w) *sz_w = 74;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT int planar2_alpha_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 7*sizeof(const casadi_real*);
-  if (sz_res) *sz_res = 4*sizeof(casadi_real*);
+  if (sz_arg) *sz_arg = 8*sizeof(const casadi_real*);
+  if (sz_res) *sz_res = 5*sizeof(casadi_real*);
   if (sz_iw) *sz_iw = 0*sizeof(casadi_int);
-  if (sz_w) *sz_w = 75*sizeof(casadi_real);
+  if (sz_w) *sz_w = 74*sizeof(casadi_real);
   return 0;
 }
 
@@ -2037,7 +2042,7 @@ CASADI_SYMBOL_EXPORT int planar2_inertia_work_bytes(casadi_int *sz_arg, casadi_i
 static int casadi_f15(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i;
-  casadi_real **res1=res+3, *rr, w04, w05, *w06=w+74, *w07=w+76, *w09=w+80, *w10=w+82, *w11=w+84, *w12=w+86, *w13=w+88;
+  casadi_real **res1=res+3, *rr, w04, w05, *w06=w+66, *w07=w+68, *w09=w+72, *w10=w+74, *w11=w+76, *w12=w+78;
   const casadi_real **arg1=arg+2, *cr, *cs, *wr00, *wr01, *wr02, *wr03, *wr07, *wr08;
   /* #0: @0 = input[0][0] */
   wr00 = arg[0] ? arg[0] : casadi_zeros;
@@ -2069,61 +2074,28 @@ static int casadi_f15(const casadi_real** arg, casadi_real** res, casadi_int* iw
   wr08 = wr00+6;
   /* #13: @9 = (@8-@2) */
   for (i=0, rr=w09, cr=wr08, cs=wr02; i<2; ++i) (*rr++)  = ((*cr++)-(*cs++));
-  /* #14: @9 = (@6*@9) */
-  for (i=0, rr=w09, cr=w06, cs=w09; i<2; ++i) (*rr++)  = ((*cr++)*(*cs++));
-  /* #15: {@10, @11, @12} = planar2_accel_kernel(@1, @2, @7, @9, @3) */
+  /* #14: @6 = (@6*@9) */
+  for (i=0, rr=w06, cs=w09; i<2; ++i) (*rr++) *= (*cs++);
+  /* #15: {@9, @10, @11, @12} = planar2_elastic_kernel(@1, @2, @7, @6, @8, @3) */
   arg1[0]=wr01;
   arg1[1]=wr02;
   arg1[2]=w07;
-  arg1[3]=w09;
-  arg1[4]=wr03;
-  res1[0]=w10;
-  res1[1]=w11;
-  res1[2]=w12;
+  arg1[3]=w06;
+  arg1[4]=wr08;
+  arg1[5]=wr03;
+  res1[0]=w09;
+  res1[1]=w10;
+  res1[2]=w11;
+  res1[3]=w12;
   if (casadi_f10(arg1, res1, iw, w, 0)) return 1;
-  /* #16: output[0][2] = @10 */
-  if (res[0]) casadi_copy(w10, 2, res[0]+4);
-  /* #17: output[0][3] = @11 */
-  if (res[0]) casadi_copy(w11, 2, res[0]+6);
-  /* #18: @4 = @3[10] */
-  w04 = wr03[10];
-  /* #19: @5 = @3[11] */
-  w05 = wr03[11];
-  /* #20: @11 = vertcat(@4, @5) */
-  rr=w11;
-  *rr++ = w04;
-  *rr++ = w05;
-  /* #21: @6 = (@11/@6) */
-  for (i=0, rr=w06, cr=w11, cs=w06; i<2; ++i) (*rr++)  = ((*cr++)/(*cs++));
-  /* #22: @6 = (@6*@12) */
-  for (i=0, rr=w06, cs=w12; i<2; ++i) (*rr++) *= (*cs++);
-  /* #23: @11 = (@11*@10) */
-  for (i=0, rr=w11, cs=w10; i<2; ++i) (*rr++) *= (*cs++);
-  /* #24: @6 = (@6+@11) */
-  for (i=0, rr=w06, cs=w11; i<2; ++i) (*rr++) += (*cs++);
-  /* #25: @6 = (@6+@7) */
-  for (i=0, rr=w06, cs=w07; i<2; ++i) (*rr++) += (*cs++);
-  /* #26: @4 = @3[12] */
-  w04 = wr03[12];
-  /* #27: @5 = @3[13] */
-  w05 = wr03[13];
-  /* #28: @7 = vertcat(@4, @5) */
-  rr=w07;
-  *rr++ = w04;
-  *rr++ = w05;
-  /* #29: @7 = (@7*@8) */
-  for (i=0, rr=w07, cs=wr08; i<2; ++i) (*rr++) *= (*cs++);
-  /* #30: @6 = (@6+@7) */
-  for (i=0, rr=w06, cs=w07; i<2; ++i) (*rr++) += (*cs++);
-  /* #31: output[1][0] = @6 */
-  casadi_copy(w06, 2, res[1]);
-  /* #32: @13 = planar2_beta(@0, @3) */
-  arg1[0]=wr00;
-  arg1[1]=wr03;
-  res1[0]=w13;
-  if (casadi_f12(arg1, res1, iw, w, 0)) return 1;
-  /* #33: output[2][0] = @13 */
-  casadi_copy(w13, 4, res[2]);
+  /* #16: output[0][2] = @9 */
+  if (res[0]) casadi_copy(w09, 2, res[0]+4);
+  /* #17: output[0][3] = @10 */
+  if (res[0]) casadi_copy(w10, 2, res[0]+6);
+  /* #18: output[1][0] = @11 */
+  casadi_copy(w11, 2, res[1]);
+  /* #19: output[2][0] = @12 */
+  casadi_copy(w12, 4, res[2]);
   return 0;
 }
 
@@ -2203,18 +2175,18 @@ CASADI_SYMBOL_EXPORT const casadi_int* planar2_control_core_sparsity_out(casadi_
 }
 
 CASADI_SYMBOL_EXPORT int planar2_control_core_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 7;
-  if (sz_res) *sz_res = 6;
+  if (sz_arg) *sz_arg = 8;
+  if (sz_res) *sz_res = 7;
   if (sz_iw) *sz_iw = 0;
-  if (sz_w) *sz_w = 92;
+  if (sz_w) *sz_w = 82;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT int planar2_control_core_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 7*sizeof(const casadi_real*);
-  if (sz_res) *sz_res = 6*sizeof(casadi_real*);
+  if (sz_arg) *sz_arg = 8*sizeof(const casadi_real*);
+  if (sz_res) *sz_res = 7*sizeof(casadi_real*);
   if (sz_iw) *sz_iw = 0*sizeof(casadi_int);
-  if (sz_w) *sz_w = 92*sizeof(casadi_real);
+  if (sz_w) *sz_w = 82*sizeof(casadi_real);
   return 0;
 }
 
@@ -2222,8 +2194,8 @@ CASADI_SYMBOL_EXPORT int planar2_control_core_work_bytes(casadi_int *sz_arg, cas
 static int casadi_f16(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i, j, k;
-  casadi_real **res1=res+5, *rr, w01, *w04=w+134, *w05=w+142, *w06=w+144, *w07=w+148, w08, *w09=w+151, *w11=w+165, *w12=w+167, *w13=w+169;
-  casadi_real *w14=w+171, *w15=w+173, *w16=w+175, w17;
+  casadi_real **res1=res+5, *rr, w01, *w04=w+124, *w05=w+132, *w06=w+134, *w07=w+138, w08, *w09=w+141, *w11=w+155, *w12=w+157, *w13=w+159;
+  casadi_real *w14=w+161, *w15=w+163, *w16=w+165, w17;
   const casadi_real **arg1=arg+5, *cr, *cs, *ct, *wr00, *wr02, *wr03, *wr07, *wr09, *wr10, *wr11, *wr13;
   const casadi_real *wr14, *wr15, *wr16, *wr18;
   /* #0: @0 = input[4][0] */
@@ -2473,18 +2445,18 @@ CASADI_SYMBOL_EXPORT const casadi_int* planar2_control_smc_sparsity_out(casadi_i
 }
 
 CASADI_SYMBOL_EXPORT int planar2_control_smc_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 12;
-  if (sz_res) *sz_res = 11;
+  if (sz_arg) *sz_arg = 13;
+  if (sz_res) *sz_res = 12;
   if (sz_iw) *sz_iw = 0;
-  if (sz_w) *sz_w = 180;
+  if (sz_w) *sz_w = 170;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT int planar2_control_smc_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 12*sizeof(const casadi_real*);
-  if (sz_res) *sz_res = 11*sizeof(casadi_real*);
+  if (sz_arg) *sz_arg = 13*sizeof(const casadi_real*);
+  if (sz_res) *sz_res = 12*sizeof(casadi_real*);
   if (sz_iw) *sz_iw = 0*sizeof(casadi_int);
-  if (sz_w) *sz_w = 180*sizeof(casadi_real);
+  if (sz_w) *sz_w = 170*sizeof(casadi_real);
   return 0;
 }
 
@@ -2492,8 +2464,8 @@ CASADI_SYMBOL_EXPORT int planar2_control_smc_work_bytes(casadi_int *sz_arg, casa
 static int casadi_f17(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i, j, k;
-  casadi_real **res1=res+5, *rr, w01, *w04=w+136, *w05=w+144, *w06=w+146, *w07=w+150, w08, *w09=w+153, *w11=w+167, *w12=w+169, *w13=w+171;
-  casadi_real *w14=w+173, *w15=w+175, *w16=w+177, *w17=w+179, w18;
+  casadi_real **res1=res+5, *rr, w01, *w04=w+126, *w05=w+134, *w06=w+136, *w07=w+140, w08, *w09=w+143, *w11=w+157, *w12=w+159, *w13=w+161;
+  casadi_real *w14=w+163, *w15=w+165, *w16=w+167, *w17=w+169, w18;
   const casadi_real **arg1=arg+5, *cr, *cs, *ct, *wr00, *wr02, *wr03, *wr07, *wr09, *wr10, *wr11, *wr13;
   const casadi_real *wr15, *wr16, *wr17;
   /* #0: @0 = input[4][0] */
@@ -2795,18 +2767,18 @@ CASADI_SYMBOL_EXPORT const casadi_int* planar2_control_ismc_sparsity_out(casadi_
 }
 
 CASADI_SYMBOL_EXPORT int planar2_control_ismc_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 12;
-  if (sz_res) *sz_res = 11;
+  if (sz_arg) *sz_arg = 13;
+  if (sz_res) *sz_res = 12;
   if (sz_iw) *sz_iw = 0;
-  if (sz_w) *sz_w = 182;
+  if (sz_w) *sz_w = 172;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT int planar2_control_ismc_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 12*sizeof(const casadi_real*);
-  if (sz_res) *sz_res = 11*sizeof(casadi_real*);
+  if (sz_arg) *sz_arg = 13*sizeof(const casadi_real*);
+  if (sz_res) *sz_res = 12*sizeof(casadi_real*);
   if (sz_iw) *sz_iw = 0*sizeof(casadi_int);
-  if (sz_w) *sz_w = 182*sizeof(casadi_real);
+  if (sz_w) *sz_w = 172*sizeof(casadi_real);
   return 0;
 }
 
@@ -2956,8 +2928,8 @@ CASADI_SYMBOL_EXPORT int planar2_control_ismc_zdot_work_bytes(casadi_int *sz_arg
 static int casadi_f19(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i, j, k;
-  casadi_real **res1=res+5, *rr, w01, *w04=w+129, *w05=w+137, *w06=w+139, *w07=w+143, w08, *w09=w+146, *w11=w+160, *w12=w+162, *w13=w+164;
-  casadi_real *w14=w+166, *w15=w+168, *w16=w+170;
+  casadi_real **res1=res+5, *rr, w01, *w04=w+119, *w05=w+127, *w06=w+129, *w07=w+133, w08, *w09=w+136, *w11=w+150, *w12=w+152, *w13=w+154;
+  casadi_real *w14=w+156, *w15=w+158, *w16=w+160;
   const casadi_real **arg1=arg+5, *cr, *cs, *ct, *wr00, *wr02, *wr03, *wr07, *wr09, *wr10, *wr11, *wr13;
   const casadi_real *wr15, *wr16, *wr17;
   /* #0: @0 = input[4][0] */
@@ -3177,18 +3149,18 @@ CASADI_SYMBOL_EXPORT const casadi_int* planar2_control_fl_sparsity_out(casadi_in
 }
 
 CASADI_SYMBOL_EXPORT int planar2_control_fl_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 12;
-  if (sz_res) *sz_res = 11;
+  if (sz_arg) *sz_arg = 13;
+  if (sz_res) *sz_res = 12;
   if (sz_iw) *sz_iw = 0;
-  if (sz_w) *sz_w = 174;
+  if (sz_w) *sz_w = 164;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT int planar2_control_fl_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 12*sizeof(const casadi_real*);
-  if (sz_res) *sz_res = 11*sizeof(casadi_real*);
+  if (sz_arg) *sz_arg = 13*sizeof(const casadi_real*);
+  if (sz_res) *sz_res = 12*sizeof(casadi_real*);
   if (sz_iw) *sz_iw = 0*sizeof(casadi_int);
-  if (sz_w) *sz_w = 174*sizeof(casadi_real);
+  if (sz_w) *sz_w = 164*sizeof(casadi_real);
   return 0;
 }
 
@@ -3196,9 +3168,9 @@ CASADI_SYMBOL_EXPORT int planar2_control_fl_work_bytes(casadi_int *sz_arg, casad
 static int casadi_f20(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i, j, k;
-  casadi_real **res1=res+5, *rr, w01, w04, w05, w06, w07, w08, w09, w10, w11, *w13=w+161;
-  casadi_real *w14=w+163, *w15=w+165, w16, w17, w18, w19, w20, w21, w22, *w23=w+174, *w24=w+189, *w25=w+197;
-  casadi_real *w26=w+201, *w27=w+203, *w29=w+217, *w30=w+219, *w31=w+221, *w32=w+223, *w33=w+225, *w34=w+227, *w35=w+229, *w36=w+231, *w37=w+233;
+  casadi_real **res1=res+5, *rr, w01, w04, w05, w06, w07, w08, w09, w10, w11, *w13=w+151;
+  casadi_real *w14=w+153, *w15=w+155, w16, w17, w18, w19, w20, w21, w22, *w23=w+164, *w24=w+179, *w25=w+187;
+  casadi_real *w26=w+191, *w27=w+193, *w29=w+207, *w30=w+209, *w31=w+211, *w32=w+213, *w33=w+215, *w34=w+217, *w35=w+219, *w36=w+221, *w37=w+223;
   const casadi_real **arg1=arg+5, *cr, *cs, *ct, *wr00, *wr02, *wr03, *wr12, *wr13, *wr14, *wr15, *wr26;
   const casadi_real *wr27, *wr28, *wr29, *wr30, *wr31, *wr32, *wr33, *wr34, *wr35, *wr36;
   /* #0: @0 = input[4][0] */
@@ -3674,17 +3646,17 @@ CASADI_SYMBOL_EXPORT const casadi_int* planar2_control_adaptive_sparsity_out(cas
 
 CASADI_SYMBOL_EXPORT int planar2_control_adaptive_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
   if (sz_arg) *sz_arg = 20;
-  if (sz_res) *sz_res = 11;
+  if (sz_res) *sz_res = 12;
   if (sz_iw) *sz_iw = 0;
-  if (sz_w) *sz_w = 235;
+  if (sz_w) *sz_w = 225;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT int planar2_control_adaptive_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
   if (sz_arg) *sz_arg = 20*sizeof(const casadi_real*);
-  if (sz_res) *sz_res = 11*sizeof(casadi_real*);
+  if (sz_res) *sz_res = 12*sizeof(casadi_real*);
   if (sz_iw) *sz_iw = 0*sizeof(casadi_int);
-  if (sz_w) *sz_w = 235*sizeof(casadi_real);
+  if (sz_w) *sz_w = 225*sizeof(casadi_real);
   return 0;
 }
 
@@ -3929,40 +3901,11 @@ CASADI_SYMBOL_EXPORT int planar2_control_adaptive_zdot_work_bytes(casadi_int *sz
   return 0;
 }
 
-/* planar2_beta_tau:(m[10],p[15])->(beta_tau[2x2]) */
-static int casadi_f23(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)arg; (void)iw; (void)w; (void)mem;
-  casadi_int i;
-  casadi_real **res1=res+1, *rr, *w2=w+57, *w3=w+63, *w5=w+86;
-  const casadi_real **arg1=arg+2, *cs, *wr0, *wr1, *wr4;
-  /* #0: @0 = input[0][0] */
-  wr0 = arg[0] ? arg[0] : casadi_zeros;
-  /* #1: @1 = @0[:2] */
-  wr1 = wr0+0;
-  /* #2: @2 = zeros(6x1) */
-  casadi_clear(w2, 6);
-  /* #3: @3 = vertcat(@1, @2) */
-  rr=w3;
-  for (i=0, cs=wr1; i<2; ++i) *rr++ = *cs++;
-  for (i=0, cs=w2; i<6; ++i) *rr++ = *cs++;
-  /* #4: @4 = input[1][0] */
-  wr4 = arg[1] ? arg[1] : casadi_zeros;
-  /* #5: @5 = planar2_beta(@3, @4) */
-  arg1[0]=w3;
-  arg1[1]=wr4;
-  res1[0]=w5;
-  if (casadi_f12(arg1, res1, iw, w, 0)) return 1;
-  /* #6: output[0][0] = @5 */
-  casadi_copy(w5, 4, res[0]);
-  return 0;
-}
-
 /* planar2_control_core_tau:(m[10],p_hat[15])->(y_hat[8],alpha[2],beta[2x2]) */
 static int casadi_f22(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)arg; (void)iw; (void)w; (void)mem;
-  casadi_int i;
-  casadi_real **res1=res+3, *rr, *w03=w+104, *w06=w+123, *w07=w+125, *w08=w+127, w09, w10, *w11=w+131;
-  const casadi_real **arg1=arg+2, *cr, *cs, *wr00, *wr01, *wr02, *wr03, *wr04, *wr05;
+  casadi_real **res1=res+3, *w07=w+72, *w08=w+74, *w09=w+76, *w10=w+78;
+  const casadi_real **arg1=arg+2, *wr00, *wr01, *wr02, *wr03, *wr04, *wr05, *wr06;
   /* #0: @0 = input[0][0] */
   wr00 = arg[0] ? arg[0] : casadi_zeros;
   /* #1: @1 = @0[:2] */
@@ -3977,71 +3920,30 @@ static int casadi_f22(const casadi_real** arg, casadi_real** res, casadi_int* iw
   wr03 = wr00+4;
   /* #6: @4 = @0[6:8] */
   wr04 = wr00+6;
-  /* #7: @5 = input[1][0] */
-  wr05 = arg[1] ? arg[1] : casadi_zeros;
-  /* #8: {@6, @7, @8} = planar2_accel_kernel(@1, @2, @3, @4, @5) */
+  /* #7: @5 = @0[8:10] */
+  wr05 = wr00+8;
+  /* #8: @6 = input[1][0] */
+  wr06 = arg[1] ? arg[1] : casadi_zeros;
+  /* #9: {@7, @8, @9, @10} = planar2_elastic_kernel(@1, @2, @3, @4, @5, @6) */
   arg1[0]=wr01;
   arg1[1]=wr02;
   arg1[2]=wr03;
   arg1[3]=wr04;
   arg1[4]=wr05;
-  res1[0]=w06;
-  res1[1]=w07;
-  res1[2]=w08;
+  arg1[5]=wr06;
+  res1[0]=w07;
+  res1[1]=w08;
+  res1[2]=w09;
+  res1[3]=w10;
   if (casadi_f10(arg1, res1, iw, w, 0)) return 1;
-  /* #9: output[0][2] = @6 */
-  if (res[0]) casadi_copy(w06, 2, res[0]+4);
-  /* #10: output[0][3] = @7 */
-  if (res[0]) casadi_copy(w07, 2, res[0]+6);
-  /* #11: @9 = @5[12] */
-  w09 = wr05[12];
-  /* #12: @10 = @5[13] */
-  w10 = wr05[13];
-  /* #13: @7 = vertcat(@9, @10) */
-  rr=w07;
-  *rr++ = w09;
-  *rr++ = w10;
-  /* #14: @1 = @0[8:10] */
-  wr01 = wr00+8;
-  /* #15: @7 = (@7*@1) */
-  for (i=0, rr=w07, cs=wr01; i<2; ++i) (*rr++) *= (*cs++);
-  /* #16: @3 = (@3+@7) */
-  for (i=0, rr=w03, cr=wr03, cs=w07; i<2; ++i) (*rr++)  = ((*cr++)+(*cs++));
-  /* #17: @9 = @5[10] */
-  w09 = wr05[10];
-  /* #18: @10 = @5[11] */
-  w10 = wr05[11];
-  /* #19: @7 = vertcat(@9, @10) */
-  rr=w07;
-  *rr++ = w09;
-  *rr++ = w10;
-  /* #20: @6 = (@7*@6) */
-  for (i=0, rr=w06, cr=w07, cs=w06; i<2; ++i) (*rr++)  = ((*cr++)*(*cs++));
-  /* #21: @3 = (@3+@6) */
-  for (i=0, rr=w03, cs=w06; i<2; ++i) (*rr++) += (*cs++);
-  /* #22: @9 = @5[8] */
-  w09 = wr05[8];
-  /* #23: @10 = @5[9] */
-  w10 = wr05[9];
-  /* #24: @6 = vertcat(@9, @10) */
-  rr=w06;
-  *rr++ = w09;
-  *rr++ = w10;
-  /* #25: @7 = (@7/@6) */
-  for (i=0, rr=w07, cs=w06; i<2; ++i) (*rr++) /= (*cs++);
-  /* #26: @7 = (@7*@8) */
-  for (i=0, rr=w07, cs=w08; i<2; ++i) (*rr++) *= (*cs++);
-  /* #27: @3 = (@3+@7) */
-  for (i=0, rr=w03, cs=w07; i<2; ++i) (*rr++) += (*cs++);
-  /* #28: output[1][0] = @3 */
-  casadi_copy(w03, 2, res[1]);
-  /* #29: @11 = planar2_beta_tau(@0, @5) */
-  arg1[0]=wr00;
-  arg1[1]=wr05;
-  res1[0]=w11;
-  if (casadi_f23(arg1, res1, iw, w, 0)) return 1;
-  /* #30: output[2][0] = @11 */
-  casadi_copy(w11, 4, res[2]);
+  /* #10: output[0][2] = @7 */
+  if (res[0]) casadi_copy(w07, 2, res[0]+4);
+  /* #11: output[0][3] = @8 */
+  if (res[0]) casadi_copy(w08, 2, res[0]+6);
+  /* #12: output[1][0] = @9 */
+  casadi_copy(w09, 2, res[1]);
+  /* #13: output[2][0] = @10 */
+  casadi_copy(w10, 4, res[2]);
   return 0;
 }
 
@@ -4122,26 +4024,26 @@ CASADI_SYMBOL_EXPORT const casadi_int* planar2_control_core_tau_sparsity_out(cas
 
 CASADI_SYMBOL_EXPORT int planar2_control_core_tau_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
   if (sz_arg) *sz_arg = 8;
-  if (sz_res) *sz_res = 6;
+  if (sz_res) *sz_res = 7;
   if (sz_iw) *sz_iw = 0;
-  if (sz_w) *sz_w = 135;
+  if (sz_w) *sz_w = 82;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT int planar2_control_core_tau_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
   if (sz_arg) *sz_arg = 8*sizeof(const casadi_real*);
-  if (sz_res) *sz_res = 6*sizeof(casadi_real*);
+  if (sz_res) *sz_res = 7*sizeof(casadi_real*);
   if (sz_iw) *sz_iw = 0*sizeof(casadi_int);
-  if (sz_w) *sz_w = 135*sizeof(casadi_real);
+  if (sz_w) *sz_w = 82*sizeof(casadi_real);
   return 0;
 }
 
 /* planar2_control_smc_tau:(m[10],z[0],r[10],p[15],gains[18])->(u[2],s[2],z_dot[0],u_cmd[2],y_hat[8]) */
-static int casadi_f24(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f23(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i, j, k;
-  casadi_real **res1=res+5, *rr, w01, *w04=w+179, *w05=w+187, *w06=w+189, *w07=w+193, w08, *w09=w+196, *w10=w+200, *w11=w+202, *w12=w+204;
-  casadi_real *w13=w+206, *w14=w+208, *w15=w+210, w16;
+  casadi_real **res1=res+5, *rr, w01, *w04=w+126, *w05=w+134, *w06=w+136, *w07=w+140, w08, *w09=w+143, *w10=w+147, *w11=w+149, *w12=w+151;
+  casadi_real *w13=w+153, *w14=w+155, *w15=w+157, w16;
   const casadi_real **arg1=arg+5, *cr, *cs, *ct, *wr00, *wr02, *wr03, *wr07, *wr09, *wr10, *wr12, *wr13;
   const casadi_real *wr14, *wr15, *wr17;
   /* #0: @0 = input[4][0] */
@@ -4306,7 +4208,7 @@ static int casadi_f24(const casadi_real** arg, casadi_real** res, casadi_int* iw
 }
 
 CASADI_SYMBOL_EXPORT int planar2_control_smc_tau(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f24(arg, res, iw, w, mem);
+  return casadi_f23(arg, res, iw, w, mem);
 }
 
 CASADI_SYMBOL_EXPORT int planar2_control_smc_tau_alloc_mem(void) {
@@ -4392,26 +4294,26 @@ CASADI_SYMBOL_EXPORT const casadi_int* planar2_control_smc_tau_sparsity_out(casa
 
 CASADI_SYMBOL_EXPORT int planar2_control_smc_tau_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
   if (sz_arg) *sz_arg = 13;
-  if (sz_res) *sz_res = 11;
+  if (sz_res) *sz_res = 12;
   if (sz_iw) *sz_iw = 0;
-  if (sz_w) *sz_w = 215;
+  if (sz_w) *sz_w = 162;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT int planar2_control_smc_tau_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
   if (sz_arg) *sz_arg = 13*sizeof(const casadi_real*);
-  if (sz_res) *sz_res = 11*sizeof(casadi_real*);
+  if (sz_res) *sz_res = 12*sizeof(casadi_real*);
   if (sz_iw) *sz_iw = 0*sizeof(casadi_int);
-  if (sz_w) *sz_w = 215*sizeof(casadi_real);
+  if (sz_w) *sz_w = 162*sizeof(casadi_real);
   return 0;
 }
 
 /* planar2_control_ismc_tau:(m[10],z[2],r[10],p[15],gains[20])->(u[2],s[2],z_dot[2],u_cmd[2],y_hat[8]) */
-static int casadi_f25(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f24(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i, j, k;
-  casadi_real **res1=res+5, *rr, w01, *w04=w+181, *w05=w+189, *w06=w+191, *w07=w+195, w08, *w09=w+198, *w11=w+212, *w12=w+214, *w13=w+216;
-  casadi_real *w14=w+218, *w15=w+220, *w16=w+222, *w17=w+224, w18;
+  casadi_real **res1=res+5, *rr, w01, *w04=w+128, *w05=w+136, *w06=w+138, *w07=w+142, w08, *w09=w+145, *w11=w+159, *w12=w+161, *w13=w+163;
+  casadi_real *w14=w+165, *w15=w+167, *w16=w+169, *w17=w+171, w18;
   const casadi_real **arg1=arg+5, *cr, *cs, *ct, *wr00, *wr02, *wr03, *wr07, *wr09, *wr10, *wr11, *wr13;
   const casadi_real *wr15, *wr16, *wr17;
   /* #0: @0 = input[4][0] */
@@ -4628,7 +4530,7 @@ static int casadi_f25(const casadi_real** arg, casadi_real** res, casadi_int* iw
 }
 
 CASADI_SYMBOL_EXPORT int planar2_control_ismc_tau(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f25(arg, res, iw, w, mem);
+  return casadi_f24(arg, res, iw, w, mem);
 }
 
 CASADI_SYMBOL_EXPORT int planar2_control_ismc_tau_alloc_mem(void) {
@@ -4714,22 +4616,22 @@ CASADI_SYMBOL_EXPORT const casadi_int* planar2_control_ismc_tau_sparsity_out(cas
 
 CASADI_SYMBOL_EXPORT int planar2_control_ismc_tau_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
   if (sz_arg) *sz_arg = 13;
-  if (sz_res) *sz_res = 11;
+  if (sz_res) *sz_res = 12;
   if (sz_iw) *sz_iw = 0;
-  if (sz_w) *sz_w = 227;
+  if (sz_w) *sz_w = 174;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT int planar2_control_ismc_tau_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
   if (sz_arg) *sz_arg = 13*sizeof(const casadi_real*);
-  if (sz_res) *sz_res = 11*sizeof(casadi_real*);
+  if (sz_res) *sz_res = 12*sizeof(casadi_real*);
   if (sz_iw) *sz_iw = 0*sizeof(casadi_int);
-  if (sz_w) *sz_w = 227*sizeof(casadi_real);
+  if (sz_w) *sz_w = 174*sizeof(casadi_real);
   return 0;
 }
 
 /* planar2_control_ismc_tau_zdot:(m[10],z[2],r[10],p[15],gains[20],u_cmd[2],u[2])->(z_dot[2]) */
-static int casadi_f26(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f25(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a0, a1, a2, a3, a4, a5, a6;
   a0=arg[4]? arg[4][13] : 0;
@@ -4774,7 +4676,7 @@ static int casadi_f26(const casadi_real** arg, casadi_real** res, casadi_int* iw
 }
 
 CASADI_SYMBOL_EXPORT int planar2_control_ismc_tau_zdot(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f26(arg, res, iw, w, mem);
+  return casadi_f25(arg, res, iw, w, mem);
 }
 
 CASADI_SYMBOL_EXPORT int planar2_control_ismc_tau_zdot_alloc_mem(void) {
@@ -4871,11 +4773,11 @@ CASADI_SYMBOL_EXPORT int planar2_control_ismc_tau_zdot_work_bytes(casadi_int *sz
 }
 
 /* planar2_control_fl_tau:(m[10],z[0],r[10],p[15],gains[13])->(u[2],s[2],z_dot[0],u_cmd[2],y_hat[8]) */
-static int casadi_f27(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f26(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i, j, k;
-  casadi_real **res1=res+5, *rr, w01, *w04=w+174, *w05=w+182, *w06=w+184, *w07=w+188, w08, *w09=w+191, *w10=w+195, *w11=w+197, *w12=w+199;
-  casadi_real *w13=w+201, *w14=w+203, *w15=w+205;
+  casadi_real **res1=res+5, *rr, w01, *w04=w+121, *w05=w+129, *w06=w+131, *w07=w+135, w08, *w09=w+138, *w10=w+142, *w11=w+144, *w12=w+146;
+  casadi_real *w13=w+148, *w14=w+150, *w15=w+152;
   const casadi_real **arg1=arg+5, *cr, *cs, *ct, *wr00, *wr02, *wr03, *wr07, *wr09, *wr10, *wr12, *wr14;
   const casadi_real *wr15, *wr16;
   /* #0: @0 = input[4][0] */
@@ -5010,7 +4912,7 @@ static int casadi_f27(const casadi_real** arg, casadi_real** res, casadi_int* iw
 }
 
 CASADI_SYMBOL_EXPORT int planar2_control_fl_tau(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f27(arg, res, iw, w, mem);
+  return casadi_f26(arg, res, iw, w, mem);
 }
 
 CASADI_SYMBOL_EXPORT int planar2_control_fl_tau_alloc_mem(void) {
@@ -5096,22 +4998,22 @@ CASADI_SYMBOL_EXPORT const casadi_int* planar2_control_fl_tau_sparsity_out(casad
 
 CASADI_SYMBOL_EXPORT int planar2_control_fl_tau_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
   if (sz_arg) *sz_arg = 13;
-  if (sz_res) *sz_res = 11;
+  if (sz_res) *sz_res = 12;
   if (sz_iw) *sz_iw = 0;
-  if (sz_w) *sz_w = 209;
+  if (sz_w) *sz_w = 156;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT int planar2_control_fl_tau_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
   if (sz_arg) *sz_arg = 13*sizeof(const casadi_real*);
-  if (sz_res) *sz_res = 11*sizeof(casadi_real*);
+  if (sz_res) *sz_res = 12*sizeof(casadi_real*);
   if (sz_iw) *sz_iw = 0*sizeof(casadi_int);
-  if (sz_w) *sz_w = 209*sizeof(casadi_real);
+  if (sz_w) *sz_w = 156*sizeof(casadi_real);
   return 0;
 }
 
 /* planar2_control_pdg:(x[8],z[0],r[10],p[15],gains[7])->(u[2],s[2],z_dot[0],u_cmd[2],y_hat[8]) */
-static int casadi_f28(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f27(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a0, a1, a2, a3, a4, a5, a6, a7, a8;
   a0=arg[4]? arg[4][6] : 0;
@@ -5197,7 +5099,7 @@ static int casadi_f28(const casadi_real** arg, casadi_real** res, casadi_int* iw
 }
 
 CASADI_SYMBOL_EXPORT int planar2_control_pdg(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f28(arg, res, iw, w, mem);
+  return casadi_f27(arg, res, iw, w, mem);
 }
 
 CASADI_SYMBOL_EXPORT int planar2_control_pdg_alloc_mem(void) {
@@ -5298,7 +5200,7 @@ CASADI_SYMBOL_EXPORT int planar2_control_pdg_work_bytes(casadi_int *sz_arg, casa
 }
 
 /* planar2_feedforward:(r[10],p[15])->(tau_Jd[2],theta_d[2],dtheta_d[2],ddtheta_d[2],u_ff[2]) */
-static int casadi_f30(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f29(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14, a15, a16, a17, a18, a19, a20, a21, a22, a23;
@@ -5516,7 +5418,7 @@ static int casadi_f30(const casadi_real** arg, casadi_real** res, casadi_int* iw
 }
 
 /* planar2_control_impedance:(m[12],z[2],r[10],p[15],gains[12])->(u[2],s[2],z_dot[2],u_cmd[2],y_hat[8]) */
-static int casadi_f29(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f28(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i;
   casadi_real **res1=res+5, *rr, w01, *w04=w+77, *w05=w+79, *w06=w+81, *w07=w+83, *w08=w+85, *w10=w+99, *w11=w+101, w12, *w13=w+104;
@@ -5538,7 +5440,7 @@ static int casadi_f29(const casadi_real** arg, casadi_real** res, casadi_int* iw
   res1[2]=w06;
   res1[3]=0;
   res1[4]=w07;
-  if (casadi_f30(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f29(arg1, res1, iw, w, 0)) return 1;
   /* #5: @8 = @0[:2] */
   wr08 = wr00+0;
   /* #6: @9 = input[0][0] */
@@ -5653,7 +5555,7 @@ static int casadi_f29(const casadi_real** arg, casadi_real** res, casadi_int* iw
 }
 
 CASADI_SYMBOL_EXPORT int planar2_control_impedance(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f29(arg, res, iw, w, mem);
+  return casadi_f28(arg, res, iw, w, mem);
 }
 
 CASADI_SYMBOL_EXPORT int planar2_control_impedance_alloc_mem(void) {
@@ -5754,7 +5656,7 @@ CASADI_SYMBOL_EXPORT int planar2_control_impedance_work_bytes(casadi_int *sz_arg
 }
 
 /* planar2_control_impedance_zdot:(m[12],z[2],r[10],p[15],gains[12],u_cmd[2],u[2])->(z_dot[2]) */
-static int casadi_f31(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f30(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a0, a1, a2, a3, a4, a5, a6;
   a0=arg[4]? arg[4][10] : 0;
@@ -5799,7 +5701,7 @@ static int casadi_f31(const casadi_real** arg, casadi_real** res, casadi_int* iw
 }
 
 CASADI_SYMBOL_EXPORT int planar2_control_impedance_zdot(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f31(arg, res, iw, w, mem);
+  return casadi_f30(arg, res, iw, w, mem);
 }
 
 CASADI_SYMBOL_EXPORT int planar2_control_impedance_zdot_alloc_mem(void) {
@@ -5896,7 +5798,7 @@ CASADI_SYMBOL_EXPORT int planar2_control_impedance_zdot_work_bytes(casadi_int *s
 }
 
 /* planar2_rigid_feedforward:(r[10],p[15])->(tau[2]) */
-static int casadi_f33(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f32(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14, a15;
@@ -5973,7 +5875,7 @@ static int casadi_f33(const casadi_real** arg, casadi_real** res, casadi_int* iw
 }
 
 /* planar2_control_joint_impedance:(m[12],z[2],r[10],p[15],gains[10])->(u[2],s[2],z_dot[2],u_cmd[2],y_hat[8]) */
-static int casadi_f32(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f31(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i;
   casadi_real **res1=res+5, *rr, w01, *w04=w+52, *w05=w+54, *w06=w+56, *w08=w+70, *w09=w+72, w10, *w11=w+75;
@@ -5990,7 +5892,7 @@ static int casadi_f32(const casadi_real** arg, casadi_real** res, casadi_int* iw
   arg1[0]=wr02;
   arg1[1]=wr03;
   res1[0]=w04;
-  if (casadi_f33(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f32(arg1, res1, iw, w, 0)) return 1;
   /* #5: @5 = @0[:2] */
   wr05 = wr00+0;
   /* #6: @6 = @2[:2] */
@@ -6097,7 +5999,7 @@ static int casadi_f32(const casadi_real** arg, casadi_real** res, casadi_int* iw
 }
 
 CASADI_SYMBOL_EXPORT int planar2_control_joint_impedance(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f32(arg, res, iw, w, mem);
+  return casadi_f31(arg, res, iw, w, mem);
 }
 
 CASADI_SYMBOL_EXPORT int planar2_control_joint_impedance_alloc_mem(void) {
@@ -6198,7 +6100,7 @@ CASADI_SYMBOL_EXPORT int planar2_control_joint_impedance_work_bytes(casadi_int *
 }
 
 /* planar2_control_joint_impedance_zdot:(m[12],z[2],r[10],p[15],gains[10],u_cmd[2],u[2])->(z_dot[2]) */
-static int casadi_f34(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f33(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a0, a1, a2, a3, a4, a5, a6;
   a0=arg[4]? arg[4][8] : 0;
@@ -6243,7 +6145,7 @@ static int casadi_f34(const casadi_real** arg, casadi_real** res, casadi_int* iw
 }
 
 CASADI_SYMBOL_EXPORT int planar2_control_joint_impedance_zdot(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f34(arg, res, iw, w, mem);
+  return casadi_f33(arg, res, iw, w, mem);
 }
 
 CASADI_SYMBOL_EXPORT int planar2_control_joint_impedance_zdot_alloc_mem(void) {
@@ -6340,10 +6242,10 @@ CASADI_SYMBOL_EXPORT int planar2_control_joint_impedance_zdot_work_bytes(casadi_
 }
 
 /* planar2_T_tau:(m[10],p[15])->(T_tau[8]) */
-static int casadi_f35(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f34(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)arg; (void)iw; (void)w; (void)mem;
-  casadi_real **res1=res+1, *w6=w+65, *w7=w+67;
-  const casadi_real **arg1=arg+2, *wr0, *wr1, *wr2, *wr3, *wr4, *wr5;
+  casadi_real **res1=res+1, *w7=w+72, *w8=w+74;
+  const casadi_real **arg1=arg+2, *wr0, *wr1, *wr2, *wr3, *wr4, *wr5, *wr6;
   /* #0: @0 = input[0][0] */
   wr0 = arg[0] ? arg[0] : casadi_zeros;
   /* #1: @1 = @0[:2] */
@@ -6358,27 +6260,31 @@ static int casadi_f35(const casadi_real** arg, casadi_real** res, casadi_int* iw
   wr3 = wr0+4;
   /* #6: @4 = @0[6:8] */
   wr4 = wr0+6;
-  /* #7: @5 = input[1][0] */
-  wr5 = arg[1] ? arg[1] : casadi_zeros;
-  /* #8: {@6, @7, NULL} = planar2_accel_kernel(@1, @2, @3, @4, @5) */
+  /* #7: @5 = @0[8:10] */
+  wr5 = wr0+8;
+  /* #8: @6 = input[1][0] */
+  wr6 = arg[1] ? arg[1] : casadi_zeros;
+  /* #9: {@7, @8, NULL, NULL} = planar2_elastic_kernel(@1, @2, @3, @4, @5, @6) */
   arg1[0]=wr1;
   arg1[1]=wr2;
   arg1[2]=wr3;
   arg1[3]=wr4;
   arg1[4]=wr5;
-  res1[0]=w6;
-  res1[1]=w7;
+  arg1[5]=wr6;
+  res1[0]=w7;
+  res1[1]=w8;
   res1[2]=0;
+  res1[3]=0;
   if (casadi_f10(arg1, res1, iw, w, 0)) return 1;
-  /* #9: output[0][2] = @6 */
-  if (res[0]) casadi_copy(w6, 2, res[0]+4);
-  /* #10: output[0][3] = @7 */
-  if (res[0]) casadi_copy(w7, 2, res[0]+6);
+  /* #10: output[0][2] = @7 */
+  if (res[0]) casadi_copy(w7, 2, res[0]+4);
+  /* #11: output[0][3] = @8 */
+  if (res[0]) casadi_copy(w8, 2, res[0]+6);
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT int planar2_T_tau(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f35(arg, res, iw, w, mem);
+  return casadi_f34(arg, res, iw, w, mem);
 }
 
 CASADI_SYMBOL_EXPORT int planar2_T_tau_alloc_mem(void) {
@@ -6449,96 +6355,59 @@ CASADI_SYMBOL_EXPORT const casadi_int* planar2_T_tau_sparsity_out(casadi_int i) 
 }
 
 CASADI_SYMBOL_EXPORT int planar2_T_tau_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 7;
-  if (sz_res) *sz_res = 4;
+  if (sz_arg) *sz_arg = 8;
+  if (sz_res) *sz_res = 5;
   if (sz_iw) *sz_iw = 0;
-  if (sz_w) *sz_w = 69;
+  if (sz_w) *sz_w = 76;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT int planar2_T_tau_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 7*sizeof(const casadi_real*);
-  if (sz_res) *sz_res = 4*sizeof(casadi_real*);
+  if (sz_arg) *sz_arg = 8*sizeof(const casadi_real*);
+  if (sz_res) *sz_res = 5*sizeof(casadi_real*);
   if (sz_iw) *sz_iw = 0*sizeof(casadi_int);
-  if (sz_w) *sz_w = 69*sizeof(casadi_real);
+  if (sz_w) *sz_w = 76*sizeof(casadi_real);
   return 0;
 }
 
 /* planar2_alpha_tau:(m[10],p[15])->(alpha_tau[2]) */
-static int casadi_f36(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f35(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)arg; (void)iw; (void)w; (void)mem;
-  casadi_int i;
-  casadi_real **res1=res+1, *rr, w03, w04, *w05=w+61, *w06=w+63, *w10=w+71, *w11=w+73;
-  const casadi_real **arg1=arg+2, *cr, *cs, *wr00, *wr01, *wr02, *wr06, *wr07, *wr08, *wr09;
+  casadi_real **res1=res+1, *w7=w+72;
+  const casadi_real **arg1=arg+2, *wr0, *wr1, *wr2, *wr3, *wr4, *wr5, *wr6;
   /* #0: @0 = input[0][0] */
-  wr00 = arg[0] ? arg[0] : casadi_zeros;
-  /* #1: @1 = @0[4:6] */
-  wr01 = wr00+4;
-  /* #2: @2 = input[1][0] */
-  wr02 = arg[1] ? arg[1] : casadi_zeros;
-  /* #3: @3 = @2[12] */
-  w03 = wr02[12];
-  /* #4: @4 = @2[13] */
-  w04 = wr02[13];
-  /* #5: @5 = vertcat(@3, @4) */
-  rr=w05;
-  *rr++ = w03;
-  *rr++ = w04;
-  /* #6: @6 = @0[8:10] */
-  wr06 = wr00+8;
-  /* #7: @5 = (@5*@6) */
-  for (i=0, rr=w05, cs=wr06; i<2; ++i) (*rr++) *= (*cs++);
-  /* #8: @5 = (@1+@5) */
-  for (i=0, rr=w05, cr=wr01, cs=w05; i<2; ++i) (*rr++)  = ((*cr++)+(*cs++));
-  /* #9: @3 = @2[10] */
-  w03 = wr02[10];
-  /* #10: @4 = @2[11] */
-  w04 = wr02[11];
-  /* #11: @6 = vertcat(@3, @4) */
-  rr=w06;
-  *rr++ = w03;
-  *rr++ = w04;
-  /* #12: @7 = @0[:2] */
-  wr07 = wr00+0;
-  /* #13: @8 = @0[2:4] */
-  wr08 = wr00+2;
-  /* #14: @9 = @0[6:8] */
-  wr09 = wr00+6;
-  /* #15: {@10, NULL, @11} = planar2_accel_kernel(@7, @8, @1, @9, @2) */
-  arg1[0]=wr07;
-  arg1[1]=wr08;
-  arg1[2]=wr01;
-  arg1[3]=wr09;
-  arg1[4]=wr02;
-  res1[0]=w10;
+  wr0 = arg[0] ? arg[0] : casadi_zeros;
+  /* #1: @1 = @0[:2] */
+  wr1 = wr0+0;
+  /* #2: @2 = @0[2:4] */
+  wr2 = wr0+2;
+  /* #3: @3 = @0[4:6] */
+  wr3 = wr0+4;
+  /* #4: @4 = @0[6:8] */
+  wr4 = wr0+6;
+  /* #5: @5 = @0[8:10] */
+  wr5 = wr0+8;
+  /* #6: @6 = input[1][0] */
+  wr6 = arg[1] ? arg[1] : casadi_zeros;
+  /* #7: {NULL, NULL, @7, NULL} = planar2_elastic_kernel(@1, @2, @3, @4, @5, @6) */
+  arg1[0]=wr1;
+  arg1[1]=wr2;
+  arg1[2]=wr3;
+  arg1[3]=wr4;
+  arg1[4]=wr5;
+  arg1[5]=wr6;
+  res1[0]=0;
   res1[1]=0;
-  res1[2]=w11;
+  res1[2]=w7;
+  res1[3]=0;
   if (casadi_f10(arg1, res1, iw, w, 0)) return 1;
-  /* #16: @10 = (@6*@10) */
-  for (i=0, rr=w10, cr=w06, cs=w10; i<2; ++i) (*rr++)  = ((*cr++)*(*cs++));
-  /* #17: @5 = (@5+@10) */
-  for (i=0, rr=w05, cs=w10; i<2; ++i) (*rr++) += (*cs++);
-  /* #18: @3 = @2[8] */
-  w03 = wr02[8];
-  /* #19: @4 = @2[9] */
-  w04 = wr02[9];
-  /* #20: @10 = vertcat(@3, @4) */
-  rr=w10;
-  *rr++ = w03;
-  *rr++ = w04;
-  /* #21: @6 = (@6/@10) */
-  for (i=0, rr=w06, cs=w10; i<2; ++i) (*rr++) /= (*cs++);
-  /* #22: @6 = (@6*@11) */
-  for (i=0, rr=w06, cs=w11; i<2; ++i) (*rr++) *= (*cs++);
-  /* #23: @5 = (@5+@6) */
-  for (i=0, rr=w05, cs=w06; i<2; ++i) (*rr++) += (*cs++);
-  /* #24: output[0][0] = @5 */
-  casadi_copy(w05, 2, res[0]);
+  /* #8: output[0][0] = @7 */
+  casadi_copy(w7, 2, res[0]);
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT int planar2_alpha_tau(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f36(arg, res, iw, w, mem);
+  return casadi_f35(arg, res, iw, w, mem);
 }
 
 CASADI_SYMBOL_EXPORT int planar2_alpha_tau_alloc_mem(void) {
@@ -6609,23 +6478,51 @@ CASADI_SYMBOL_EXPORT const casadi_int* planar2_alpha_tau_sparsity_out(casadi_int
 }
 
 CASADI_SYMBOL_EXPORT int planar2_alpha_tau_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 7;
-  if (sz_res) *sz_res = 4;
+  if (sz_arg) *sz_arg = 8;
+  if (sz_res) *sz_res = 5;
   if (sz_iw) *sz_iw = 0;
-  if (sz_w) *sz_w = 75;
+  if (sz_w) *sz_w = 74;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT int planar2_alpha_tau_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 7*sizeof(const casadi_real*);
-  if (sz_res) *sz_res = 4*sizeof(casadi_real*);
+  if (sz_arg) *sz_arg = 8*sizeof(const casadi_real*);
+  if (sz_res) *sz_res = 5*sizeof(casadi_real*);
   if (sz_iw) *sz_iw = 0*sizeof(casadi_int);
-  if (sz_w) *sz_w = 75*sizeof(casadi_real);
+  if (sz_w) *sz_w = 74*sizeof(casadi_real);
+  return 0;
+}
+
+/* planar2_beta_tau:(m[10],p[15])->(beta_tau[2x2]) */
+static int casadi_f36(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  (void)arg; (void)iw; (void)w; (void)mem;
+  casadi_int i;
+  casadi_real **res1=res+1, *rr, *w2=w+57, *w3=w+63, *w5=w+86;
+  const casadi_real **arg1=arg+2, *cs, *wr0, *wr1, *wr4;
+  /* #0: @0 = input[0][0] */
+  wr0 = arg[0] ? arg[0] : casadi_zeros;
+  /* #1: @1 = @0[:2] */
+  wr1 = wr0+0;
+  /* #2: @2 = zeros(6x1) */
+  casadi_clear(w2, 6);
+  /* #3: @3 = vertcat(@1, @2) */
+  rr=w3;
+  for (i=0, cs=wr1; i<2; ++i) *rr++ = *cs++;
+  for (i=0, cs=w2; i<6; ++i) *rr++ = *cs++;
+  /* #4: @4 = input[1][0] */
+  wr4 = arg[1] ? arg[1] : casadi_zeros;
+  /* #5: @5 = planar2_beta(@3, @4) */
+  arg1[0]=w3;
+  arg1[1]=wr4;
+  res1[0]=w5;
+  if (casadi_f12(arg1, res1, iw, w, 0)) return 1;
+  /* #6: output[0][0] = @5 */
+  casadi_copy(w5, 4, res[0]);
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT int planar2_beta_tau(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f23(arg, res, iw, w, mem);
+  return casadi_f36(arg, res, iw, w, mem);
 }
 
 CASADI_SYMBOL_EXPORT int planar2_beta_tau_alloc_mem(void) {
@@ -6712,7 +6609,7 @@ CASADI_SYMBOL_EXPORT int planar2_beta_tau_work_bytes(casadi_int *sz_arg, casadi_
 }
 
 CASADI_SYMBOL_EXPORT int planar2_feedforward(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f30(arg, res, iw, w, mem);
+  return casadi_f29(arg, res, iw, w, mem);
 }
 
 CASADI_SYMBOL_EXPORT int planar2_feedforward_alloc_mem(void) {

@@ -152,10 +152,10 @@ const casadi_int* planar2_T_sparsity_in(casadi_int i);
 const casadi_int* planar2_T_sparsity_out(casadi_int i);
 int planar2_T_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int planar2_T_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define planar2_T_SZ_ARG 7
-#define planar2_T_SZ_RES 4
+#define planar2_T_SZ_ARG 8
+#define planar2_T_SZ_RES 5
 #define planar2_T_SZ_IW 0
-#define planar2_T_SZ_W 69
+#define planar2_T_SZ_W 76
 int planar2_alpha(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int planar2_alpha_alloc_mem(void);
 int planar2_alpha_init_mem(int mem);
@@ -173,10 +173,10 @@ const casadi_int* planar2_alpha_sparsity_in(casadi_int i);
 const casadi_int* planar2_alpha_sparsity_out(casadi_int i);
 int planar2_alpha_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int planar2_alpha_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define planar2_alpha_SZ_ARG 7
-#define planar2_alpha_SZ_RES 4
+#define planar2_alpha_SZ_ARG 8
+#define planar2_alpha_SZ_RES 5
 #define planar2_alpha_SZ_IW 0
-#define planar2_alpha_SZ_W 75
+#define planar2_alpha_SZ_W 74
 int planar2_beta(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int planar2_beta_alloc_mem(void);
 int planar2_beta_init_mem(int mem);
@@ -257,10 +257,10 @@ const casadi_int* planar2_control_core_sparsity_in(casadi_int i);
 const casadi_int* planar2_control_core_sparsity_out(casadi_int i);
 int planar2_control_core_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int planar2_control_core_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define planar2_control_core_SZ_ARG 7
-#define planar2_control_core_SZ_RES 6
+#define planar2_control_core_SZ_ARG 8
+#define planar2_control_core_SZ_RES 7
 #define planar2_control_core_SZ_IW 0
-#define planar2_control_core_SZ_W 92
+#define planar2_control_core_SZ_W 82
 int planar2_control_smc(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int planar2_control_smc_alloc_mem(void);
 int planar2_control_smc_init_mem(int mem);
@@ -278,10 +278,10 @@ const casadi_int* planar2_control_smc_sparsity_in(casadi_int i);
 const casadi_int* planar2_control_smc_sparsity_out(casadi_int i);
 int planar2_control_smc_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int planar2_control_smc_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define planar2_control_smc_SZ_ARG 12
-#define planar2_control_smc_SZ_RES 11
+#define planar2_control_smc_SZ_ARG 13
+#define planar2_control_smc_SZ_RES 12
 #define planar2_control_smc_SZ_IW 0
-#define planar2_control_smc_SZ_W 180
+#define planar2_control_smc_SZ_W 170
 int planar2_control_ismc(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int planar2_control_ismc_alloc_mem(void);
 int planar2_control_ismc_init_mem(int mem);
@@ -299,10 +299,10 @@ const casadi_int* planar2_control_ismc_sparsity_in(casadi_int i);
 const casadi_int* planar2_control_ismc_sparsity_out(casadi_int i);
 int planar2_control_ismc_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int planar2_control_ismc_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define planar2_control_ismc_SZ_ARG 12
-#define planar2_control_ismc_SZ_RES 11
+#define planar2_control_ismc_SZ_ARG 13
+#define planar2_control_ismc_SZ_RES 12
 #define planar2_control_ismc_SZ_IW 0
-#define planar2_control_ismc_SZ_W 182
+#define planar2_control_ismc_SZ_W 172
 int planar2_control_ismc_zdot(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int planar2_control_ismc_zdot_alloc_mem(void);
 int planar2_control_ismc_zdot_init_mem(int mem);
@@ -341,10 +341,10 @@ const casadi_int* planar2_control_fl_sparsity_in(casadi_int i);
 const casadi_int* planar2_control_fl_sparsity_out(casadi_int i);
 int planar2_control_fl_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int planar2_control_fl_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define planar2_control_fl_SZ_ARG 12
-#define planar2_control_fl_SZ_RES 11
+#define planar2_control_fl_SZ_ARG 13
+#define planar2_control_fl_SZ_RES 12
 #define planar2_control_fl_SZ_IW 0
-#define planar2_control_fl_SZ_W 174
+#define planar2_control_fl_SZ_W 164
 int planar2_control_adaptive(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int planar2_control_adaptive_alloc_mem(void);
 int planar2_control_adaptive_init_mem(int mem);
@@ -363,9 +363,9 @@ const casadi_int* planar2_control_adaptive_sparsity_out(casadi_int i);
 int planar2_control_adaptive_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int planar2_control_adaptive_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 #define planar2_control_adaptive_SZ_ARG 20
-#define planar2_control_adaptive_SZ_RES 11
+#define planar2_control_adaptive_SZ_RES 12
 #define planar2_control_adaptive_SZ_IW 0
-#define planar2_control_adaptive_SZ_W 235
+#define planar2_control_adaptive_SZ_W 225
 int planar2_control_adaptive_zdot(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int planar2_control_adaptive_zdot_alloc_mem(void);
 int planar2_control_adaptive_zdot_init_mem(int mem);
@@ -405,9 +405,9 @@ const casadi_int* planar2_control_core_tau_sparsity_out(casadi_int i);
 int planar2_control_core_tau_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int planar2_control_core_tau_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 #define planar2_control_core_tau_SZ_ARG 8
-#define planar2_control_core_tau_SZ_RES 6
+#define planar2_control_core_tau_SZ_RES 7
 #define planar2_control_core_tau_SZ_IW 0
-#define planar2_control_core_tau_SZ_W 135
+#define planar2_control_core_tau_SZ_W 82
 int planar2_control_smc_tau(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int planar2_control_smc_tau_alloc_mem(void);
 int planar2_control_smc_tau_init_mem(int mem);
@@ -426,9 +426,9 @@ const casadi_int* planar2_control_smc_tau_sparsity_out(casadi_int i);
 int planar2_control_smc_tau_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int planar2_control_smc_tau_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 #define planar2_control_smc_tau_SZ_ARG 13
-#define planar2_control_smc_tau_SZ_RES 11
+#define planar2_control_smc_tau_SZ_RES 12
 #define planar2_control_smc_tau_SZ_IW 0
-#define planar2_control_smc_tau_SZ_W 215
+#define planar2_control_smc_tau_SZ_W 162
 int planar2_control_ismc_tau(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int planar2_control_ismc_tau_alloc_mem(void);
 int planar2_control_ismc_tau_init_mem(int mem);
@@ -447,9 +447,9 @@ const casadi_int* planar2_control_ismc_tau_sparsity_out(casadi_int i);
 int planar2_control_ismc_tau_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int planar2_control_ismc_tau_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 #define planar2_control_ismc_tau_SZ_ARG 13
-#define planar2_control_ismc_tau_SZ_RES 11
+#define planar2_control_ismc_tau_SZ_RES 12
 #define planar2_control_ismc_tau_SZ_IW 0
-#define planar2_control_ismc_tau_SZ_W 227
+#define planar2_control_ismc_tau_SZ_W 174
 int planar2_control_ismc_tau_zdot(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int planar2_control_ismc_tau_zdot_alloc_mem(void);
 int planar2_control_ismc_tau_zdot_init_mem(int mem);
@@ -489,9 +489,9 @@ const casadi_int* planar2_control_fl_tau_sparsity_out(casadi_int i);
 int planar2_control_fl_tau_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int planar2_control_fl_tau_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 #define planar2_control_fl_tau_SZ_ARG 13
-#define planar2_control_fl_tau_SZ_RES 11
+#define planar2_control_fl_tau_SZ_RES 12
 #define planar2_control_fl_tau_SZ_IW 0
-#define planar2_control_fl_tau_SZ_W 209
+#define planar2_control_fl_tau_SZ_W 156
 int planar2_control_pdg(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int planar2_control_pdg_alloc_mem(void);
 int planar2_control_pdg_init_mem(int mem);
@@ -614,10 +614,10 @@ const casadi_int* planar2_T_tau_sparsity_in(casadi_int i);
 const casadi_int* planar2_T_tau_sparsity_out(casadi_int i);
 int planar2_T_tau_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int planar2_T_tau_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define planar2_T_tau_SZ_ARG 7
-#define planar2_T_tau_SZ_RES 4
+#define planar2_T_tau_SZ_ARG 8
+#define planar2_T_tau_SZ_RES 5
 #define planar2_T_tau_SZ_IW 0
-#define planar2_T_tau_SZ_W 69
+#define planar2_T_tau_SZ_W 76
 int planar2_alpha_tau(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int planar2_alpha_tau_alloc_mem(void);
 int planar2_alpha_tau_init_mem(int mem);
@@ -635,10 +635,10 @@ const casadi_int* planar2_alpha_tau_sparsity_in(casadi_int i);
 const casadi_int* planar2_alpha_tau_sparsity_out(casadi_int i);
 int planar2_alpha_tau_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int planar2_alpha_tau_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define planar2_alpha_tau_SZ_ARG 7
-#define planar2_alpha_tau_SZ_RES 4
+#define planar2_alpha_tau_SZ_ARG 8
+#define planar2_alpha_tau_SZ_RES 5
 #define planar2_alpha_tau_SZ_IW 0
-#define planar2_alpha_tau_SZ_W 75
+#define planar2_alpha_tau_SZ_W 74
 int planar2_beta_tau(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int planar2_beta_tau_alloc_mem(void);
 int planar2_beta_tau_init_mem(int mem);

@@ -1396,7 +1396,7 @@ CASADI_SYMBOL_EXPORT int planar3_ad_work_bytes(casadi_int *sz_arg, casadi_int* s
   return 0;
 }
 
-/* planar3_accel_kernel:(q[3],dq[3],s[3],ds[3],p[22])->(y3[3],y4[3],w[3]) */
+/* planar3_elastic_kernel:(q[3],dq[3],s[3],ds[3],dq_m[3],p[22])->(y3[3],y4[3],alpha[3],beta[3x3]) */
 static int casadi_f10(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
@@ -1404,12 +1404,12 @@ static int casadi_f10(const casadi_real** arg, casadi_real** res, casadi_int* iw
   casadi_real a24, a25, a26, a27, a28, a29, a30, a31, a32, a33, a34, a35;
   casadi_real a36, a37, a38, a39, a40, a41, a42, a43, a44, a45, a46, a47;
   casadi_real a48, a49, a50, a51, a52, a53, a54, a55, a56, a57, a58, a59;
-  casadi_real a60;
+  casadi_real a60, a61, a62, a63, a64, a65, a66, a67, a68, a69;
   a00=arg[2]? arg[2][0] : 0;
-  a01=arg[4]? arg[4][2] : 0;
-  a02=arg[4]? arg[4][8] : 0;
+  a01=arg[5]? arg[5][2] : 0;
+  a02=arg[5]? arg[5][8] : 0;
   a03=(a01*a02);
-  a04=arg[4]? arg[4][3] : 0;
+  a04=arg[5]? arg[5][3] : 0;
   a05=(a03*a04);
   a06=arg[0]? arg[0][0] : 0;
   a07=cos(a06);
@@ -1427,7 +1427,7 @@ static int casadi_f10(const casadi_real** arg, casadi_real** res, casadi_int* iw
   a13=arg[1]? arg[1][0] : 0;
   a14=casadi_sq(a13);
   a15=(a12*a14);
-  a16=arg[4]? arg[4][4] : 0;
+  a16=arg[5]? arg[5][4] : 0;
   a17=(a03*a16);
   a18=cos(a09);
   a19=(a18*a10);
@@ -1440,13 +1440,13 @@ static int casadi_f10(const casadi_real** arg, casadi_real** res, casadi_int* iw
   a23=casadi_sq(a22);
   a24=(a20*a23);
   a15=(a15+a24);
-  a24=arg[4]? arg[4][21] : 0;
+  a24=arg[5]? arg[5][21] : 0;
   a03=(a03*a24);
   a25=(a03*a10);
   a15=(a15+a25);
   a25=(a16*a01);
-  a26=arg[4]? arg[4][1] : 0;
-  a27=arg[4]? arg[4][7] : 0;
+  a26=arg[5]? arg[5][1] : 0;
+  a27=arg[5]? arg[5][7] : 0;
   a28=(a26*a27);
   a25=(a25+a28);
   a28=(a25*a04);
@@ -1466,8 +1466,8 @@ static int casadi_f10(const casadi_real** arg, casadi_real** res, casadi_int* iw
   a31=(a31-a35);
   a35=(a26+a01);
   a36=(a04*a35);
-  a37=arg[4]? arg[4][0] : 0;
-  a38=arg[4]? arg[4][6] : 0;
+  a37=arg[5]? arg[5][0] : 0;
+  a38=arg[5]? arg[5][6] : 0;
   a39=(a37*a38);
   a36=(a36+a39);
   a36=(a36*a24);
@@ -1477,37 +1477,37 @@ static int casadi_f10(const casadi_real** arg, casadi_real** res, casadi_int* iw
   a24=(a24-a39);
   a39=(a12*a34);
   a24=(a24-a39);
-  a00=(a00-a24);
-  a24=(a18*a08);
-  a39=(a09*a10);
-  a24=(a24+a39);
-  a39=(a17*a24);
-  a40=arg[4]? arg[4][10] : 0;
+  a24=(a00-a24);
+  a39=(a18*a08);
+  a40=(a09*a10);
+  a39=(a39+a40);
+  a40=(a17*a39);
+  a41=arg[5]? arg[5][10] : 0;
   a27=casadi_sq(a27);
   a26=(a26*a27);
-  a40=(a40+a26);
+  a41=(a41+a26);
   a16=casadi_sq(a16);
   a16=(a01*a16);
-  a40=(a40+a16);
-  a40=(a39+a40);
+  a41=(a41+a16);
+  a41=(a40+a41);
   a16=(a07*a18);
   a26=(a06*a09);
   a16=(a16+a26);
   a26=(a28*a16);
-  a27=(a40+a26);
-  a41=arg[4]? arg[4][11] : 0;
+  a27=(a41+a26);
+  a42=arg[5]? arg[5][11] : 0;
   a02=casadi_sq(a02);
   a01=(a01*a02);
-  a41=(a41+a01);
-  a39=(a41+a39);
+  a42=(a42+a01);
+  a40=(a42+a40);
   a01=(a07*a08);
   a02=(a06*a10);
   a01=(a01+a02);
   a02=(a05*a01);
-  a42=(a39+a02);
-  a27=(a27+a42);
+  a43=(a40+a02);
+  a27=(a27+a43);
   a02=(a02+a26);
-  a26=arg[4]? arg[4][9] : 0;
+  a26=arg[5]? arg[5][9] : 0;
   a38=casadi_sq(a38);
   a37=(a37*a38);
   a26=(a26+a37);
@@ -1516,215 +1516,218 @@ static int casadi_f10(const casadi_real** arg, casadi_real** res, casadi_int* iw
   a26=(a26+a35);
   a02=(a02+a26);
   a02=(a27+a02);
-  a26=(a00/a02);
+  a26=(a24/a02);
   a35=(a27/a02);
   a04=arg[2]? arg[2][1] : 0;
-  a04=(a04-a31);
-  a31=(a35*a00);
-  a04=(a04-a31);
-  a40=(a40+a39);
-  a31=(a35*a27);
-  a40=(a40-a31);
-  a31=(a04/a40);
-  a37=(a42/a02);
-  a27=(a37*a27);
-  a39=(a39-a27);
-  a27=(a39/a40);
-  a38=arg[2]? arg[2][2] : 0;
-  a38=(a38-a15);
-  a00=(a37*a00);
-  a38=(a38-a00);
-  a04=(a27*a04);
-  a38=(a38-a04);
-  a42=(a37*a42);
-  a41=(a41-a42);
-  a39=(a27*a39);
-  a41=(a41-a39);
-  a38=(a38/a41);
-  a39=(a27*a38);
-  a31=(a31-a39);
-  a39=(a35*a31);
-  a26=(a26-a39);
-  a39=(a37*a38);
-  a26=(a26-a39);
+  a31=(a04-a31);
+  a37=(a35*a24);
+  a31=(a31-a37);
+  a41=(a41+a40);
+  a37=(a35*a27);
+  a37=(a41-a37);
+  a38=(a31/a37);
+  a44=(a43/a02);
+  a45=(a44*a27);
+  a45=(a40-a45);
+  a46=(a45/a37);
+  a47=arg[2]? arg[2][2] : 0;
+  a15=(a47-a15);
+  a24=(a44*a24);
+  a15=(a15-a24);
+  a31=(a46*a31);
+  a15=(a15-a31);
+  a31=(a44*a43);
+  a31=(a42-a31);
+  a45=(a46*a45);
+  a31=(a31-a45);
+  a15=(a15/a31);
+  a45=(a46*a15);
+  a38=(a38-a45);
+  a45=(a35*a38);
+  a26=(a26-a45);
+  a45=(a44*a15);
+  a26=(a26-a45);
   if (res[0]!=0) res[0][0]=a26;
-  if (res[0]!=0) res[0][1]=a31;
-  if (res[0]!=0) res[0][2]=a38;
-  a39=arg[3]? arg[3][0] : 0;
-  a42=2.;
-  a04=(a42*a13);
-  a00=(a04*a26);
-  a15=(a12*a00);
-  a43=(a33-a13);
-  a44=(a01*a43);
-  a45=(a05*a44);
-  a46=(a45*a14);
-  a15=(a15+a46);
-  a46=(a42*a22);
-  a47=(a26+a31);
-  a48=(a46*a47);
-  a49=(a20*a48);
-  a15=(a15+a49);
-  a49=(a24*a32);
-  a50=(a17*a49);
-  a51=(a50*a23);
-  a15=(a15+a51);
-  a51=(a33*a08);
-  a51=(a03*a51);
-  a15=(a15+a51);
-  a51=(a30*a00);
-  a51=(a15+a51);
-  a52=(a16*a21);
-  a53=(a28*a52);
+  if (res[0]!=0) res[0][1]=a38;
+  if (res[0]!=0) res[0][2]=a15;
+  a45=arg[3]? arg[3][0] : 0;
+  a24=2.;
+  a48=(a24*a13);
+  a49=(a48*a26);
+  a50=(a12*a49);
+  a51=(a33-a13);
+  a52=(a01*a51);
+  a53=(a05*a52);
   a54=(a53*a14);
-  a51=(a51+a54);
+  a50=(a50+a54);
+  a54=(a24*a22);
+  a55=(a26+a38);
+  a56=(a54*a55);
+  a57=(a20*a56);
+  a50=(a50+a57);
+  a57=(a39*a32);
+  a58=(a17*a57);
+  a59=(a58*a23);
+  a50=(a50+a59);
+  a59=(a33*a08);
+  a59=(a03*a59);
+  a50=(a50+a59);
+  a59=(a30*a49);
+  a59=(a50+a59);
+  a60=(a16*a21);
+  a61=(a28*a60);
+  a62=(a61*a14);
+  a59=(a59+a62);
   a22=(a22*a18);
   a22=(a25*a22);
-  a51=(a51+a22);
-  a33=(a42*a33);
-  a22=(a47+a38);
-  a54=(a33*a22);
-  a55=(a20*a54);
-  a51=(a51-a55);
-  a50=(a50*a34);
-  a51=(a51-a50);
+  a59=(a59+a22);
+  a33=(a24*a33);
+  a22=(a55+a15);
+  a62=(a33*a22);
+  a63=(a20*a62);
+  a59=(a59-a63);
+  a58=(a58*a34);
+  a59=(a59-a58);
   a13=(a13*a07);
   a13=(a36*a13);
-  a13=(a51+a13);
-  a50=(a30*a48);
-  a13=(a13-a50);
-  a53=(a53*a23);
+  a13=(a59+a13);
+  a58=(a30*a56);
+  a13=(a13-a58);
+  a61=(a61*a23);
+  a13=(a13-a61);
+  a61=(a12*a62);
+  a13=(a13-a61);
+  a53=(a53*a34);
   a13=(a13-a53);
-  a53=(a12*a54);
-  a13=(a13-a53);
-  a45=(a45*a34);
-  a13=(a13-a45);
-  a45=(a19*a32);
-  a53=(a17*a45);
-  a50=(a29*a21);
-  a55=(a28*a50);
-  a56=(a53+a55);
-  a57=(a11*a43);
-  a58=(a05*a57);
-  a59=(a53+a58);
-  a56=(a56+a59);
-  a58=(a58+a55);
-  a58=(a56+a58);
-  a55=(a58*a26);
-  a13=(a13-a55);
-  a55=(a56*a31);
-  a13=(a13-a55);
-  a55=(a59*a38);
-  a13=(a13-a55);
-  a39=(a39-a13);
-  a02=(a39/a02);
-  a13=arg[3]? arg[3][1] : 0;
-  a55=(a56*a26);
-  a51=(a51-a55);
-  a55=(a53+a53);
-  a60=(a55*a31);
-  a51=(a51-a60);
-  a60=(a53*a38);
-  a51=(a51-a60);
-  a13=(a13-a51);
-  a51=(a35*a39);
-  a13=(a13-a51);
-  a40=(a13/a40);
-  a51=arg[3]? arg[3][2] : 0;
-  a60=(a59*a26);
-  a15=(a15-a60);
-  a60=(a53*a31);
-  a15=(a15-a60);
-  a51=(a51-a15);
-  a39=(a37*a39);
-  a51=(a51-a39);
-  a13=(a27*a13);
-  a51=(a51-a13);
-  a51=(a51/a41);
-  a27=(a27*a51);
-  a40=(a40-a27);
-  a35=(a35*a40);
-  a02=(a02-a35);
-  a37=(a37*a51);
-  a02=(a02-a37);
-  if (res[1]!=0) res[1][0]=a02;
-  if (res[1]!=0) res[1][1]=a40;
-  if (res[1]!=0) res[1][2]=a51;
-  a37=casadi_sq(a26);
-  a37=(a42*a37);
-  a04=(a04*a02);
-  a37=(a37+a04);
-  a04=(a12*a37);
-  a35=(a22-a26);
-  a01=(a01*a35);
-  a57=(a57*a43);
-  a01=(a01-a57);
+  a53=(a19*a32);
+  a61=(a17*a53);
+  a58=(a29*a21);
+  a63=(a28*a58);
+  a64=(a61+a63);
+  a65=(a11*a51);
+  a66=(a05*a65);
+  a67=(a61+a66);
+  a64=(a64+a67);
+  a66=(a66+a63);
+  a66=(a64+a66);
+  a63=(a66*a26);
+  a13=(a13-a63);
+  a63=(a64*a38);
+  a13=(a13-a63);
+  a63=(a67*a15);
+  a13=(a13-a63);
+  a45=(a45-a13);
+  a13=(a45/a02);
+  a63=arg[3]? arg[3][1] : 0;
+  a68=(a64*a26);
+  a59=(a59-a68);
+  a68=(a61+a61);
+  a69=(a68*a38);
+  a59=(a59-a69);
+  a69=(a61*a15);
+  a59=(a59-a69);
+  a63=(a63-a59);
+  a59=(a35*a45);
+  a63=(a63-a59);
+  a37=(a63/a37);
+  a59=arg[3]? arg[3][2] : 0;
+  a69=(a67*a26);
+  a50=(a50-a69);
+  a69=(a61*a38);
+  a50=(a50-a69);
+  a59=(a59-a50);
+  a45=(a44*a45);
+  a59=(a59-a45);
+  a63=(a46*a63);
+  a59=(a59-a63);
+  a59=(a59/a31);
+  a46=(a46*a59);
+  a37=(a37-a46);
+  a35=(a35*a37);
+  a13=(a13-a35);
+  a44=(a44*a59);
+  a13=(a13-a44);
+  if (res[1]!=0) res[1][0]=a13;
+  if (res[1]!=0) res[1][1]=a37;
+  if (res[1]!=0) res[1][2]=a59;
+  a44=arg[5]? arg[5][15] : 0;
+  a35=arg[5]? arg[5][12] : 0;
+  a35=(a44/a35);
+  a46=casadi_sq(a26);
+  a46=(a24*a46);
+  a48=(a48*a13);
+  a46=(a46+a48);
+  a48=(a12*a46);
+  a31=(a22-a26);
+  a01=(a01*a31);
+  a65=(a65*a51);
+  a01=(a01-a65);
   a01=(a05*a01);
-  a57=(a01*a14);
-  a04=(a04+a57);
-  a57=casadi_sq(a47);
-  a57=(a42*a57);
-  a27=(a02+a40);
-  a46=(a46*a27);
-  a57=(a57+a46);
-  a46=(a20*a57);
-  a04=(a04+a46);
-  a24=(a24*a38);
-  a45=(a45*a32);
-  a24=(a24-a45);
-  a24=(a17*a24);
-  a45=(a24*a23);
-  a04=(a04+a45);
+  a65=(a01*a14);
+  a48=(a48+a65);
+  a65=casadi_sq(a55);
+  a65=(a24*a65);
+  a63=(a13+a37);
+  a54=(a54*a63);
+  a65=(a65+a54);
+  a54=(a20*a65);
+  a48=(a48+a54);
+  a39=(a39*a15);
+  a53=(a53*a32);
+  a39=(a39-a53);
+  a39=(a17*a39);
+  a53=(a39*a23);
+  a48=(a48+a53);
   a08=(a22*a08);
   a10=(a34*a10);
   a08=(a08-a10);
   a03=(a03*a08);
-  a04=(a04+a03);
-  a03=(a42*a05);
-  a03=(a03*a44);
-  a03=(a03*a00);
-  a04=(a04+a03);
-  a03=(a42*a17);
+  a48=(a48+a03);
+  a03=(a24*a05);
+  a03=(a03*a52);
   a03=(a03*a49);
-  a03=(a03*a48);
-  a04=(a04+a03);
-  a37=(a30*a37);
-  a37=(a04+a37);
-  a16=(a16*a31);
-  a50=(a50*a21);
-  a16=(a16-a50);
+  a48=(a48+a03);
+  a03=(a24*a17);
+  a03=(a03*a57);
+  a03=(a03*a56);
+  a48=(a48+a03);
+  a46=(a30*a46);
+  a46=(a48+a46);
+  a16=(a16*a38);
+  a58=(a58*a21);
+  a16=(a16-a58);
   a16=(a28*a16);
-  a50=(a16*a14);
-  a37=(a37+a50);
-  a47=(a47*a18);
+  a58=(a16*a14);
+  a46=(a46+a58);
+  a55=(a55*a18);
   a09=(a23*a09);
-  a47=(a47-a09);
-  a25=(a25*a47);
-  a37=(a37+a25);
+  a55=(a55-a09);
+  a25=(a25*a55);
+  a46=(a46+a25);
   a22=casadi_sq(a22);
-  a22=(a42*a22);
-  a27=(a27+a51);
-  a33=(a33*a27);
+  a22=(a24*a22);
+  a63=(a63+a59);
+  a33=(a33*a63);
   a22=(a22+a33);
   a20=(a20*a22);
-  a37=(a37-a20);
-  a24=(a24*a34);
-  a37=(a37-a24);
-  a24=-2.;
-  a20=(a24*a17);
+  a46=(a46-a20);
+  a39=(a39*a34);
+  a46=(a46-a39);
+  a39=-2.;
+  a20=(a39*a17);
+  a20=(a20*a57);
+  a20=(a20*a62);
+  a46=(a46+a20);
+  a20=(a24*a28);
+  a20=(a20*a60);
   a20=(a20*a49);
-  a20=(a20*a54);
-  a37=(a37+a20);
-  a20=(a42*a28);
-  a20=(a20*a52);
-  a20=(a20*a00);
-  a37=(a37+a20);
+  a46=(a46+a20);
   a07=(a26*a07);
   a14=(a14*a06);
   a07=(a07-a14);
   a36=(a36*a07);
-  a36=(a37+a36);
-  a30=(a30*a57);
+  a36=(a46+a36);
+  a30=(a30*a65);
   a36=(a36-a30);
   a16=(a16*a23);
   a36=(a36-a16);
@@ -1732,26 +1735,26 @@ static int casadi_f10(const casadi_real** arg, casadi_real** res, casadi_int* iw
   a36=(a36-a12);
   a01=(a01*a34);
   a36=(a36-a01);
-  a01=(a24*a28);
-  a01=(a01*a52);
-  a01=(a01*a48);
+  a01=(a39*a28);
+  a01=(a01*a60);
+  a01=(a01*a56);
   a36=(a36+a01);
-  a24=(a24*a05);
-  a24=(a24*a44);
-  a24=(a24*a54);
-  a36=(a36+a24);
-  a19=(a19*a38);
-  a49=(a49*a32);
-  a19=(a19+a49);
+  a39=(a39*a05);
+  a39=(a39*a52);
+  a39=(a39*a62);
+  a36=(a36+a39);
+  a19=(a19*a15);
+  a57=(a57*a32);
+  a19=(a19+a57);
   a17=(a17*a19);
-  a29=(a29*a31);
-  a52=(a52*a21);
-  a29=(a29+a52);
+  a29=(a29*a38);
+  a60=(a60*a21);
+  a29=(a29+a60);
   a28=(a28*a29);
   a29=(a17+a28);
-  a11=(a11*a35);
-  a44=(a44*a43);
-  a11=(a11+a44);
+  a11=(a11*a31);
+  a52=(a52*a51);
+  a11=(a11+a52);
   a05=(a05*a11);
   a11=(a17+a05);
   a29=(a29+a11);
@@ -1759,45 +1762,93 @@ static int casadi_f10(const casadi_real** arg, casadi_real** res, casadi_int* iw
   a05=(a29+a05);
   a05=(a05*a26);
   a36=(a36-a05);
-  a05=(a29*a31);
+  a05=(a29*a38);
   a36=(a36-a05);
-  a05=(a11*a38);
+  a05=(a11*a15);
   a36=(a36-a05);
-  a58=(a42*a58);
-  a58=(a58*a02);
-  a36=(a36-a58);
-  a56=(a42*a56);
-  a58=(a56*a40);
-  a36=(a36-a58);
-  a59=(a42*a59);
-  a58=(a59*a51);
-  a36=(a36-a58);
+  a66=(a24*a66);
+  a66=(a66*a13);
+  a36=(a36-a66);
+  a64=(a24*a64);
+  a66=(a64*a37);
+  a36=(a36-a66);
+  a67=(a24*a67);
+  a66=(a67*a59);
+  a36=(a36-a66);
+  a36=(a35*a36);
+  a44=(a44*a26);
+  a36=(a36+a44);
+  a36=(a36+a00);
+  a00=arg[5]? arg[5][18] : 0;
+  a44=arg[4]? arg[4][0] : 0;
+  a00=(a00*a44);
+  a36=(a36+a00);
   if (res[2]!=0) res[2][0]=a36;
+  a36=arg[5]? arg[5][16] : 0;
+  a00=arg[5]? arg[5][13] : 0;
+  a00=(a36/a00);
   a29=(a29*a26);
-  a37=(a37-a29);
+  a46=(a46-a29);
   a29=(a17+a17);
-  a29=(a29*a31);
-  a37=(a37-a29);
-  a38=(a17*a38);
-  a37=(a37-a38);
-  a56=(a56*a02);
-  a37=(a37-a56);
-  a55=(a42*a55);
-  a55=(a55*a40);
-  a37=(a37-a55);
-  a42=(a42*a53);
-  a51=(a42*a51);
-  a37=(a37-a51);
-  if (res[2]!=0) res[2][1]=a37;
+  a29=(a29*a38);
+  a46=(a46-a29);
+  a29=(a17*a15);
+  a46=(a46-a29);
+  a64=(a64*a13);
+  a46=(a46-a64);
+  a68=(a24*a68);
+  a68=(a68*a37);
+  a46=(a46-a68);
+  a24=(a24*a61);
+  a59=(a24*a59);
+  a46=(a46-a59);
+  a46=(a00*a46);
+  a36=(a36*a38);
+  a46=(a46+a36);
+  a46=(a46+a04);
+  a04=arg[5]? arg[5][19] : 0;
+  a36=arg[4]? arg[4][1] : 0;
+  a04=(a04*a36);
+  a46=(a46+a04);
+  if (res[2]!=0) res[2][1]=a46;
+  a46=arg[5]? arg[5][17] : 0;
+  a04=arg[5]? arg[5][14] : 0;
+  a04=(a46/a04);
   a11=(a11*a26);
-  a04=(a04-a11);
-  a17=(a17*a31);
-  a04=(a04-a17);
-  a59=(a59*a02);
-  a04=(a04-a59);
-  a42=(a42*a40);
-  a04=(a04-a42);
-  if (res[2]!=0) res[2][2]=a04;
+  a48=(a48-a11);
+  a17=(a17*a38);
+  a48=(a48-a17);
+  a67=(a67*a13);
+  a48=(a48-a67);
+  a24=(a24*a37);
+  a48=(a48-a24);
+  a48=(a04*a48);
+  a46=(a46*a15);
+  a48=(a48+a46);
+  a48=(a48+a47);
+  a47=arg[5]? arg[5][20] : 0;
+  a46=arg[4]? arg[4][2] : 0;
+  a47=(a47*a46);
+  a48=(a48+a47);
+  if (res[2]!=0) res[2][2]=a48;
+  a02=(a35*a02);
+  if (res[3]!=0) res[3][0]=a02;
+  a02=(a00*a27);
+  if (res[3]!=0) res[3][1]=a02;
+  a02=(a04*a43);
+  if (res[3]!=0) res[3][2]=a02;
+  a27=(a35*a27);
+  if (res[3]!=0) res[3][3]=a27;
+  a41=(a00*a41);
+  if (res[3]!=0) res[3][4]=a41;
+  a41=(a04*a40);
+  if (res[3]!=0) res[3][5]=a41;
+  a35=(a35*a43);
+  if (res[3]!=0) res[3][6]=a35;
+  a00=(a00*a40);
+  if (res[3]!=0) res[3][7]=a00;
+  a04=(a04*a42);
+  if (res[3]!=0) res[3][8]=a04;
   return 0;
 }
 
@@ -1805,7 +1856,7 @@ static int casadi_f10(const casadi_real** arg, casadi_real** res, casadi_int* iw
 static int casadi_f9(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i;
-  casadi_real **res1=res+1, *rr, w04, w05, w06, *w07=w+104, *w08=w+107, *w09=w+110, *w10=w+113;
+  casadi_real **res1=res+1, *rr, w04, w05, w06, *w07=w+113, *w08=w+116, *w10=w+122, *w11=w+125;
   const casadi_real **arg1=arg+2, *cr, *cs, *wr00, *wr01, *wr02, *wr03, *wr08, *wr09;
   /* #0: @0 = input[0][0] */
   wr00 = arg[0] ? arg[0] : casadi_zeros;
@@ -1838,24 +1889,26 @@ static int casadi_f9(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   for (i=0, rr=w08, cr=w07, cs=w08; i<3; ++i) (*rr++)  = ((*cr++)*(*cs++));
   /* #13: @9 = @0[9:12] */
   wr09 = wr00+9;
-  /* #14: @9 = (@9-@2) */
-  for (i=0, rr=w09, cr=wr09, cs=wr02; i<3; ++i) (*rr++)  = ((*cr++)-(*cs++));
-  /* #15: @7 = (@7*@9) */
-  for (i=0, rr=w07, cs=w09; i<3; ++i) (*rr++) *= (*cs++);
-  /* #16: {@9, @10, NULL} = planar3_accel_kernel(@1, @2, @8, @7, @3) */
+  /* #14: @10 = (@9-@2) */
+  for (i=0, rr=w10, cr=wr09, cs=wr02; i<3; ++i) (*rr++)  = ((*cr++)-(*cs++));
+  /* #15: @7 = (@7*@10) */
+  for (i=0, rr=w07, cs=w10; i<3; ++i) (*rr++) *= (*cs++);
+  /* #16: {@10, @11, NULL, NULL} = planar3_elastic_kernel(@1, @2, @8, @7, @9, @3) */
   arg1[0]=wr01;
   arg1[1]=wr02;
   arg1[2]=w08;
   arg1[3]=w07;
-  arg1[4]=wr03;
-  res1[0]=w09;
-  res1[1]=w10;
+  arg1[4]=wr09;
+  arg1[5]=wr03;
+  res1[0]=w10;
+  res1[1]=w11;
   res1[2]=0;
+  res1[3]=0;
   if (casadi_f10(arg1, res1, iw, w, 0)) return 1;
-  /* #17: output[0][2] = @9 */
-  if (res[0]) casadi_copy(w09, 3, res[0]+6);
-  /* #18: output[0][3] = @10 */
-  if (res[0]) casadi_copy(w10, 3, res[0]+9);
+  /* #17: output[0][2] = @10 */
+  if (res[0]) casadi_copy(w10, 3, res[0]+6);
+  /* #18: output[0][3] = @11 */
+  if (res[0]) casadi_copy(w11, 3, res[0]+9);
   return 0;
 }
 
@@ -1931,18 +1984,18 @@ CASADI_SYMBOL_EXPORT const casadi_int* planar3_T_sparsity_out(casadi_int i) {
 }
 
 CASADI_SYMBOL_EXPORT int planar3_T_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 7;
-  if (sz_res) *sz_res = 4;
+  if (sz_arg) *sz_arg = 8;
+  if (sz_res) *sz_res = 5;
   if (sz_iw) *sz_iw = 0;
-  if (sz_w) *sz_w = 116;
+  if (sz_w) *sz_w = 128;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT int planar3_T_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 7*sizeof(const casadi_real*);
-  if (sz_res) *sz_res = 4*sizeof(casadi_real*);
+  if (sz_arg) *sz_arg = 8*sizeof(const casadi_real*);
+  if (sz_res) *sz_res = 5*sizeof(casadi_real*);
   if (sz_iw) *sz_iw = 0*sizeof(casadi_int);
-  if (sz_w) *sz_w = 116*sizeof(casadi_real);
+  if (sz_w) *sz_w = 128*sizeof(casadi_real);
   return 0;
 }
 
@@ -1950,87 +2003,53 @@ CASADI_SYMBOL_EXPORT int planar3_T_work_bytes(casadi_int *sz_arg, casadi_int* sz
 static int casadi_f11(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i;
-  casadi_real **res1=res+1, *rr, w01, w02, w03, *w04=w+86, *w05=w+89, *w06=w+92, *w10=w+113, *w12=w+119, *w13=w+122;
-  const casadi_real **arg1=arg+2, *cr, *cs, *wr00, *wr07, *wr08, *wr09, *wr10, *wr11;
-  /* #0: @0 = input[1][0] */
-  wr00 = arg[1] ? arg[1] : casadi_zeros;
-  /* #1: @1 = @0[15] */
-  w01 = wr00[15];
-  /* #2: @2 = @0[16] */
-  w02 = wr00[16];
-  /* #3: @3 = @0[17] */
-  w03 = wr00[17];
-  /* #4: @4 = vertcat(@1, @2, @3) */
-  rr=w04;
-  *rr++ = w01;
-  *rr++ = w02;
-  *rr++ = w03;
-  /* #5: @1 = @0[12] */
-  w01 = wr00[12];
-  /* #6: @2 = @0[13] */
-  w02 = wr00[13];
-  /* #7: @3 = @0[14] */
-  w03 = wr00[14];
-  /* #8: @5 = vertcat(@1, @2, @3) */
-  rr=w05;
-  *rr++ = w01;
-  *rr++ = w02;
-  *rr++ = w03;
-  /* #9: @6 = (@4/@5) */
-  for (i=0, rr=w06, cr=w04, cs=w05; i<3; ++i) (*rr++)  = ((*cr++)/(*cs++));
-  /* #10: @7 = input[0][0] */
-  wr07 = arg[0] ? arg[0] : casadi_zeros;
-  /* #11: @8 = @7[:3] */
-  wr08 = wr07+0;
-  /* #12: @9 = @7[3:6] */
-  wr09 = wr07+3;
-  /* #13: @10 = @7[6:9] */
-  wr10 = wr07+6;
-  /* #14: @10 = (@10-@8) */
-  for (i=0, rr=w10, cr=wr10, cs=wr08; i<3; ++i) (*rr++)  = ((*cr++)-(*cs++));
-  /* #15: @10 = (@5*@10) */
-  for (i=0, rr=w10, cr=w05, cs=w10; i<3; ++i) (*rr++)  = ((*cr++)*(*cs++));
-  /* #16: @11 = @7[9:12] */
-  wr11 = wr07+9;
-  /* #17: @12 = (@11-@9) */
-  for (i=0, rr=w12, cr=wr11, cs=wr09; i<3; ++i) (*rr++)  = ((*cr++)-(*cs++));
-  /* #18: @5 = (@5*@12) */
-  for (i=0, rr=w05, cs=w12; i<3; ++i) (*rr++) *= (*cs++);
-  /* #19: {@12, NULL, @13} = planar3_accel_kernel(@8, @9, @10, @5, @0) */
-  arg1[0]=wr08;
-  arg1[1]=wr09;
-  arg1[2]=w10;
-  arg1[3]=w05;
-  arg1[4]=wr00;
-  res1[0]=w12;
+  casadi_real **res1=res+1, *rr, w04, w05, w06, *w07=w+113, *w08=w+116, *w10=w+122;
+  const casadi_real **arg1=arg+2, *cr, *cs, *wr00, *wr01, *wr02, *wr03, *wr08, *wr09;
+  /* #0: @0 = input[0][0] */
+  wr00 = arg[0] ? arg[0] : casadi_zeros;
+  /* #1: @1 = @0[:3] */
+  wr01 = wr00+0;
+  /* #2: @2 = @0[3:6] */
+  wr02 = wr00+3;
+  /* #3: @3 = input[1][0] */
+  wr03 = arg[1] ? arg[1] : casadi_zeros;
+  /* #4: @4 = @3[12] */
+  w04 = wr03[12];
+  /* #5: @5 = @3[13] */
+  w05 = wr03[13];
+  /* #6: @6 = @3[14] */
+  w06 = wr03[14];
+  /* #7: @7 = vertcat(@4, @5, @6) */
+  rr=w07;
+  *rr++ = w04;
+  *rr++ = w05;
+  *rr++ = w06;
+  /* #8: @8 = @0[6:9] */
+  wr08 = wr00+6;
+  /* #9: @8 = (@8-@1) */
+  for (i=0, rr=w08, cr=wr08, cs=wr01; i<3; ++i) (*rr++)  = ((*cr++)-(*cs++));
+  /* #10: @8 = (@7*@8) */
+  for (i=0, rr=w08, cr=w07, cs=w08; i<3; ++i) (*rr++)  = ((*cr++)*(*cs++));
+  /* #11: @9 = @0[9:12] */
+  wr09 = wr00+9;
+  /* #12: @10 = (@9-@2) */
+  for (i=0, rr=w10, cr=wr09, cs=wr02; i<3; ++i) (*rr++)  = ((*cr++)-(*cs++));
+  /* #13: @7 = (@7*@10) */
+  for (i=0, rr=w07, cs=w10; i<3; ++i) (*rr++) *= (*cs++);
+  /* #14: {NULL, NULL, @10, NULL} = planar3_elastic_kernel(@1, @2, @8, @7, @9, @3) */
+  arg1[0]=wr01;
+  arg1[1]=wr02;
+  arg1[2]=w08;
+  arg1[3]=w07;
+  arg1[4]=wr09;
+  arg1[5]=wr03;
+  res1[0]=0;
   res1[1]=0;
-  res1[2]=w13;
+  res1[2]=w10;
+  res1[3]=0;
   if (casadi_f10(arg1, res1, iw, w, 0)) return 1;
-  /* #20: @6 = (@6*@13) */
-  for (i=0, rr=w06, cs=w13; i<3; ++i) (*rr++) *= (*cs++);
-  /* #21: @4 = (@4*@12) */
-  for (i=0, rr=w04, cs=w12; i<3; ++i) (*rr++) *= (*cs++);
-  /* #22: @6 = (@6+@4) */
-  for (i=0, rr=w06, cs=w04; i<3; ++i) (*rr++) += (*cs++);
-  /* #23: @6 = (@6+@10) */
-  for (i=0, rr=w06, cs=w10; i<3; ++i) (*rr++) += (*cs++);
-  /* #24: @1 = @0[18] */
-  w01 = wr00[18];
-  /* #25: @2 = @0[19] */
-  w02 = wr00[19];
-  /* #26: @3 = @0[20] */
-  w03 = wr00[20];
-  /* #27: @10 = vertcat(@1, @2, @3) */
-  rr=w10;
-  *rr++ = w01;
-  *rr++ = w02;
-  *rr++ = w03;
-  /* #28: @10 = (@10*@11) */
-  for (i=0, rr=w10, cs=wr11; i<3; ++i) (*rr++) *= (*cs++);
-  /* #29: @6 = (@6+@10) */
-  for (i=0, rr=w06, cs=w10; i<3; ++i) (*rr++) += (*cs++);
-  /* #30: output[0][0] = @6 */
-  casadi_copy(w06, 3, res[0]);
+  /* #15: output[0][0] = @10 */
+  casadi_copy(w10, 3, res[0]);
   return 0;
 }
 
@@ -2106,16 +2125,16 @@ CASADI_SYMBOL_EXPORT const casadi_int* planar3_alpha_sparsity_out(casadi_int i) 
 }
 
 CASADI_SYMBOL_EXPORT int planar3_alpha_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 7;
-  if (sz_res) *sz_res = 4;
+  if (sz_arg) *sz_arg = 8;
+  if (sz_res) *sz_res = 5;
   if (sz_iw) *sz_iw = 0;
   if (sz_w) *sz_w = 125;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT int planar3_alpha_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 7*sizeof(const casadi_real*);
-  if (sz_res) *sz_res = 4*sizeof(casadi_real*);
+  if (sz_arg) *sz_arg = 8*sizeof(const casadi_real*);
+  if (sz_res) *sz_res = 5*sizeof(casadi_real*);
   if (sz_iw) *sz_iw = 0*sizeof(casadi_int);
   if (sz_w) *sz_w = 125*sizeof(casadi_real);
   return 0;
@@ -2557,7 +2576,7 @@ CASADI_SYMBOL_EXPORT int planar3_inertia_work_bytes(casadi_int *sz_arg, casadi_i
 static int casadi_f15(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i;
-  casadi_real **res1=res+3, *rr, w04, w05, w06, *w07=w+118, *w08=w+121, *w10=w+127, *w11=w+130, *w12=w+133, *w13=w+136, *w14=w+139;
+  casadi_real **res1=res+3, *rr, w04, w05, w06, *w07=w+113, *w08=w+116, *w10=w+122, *w11=w+125, *w12=w+128, *w13=w+131;
   const casadi_real **arg1=arg+2, *cr, *cs, *wr00, *wr01, *wr02, *wr03, *wr08, *wr09;
   /* #0: @0 = input[0][0] */
   wr00 = arg[0] ? arg[0] : casadi_zeros;
@@ -2592,67 +2611,28 @@ static int casadi_f15(const casadi_real** arg, casadi_real** res, casadi_int* iw
   wr09 = wr00+9;
   /* #14: @10 = (@9-@2) */
   for (i=0, rr=w10, cr=wr09, cs=wr02; i<3; ++i) (*rr++)  = ((*cr++)-(*cs++));
-  /* #15: @10 = (@7*@10) */
-  for (i=0, rr=w10, cr=w07, cs=w10; i<3; ++i) (*rr++)  = ((*cr++)*(*cs++));
-  /* #16: {@11, @12, @13} = planar3_accel_kernel(@1, @2, @8, @10, @3) */
+  /* #15: @7 = (@7*@10) */
+  for (i=0, rr=w07, cs=w10; i<3; ++i) (*rr++) *= (*cs++);
+  /* #16: {@10, @11, @12, @13} = planar3_elastic_kernel(@1, @2, @8, @7, @9, @3) */
   arg1[0]=wr01;
   arg1[1]=wr02;
   arg1[2]=w08;
-  arg1[3]=w10;
-  arg1[4]=wr03;
-  res1[0]=w11;
-  res1[1]=w12;
-  res1[2]=w13;
+  arg1[3]=w07;
+  arg1[4]=wr09;
+  arg1[5]=wr03;
+  res1[0]=w10;
+  res1[1]=w11;
+  res1[2]=w12;
+  res1[3]=w13;
   if (casadi_f10(arg1, res1, iw, w, 0)) return 1;
-  /* #17: output[0][2] = @11 */
-  if (res[0]) casadi_copy(w11, 3, res[0]+6);
-  /* #18: output[0][3] = @12 */
-  if (res[0]) casadi_copy(w12, 3, res[0]+9);
-  /* #19: @4 = @3[15] */
-  w04 = wr03[15];
-  /* #20: @5 = @3[16] */
-  w05 = wr03[16];
-  /* #21: @6 = @3[17] */
-  w06 = wr03[17];
-  /* #22: @12 = vertcat(@4, @5, @6) */
-  rr=w12;
-  *rr++ = w04;
-  *rr++ = w05;
-  *rr++ = w06;
-  /* #23: @7 = (@12/@7) */
-  for (i=0, rr=w07, cr=w12, cs=w07; i<3; ++i) (*rr++)  = ((*cr++)/(*cs++));
-  /* #24: @7 = (@7*@13) */
-  for (i=0, rr=w07, cs=w13; i<3; ++i) (*rr++) *= (*cs++);
-  /* #25: @12 = (@12*@11) */
-  for (i=0, rr=w12, cs=w11; i<3; ++i) (*rr++) *= (*cs++);
-  /* #26: @7 = (@7+@12) */
-  for (i=0, rr=w07, cs=w12; i<3; ++i) (*rr++) += (*cs++);
-  /* #27: @7 = (@7+@8) */
-  for (i=0, rr=w07, cs=w08; i<3; ++i) (*rr++) += (*cs++);
-  /* #28: @4 = @3[18] */
-  w04 = wr03[18];
-  /* #29: @5 = @3[19] */
-  w05 = wr03[19];
-  /* #30: @6 = @3[20] */
-  w06 = wr03[20];
-  /* #31: @8 = vertcat(@4, @5, @6) */
-  rr=w08;
-  *rr++ = w04;
-  *rr++ = w05;
-  *rr++ = w06;
-  /* #32: @8 = (@8*@9) */
-  for (i=0, rr=w08, cs=wr09; i<3; ++i) (*rr++) *= (*cs++);
-  /* #33: @7 = (@7+@8) */
-  for (i=0, rr=w07, cs=w08; i<3; ++i) (*rr++) += (*cs++);
-  /* #34: output[1][0] = @7 */
-  casadi_copy(w07, 3, res[1]);
-  /* #35: @14 = planar3_beta(@0, @3) */
-  arg1[0]=wr00;
-  arg1[1]=wr03;
-  res1[0]=w14;
-  if (casadi_f12(arg1, res1, iw, w, 0)) return 1;
-  /* #36: output[2][0] = @14 */
-  casadi_copy(w14, 9, res[2]);
+  /* #17: output[0][2] = @10 */
+  if (res[0]) casadi_copy(w10, 3, res[0]+6);
+  /* #18: output[0][3] = @11 */
+  if (res[0]) casadi_copy(w11, 3, res[0]+9);
+  /* #19: output[1][0] = @12 */
+  casadi_copy(w12, 3, res[1]);
+  /* #20: output[2][0] = @13 */
+  casadi_copy(w13, 9, res[2]);
   return 0;
 }
 
@@ -2732,18 +2712,18 @@ CASADI_SYMBOL_EXPORT const casadi_int* planar3_control_core_sparsity_out(casadi_
 }
 
 CASADI_SYMBOL_EXPORT int planar3_control_core_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 7;
-  if (sz_res) *sz_res = 6;
+  if (sz_arg) *sz_arg = 8;
+  if (sz_res) *sz_res = 7;
   if (sz_iw) *sz_iw = 0;
-  if (sz_w) *sz_w = 148;
+  if (sz_w) *sz_w = 140;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT int planar3_control_core_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 7*sizeof(const casadi_real*);
-  if (sz_res) *sz_res = 6*sizeof(casadi_real*);
+  if (sz_arg) *sz_arg = 8*sizeof(const casadi_real*);
+  if (sz_res) *sz_res = 7*sizeof(casadi_real*);
   if (sz_iw) *sz_iw = 0*sizeof(casadi_int);
-  if (sz_w) *sz_w = 148*sizeof(casadi_real);
+  if (sz_w) *sz_w = 140*sizeof(casadi_real);
   return 0;
 }
 
@@ -2751,8 +2731,8 @@ CASADI_SYMBOL_EXPORT int planar3_control_core_work_bytes(casadi_int *sz_arg, cas
 static int casadi_f16(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i, j, k;
-  casadi_real **res1=res+5, *rr, w01, *w04=w+210, *w05=w+222, *w06=w+225, *w07=w+234, w08, *w09=w+238, *w11=w+262, *w12=w+265, *w13=w+268;
-  casadi_real *w14=w+271, *w15=w+274, *w16=w+277, w17;
+  casadi_real **res1=res+5, *rr, w01, *w04=w+202, *w05=w+214, *w06=w+217, *w07=w+226, w08, *w09=w+230, *w11=w+254, *w12=w+257, *w13=w+260;
+  casadi_real *w14=w+263, *w15=w+266, *w16=w+269, w17;
   const casadi_real **arg1=arg+5, *cr, *cs, *ct, *wr00, *wr02, *wr03, *wr07, *wr09, *wr10, *wr11, *wr13;
   const casadi_real *wr14, *wr15, *wr16, *wr18;
   /* #0: @0 = input[4][0] */
@@ -3002,18 +2982,18 @@ CASADI_SYMBOL_EXPORT const casadi_int* planar3_control_smc_sparsity_out(casadi_i
 }
 
 CASADI_SYMBOL_EXPORT int planar3_control_smc_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 12;
-  if (sz_res) *sz_res = 11;
+  if (sz_arg) *sz_arg = 13;
+  if (sz_res) *sz_res = 12;
   if (sz_iw) *sz_iw = 0;
-  if (sz_w) *sz_w = 284;
+  if (sz_w) *sz_w = 276;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT int planar3_control_smc_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 12*sizeof(const casadi_real*);
-  if (sz_res) *sz_res = 11*sizeof(casadi_real*);
+  if (sz_arg) *sz_arg = 13*sizeof(const casadi_real*);
+  if (sz_res) *sz_res = 12*sizeof(casadi_real*);
   if (sz_iw) *sz_iw = 0*sizeof(casadi_int);
-  if (sz_w) *sz_w = 284*sizeof(casadi_real);
+  if (sz_w) *sz_w = 276*sizeof(casadi_real);
   return 0;
 }
 
@@ -3021,8 +3001,8 @@ CASADI_SYMBOL_EXPORT int planar3_control_smc_work_bytes(casadi_int *sz_arg, casa
 static int casadi_f17(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i, j, k;
-  casadi_real **res1=res+5, *rr, w01, *w04=w+212, *w05=w+224, *w06=w+227, *w07=w+236, w08, *w09=w+240, *w11=w+264, *w12=w+267, *w13=w+270;
-  casadi_real *w14=w+273, *w15=w+276, *w16=w+279, *w17=w+282, w18;
+  casadi_real **res1=res+5, *rr, w01, *w04=w+204, *w05=w+216, *w06=w+219, *w07=w+228, w08, *w09=w+232, *w11=w+256, *w12=w+259, *w13=w+262;
+  casadi_real *w14=w+265, *w15=w+268, *w16=w+271, *w17=w+274, w18;
   const casadi_real **arg1=arg+5, *cr, *cs, *ct, *wr00, *wr02, *wr03, *wr07, *wr09, *wr10, *wr11, *wr13;
   const casadi_real *wr15, *wr16, *wr17;
   /* #0: @0 = input[4][0] */
@@ -3324,18 +3304,18 @@ CASADI_SYMBOL_EXPORT const casadi_int* planar3_control_ismc_sparsity_out(casadi_
 }
 
 CASADI_SYMBOL_EXPORT int planar3_control_ismc_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 12;
-  if (sz_res) *sz_res = 11;
+  if (sz_arg) *sz_arg = 13;
+  if (sz_res) *sz_res = 12;
   if (sz_iw) *sz_iw = 0;
-  if (sz_w) *sz_w = 286;
+  if (sz_w) *sz_w = 278;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT int planar3_control_ismc_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 12*sizeof(const casadi_real*);
-  if (sz_res) *sz_res = 11*sizeof(casadi_real*);
+  if (sz_arg) *sz_arg = 13*sizeof(const casadi_real*);
+  if (sz_res) *sz_res = 12*sizeof(casadi_real*);
   if (sz_iw) *sz_iw = 0*sizeof(casadi_int);
-  if (sz_w) *sz_w = 286*sizeof(casadi_real);
+  if (sz_w) *sz_w = 278*sizeof(casadi_real);
   return 0;
 }
 
@@ -3502,8 +3482,8 @@ CASADI_SYMBOL_EXPORT int planar3_control_ismc_zdot_work_bytes(casadi_int *sz_arg
 static int casadi_f19(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i, j, k;
-  casadi_real **res1=res+5, *rr, w01, *w04=w+203, *w05=w+215, *w06=w+218, *w07=w+227, w08, *w09=w+231, *w11=w+255, *w12=w+258, *w13=w+261;
-  casadi_real *w14=w+264, *w15=w+267, *w16=w+270;
+  casadi_real **res1=res+5, *rr, w01, *w04=w+195, *w05=w+207, *w06=w+210, *w07=w+219, w08, *w09=w+223, *w11=w+247, *w12=w+250, *w13=w+253;
+  casadi_real *w14=w+256, *w15=w+259, *w16=w+262;
   const casadi_real **arg1=arg+5, *cr, *cs, *ct, *wr00, *wr02, *wr03, *wr07, *wr09, *wr10, *wr11, *wr13;
   const casadi_real *wr15, *wr16, *wr17;
   /* #0: @0 = input[4][0] */
@@ -3723,18 +3703,18 @@ CASADI_SYMBOL_EXPORT const casadi_int* planar3_control_fl_sparsity_out(casadi_in
 }
 
 CASADI_SYMBOL_EXPORT int planar3_control_fl_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 12;
-  if (sz_res) *sz_res = 11;
+  if (sz_arg) *sz_arg = 13;
+  if (sz_res) *sz_res = 12;
   if (sz_iw) *sz_iw = 0;
-  if (sz_w) *sz_w = 276;
+  if (sz_w) *sz_w = 268;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT int planar3_control_fl_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 12*sizeof(const casadi_real*);
-  if (sz_res) *sz_res = 11*sizeof(casadi_real*);
+  if (sz_arg) *sz_arg = 13*sizeof(const casadi_real*);
+  if (sz_res) *sz_res = 12*sizeof(casadi_real*);
   if (sz_iw) *sz_iw = 0*sizeof(casadi_int);
-  if (sz_w) *sz_w = 276*sizeof(casadi_real);
+  if (sz_w) *sz_w = 268*sizeof(casadi_real);
   return 0;
 }
 
@@ -3743,9 +3723,9 @@ static int casadi_f20(const casadi_real** arg, casadi_real** res, casadi_int* iw
   (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i, j, k;
   casadi_real **res1=res+5, *rr, w01, w04, w05, w06, w07, w08, w09, w10, w11, w12;
-  casadi_real w13, w14, w15, *w17=w+249, *w18=w+252, *w19=w+255, w20, w21, w22, w23, w24, w25;
-  casadi_real w26, w27, w28, w29, *w30=w+268, *w31=w+290, *w32=w+302, *w33=w+311, *w34=w+314, *w36=w+338, *w37=w+341, *w38=w+344;
-  casadi_real *w39=w+347, *w40=w+350, *w41=w+353, *w42=w+356, *w43=w+359, *w44=w+362;
+  casadi_real w13, w14, w15, *w17=w+241, *w18=w+244, *w19=w+247, w20, w21, w22, w23, w24, w25;
+  casadi_real w26, w27, w28, w29, *w30=w+260, *w31=w+282, *w32=w+294, *w33=w+303, *w34=w+306, *w36=w+330, *w37=w+333, *w38=w+336;
+  casadi_real *w39=w+339, *w40=w+342, *w41=w+345, *w42=w+348, *w43=w+351, *w44=w+354;
   const casadi_real **arg1=arg+5, *cr, *cs, *ct, *wr00, *wr02, *wr03, *wr16, *wr17, *wr18, *wr19, *wr33;
   const casadi_real *wr34, *wr35, *wr36, *wr37, *wr38, *wr39, *wr40, *wr41, *wr42, *wr43;
   /* #0: @0 = input[4][0] */
@@ -4248,17 +4228,17 @@ CASADI_SYMBOL_EXPORT const casadi_int* planar3_control_adaptive_sparsity_out(cas
 
 CASADI_SYMBOL_EXPORT int planar3_control_adaptive_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
   if (sz_arg) *sz_arg = 27;
-  if (sz_res) *sz_res = 11;
+  if (sz_res) *sz_res = 12;
   if (sz_iw) *sz_iw = 0;
-  if (sz_w) *sz_w = 365;
+  if (sz_w) *sz_w = 357;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT int planar3_control_adaptive_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
   if (sz_arg) *sz_arg = 27*sizeof(const casadi_real*);
-  if (sz_res) *sz_res = 11*sizeof(casadi_real*);
+  if (sz_res) *sz_res = 12*sizeof(casadi_real*);
   if (sz_iw) *sz_iw = 0*sizeof(casadi_int);
-  if (sz_w) *sz_w = 365*sizeof(casadi_real);
+  if (sz_w) *sz_w = 357*sizeof(casadi_real);
   return 0;
 }
 
@@ -4568,40 +4548,11 @@ CASADI_SYMBOL_EXPORT int planar3_control_adaptive_zdot_work_bytes(casadi_int *sz
   return 0;
 }
 
-/* planar3_beta_tau:(m[15],p[22])->(beta_tau[3x3]) */
-static int casadi_f23(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  (void)arg; (void)iw; (void)w; (void)mem;
-  casadi_int i;
-  casadi_real **res1=res+1, *rr, *w2=w+93, *w3=w+102;
-  const casadi_real **arg1=arg+2, *cs, *wr0, *wr1, *wr4;
-  /* #0: @0 = input[0][0] */
-  wr0 = arg[0] ? arg[0] : casadi_zeros;
-  /* #1: @1 = @0[:3] */
-  wr1 = wr0+0;
-  /* #2: @2 = zeros(9x1) */
-  casadi_clear(w2, 9);
-  /* #3: @3 = vertcat(@1, @2) */
-  rr=w3;
-  for (i=0, cs=wr1; i<3; ++i) *rr++ = *cs++;
-  for (i=0, cs=w2; i<9; ++i) *rr++ = *cs++;
-  /* #4: @4 = input[1][0] */
-  wr4 = arg[1] ? arg[1] : casadi_zeros;
-  /* #5: @2 = planar3_beta(@3, @4) */
-  arg1[0]=w3;
-  arg1[1]=wr4;
-  res1[0]=w2;
-  if (casadi_f12(arg1, res1, iw, w, 0)) return 1;
-  /* #6: output[0][0] = @2 */
-  casadi_copy(w2, 9, res[0]);
-  return 0;
-}
-
 /* planar3_control_core_tau:(m[15],p_hat[22])->(y_hat[12],alpha[3],beta[3x3]) */
 static int casadi_f22(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)arg; (void)iw; (void)w; (void)mem;
-  casadi_int i;
-  casadi_real **res1=res+3, *rr, *w03=w+157, *w06=w+185, *w07=w+188, *w08=w+191, w09, w10, w11, *w12=w+197;
-  const casadi_real **arg1=arg+2, *cr, *cs, *wr00, *wr01, *wr02, *wr03, *wr04, *wr05;
+  casadi_real **res1=res+3, *w07=w+122, *w08=w+125, *w09=w+128, *w10=w+131;
+  const casadi_real **arg1=arg+2, *wr00, *wr01, *wr02, *wr03, *wr04, *wr05, *wr06;
   /* #0: @0 = input[0][0] */
   wr00 = arg[0] ? arg[0] : casadi_zeros;
   /* #1: @1 = @0[:3] */
@@ -4616,80 +4567,30 @@ static int casadi_f22(const casadi_real** arg, casadi_real** res, casadi_int* iw
   wr03 = wr00+6;
   /* #6: @4 = @0[9:12] */
   wr04 = wr00+9;
-  /* #7: @5 = input[1][0] */
-  wr05 = arg[1] ? arg[1] : casadi_zeros;
-  /* #8: {@6, @7, @8} = planar3_accel_kernel(@1, @2, @3, @4, @5) */
+  /* #7: @5 = @0[12:15] */
+  wr05 = wr00+12;
+  /* #8: @6 = input[1][0] */
+  wr06 = arg[1] ? arg[1] : casadi_zeros;
+  /* #9: {@7, @8, @9, @10} = planar3_elastic_kernel(@1, @2, @3, @4, @5, @6) */
   arg1[0]=wr01;
   arg1[1]=wr02;
   arg1[2]=wr03;
   arg1[3]=wr04;
   arg1[4]=wr05;
-  res1[0]=w06;
-  res1[1]=w07;
-  res1[2]=w08;
+  arg1[5]=wr06;
+  res1[0]=w07;
+  res1[1]=w08;
+  res1[2]=w09;
+  res1[3]=w10;
   if (casadi_f10(arg1, res1, iw, w, 0)) return 1;
-  /* #9: output[0][2] = @6 */
-  if (res[0]) casadi_copy(w06, 3, res[0]+6);
-  /* #10: output[0][3] = @7 */
-  if (res[0]) casadi_copy(w07, 3, res[0]+9);
-  /* #11: @9 = @5[18] */
-  w09 = wr05[18];
-  /* #12: @10 = @5[19] */
-  w10 = wr05[19];
-  /* #13: @11 = @5[20] */
-  w11 = wr05[20];
-  /* #14: @7 = vertcat(@9, @10, @11) */
-  rr=w07;
-  *rr++ = w09;
-  *rr++ = w10;
-  *rr++ = w11;
-  /* #15: @1 = @0[12:15] */
-  wr01 = wr00+12;
-  /* #16: @7 = (@7*@1) */
-  for (i=0, rr=w07, cs=wr01; i<3; ++i) (*rr++) *= (*cs++);
-  /* #17: @3 = (@3+@7) */
-  for (i=0, rr=w03, cr=wr03, cs=w07; i<3; ++i) (*rr++)  = ((*cr++)+(*cs++));
-  /* #18: @9 = @5[15] */
-  w09 = wr05[15];
-  /* #19: @10 = @5[16] */
-  w10 = wr05[16];
-  /* #20: @11 = @5[17] */
-  w11 = wr05[17];
-  /* #21: @7 = vertcat(@9, @10, @11) */
-  rr=w07;
-  *rr++ = w09;
-  *rr++ = w10;
-  *rr++ = w11;
-  /* #22: @6 = (@7*@6) */
-  for (i=0, rr=w06, cr=w07, cs=w06; i<3; ++i) (*rr++)  = ((*cr++)*(*cs++));
-  /* #23: @3 = (@3+@6) */
-  for (i=0, rr=w03, cs=w06; i<3; ++i) (*rr++) += (*cs++);
-  /* #24: @9 = @5[12] */
-  w09 = wr05[12];
-  /* #25: @10 = @5[13] */
-  w10 = wr05[13];
-  /* #26: @11 = @5[14] */
-  w11 = wr05[14];
-  /* #27: @6 = vertcat(@9, @10, @11) */
-  rr=w06;
-  *rr++ = w09;
-  *rr++ = w10;
-  *rr++ = w11;
-  /* #28: @7 = (@7/@6) */
-  for (i=0, rr=w07, cs=w06; i<3; ++i) (*rr++) /= (*cs++);
-  /* #29: @7 = (@7*@8) */
-  for (i=0, rr=w07, cs=w08; i<3; ++i) (*rr++) *= (*cs++);
-  /* #30: @3 = (@3+@7) */
-  for (i=0, rr=w03, cs=w07; i<3; ++i) (*rr++) += (*cs++);
-  /* #31: output[1][0] = @3 */
-  casadi_copy(w03, 3, res[1]);
-  /* #32: @12 = planar3_beta_tau(@0, @5) */
-  arg1[0]=wr00;
-  arg1[1]=wr05;
-  res1[0]=w12;
-  if (casadi_f23(arg1, res1, iw, w, 0)) return 1;
-  /* #33: output[2][0] = @12 */
-  casadi_copy(w12, 9, res[2]);
+  /* #10: output[0][2] = @7 */
+  if (res[0]) casadi_copy(w07, 3, res[0]+6);
+  /* #11: output[0][3] = @8 */
+  if (res[0]) casadi_copy(w08, 3, res[0]+9);
+  /* #12: output[1][0] = @9 */
+  casadi_copy(w09, 3, res[1]);
+  /* #13: output[2][0] = @10 */
+  casadi_copy(w10, 9, res[2]);
   return 0;
 }
 
@@ -4769,27 +4670,27 @@ CASADI_SYMBOL_EXPORT const casadi_int* planar3_control_core_tau_sparsity_out(cas
 }
 
 CASADI_SYMBOL_EXPORT int planar3_control_core_tau_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 9;
-  if (sz_res) *sz_res = 6;
+  if (sz_arg) *sz_arg = 8;
+  if (sz_res) *sz_res = 7;
   if (sz_iw) *sz_iw = 0;
-  if (sz_w) *sz_w = 206;
+  if (sz_w) *sz_w = 140;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT int planar3_control_core_tau_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 9*sizeof(const casadi_real*);
-  if (sz_res) *sz_res = 6*sizeof(casadi_real*);
+  if (sz_arg) *sz_arg = 8*sizeof(const casadi_real*);
+  if (sz_res) *sz_res = 7*sizeof(casadi_real*);
   if (sz_iw) *sz_iw = 0*sizeof(casadi_int);
-  if (sz_w) *sz_w = 206*sizeof(casadi_real);
+  if (sz_w) *sz_w = 140*sizeof(casadi_real);
   return 0;
 }
 
 /* planar3_control_smc_tau:(m[15],z[0],r[15],p[22],gains[27])->(u[3],s[3],z_dot[0],u_cmd[3],y_hat[12]) */
-static int casadi_f24(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f23(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i, j, k;
-  casadi_real **res1=res+5, *rr, w01, *w04=w+271, *w05=w+283, *w06=w+286, *w07=w+295, w08, *w09=w+299, *w10=w+308, *w11=w+311, *w12=w+314;
-  casadi_real *w13=w+317, *w14=w+320, *w15=w+323, w16;
+  casadi_real **res1=res+5, *rr, w01, *w04=w+205, *w05=w+217, *w06=w+220, *w07=w+229, w08, *w09=w+233, *w10=w+242, *w11=w+245, *w12=w+248;
+  casadi_real *w13=w+251, *w14=w+254, *w15=w+257, w16;
   const casadi_real **arg1=arg+5, *cr, *cs, *ct, *wr00, *wr02, *wr03, *wr07, *wr09, *wr10, *wr12, *wr13;
   const casadi_real *wr14, *wr15, *wr17;
   /* #0: @0 = input[4][0] */
@@ -4954,7 +4855,7 @@ static int casadi_f24(const casadi_real** arg, casadi_real** res, casadi_int* iw
 }
 
 CASADI_SYMBOL_EXPORT int planar3_control_smc_tau(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f24(arg, res, iw, w, mem);
+  return casadi_f23(arg, res, iw, w, mem);
 }
 
 CASADI_SYMBOL_EXPORT int planar3_control_smc_tau_alloc_mem(void) {
@@ -5039,27 +4940,27 @@ CASADI_SYMBOL_EXPORT const casadi_int* planar3_control_smc_tau_sparsity_out(casa
 }
 
 CASADI_SYMBOL_EXPORT int planar3_control_smc_tau_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 14;
-  if (sz_res) *sz_res = 11;
+  if (sz_arg) *sz_arg = 13;
+  if (sz_res) *sz_res = 12;
   if (sz_iw) *sz_iw = 0;
-  if (sz_w) *sz_w = 330;
+  if (sz_w) *sz_w = 264;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT int planar3_control_smc_tau_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 14*sizeof(const casadi_real*);
-  if (sz_res) *sz_res = 11*sizeof(casadi_real*);
+  if (sz_arg) *sz_arg = 13*sizeof(const casadi_real*);
+  if (sz_res) *sz_res = 12*sizeof(casadi_real*);
   if (sz_iw) *sz_iw = 0*sizeof(casadi_int);
-  if (sz_w) *sz_w = 330*sizeof(casadi_real);
+  if (sz_w) *sz_w = 264*sizeof(casadi_real);
   return 0;
 }
 
 /* planar3_control_ismc_tau:(m[15],z[3],r[15],p[22],gains[29])->(u[3],s[3],z_dot[3],u_cmd[3],y_hat[12]) */
-static int casadi_f25(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f24(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i, j, k;
-  casadi_real **res1=res+5, *rr, w01, *w04=w+273, *w05=w+285, *w06=w+288, *w07=w+297, w08, *w09=w+301, *w11=w+325, *w12=w+328, *w13=w+331;
-  casadi_real *w14=w+334, *w15=w+337, *w16=w+340, *w17=w+343, w18;
+  casadi_real **res1=res+5, *rr, w01, *w04=w+207, *w05=w+219, *w06=w+222, *w07=w+231, w08, *w09=w+235, *w11=w+259, *w12=w+262, *w13=w+265;
+  casadi_real *w14=w+268, *w15=w+271, *w16=w+274, *w17=w+277, w18;
   const casadi_real **arg1=arg+5, *cr, *cs, *ct, *wr00, *wr02, *wr03, *wr07, *wr09, *wr10, *wr11, *wr13;
   const casadi_real *wr15, *wr16, *wr17;
   /* #0: @0 = input[4][0] */
@@ -5276,7 +5177,7 @@ static int casadi_f25(const casadi_real** arg, casadi_real** res, casadi_int* iw
 }
 
 CASADI_SYMBOL_EXPORT int planar3_control_ismc_tau(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f25(arg, res, iw, w, mem);
+  return casadi_f24(arg, res, iw, w, mem);
 }
 
 CASADI_SYMBOL_EXPORT int planar3_control_ismc_tau_alloc_mem(void) {
@@ -5361,23 +5262,23 @@ CASADI_SYMBOL_EXPORT const casadi_int* planar3_control_ismc_tau_sparsity_out(cas
 }
 
 CASADI_SYMBOL_EXPORT int planar3_control_ismc_tau_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 14;
-  if (sz_res) *sz_res = 11;
+  if (sz_arg) *sz_arg = 13;
+  if (sz_res) *sz_res = 12;
   if (sz_iw) *sz_iw = 0;
-  if (sz_w) *sz_w = 347;
+  if (sz_w) *sz_w = 281;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT int planar3_control_ismc_tau_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 14*sizeof(const casadi_real*);
-  if (sz_res) *sz_res = 11*sizeof(casadi_real*);
+  if (sz_arg) *sz_arg = 13*sizeof(const casadi_real*);
+  if (sz_res) *sz_res = 12*sizeof(casadi_real*);
   if (sz_iw) *sz_iw = 0*sizeof(casadi_int);
-  if (sz_w) *sz_w = 347*sizeof(casadi_real);
+  if (sz_w) *sz_w = 281*sizeof(casadi_real);
   return 0;
 }
 
 /* planar3_control_ismc_tau_zdot:(m[15],z[3],r[15],p[22],gains[29],u_cmd[3],u[3])->(z_dot[3]) */
-static int casadi_f26(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f25(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a0, a1, a2, a3, a4, a5, a6;
   a0=arg[4]? arg[4][17] : 0;
@@ -5439,7 +5340,7 @@ static int casadi_f26(const casadi_real** arg, casadi_real** res, casadi_int* iw
 }
 
 CASADI_SYMBOL_EXPORT int planar3_control_ismc_tau_zdot(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f26(arg, res, iw, w, mem);
+  return casadi_f25(arg, res, iw, w, mem);
 }
 
 CASADI_SYMBOL_EXPORT int planar3_control_ismc_tau_zdot_alloc_mem(void) {
@@ -5536,11 +5437,11 @@ CASADI_SYMBOL_EXPORT int planar3_control_ismc_tau_zdot_work_bytes(casadi_int *sz
 }
 
 /* planar3_control_fl_tau:(m[15],z[0],r[15],p[22],gains[20])->(u[3],s[3],z_dot[0],u_cmd[3],y_hat[12]) */
-static int casadi_f27(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f26(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i, j, k;
-  casadi_real **res1=res+5, *rr, w01, *w04=w+264, *w05=w+276, *w06=w+279, *w07=w+288, w08, *w09=w+292, *w10=w+301, *w11=w+304, *w12=w+307;
-  casadi_real *w13=w+310, *w14=w+313, *w15=w+316;
+  casadi_real **res1=res+5, *rr, w01, *w04=w+198, *w05=w+210, *w06=w+213, *w07=w+222, w08, *w09=w+226, *w10=w+235, *w11=w+238, *w12=w+241;
+  casadi_real *w13=w+244, *w14=w+247, *w15=w+250;
   const casadi_real **arg1=arg+5, *cr, *cs, *ct, *wr00, *wr02, *wr03, *wr07, *wr09, *wr10, *wr12, *wr14;
   const casadi_real *wr15, *wr16;
   /* #0: @0 = input[4][0] */
@@ -5675,7 +5576,7 @@ static int casadi_f27(const casadi_real** arg, casadi_real** res, casadi_int* iw
 }
 
 CASADI_SYMBOL_EXPORT int planar3_control_fl_tau(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f27(arg, res, iw, w, mem);
+  return casadi_f26(arg, res, iw, w, mem);
 }
 
 CASADI_SYMBOL_EXPORT int planar3_control_fl_tau_alloc_mem(void) {
@@ -5760,23 +5661,23 @@ CASADI_SYMBOL_EXPORT const casadi_int* planar3_control_fl_tau_sparsity_out(casad
 }
 
 CASADI_SYMBOL_EXPORT int planar3_control_fl_tau_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 14;
-  if (sz_res) *sz_res = 11;
+  if (sz_arg) *sz_arg = 13;
+  if (sz_res) *sz_res = 12;
   if (sz_iw) *sz_iw = 0;
-  if (sz_w) *sz_w = 322;
+  if (sz_w) *sz_w = 256;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT int planar3_control_fl_tau_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 14*sizeof(const casadi_real*);
-  if (sz_res) *sz_res = 11*sizeof(casadi_real*);
+  if (sz_arg) *sz_arg = 13*sizeof(const casadi_real*);
+  if (sz_res) *sz_res = 12*sizeof(casadi_real*);
   if (sz_iw) *sz_iw = 0*sizeof(casadi_int);
-  if (sz_w) *sz_w = 322*sizeof(casadi_real);
+  if (sz_w) *sz_w = 256*sizeof(casadi_real);
   return 0;
 }
 
 /* planar3_control_pdg:(x[12],z[0],r[15],p[22],gains[10])->(u[3],s[3],z_dot[0],u_cmd[3],y_hat[12]) */
-static int casadi_f28(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f27(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   a00=arg[4]? arg[4][9] : 0;
@@ -5903,7 +5804,7 @@ static int casadi_f28(const casadi_real** arg, casadi_real** res, casadi_int* iw
 }
 
 CASADI_SYMBOL_EXPORT int planar3_control_pdg(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f28(arg, res, iw, w, mem);
+  return casadi_f27(arg, res, iw, w, mem);
 }
 
 CASADI_SYMBOL_EXPORT int planar3_control_pdg_alloc_mem(void) {
@@ -6004,7 +5905,7 @@ CASADI_SYMBOL_EXPORT int planar3_control_pdg_work_bytes(casadi_int *sz_arg, casa
 }
 
 /* planar3_feedforward:(r[15],p[22])->(tau_Jd[3],theta_d[3],dtheta_d[3],ddtheta_d[3],u_ff[3]) */
-static int casadi_f30(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f29(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14, a15, a16, a17, a18, a19, a20, a21, a22, a23;
@@ -6464,7 +6365,7 @@ static int casadi_f30(const casadi_real** arg, casadi_real** res, casadi_int* iw
 }
 
 /* planar3_control_impedance:(m[18],z[3],r[15],p[22],gains[17])->(u[3],s[3],z_dot[3],u_cmd[3],y_hat[12]) */
-static int casadi_f29(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f28(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i;
   casadi_real **res1=res+5, *rr, w01, *w04=w+126, *w05=w+129, *w06=w+132, *w07=w+135, *w08=w+138, *w10=w+159, *w11=w+162, w12, *w13=w+166;
@@ -6486,7 +6387,7 @@ static int casadi_f29(const casadi_real** arg, casadi_real** res, casadi_int* iw
   res1[2]=w06;
   res1[3]=0;
   res1[4]=w07;
-  if (casadi_f30(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f29(arg1, res1, iw, w, 0)) return 1;
   /* #5: @8 = @0[:3] */
   wr08 = wr00+0;
   /* #6: @9 = input[0][0] */
@@ -6601,7 +6502,7 @@ static int casadi_f29(const casadi_real** arg, casadi_real** res, casadi_int* iw
 }
 
 CASADI_SYMBOL_EXPORT int planar3_control_impedance(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f29(arg, res, iw, w, mem);
+  return casadi_f28(arg, res, iw, w, mem);
 }
 
 CASADI_SYMBOL_EXPORT int planar3_control_impedance_alloc_mem(void) {
@@ -6702,7 +6603,7 @@ CASADI_SYMBOL_EXPORT int planar3_control_impedance_work_bytes(casadi_int *sz_arg
 }
 
 /* planar3_control_impedance_zdot:(m[18],z[3],r[15],p[22],gains[17],u_cmd[3],u[3])->(z_dot[3]) */
-static int casadi_f31(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f30(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a0, a1, a2, a3, a4, a5, a6;
   a0=arg[4]? arg[4][15] : 0;
@@ -6764,7 +6665,7 @@ static int casadi_f31(const casadi_real** arg, casadi_real** res, casadi_int* iw
 }
 
 CASADI_SYMBOL_EXPORT int planar3_control_impedance_zdot(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f31(arg, res, iw, w, mem);
+  return casadi_f30(arg, res, iw, w, mem);
 }
 
 CASADI_SYMBOL_EXPORT int planar3_control_impedance_zdot_alloc_mem(void) {
@@ -6861,7 +6762,7 @@ CASADI_SYMBOL_EXPORT int planar3_control_impedance_zdot_work_bytes(casadi_int *s
 }
 
 /* planar3_rigid_feedforward:(r[15],p[22])->(tau[3]) */
-static int casadi_f33(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f32(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14, a15, a16, a17, a18, a19, a20, a21, a22, a23;
@@ -7009,7 +6910,7 @@ static int casadi_f33(const casadi_real** arg, casadi_real** res, casadi_int* iw
 }
 
 /* planar3_control_joint_impedance:(m[18],z[3],r[15],p[22],gains[14])->(u[3],s[3],z_dot[3],u_cmd[3],y_hat[12]) */
-static int casadi_f32(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f31(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)arg; (void)iw; (void)w; (void)mem;
   casadi_int i;
   casadi_real **res1=res+5, *rr, w01, *w04=w+80, *w05=w+83, *w06=w+86, *w08=w+107, *w09=w+110, w10, *w11=w+114;
@@ -7026,7 +6927,7 @@ static int casadi_f32(const casadi_real** arg, casadi_real** res, casadi_int* iw
   arg1[0]=wr02;
   arg1[1]=wr03;
   res1[0]=w04;
-  if (casadi_f33(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f32(arg1, res1, iw, w, 0)) return 1;
   /* #5: @5 = @0[:3] */
   wr05 = wr00+0;
   /* #6: @6 = @2[:3] */
@@ -7133,7 +7034,7 @@ static int casadi_f32(const casadi_real** arg, casadi_real** res, casadi_int* iw
 }
 
 CASADI_SYMBOL_EXPORT int planar3_control_joint_impedance(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f32(arg, res, iw, w, mem);
+  return casadi_f31(arg, res, iw, w, mem);
 }
 
 CASADI_SYMBOL_EXPORT int planar3_control_joint_impedance_alloc_mem(void) {
@@ -7234,7 +7135,7 @@ CASADI_SYMBOL_EXPORT int planar3_control_joint_impedance_work_bytes(casadi_int *
 }
 
 /* planar3_control_joint_impedance_zdot:(m[18],z[3],r[15],p[22],gains[14],u_cmd[3],u[3])->(z_dot[3]) */
-static int casadi_f34(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f33(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)arg; (void)iw; (void)w; (void)mem;
   casadi_real a0, a1, a2, a3, a4, a5, a6;
   a0=arg[4]? arg[4][12] : 0;
@@ -7296,7 +7197,7 @@ static int casadi_f34(const casadi_real** arg, casadi_real** res, casadi_int* iw
 }
 
 CASADI_SYMBOL_EXPORT int planar3_control_joint_impedance_zdot(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f34(arg, res, iw, w, mem);
+  return casadi_f33(arg, res, iw, w, mem);
 }
 
 CASADI_SYMBOL_EXPORT int planar3_control_joint_impedance_zdot_alloc_mem(void) {
@@ -7393,10 +7294,10 @@ CASADI_SYMBOL_EXPORT int planar3_control_joint_impedance_zdot_work_bytes(casadi_
 }
 
 /* planar3_T_tau:(m[15],p[22])->(T_tau[12]) */
-static int casadi_f35(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f34(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)arg; (void)iw; (void)w; (void)mem;
-  casadi_real **res1=res+1, *w6=w+110, *w7=w+113;
-  const casadi_real **arg1=arg+2, *wr0, *wr1, *wr2, *wr3, *wr4, *wr5;
+  casadi_real **res1=res+1, *w7=w+122, *w8=w+125;
+  const casadi_real **arg1=arg+2, *wr0, *wr1, *wr2, *wr3, *wr4, *wr5, *wr6;
   /* #0: @0 = input[0][0] */
   wr0 = arg[0] ? arg[0] : casadi_zeros;
   /* #1: @1 = @0[:3] */
@@ -7411,27 +7312,31 @@ static int casadi_f35(const casadi_real** arg, casadi_real** res, casadi_int* iw
   wr3 = wr0+6;
   /* #6: @4 = @0[9:12] */
   wr4 = wr0+9;
-  /* #7: @5 = input[1][0] */
-  wr5 = arg[1] ? arg[1] : casadi_zeros;
-  /* #8: {@6, @7, NULL} = planar3_accel_kernel(@1, @2, @3, @4, @5) */
+  /* #7: @5 = @0[12:15] */
+  wr5 = wr0+12;
+  /* #8: @6 = input[1][0] */
+  wr6 = arg[1] ? arg[1] : casadi_zeros;
+  /* #9: {@7, @8, NULL, NULL} = planar3_elastic_kernel(@1, @2, @3, @4, @5, @6) */
   arg1[0]=wr1;
   arg1[1]=wr2;
   arg1[2]=wr3;
   arg1[3]=wr4;
   arg1[4]=wr5;
-  res1[0]=w6;
-  res1[1]=w7;
+  arg1[5]=wr6;
+  res1[0]=w7;
+  res1[1]=w8;
   res1[2]=0;
+  res1[3]=0;
   if (casadi_f10(arg1, res1, iw, w, 0)) return 1;
-  /* #9: output[0][2] = @6 */
-  if (res[0]) casadi_copy(w6, 3, res[0]+6);
-  /* #10: output[0][3] = @7 */
-  if (res[0]) casadi_copy(w7, 3, res[0]+9);
+  /* #10: output[0][2] = @7 */
+  if (res[0]) casadi_copy(w7, 3, res[0]+6);
+  /* #11: output[0][3] = @8 */
+  if (res[0]) casadi_copy(w8, 3, res[0]+9);
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT int planar3_T_tau(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f35(arg, res, iw, w, mem);
+  return casadi_f34(arg, res, iw, w, mem);
 }
 
 CASADI_SYMBOL_EXPORT int planar3_T_tau_alloc_mem(void) {
@@ -7502,105 +7407,59 @@ CASADI_SYMBOL_EXPORT const casadi_int* planar3_T_tau_sparsity_out(casadi_int i) 
 }
 
 CASADI_SYMBOL_EXPORT int planar3_T_tau_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 7;
-  if (sz_res) *sz_res = 4;
+  if (sz_arg) *sz_arg = 8;
+  if (sz_res) *sz_res = 5;
   if (sz_iw) *sz_iw = 0;
-  if (sz_w) *sz_w = 116;
+  if (sz_w) *sz_w = 128;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT int planar3_T_tau_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 7*sizeof(const casadi_real*);
-  if (sz_res) *sz_res = 4*sizeof(casadi_real*);
+  if (sz_arg) *sz_arg = 8*sizeof(const casadi_real*);
+  if (sz_res) *sz_res = 5*sizeof(casadi_real*);
   if (sz_iw) *sz_iw = 0*sizeof(casadi_int);
-  if (sz_w) *sz_w = 116*sizeof(casadi_real);
+  if (sz_w) *sz_w = 128*sizeof(casadi_real);
   return 0;
 }
 
 /* planar3_alpha_tau:(m[15],p[22])->(alpha_tau[3]) */
-static int casadi_f36(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f35(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)arg; (void)iw; (void)w; (void)mem;
-  casadi_int i;
-  casadi_real **res1=res+1, *rr, w03, w04, w05, *w06=w+104, *w07=w+107, *w11=w+119, *w12=w+122;
-  const casadi_real **arg1=arg+2, *cr, *cs, *wr00, *wr01, *wr02, *wr07, *wr08, *wr09, *wr10;
+  casadi_real **res1=res+1, *w7=w+122;
+  const casadi_real **arg1=arg+2, *wr0, *wr1, *wr2, *wr3, *wr4, *wr5, *wr6;
   /* #0: @0 = input[0][0] */
-  wr00 = arg[0] ? arg[0] : casadi_zeros;
-  /* #1: @1 = @0[6:9] */
-  wr01 = wr00+6;
-  /* #2: @2 = input[1][0] */
-  wr02 = arg[1] ? arg[1] : casadi_zeros;
-  /* #3: @3 = @2[18] */
-  w03 = wr02[18];
-  /* #4: @4 = @2[19] */
-  w04 = wr02[19];
-  /* #5: @5 = @2[20] */
-  w05 = wr02[20];
-  /* #6: @6 = vertcat(@3, @4, @5) */
-  rr=w06;
-  *rr++ = w03;
-  *rr++ = w04;
-  *rr++ = w05;
-  /* #7: @7 = @0[12:15] */
-  wr07 = wr00+12;
-  /* #8: @6 = (@6*@7) */
-  for (i=0, rr=w06, cs=wr07; i<3; ++i) (*rr++) *= (*cs++);
-  /* #9: @6 = (@1+@6) */
-  for (i=0, rr=w06, cr=wr01, cs=w06; i<3; ++i) (*rr++)  = ((*cr++)+(*cs++));
-  /* #10: @3 = @2[15] */
-  w03 = wr02[15];
-  /* #11: @4 = @2[16] */
-  w04 = wr02[16];
-  /* #12: @5 = @2[17] */
-  w05 = wr02[17];
-  /* #13: @7 = vertcat(@3, @4, @5) */
-  rr=w07;
-  *rr++ = w03;
-  *rr++ = w04;
-  *rr++ = w05;
-  /* #14: @8 = @0[:3] */
-  wr08 = wr00+0;
-  /* #15: @9 = @0[3:6] */
-  wr09 = wr00+3;
-  /* #16: @10 = @0[9:12] */
-  wr10 = wr00+9;
-  /* #17: {@11, NULL, @12} = planar3_accel_kernel(@8, @9, @1, @10, @2) */
-  arg1[0]=wr08;
-  arg1[1]=wr09;
-  arg1[2]=wr01;
-  arg1[3]=wr10;
-  arg1[4]=wr02;
-  res1[0]=w11;
+  wr0 = arg[0] ? arg[0] : casadi_zeros;
+  /* #1: @1 = @0[:3] */
+  wr1 = wr0+0;
+  /* #2: @2 = @0[3:6] */
+  wr2 = wr0+3;
+  /* #3: @3 = @0[6:9] */
+  wr3 = wr0+6;
+  /* #4: @4 = @0[9:12] */
+  wr4 = wr0+9;
+  /* #5: @5 = @0[12:15] */
+  wr5 = wr0+12;
+  /* #6: @6 = input[1][0] */
+  wr6 = arg[1] ? arg[1] : casadi_zeros;
+  /* #7: {NULL, NULL, @7, NULL} = planar3_elastic_kernel(@1, @2, @3, @4, @5, @6) */
+  arg1[0]=wr1;
+  arg1[1]=wr2;
+  arg1[2]=wr3;
+  arg1[3]=wr4;
+  arg1[4]=wr5;
+  arg1[5]=wr6;
+  res1[0]=0;
   res1[1]=0;
-  res1[2]=w12;
+  res1[2]=w7;
+  res1[3]=0;
   if (casadi_f10(arg1, res1, iw, w, 0)) return 1;
-  /* #18: @11 = (@7*@11) */
-  for (i=0, rr=w11, cr=w07, cs=w11; i<3; ++i) (*rr++)  = ((*cr++)*(*cs++));
-  /* #19: @6 = (@6+@11) */
-  for (i=0, rr=w06, cs=w11; i<3; ++i) (*rr++) += (*cs++);
-  /* #20: @3 = @2[12] */
-  w03 = wr02[12];
-  /* #21: @4 = @2[13] */
-  w04 = wr02[13];
-  /* #22: @5 = @2[14] */
-  w05 = wr02[14];
-  /* #23: @11 = vertcat(@3, @4, @5) */
-  rr=w11;
-  *rr++ = w03;
-  *rr++ = w04;
-  *rr++ = w05;
-  /* #24: @7 = (@7/@11) */
-  for (i=0, rr=w07, cs=w11; i<3; ++i) (*rr++) /= (*cs++);
-  /* #25: @7 = (@7*@12) */
-  for (i=0, rr=w07, cs=w12; i<3; ++i) (*rr++) *= (*cs++);
-  /* #26: @6 = (@6+@7) */
-  for (i=0, rr=w06, cs=w07; i<3; ++i) (*rr++) += (*cs++);
-  /* #27: output[0][0] = @6 */
-  casadi_copy(w06, 3, res[0]);
+  /* #8: output[0][0] = @7 */
+  casadi_copy(w7, 3, res[0]);
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT int planar3_alpha_tau(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f36(arg, res, iw, w, mem);
+  return casadi_f35(arg, res, iw, w, mem);
 }
 
 CASADI_SYMBOL_EXPORT int planar3_alpha_tau_alloc_mem(void) {
@@ -7671,23 +7530,51 @@ CASADI_SYMBOL_EXPORT const casadi_int* planar3_alpha_tau_sparsity_out(casadi_int
 }
 
 CASADI_SYMBOL_EXPORT int planar3_alpha_tau_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 7;
-  if (sz_res) *sz_res = 4;
+  if (sz_arg) *sz_arg = 8;
+  if (sz_res) *sz_res = 5;
   if (sz_iw) *sz_iw = 0;
   if (sz_w) *sz_w = 125;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT int planar3_alpha_tau_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 7*sizeof(const casadi_real*);
-  if (sz_res) *sz_res = 4*sizeof(casadi_real*);
+  if (sz_arg) *sz_arg = 8*sizeof(const casadi_real*);
+  if (sz_res) *sz_res = 5*sizeof(casadi_real*);
   if (sz_iw) *sz_iw = 0*sizeof(casadi_int);
   if (sz_w) *sz_w = 125*sizeof(casadi_real);
   return 0;
 }
 
+/* planar3_beta_tau:(m[15],p[22])->(beta_tau[3x3]) */
+static int casadi_f36(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  (void)arg; (void)iw; (void)w; (void)mem;
+  casadi_int i;
+  casadi_real **res1=res+1, *rr, *w2=w+93, *w3=w+102;
+  const casadi_real **arg1=arg+2, *cs, *wr0, *wr1, *wr4;
+  /* #0: @0 = input[0][0] */
+  wr0 = arg[0] ? arg[0] : casadi_zeros;
+  /* #1: @1 = @0[:3] */
+  wr1 = wr0+0;
+  /* #2: @2 = zeros(9x1) */
+  casadi_clear(w2, 9);
+  /* #3: @3 = vertcat(@1, @2) */
+  rr=w3;
+  for (i=0, cs=wr1; i<3; ++i) *rr++ = *cs++;
+  for (i=0, cs=w2; i<9; ++i) *rr++ = *cs++;
+  /* #4: @4 = input[1][0] */
+  wr4 = arg[1] ? arg[1] : casadi_zeros;
+  /* #5: @2 = planar3_beta(@3, @4) */
+  arg1[0]=w3;
+  arg1[1]=wr4;
+  res1[0]=w2;
+  if (casadi_f12(arg1, res1, iw, w, 0)) return 1;
+  /* #6: output[0][0] = @2 */
+  casadi_copy(w2, 9, res[0]);
+  return 0;
+}
+
 CASADI_SYMBOL_EXPORT int planar3_beta_tau(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f23(arg, res, iw, w, mem);
+  return casadi_f36(arg, res, iw, w, mem);
 }
 
 CASADI_SYMBOL_EXPORT int planar3_beta_tau_alloc_mem(void) {
@@ -7774,7 +7661,7 @@ CASADI_SYMBOL_EXPORT int planar3_beta_tau_work_bytes(casadi_int *sz_arg, casadi_
 }
 
 CASADI_SYMBOL_EXPORT int planar3_feedforward(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f30(arg, res, iw, w, mem);
+  return casadi_f29(arg, res, iw, w, mem);
 }
 
 CASADI_SYMBOL_EXPORT int planar3_feedforward_alloc_mem(void) {

@@ -152,10 +152,10 @@ const casadi_int* planar3_T_sparsity_in(casadi_int i);
 const casadi_int* planar3_T_sparsity_out(casadi_int i);
 int planar3_T_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int planar3_T_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define planar3_T_SZ_ARG 7
-#define planar3_T_SZ_RES 4
+#define planar3_T_SZ_ARG 8
+#define planar3_T_SZ_RES 5
 #define planar3_T_SZ_IW 0
-#define planar3_T_SZ_W 116
+#define planar3_T_SZ_W 128
 int planar3_alpha(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int planar3_alpha_alloc_mem(void);
 int planar3_alpha_init_mem(int mem);
@@ -173,8 +173,8 @@ const casadi_int* planar3_alpha_sparsity_in(casadi_int i);
 const casadi_int* planar3_alpha_sparsity_out(casadi_int i);
 int planar3_alpha_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int planar3_alpha_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define planar3_alpha_SZ_ARG 7
-#define planar3_alpha_SZ_RES 4
+#define planar3_alpha_SZ_ARG 8
+#define planar3_alpha_SZ_RES 5
 #define planar3_alpha_SZ_IW 0
 #define planar3_alpha_SZ_W 125
 int planar3_beta(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
@@ -257,10 +257,10 @@ const casadi_int* planar3_control_core_sparsity_in(casadi_int i);
 const casadi_int* planar3_control_core_sparsity_out(casadi_int i);
 int planar3_control_core_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int planar3_control_core_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define planar3_control_core_SZ_ARG 7
-#define planar3_control_core_SZ_RES 6
+#define planar3_control_core_SZ_ARG 8
+#define planar3_control_core_SZ_RES 7
 #define planar3_control_core_SZ_IW 0
-#define planar3_control_core_SZ_W 148
+#define planar3_control_core_SZ_W 140
 int planar3_control_smc(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int planar3_control_smc_alloc_mem(void);
 int planar3_control_smc_init_mem(int mem);
@@ -278,10 +278,10 @@ const casadi_int* planar3_control_smc_sparsity_in(casadi_int i);
 const casadi_int* planar3_control_smc_sparsity_out(casadi_int i);
 int planar3_control_smc_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int planar3_control_smc_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define planar3_control_smc_SZ_ARG 12
-#define planar3_control_smc_SZ_RES 11
+#define planar3_control_smc_SZ_ARG 13
+#define planar3_control_smc_SZ_RES 12
 #define planar3_control_smc_SZ_IW 0
-#define planar3_control_smc_SZ_W 284
+#define planar3_control_smc_SZ_W 276
 int planar3_control_ismc(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int planar3_control_ismc_alloc_mem(void);
 int planar3_control_ismc_init_mem(int mem);
@@ -299,10 +299,10 @@ const casadi_int* planar3_control_ismc_sparsity_in(casadi_int i);
 const casadi_int* planar3_control_ismc_sparsity_out(casadi_int i);
 int planar3_control_ismc_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int planar3_control_ismc_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define planar3_control_ismc_SZ_ARG 12
-#define planar3_control_ismc_SZ_RES 11
+#define planar3_control_ismc_SZ_ARG 13
+#define planar3_control_ismc_SZ_RES 12
 #define planar3_control_ismc_SZ_IW 0
-#define planar3_control_ismc_SZ_W 286
+#define planar3_control_ismc_SZ_W 278
 int planar3_control_ismc_zdot(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int planar3_control_ismc_zdot_alloc_mem(void);
 int planar3_control_ismc_zdot_init_mem(int mem);
@@ -341,10 +341,10 @@ const casadi_int* planar3_control_fl_sparsity_in(casadi_int i);
 const casadi_int* planar3_control_fl_sparsity_out(casadi_int i);
 int planar3_control_fl_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int planar3_control_fl_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define planar3_control_fl_SZ_ARG 12
-#define planar3_control_fl_SZ_RES 11
+#define planar3_control_fl_SZ_ARG 13
+#define planar3_control_fl_SZ_RES 12
 #define planar3_control_fl_SZ_IW 0
-#define planar3_control_fl_SZ_W 276
+#define planar3_control_fl_SZ_W 268
 int planar3_control_adaptive(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int planar3_control_adaptive_alloc_mem(void);
 int planar3_control_adaptive_init_mem(int mem);
@@ -363,9 +363,9 @@ const casadi_int* planar3_control_adaptive_sparsity_out(casadi_int i);
 int planar3_control_adaptive_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int planar3_control_adaptive_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 #define planar3_control_adaptive_SZ_ARG 27
-#define planar3_control_adaptive_SZ_RES 11
+#define planar3_control_adaptive_SZ_RES 12
 #define planar3_control_adaptive_SZ_IW 0
-#define planar3_control_adaptive_SZ_W 365
+#define planar3_control_adaptive_SZ_W 357
 int planar3_control_adaptive_zdot(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int planar3_control_adaptive_zdot_alloc_mem(void);
 int planar3_control_adaptive_zdot_init_mem(int mem);
@@ -404,10 +404,10 @@ const casadi_int* planar3_control_core_tau_sparsity_in(casadi_int i);
 const casadi_int* planar3_control_core_tau_sparsity_out(casadi_int i);
 int planar3_control_core_tau_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int planar3_control_core_tau_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define planar3_control_core_tau_SZ_ARG 9
-#define planar3_control_core_tau_SZ_RES 6
+#define planar3_control_core_tau_SZ_ARG 8
+#define planar3_control_core_tau_SZ_RES 7
 #define planar3_control_core_tau_SZ_IW 0
-#define planar3_control_core_tau_SZ_W 206
+#define planar3_control_core_tau_SZ_W 140
 int planar3_control_smc_tau(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int planar3_control_smc_tau_alloc_mem(void);
 int planar3_control_smc_tau_init_mem(int mem);
@@ -425,10 +425,10 @@ const casadi_int* planar3_control_smc_tau_sparsity_in(casadi_int i);
 const casadi_int* planar3_control_smc_tau_sparsity_out(casadi_int i);
 int planar3_control_smc_tau_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int planar3_control_smc_tau_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define planar3_control_smc_tau_SZ_ARG 14
-#define planar3_control_smc_tau_SZ_RES 11
+#define planar3_control_smc_tau_SZ_ARG 13
+#define planar3_control_smc_tau_SZ_RES 12
 #define planar3_control_smc_tau_SZ_IW 0
-#define planar3_control_smc_tau_SZ_W 330
+#define planar3_control_smc_tau_SZ_W 264
 int planar3_control_ismc_tau(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int planar3_control_ismc_tau_alloc_mem(void);
 int planar3_control_ismc_tau_init_mem(int mem);
@@ -446,10 +446,10 @@ const casadi_int* planar3_control_ismc_tau_sparsity_in(casadi_int i);
 const casadi_int* planar3_control_ismc_tau_sparsity_out(casadi_int i);
 int planar3_control_ismc_tau_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int planar3_control_ismc_tau_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define planar3_control_ismc_tau_SZ_ARG 14
-#define planar3_control_ismc_tau_SZ_RES 11
+#define planar3_control_ismc_tau_SZ_ARG 13
+#define planar3_control_ismc_tau_SZ_RES 12
 #define planar3_control_ismc_tau_SZ_IW 0
-#define planar3_control_ismc_tau_SZ_W 347
+#define planar3_control_ismc_tau_SZ_W 281
 int planar3_control_ismc_tau_zdot(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int planar3_control_ismc_tau_zdot_alloc_mem(void);
 int planar3_control_ismc_tau_zdot_init_mem(int mem);
@@ -488,10 +488,10 @@ const casadi_int* planar3_control_fl_tau_sparsity_in(casadi_int i);
 const casadi_int* planar3_control_fl_tau_sparsity_out(casadi_int i);
 int planar3_control_fl_tau_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int planar3_control_fl_tau_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define planar3_control_fl_tau_SZ_ARG 14
-#define planar3_control_fl_tau_SZ_RES 11
+#define planar3_control_fl_tau_SZ_ARG 13
+#define planar3_control_fl_tau_SZ_RES 12
 #define planar3_control_fl_tau_SZ_IW 0
-#define planar3_control_fl_tau_SZ_W 322
+#define planar3_control_fl_tau_SZ_W 256
 int planar3_control_pdg(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int planar3_control_pdg_alloc_mem(void);
 int planar3_control_pdg_init_mem(int mem);
@@ -614,10 +614,10 @@ const casadi_int* planar3_T_tau_sparsity_in(casadi_int i);
 const casadi_int* planar3_T_tau_sparsity_out(casadi_int i);
 int planar3_T_tau_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int planar3_T_tau_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define planar3_T_tau_SZ_ARG 7
-#define planar3_T_tau_SZ_RES 4
+#define planar3_T_tau_SZ_ARG 8
+#define planar3_T_tau_SZ_RES 5
 #define planar3_T_tau_SZ_IW 0
-#define planar3_T_tau_SZ_W 116
+#define planar3_T_tau_SZ_W 128
 int planar3_alpha_tau(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int planar3_alpha_tau_alloc_mem(void);
 int planar3_alpha_tau_init_mem(int mem);
@@ -635,8 +635,8 @@ const casadi_int* planar3_alpha_tau_sparsity_in(casadi_int i);
 const casadi_int* planar3_alpha_tau_sparsity_out(casadi_int i);
 int planar3_alpha_tau_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int planar3_alpha_tau_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define planar3_alpha_tau_SZ_ARG 7
-#define planar3_alpha_tau_SZ_RES 4
+#define planar3_alpha_tau_SZ_ARG 8
+#define planar3_alpha_tau_SZ_RES 5
 #define planar3_alpha_tau_SZ_IW 0
 #define planar3_alpha_tau_SZ_W 125
 int planar3_beta_tau(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);

@@ -152,10 +152,10 @@ const casadi_int* planar4_T_sparsity_in(casadi_int i);
 const casadi_int* planar4_T_sparsity_out(casadi_int i);
 int planar4_T_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int planar4_T_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define planar4_T_SZ_ARG 7
-#define planar4_T_SZ_RES 4
+#define planar4_T_SZ_ARG 8
+#define planar4_T_SZ_RES 5
 #define planar4_T_SZ_IW 0
-#define planar4_T_SZ_W 172
+#define planar4_T_SZ_W 190
 int planar4_alpha(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int planar4_alpha_alloc_mem(void);
 int planar4_alpha_init_mem(int mem);
@@ -173,10 +173,10 @@ const casadi_int* planar4_alpha_sparsity_in(casadi_int i);
 const casadi_int* planar4_alpha_sparsity_out(casadi_int i);
 int planar4_alpha_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int planar4_alpha_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define planar4_alpha_SZ_ARG 7
-#define planar4_alpha_SZ_RES 4
+#define planar4_alpha_SZ_ARG 8
+#define planar4_alpha_SZ_RES 5
 #define planar4_alpha_SZ_IW 0
-#define planar4_alpha_SZ_W 184
+#define planar4_alpha_SZ_W 186
 int planar4_beta(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int planar4_beta_alloc_mem(void);
 int planar4_beta_init_mem(int mem);
@@ -258,9 +258,9 @@ const casadi_int* planar4_control_core_sparsity_out(casadi_int i);
 int planar4_control_core_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int planar4_control_core_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 #define planar4_control_core_SZ_ARG 8
-#define planar4_control_core_SZ_RES 6
+#define planar4_control_core_SZ_RES 7
 #define planar4_control_core_SZ_IW 0
-#define planar4_control_core_SZ_W 212
+#define planar4_control_core_SZ_W 194
 int planar4_control_smc(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int planar4_control_smc_alloc_mem(void);
 int planar4_control_smc_init_mem(int mem);
@@ -279,9 +279,9 @@ const casadi_int* planar4_control_smc_sparsity_out(casadi_int i);
 int planar4_control_smc_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int planar4_control_smc_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 #define planar4_control_smc_SZ_ARG 13
-#define planar4_control_smc_SZ_RES 11
+#define planar4_control_smc_SZ_RES 12
 #define planar4_control_smc_SZ_IW 0
-#define planar4_control_smc_SZ_W 386
+#define planar4_control_smc_SZ_W 368
 int planar4_control_ismc(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int planar4_control_ismc_alloc_mem(void);
 int planar4_control_ismc_init_mem(int mem);
@@ -300,9 +300,9 @@ const casadi_int* planar4_control_ismc_sparsity_out(casadi_int i);
 int planar4_control_ismc_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int planar4_control_ismc_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 #define planar4_control_ismc_SZ_ARG 13
-#define planar4_control_ismc_SZ_RES 11
+#define planar4_control_ismc_SZ_RES 12
 #define planar4_control_ismc_SZ_IW 0
-#define planar4_control_ismc_SZ_W 404
+#define planar4_control_ismc_SZ_W 386
 int planar4_control_ismc_zdot(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int planar4_control_ismc_zdot_alloc_mem(void);
 int planar4_control_ismc_zdot_init_mem(int mem);
@@ -342,9 +342,9 @@ const casadi_int* planar4_control_fl_sparsity_out(casadi_int i);
 int planar4_control_fl_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int planar4_control_fl_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 #define planar4_control_fl_SZ_ARG 13
-#define planar4_control_fl_SZ_RES 11
+#define planar4_control_fl_SZ_RES 12
 #define planar4_control_fl_SZ_IW 0
-#define planar4_control_fl_SZ_W 376
+#define planar4_control_fl_SZ_W 358
 int planar4_control_adaptive(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int planar4_control_adaptive_alloc_mem(void);
 int planar4_control_adaptive_init_mem(int mem);
@@ -363,9 +363,9 @@ const casadi_int* planar4_control_adaptive_sparsity_out(casadi_int i);
 int planar4_control_adaptive_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int planar4_control_adaptive_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 #define planar4_control_adaptive_SZ_ARG 34
-#define planar4_control_adaptive_SZ_RES 11
+#define planar4_control_adaptive_SZ_RES 12
 #define planar4_control_adaptive_SZ_IW 0
-#define planar4_control_adaptive_SZ_W 509
+#define planar4_control_adaptive_SZ_W 491
 int planar4_control_adaptive_zdot(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int planar4_control_adaptive_zdot_alloc_mem(void);
 int planar4_control_adaptive_zdot_init_mem(int mem);
@@ -404,10 +404,10 @@ const casadi_int* planar4_control_core_tau_sparsity_in(casadi_int i);
 const casadi_int* planar4_control_core_tau_sparsity_out(casadi_int i);
 int planar4_control_core_tau_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int planar4_control_core_tau_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define planar4_control_core_tau_SZ_ARG 10
-#define planar4_control_core_tau_SZ_RES 6
+#define planar4_control_core_tau_SZ_ARG 8
+#define planar4_control_core_tau_SZ_RES 7
 #define planar4_control_core_tau_SZ_IW 0
-#define planar4_control_core_tau_SZ_W 305
+#define planar4_control_core_tau_SZ_W 210
 int planar4_control_smc_tau(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int planar4_control_smc_tau_alloc_mem(void);
 int planar4_control_smc_tau_init_mem(int mem);
@@ -425,10 +425,10 @@ const casadi_int* planar4_control_smc_tau_sparsity_in(casadi_int i);
 const casadi_int* planar4_control_smc_tau_sparsity_out(casadi_int i);
 int planar4_control_smc_tau_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int planar4_control_smc_tau_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define planar4_control_smc_tau_SZ_ARG 15
-#define planar4_control_smc_tau_SZ_RES 11
+#define planar4_control_smc_tau_SZ_ARG 13
+#define planar4_control_smc_tau_SZ_RES 12
 #define planar4_control_smc_tau_SZ_IW 0
-#define planar4_control_smc_tau_SZ_W 479
+#define planar4_control_smc_tau_SZ_W 384
 int planar4_control_ismc_tau(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int planar4_control_ismc_tau_alloc_mem(void);
 int planar4_control_ismc_tau_init_mem(int mem);
@@ -446,10 +446,10 @@ const casadi_int* planar4_control_ismc_tau_sparsity_in(casadi_int i);
 const casadi_int* planar4_control_ismc_tau_sparsity_out(casadi_int i);
 int planar4_control_ismc_tau_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int planar4_control_ismc_tau_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define planar4_control_ismc_tau_SZ_ARG 15
-#define planar4_control_ismc_tau_SZ_RES 11
+#define planar4_control_ismc_tau_SZ_ARG 13
+#define planar4_control_ismc_tau_SZ_RES 12
 #define planar4_control_ismc_tau_SZ_IW 0
-#define planar4_control_ismc_tau_SZ_W 501
+#define planar4_control_ismc_tau_SZ_W 406
 int planar4_control_ismc_tau_zdot(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int planar4_control_ismc_tau_zdot_alloc_mem(void);
 int planar4_control_ismc_tau_zdot_init_mem(int mem);
@@ -488,10 +488,10 @@ const casadi_int* planar4_control_fl_tau_sparsity_in(casadi_int i);
 const casadi_int* planar4_control_fl_tau_sparsity_out(casadi_int i);
 int planar4_control_fl_tau_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int planar4_control_fl_tau_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define planar4_control_fl_tau_SZ_ARG 15
-#define planar4_control_fl_tau_SZ_RES 11
+#define planar4_control_fl_tau_SZ_ARG 13
+#define planar4_control_fl_tau_SZ_RES 12
 #define planar4_control_fl_tau_SZ_IW 0
-#define planar4_control_fl_tau_SZ_W 469
+#define planar4_control_fl_tau_SZ_W 374
 int planar4_control_pdg(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int planar4_control_pdg_alloc_mem(void);
 int planar4_control_pdg_init_mem(int mem);
@@ -614,10 +614,10 @@ const casadi_int* planar4_T_tau_sparsity_in(casadi_int i);
 const casadi_int* planar4_T_tau_sparsity_out(casadi_int i);
 int planar4_T_tau_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int planar4_T_tau_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define planar4_T_tau_SZ_ARG 7
-#define planar4_T_tau_SZ_RES 4
+#define planar4_T_tau_SZ_ARG 8
+#define planar4_T_tau_SZ_RES 5
 #define planar4_T_tau_SZ_IW 0
-#define planar4_T_tau_SZ_W 172
+#define planar4_T_tau_SZ_W 190
 int planar4_alpha_tau(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int planar4_alpha_tau_alloc_mem(void);
 int planar4_alpha_tau_init_mem(int mem);
@@ -635,10 +635,10 @@ const casadi_int* planar4_alpha_tau_sparsity_in(casadi_int i);
 const casadi_int* planar4_alpha_tau_sparsity_out(casadi_int i);
 int planar4_alpha_tau_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int planar4_alpha_tau_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define planar4_alpha_tau_SZ_ARG 7
-#define planar4_alpha_tau_SZ_RES 4
+#define planar4_alpha_tau_SZ_ARG 8
+#define planar4_alpha_tau_SZ_RES 5
 #define planar4_alpha_tau_SZ_IW 0
-#define planar4_alpha_tau_SZ_W 184
+#define planar4_alpha_tau_SZ_W 186
 int planar4_beta_tau(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int planar4_beta_tau_alloc_mem(void);
 int planar4_beta_tau_init_mem(int mem);

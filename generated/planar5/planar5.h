@@ -152,10 +152,10 @@ const casadi_int* planar5_T_sparsity_in(casadi_int i);
 const casadi_int* planar5_T_sparsity_out(casadi_int i);
 int planar5_T_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int planar5_T_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define planar5_T_SZ_ARG 7
-#define planar5_T_SZ_RES 4
+#define planar5_T_SZ_ARG 8
+#define planar5_T_SZ_RES 5
 #define planar5_T_SZ_IW 0
-#define planar5_T_SZ_W 238
+#define planar5_T_SZ_W 262
 int planar5_alpha(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int planar5_alpha_alloc_mem(void);
 int planar5_alpha_init_mem(int mem);
@@ -173,10 +173,10 @@ const casadi_int* planar5_alpha_sparsity_in(casadi_int i);
 const casadi_int* planar5_alpha_sparsity_out(casadi_int i);
 int planar5_alpha_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int planar5_alpha_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define planar5_alpha_SZ_ARG 7
-#define planar5_alpha_SZ_RES 4
+#define planar5_alpha_SZ_ARG 8
+#define planar5_alpha_SZ_RES 5
 #define planar5_alpha_SZ_IW 0
-#define planar5_alpha_SZ_W 253
+#define planar5_alpha_SZ_W 257
 int planar5_beta(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int planar5_beta_alloc_mem(void);
 int planar5_beta_init_mem(int mem);
@@ -257,10 +257,10 @@ const casadi_int* planar5_control_core_sparsity_in(casadi_int i);
 const casadi_int* planar5_control_core_sparsity_out(casadi_int i);
 int planar5_control_core_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int planar5_control_core_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define planar5_control_core_SZ_ARG 9
-#define planar5_control_core_SZ_RES 6
+#define planar5_control_core_SZ_ARG 8
+#define planar5_control_core_SZ_RES 7
 #define planar5_control_core_SZ_IW 0
-#define planar5_control_core_SZ_W 281
+#define planar5_control_core_SZ_W 292
 int planar5_control_smc(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int planar5_control_smc_alloc_mem(void);
 int planar5_control_smc_init_mem(int mem);
@@ -278,10 +278,10 @@ const casadi_int* planar5_control_smc_sparsity_in(casadi_int i);
 const casadi_int* planar5_control_smc_sparsity_out(casadi_int i);
 int planar5_control_smc_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int planar5_control_smc_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define planar5_control_smc_SZ_ARG 14
-#define planar5_control_smc_SZ_RES 11
+#define planar5_control_smc_SZ_ARG 13
+#define planar5_control_smc_SZ_RES 12
 #define planar5_control_smc_SZ_IW 0
-#define planar5_control_smc_SZ_W 506
+#define planar5_control_smc_SZ_W 517
 int planar5_control_ismc(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int planar5_control_ismc_alloc_mem(void);
 int planar5_control_ismc_init_mem(int mem);
@@ -299,10 +299,10 @@ const casadi_int* planar5_control_ismc_sparsity_in(casadi_int i);
 const casadi_int* planar5_control_ismc_sparsity_out(casadi_int i);
 int planar5_control_ismc_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int planar5_control_ismc_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define planar5_control_ismc_SZ_ARG 14
-#define planar5_control_ismc_SZ_RES 11
+#define planar5_control_ismc_SZ_ARG 13
+#define planar5_control_ismc_SZ_RES 12
 #define planar5_control_ismc_SZ_IW 0
-#define planar5_control_ismc_SZ_W 508
+#define planar5_control_ismc_SZ_W 519
 int planar5_control_ismc_zdot(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int planar5_control_ismc_zdot_alloc_mem(void);
 int planar5_control_ismc_zdot_init_mem(int mem);
@@ -341,10 +341,10 @@ const casadi_int* planar5_control_fl_sparsity_in(casadi_int i);
 const casadi_int* planar5_control_fl_sparsity_out(casadi_int i);
 int planar5_control_fl_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int planar5_control_fl_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define planar5_control_fl_SZ_ARG 14
-#define planar5_control_fl_SZ_RES 11
+#define planar5_control_fl_SZ_ARG 13
+#define planar5_control_fl_SZ_RES 12
 #define planar5_control_fl_SZ_IW 0
-#define planar5_control_fl_SZ_W 494
+#define planar5_control_fl_SZ_W 505
 int planar5_control_adaptive(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int planar5_control_adaptive_alloc_mem(void);
 int planar5_control_adaptive_init_mem(int mem);
@@ -363,9 +363,9 @@ const casadi_int* planar5_control_adaptive_sparsity_out(casadi_int i);
 int planar5_control_adaptive_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int planar5_control_adaptive_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 #define planar5_control_adaptive_SZ_ARG 41
-#define planar5_control_adaptive_SZ_RES 11
+#define planar5_control_adaptive_SZ_RES 12
 #define planar5_control_adaptive_SZ_IW 0
-#define planar5_control_adaptive_SZ_W 639
+#define planar5_control_adaptive_SZ_W 650
 int planar5_control_adaptive_zdot(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int planar5_control_adaptive_zdot_alloc_mem(void);
 int planar5_control_adaptive_zdot_init_mem(int mem);
@@ -404,10 +404,10 @@ const casadi_int* planar5_control_core_tau_sparsity_in(casadi_int i);
 const casadi_int* planar5_control_core_tau_sparsity_out(casadi_int i);
 int planar5_control_core_tau_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int planar5_control_core_tau_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define planar5_control_core_tau_SZ_ARG 11
-#define planar5_control_core_tau_SZ_RES 6
+#define planar5_control_core_tau_SZ_ARG 8
+#define planar5_control_core_tau_SZ_RES 7
 #define planar5_control_core_tau_SZ_IW 0
-#define planar5_control_core_tau_SZ_W 377
+#define planar5_control_core_tau_SZ_W 267
 int planar5_control_smc_tau(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int planar5_control_smc_tau_alloc_mem(void);
 int planar5_control_smc_tau_init_mem(int mem);
@@ -425,10 +425,10 @@ const casadi_int* planar5_control_smc_tau_sparsity_in(casadi_int i);
 const casadi_int* planar5_control_smc_tau_sparsity_out(casadi_int i);
 int planar5_control_smc_tau_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int planar5_control_smc_tau_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define planar5_control_smc_tau_SZ_ARG 16
-#define planar5_control_smc_tau_SZ_RES 11
+#define planar5_control_smc_tau_SZ_ARG 13
+#define planar5_control_smc_tau_SZ_RES 12
 #define planar5_control_smc_tau_SZ_IW 0
-#define planar5_control_smc_tau_SZ_W 582
+#define planar5_control_smc_tau_SZ_W 472
 int planar5_control_ismc_tau(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int planar5_control_ismc_tau_alloc_mem(void);
 int planar5_control_ismc_tau_init_mem(int mem);
@@ -446,10 +446,10 @@ const casadi_int* planar5_control_ismc_tau_sparsity_in(casadi_int i);
 const casadi_int* planar5_control_ismc_tau_sparsity_out(casadi_int i);
 int planar5_control_ismc_tau_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int planar5_control_ismc_tau_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define planar5_control_ismc_tau_SZ_ARG 16
-#define planar5_control_ismc_tau_SZ_RES 11
+#define planar5_control_ismc_tau_SZ_ARG 13
+#define planar5_control_ismc_tau_SZ_RES 12
 #define planar5_control_ismc_tau_SZ_IW 0
-#define planar5_control_ismc_tau_SZ_W 609
+#define planar5_control_ismc_tau_SZ_W 499
 int planar5_control_ismc_tau_zdot(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int planar5_control_ismc_tau_zdot_alloc_mem(void);
 int planar5_control_ismc_tau_zdot_init_mem(int mem);
@@ -488,10 +488,10 @@ const casadi_int* planar5_control_fl_tau_sparsity_in(casadi_int i);
 const casadi_int* planar5_control_fl_tau_sparsity_out(casadi_int i);
 int planar5_control_fl_tau_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int planar5_control_fl_tau_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define planar5_control_fl_tau_SZ_ARG 16
-#define planar5_control_fl_tau_SZ_RES 11
+#define planar5_control_fl_tau_SZ_ARG 13
+#define planar5_control_fl_tau_SZ_RES 12
 #define planar5_control_fl_tau_SZ_IW 0
-#define planar5_control_fl_tau_SZ_W 570
+#define planar5_control_fl_tau_SZ_W 460
 int planar5_control_pdg(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int planar5_control_pdg_alloc_mem(void);
 int planar5_control_pdg_init_mem(int mem);
@@ -614,10 +614,10 @@ const casadi_int* planar5_T_tau_sparsity_in(casadi_int i);
 const casadi_int* planar5_T_tau_sparsity_out(casadi_int i);
 int planar5_T_tau_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int planar5_T_tau_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define planar5_T_tau_SZ_ARG 7
-#define planar5_T_tau_SZ_RES 4
+#define planar5_T_tau_SZ_ARG 8
+#define planar5_T_tau_SZ_RES 5
 #define planar5_T_tau_SZ_IW 0
-#define planar5_T_tau_SZ_W 238
+#define planar5_T_tau_SZ_W 262
 int planar5_alpha_tau(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int planar5_alpha_tau_alloc_mem(void);
 int planar5_alpha_tau_init_mem(int mem);
@@ -635,10 +635,10 @@ const casadi_int* planar5_alpha_tau_sparsity_in(casadi_int i);
 const casadi_int* planar5_alpha_tau_sparsity_out(casadi_int i);
 int planar5_alpha_tau_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int planar5_alpha_tau_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define planar5_alpha_tau_SZ_ARG 7
-#define planar5_alpha_tau_SZ_RES 4
+#define planar5_alpha_tau_SZ_ARG 8
+#define planar5_alpha_tau_SZ_RES 5
 #define planar5_alpha_tau_SZ_IW 0
-#define planar5_alpha_tau_SZ_W 253
+#define planar5_alpha_tau_SZ_W 257
 int planar5_beta_tau(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int planar5_beta_tau_alloc_mem(void);
 int planar5_beta_tau_init_mem(int mem);

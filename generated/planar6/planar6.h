@@ -153,9 +153,9 @@ const casadi_int* planar6_T_sparsity_out(casadi_int i);
 int planar6_T_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int planar6_T_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 #define planar6_T_SZ_ARG 8
-#define planar6_T_SZ_RES 4
+#define planar6_T_SZ_RES 5
 #define planar6_T_SZ_IW 0
-#define planar6_T_SZ_W 313
+#define planar6_T_SZ_W 345
 int planar6_alpha(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int planar6_alpha_alloc_mem(void);
 int planar6_alpha_init_mem(int mem);
@@ -174,9 +174,9 @@ const casadi_int* planar6_alpha_sparsity_out(casadi_int i);
 int planar6_alpha_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int planar6_alpha_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 #define planar6_alpha_SZ_ARG 8
-#define planar6_alpha_SZ_RES 4
+#define planar6_alpha_SZ_RES 5
 #define planar6_alpha_SZ_IW 0
-#define planar6_alpha_SZ_W 331
+#define planar6_alpha_SZ_W 339
 int planar6_beta(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int planar6_beta_alloc_mem(void);
 int planar6_beta_init_mem(int mem);
@@ -257,10 +257,10 @@ const casadi_int* planar6_control_core_sparsity_in(casadi_int i);
 const casadi_int* planar6_control_core_sparsity_out(casadi_int i);
 int planar6_control_core_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int planar6_control_core_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define planar6_control_core_SZ_ARG 10
-#define planar6_control_core_SZ_RES 6
+#define planar6_control_core_SZ_ARG 8
+#define planar6_control_core_SZ_RES 7
 #define planar6_control_core_SZ_IW 0
-#define planar6_control_core_SZ_W 367
+#define planar6_control_core_SZ_W 387
 int planar6_control_smc(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int planar6_control_smc_alloc_mem(void);
 int planar6_control_smc_init_mem(int mem);
@@ -278,10 +278,10 @@ const casadi_int* planar6_control_smc_sparsity_in(casadi_int i);
 const casadi_int* planar6_control_smc_sparsity_out(casadi_int i);
 int planar6_control_smc_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int planar6_control_smc_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define planar6_control_smc_SZ_ARG 15
-#define planar6_control_smc_SZ_RES 11
+#define planar6_control_smc_SZ_ARG 13
+#define planar6_control_smc_SZ_RES 12
 #define planar6_control_smc_SZ_IW 0
-#define planar6_control_smc_SZ_W 683
+#define planar6_control_smc_SZ_W 703
 int planar6_control_ismc(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int planar6_control_ismc_alloc_mem(void);
 int planar6_control_ismc_init_mem(int mem);
@@ -299,10 +299,10 @@ const casadi_int* planar6_control_ismc_sparsity_in(casadi_int i);
 const casadi_int* planar6_control_ismc_sparsity_out(casadi_int i);
 int planar6_control_ismc_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int planar6_control_ismc_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define planar6_control_ismc_SZ_ARG 15
-#define planar6_control_ismc_SZ_RES 11
+#define planar6_control_ismc_SZ_ARG 13
+#define planar6_control_ismc_SZ_RES 12
 #define planar6_control_ismc_SZ_IW 0
-#define planar6_control_ismc_SZ_W 685
+#define planar6_control_ismc_SZ_W 705
 int planar6_control_ismc_zdot(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int planar6_control_ismc_zdot_alloc_mem(void);
 int planar6_control_ismc_zdot_init_mem(int mem);
@@ -341,10 +341,10 @@ const casadi_int* planar6_control_fl_sparsity_in(casadi_int i);
 const casadi_int* planar6_control_fl_sparsity_out(casadi_int i);
 int planar6_control_fl_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int planar6_control_fl_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define planar6_control_fl_SZ_ARG 15
-#define planar6_control_fl_SZ_RES 11
+#define planar6_control_fl_SZ_ARG 13
+#define planar6_control_fl_SZ_RES 12
 #define planar6_control_fl_SZ_IW 0
-#define planar6_control_fl_SZ_W 669
+#define planar6_control_fl_SZ_W 689
 int planar6_control_adaptive(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int planar6_control_adaptive_alloc_mem(void);
 int planar6_control_adaptive_init_mem(int mem);
@@ -363,9 +363,9 @@ const casadi_int* planar6_control_adaptive_sparsity_out(casadi_int i);
 int planar6_control_adaptive_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int planar6_control_adaptive_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 #define planar6_control_adaptive_SZ_ARG 48
-#define planar6_control_adaptive_SZ_RES 11
+#define planar6_control_adaptive_SZ_RES 12
 #define planar6_control_adaptive_SZ_IW 0
-#define planar6_control_adaptive_SZ_W 842
+#define planar6_control_adaptive_SZ_W 862
 int planar6_control_adaptive_zdot(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int planar6_control_adaptive_zdot_alloc_mem(void);
 int planar6_control_adaptive_zdot_init_mem(int mem);
@@ -404,10 +404,10 @@ const casadi_int* planar6_control_core_tau_sparsity_in(casadi_int i);
 const casadi_int* planar6_control_core_tau_sparsity_out(casadi_int i);
 int planar6_control_core_tau_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int planar6_control_core_tau_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define planar6_control_core_tau_SZ_ARG 12
-#define planar6_control_core_tau_SZ_RES 6
+#define planar6_control_core_tau_SZ_ARG 8
+#define planar6_control_core_tau_SZ_RES 7
 #define planar6_control_core_tau_SZ_IW 0
-#define planar6_control_core_tau_SZ_W 508
+#define planar6_control_core_tau_SZ_W 387
 int planar6_control_smc_tau(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int planar6_control_smc_tau_alloc_mem(void);
 int planar6_control_smc_tau_init_mem(int mem);
@@ -425,10 +425,10 @@ const casadi_int* planar6_control_smc_tau_sparsity_in(casadi_int i);
 const casadi_int* planar6_control_smc_tau_sparsity_out(casadi_int i);
 int planar6_control_smc_tau_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int planar6_control_smc_tau_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define planar6_control_smc_tau_SZ_ARG 17
-#define planar6_control_smc_tau_SZ_RES 11
+#define planar6_control_smc_tau_SZ_ARG 13
+#define planar6_control_smc_tau_SZ_RES 12
 #define planar6_control_smc_tau_SZ_IW 0
-#define planar6_control_smc_tau_SZ_W 800
+#define planar6_control_smc_tau_SZ_W 679
 int planar6_control_ismc_tau(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int planar6_control_ismc_tau_alloc_mem(void);
 int planar6_control_ismc_tau_init_mem(int mem);
@@ -446,10 +446,10 @@ const casadi_int* planar6_control_ismc_tau_sparsity_in(casadi_int i);
 const casadi_int* planar6_control_ismc_tau_sparsity_out(casadi_int i);
 int planar6_control_ismc_tau_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int planar6_control_ismc_tau_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define planar6_control_ismc_tau_SZ_ARG 17
-#define planar6_control_ismc_tau_SZ_RES 11
+#define planar6_control_ismc_tau_SZ_ARG 13
+#define planar6_control_ismc_tau_SZ_RES 12
 #define planar6_control_ismc_tau_SZ_IW 0
-#define planar6_control_ismc_tau_SZ_W 832
+#define planar6_control_ismc_tau_SZ_W 711
 int planar6_control_ismc_tau_zdot(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int planar6_control_ismc_tau_zdot_alloc_mem(void);
 int planar6_control_ismc_tau_zdot_init_mem(int mem);
@@ -488,10 +488,10 @@ const casadi_int* planar6_control_fl_tau_sparsity_in(casadi_int i);
 const casadi_int* planar6_control_fl_tau_sparsity_out(casadi_int i);
 int planar6_control_fl_tau_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int planar6_control_fl_tau_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define planar6_control_fl_tau_SZ_ARG 17
-#define planar6_control_fl_tau_SZ_RES 11
+#define planar6_control_fl_tau_SZ_ARG 13
+#define planar6_control_fl_tau_SZ_RES 12
 #define planar6_control_fl_tau_SZ_IW 0
-#define planar6_control_fl_tau_SZ_W 786
+#define planar6_control_fl_tau_SZ_W 665
 int planar6_control_pdg(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int planar6_control_pdg_alloc_mem(void);
 int planar6_control_pdg_init_mem(int mem);
@@ -614,10 +614,10 @@ const casadi_int* planar6_T_tau_sparsity_in(casadi_int i);
 const casadi_int* planar6_T_tau_sparsity_out(casadi_int i);
 int planar6_T_tau_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int planar6_T_tau_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define planar6_T_tau_SZ_ARG 7
-#define planar6_T_tau_SZ_RES 4
+#define planar6_T_tau_SZ_ARG 8
+#define planar6_T_tau_SZ_RES 5
 #define planar6_T_tau_SZ_IW 0
-#define planar6_T_tau_SZ_W 313
+#define planar6_T_tau_SZ_W 345
 int planar6_alpha_tau(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int planar6_alpha_tau_alloc_mem(void);
 int planar6_alpha_tau_init_mem(int mem);
@@ -636,9 +636,9 @@ const casadi_int* planar6_alpha_tau_sparsity_out(casadi_int i);
 int planar6_alpha_tau_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int planar6_alpha_tau_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 #define planar6_alpha_tau_SZ_ARG 8
-#define planar6_alpha_tau_SZ_RES 4
+#define planar6_alpha_tau_SZ_RES 5
 #define planar6_alpha_tau_SZ_IW 0
-#define planar6_alpha_tau_SZ_W 331
+#define planar6_alpha_tau_SZ_W 339
 int planar6_beta_tau(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int planar6_beta_tau_alloc_mem(void);
 int planar6_beta_tau_init_mem(int mem);

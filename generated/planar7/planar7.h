@@ -153,9 +153,9 @@ const casadi_int* planar7_T_sparsity_out(casadi_int i);
 int planar7_T_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int planar7_T_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 #define planar7_T_SZ_ARG 9
-#define planar7_T_SZ_RES 4
+#define planar7_T_SZ_RES 5
 #define planar7_T_SZ_IW 0
-#define planar7_T_SZ_W 398
+#define planar7_T_SZ_W 439
 int planar7_alpha(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int planar7_alpha_alloc_mem(void);
 int planar7_alpha_init_mem(int mem);
@@ -174,9 +174,9 @@ const casadi_int* planar7_alpha_sparsity_out(casadi_int i);
 int planar7_alpha_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int planar7_alpha_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 #define planar7_alpha_SZ_ARG 9
-#define planar7_alpha_SZ_RES 4
+#define planar7_alpha_SZ_RES 5
 #define planar7_alpha_SZ_IW 0
-#define planar7_alpha_SZ_W 419
+#define planar7_alpha_SZ_W 432
 int planar7_beta(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int planar7_beta_alloc_mem(void);
 int planar7_beta_init_mem(int mem);
@@ -257,10 +257,10 @@ const casadi_int* planar7_control_core_sparsity_in(casadi_int i);
 const casadi_int* planar7_control_core_sparsity_out(casadi_int i);
 int planar7_control_core_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int planar7_control_core_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define planar7_control_core_SZ_ARG 11
-#define planar7_control_core_SZ_RES 6
+#define planar7_control_core_SZ_ARG 9
+#define planar7_control_core_SZ_RES 7
 #define planar7_control_core_SZ_IW 0
-#define planar7_control_core_SZ_W 468
+#define planar7_control_core_SZ_W 495
 int planar7_control_smc(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int planar7_control_smc_alloc_mem(void);
 int planar7_control_smc_init_mem(int mem);
@@ -278,10 +278,10 @@ const casadi_int* planar7_control_smc_sparsity_in(casadi_int i);
 const casadi_int* planar7_control_smc_sparsity_out(casadi_int i);
 int planar7_control_smc_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int planar7_control_smc_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define planar7_control_smc_SZ_ARG 16
-#define planar7_control_smc_SZ_RES 11
+#define planar7_control_smc_SZ_ARG 14
+#define planar7_control_smc_SZ_RES 12
 #define planar7_control_smc_SZ_IW 0
-#define planar7_control_smc_SZ_W 856
+#define planar7_control_smc_SZ_W 883
 int planar7_control_ismc(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int planar7_control_ismc_alloc_mem(void);
 int planar7_control_ismc_init_mem(int mem);
@@ -299,10 +299,10 @@ const casadi_int* planar7_control_ismc_sparsity_in(casadi_int i);
 const casadi_int* planar7_control_ismc_sparsity_out(casadi_int i);
 int planar7_control_ismc_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int planar7_control_ismc_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define planar7_control_ismc_SZ_ARG 16
-#define planar7_control_ismc_SZ_RES 11
+#define planar7_control_ismc_SZ_ARG 14
+#define planar7_control_ismc_SZ_RES 12
 #define planar7_control_ismc_SZ_IW 0
-#define planar7_control_ismc_SZ_W 858
+#define planar7_control_ismc_SZ_W 885
 int planar7_control_ismc_zdot(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int planar7_control_ismc_zdot_alloc_mem(void);
 int planar7_control_ismc_zdot_init_mem(int mem);
@@ -341,10 +341,10 @@ const casadi_int* planar7_control_fl_sparsity_in(casadi_int i);
 const casadi_int* planar7_control_fl_sparsity_out(casadi_int i);
 int planar7_control_fl_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int planar7_control_fl_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define planar7_control_fl_SZ_ARG 16
-#define planar7_control_fl_SZ_RES 11
+#define planar7_control_fl_SZ_ARG 14
+#define planar7_control_fl_SZ_RES 12
 #define planar7_control_fl_SZ_IW 0
-#define planar7_control_fl_SZ_W 840
+#define planar7_control_fl_SZ_W 867
 int planar7_control_adaptive(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int planar7_control_adaptive_alloc_mem(void);
 int planar7_control_adaptive_init_mem(int mem);
@@ -363,9 +363,9 @@ const casadi_int* planar7_control_adaptive_sparsity_out(casadi_int i);
 int planar7_control_adaptive_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int planar7_control_adaptive_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 #define planar7_control_adaptive_SZ_ARG 55
-#define planar7_control_adaptive_SZ_RES 11
+#define planar7_control_adaptive_SZ_RES 12
 #define planar7_control_adaptive_SZ_IW 0
-#define planar7_control_adaptive_SZ_W 1041
+#define planar7_control_adaptive_SZ_W 1068
 int planar7_control_adaptive_zdot(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int planar7_control_adaptive_zdot_alloc_mem(void);
 int planar7_control_adaptive_zdot_init_mem(int mem);
@@ -404,10 +404,10 @@ const casadi_int* planar7_control_core_tau_sparsity_in(casadi_int i);
 const casadi_int* planar7_control_core_tau_sparsity_out(casadi_int i);
 int planar7_control_core_tau_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int planar7_control_core_tau_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define planar7_control_core_tau_SZ_ARG 13
-#define planar7_control_core_tau_SZ_RES 6
+#define planar7_control_core_tau_SZ_ARG 8
+#define planar7_control_core_tau_SZ_RES 7
 #define planar7_control_core_tau_SZ_IW 0
-#define planar7_control_core_tau_SZ_W 624
+#define planar7_control_core_tau_SZ_W 495
 int planar7_control_smc_tau(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int planar7_control_smc_tau_alloc_mem(void);
 int planar7_control_smc_tau_init_mem(int mem);
@@ -425,10 +425,10 @@ const casadi_int* planar7_control_smc_tau_sparsity_in(casadi_int i);
 const casadi_int* planar7_control_smc_tau_sparsity_out(casadi_int i);
 int planar7_control_smc_tau_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int planar7_control_smc_tau_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define planar7_control_smc_tau_SZ_ARG 18
-#define planar7_control_smc_tau_SZ_RES 11
+#define planar7_control_smc_tau_SZ_ARG 13
+#define planar7_control_smc_tau_SZ_RES 12
 #define planar7_control_smc_tau_SZ_IW 0
-#define planar7_control_smc_tau_SZ_W 984
+#define planar7_control_smc_tau_SZ_W 855
 int planar7_control_ismc_tau(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int planar7_control_ismc_tau_alloc_mem(void);
 int planar7_control_ismc_tau_init_mem(int mem);
@@ -446,10 +446,10 @@ const casadi_int* planar7_control_ismc_tau_sparsity_in(casadi_int i);
 const casadi_int* planar7_control_ismc_tau_sparsity_out(casadi_int i);
 int planar7_control_ismc_tau_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int planar7_control_ismc_tau_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define planar7_control_ismc_tau_SZ_ARG 18
-#define planar7_control_ismc_tau_SZ_RES 11
+#define planar7_control_ismc_tau_SZ_ARG 13
+#define planar7_control_ismc_tau_SZ_RES 12
 #define planar7_control_ismc_tau_SZ_IW 0
-#define planar7_control_ismc_tau_SZ_W 1021
+#define planar7_control_ismc_tau_SZ_W 892
 int planar7_control_ismc_tau_zdot(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int planar7_control_ismc_tau_zdot_alloc_mem(void);
 int planar7_control_ismc_tau_zdot_init_mem(int mem);
@@ -488,10 +488,10 @@ const casadi_int* planar7_control_fl_tau_sparsity_in(casadi_int i);
 const casadi_int* planar7_control_fl_tau_sparsity_out(casadi_int i);
 int planar7_control_fl_tau_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int planar7_control_fl_tau_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define planar7_control_fl_tau_SZ_ARG 18
-#define planar7_control_fl_tau_SZ_RES 11
+#define planar7_control_fl_tau_SZ_ARG 13
+#define planar7_control_fl_tau_SZ_RES 12
 #define planar7_control_fl_tau_SZ_IW 0
-#define planar7_control_fl_tau_SZ_W 968
+#define planar7_control_fl_tau_SZ_W 839
 int planar7_control_pdg(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int planar7_control_pdg_alloc_mem(void);
 int planar7_control_pdg_init_mem(int mem);
@@ -614,10 +614,10 @@ const casadi_int* planar7_T_tau_sparsity_in(casadi_int i);
 const casadi_int* planar7_T_tau_sparsity_out(casadi_int i);
 int planar7_T_tau_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int planar7_T_tau_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define planar7_T_tau_SZ_ARG 7
-#define planar7_T_tau_SZ_RES 4
+#define planar7_T_tau_SZ_ARG 8
+#define planar7_T_tau_SZ_RES 5
 #define planar7_T_tau_SZ_IW 0
-#define planar7_T_tau_SZ_W 398
+#define planar7_T_tau_SZ_W 439
 int planar7_alpha_tau(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int planar7_alpha_tau_alloc_mem(void);
 int planar7_alpha_tau_init_mem(int mem);
@@ -635,10 +635,10 @@ const casadi_int* planar7_alpha_tau_sparsity_in(casadi_int i);
 const casadi_int* planar7_alpha_tau_sparsity_out(casadi_int i);
 int planar7_alpha_tau_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int planar7_alpha_tau_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define planar7_alpha_tau_SZ_ARG 9
-#define planar7_alpha_tau_SZ_RES 4
+#define planar7_alpha_tau_SZ_ARG 8
+#define planar7_alpha_tau_SZ_RES 5
 #define planar7_alpha_tau_SZ_IW 0
-#define planar7_alpha_tau_SZ_W 419
+#define planar7_alpha_tau_SZ_W 432
 int planar7_beta_tau(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int planar7_beta_tau_alloc_mem(void);
 int planar7_beta_tau_init_mem(int mem);

@@ -118,3 +118,31 @@ def test_c_twins_equal_the_casadi_functions(name):
         args = [rng.uniform(0.5, 1.5, sx.size1_in(i) * sx.size2_in(i)) for i in range(sx.n_in())]
         for a, b in zip(mx.call(args), sx.call(args)):
             _close(a, b, f"{name} {key}")
+
+
+@pytest.mark.parametrize("name", ["planar3", "panda", "panda_hd", "link1_hd"])
+def test_the_cores_beta_from_the_kernels_D_equals_beta(name):
+    """A law's core takes ``beta`` from the kernel's ``D`` output (one ``D`` per call), ``<model>_beta`` from
+    ``inertia``: the same matrix, wired two ways; and the core's ``y_hat`` and ``alpha`` are ``T`` and ``alpha``
+    (state and torque-sensed, linear and nonlinear springs)."""
+    import casadi as ca
+    import fjm_runtime
+    m = fjm_runtime.load(name)
+    rng = np.random.default_rng(11)
+    def load(quantity):  # a .casadi file: comment lines, then the serialized Function
+        text = (m.directory / f"{quantity}.casadi").read_text().splitlines()
+        return ca.Function.deserialize(next(ln for ln in text if ln and not ln.startswith("#")))
+    core, core_tau = load("control_core"), load("control_core_tau")
+    T_tau, alpha_tau, beta_tau = load("T_tau"), load("alpha_tau"), load("beta_tau")
+    for _ in range(3):
+        x = rng.uniform(-1, 1, m.nx)
+        p = m.params_array() * rng.uniform(0.9, 1.1, len(m.param_names))
+        y_hat, alpha, beta = core(x, p)
+        _close(y_hat, m.T(x, p).reshape(-1, 1), f"{name} core y_hat")
+        _close(alpha, m.alpha(x, p).reshape(-1, 1), f"{name} core alpha")
+        _close(beta, m.beta(x, p), f"{name} core beta")
+        meas = rng.uniform(-1, 1, 5 * m.n)
+        y_hat, alpha, beta = core_tau(meas, p)
+        _close(y_hat, T_tau(meas, p), f"{name} core_tau y_hat")
+        _close(alpha, alpha_tau(meas, p), f"{name} core_tau alpha")
+        _close(beta, beta_tau(meas, p), f"{name} core_tau beta")
