@@ -27,7 +27,6 @@ from fjm_runtime.control.factory import make_controller
 from fjm_runtime.control.laws import coefficients_from_pole
 from fjm_runtime.control.references import Sinusoid
 from fjm_runtime.sim.compiled import sampled_loop_runner
-from fjm_runtime.sim.metrics import metrics_from_sums
 from fjm_runtime.sim.interface import CommandInterface
 from fjm_runtime.sim.sample_step import initial_step_state
 from fjm_runtime.sim.step_layout import make_layout
@@ -204,67 +203,3 @@ def solve_ivp_loop(case: Case, rtol: float = 1e-6, atol: float = 1e-9):
     t_eval = case.dt * np.arange(case.n_steps + 1)
     return solve_ivp(rhs, (0.0, case.duration), case.x0(), method="RK45", rtol=rtol, atol=atol,
                      t_eval=t_eval)
-
-
-def numpy_batch(case: Case, K_values: np.ndarray) -> dict:
-    """The sampled loop with one RK4 step per sample, vectorized over runs (link1, plant K per run; ideal
-    sensor, no delay, the stateless SMC law): the same metrics as ``simulate_batch(..., substeps=1)``."""
-    B = K_values.size
-    dt, N = case.dt, case.n_steps
-    pt = case.p_true
-    Jl, Jm, MgL, Bm = pt[0], pt[1], pt[3] * pt[4] * pt[5], pt[6]
-    K = np.asarray(K_values, dtype=float)
-    pn = case.p_nom
-    nJl, nJm, nK, nMgL, nBm = pn[0], pn[1], pn[2], pn[3] * pn[4] * pn[5], pn[6]
-    c1, c2, c3 = case.controller.c
-    k_s, delta = float(case.controller.k_s[0]), float(case.controller.delta[0])
-    bh = case.controller.beta_hat
-    beta_hat = float(bh[0, 0]) if bh is not None else None
-    R = case.reference.sample(dt * np.arange(N + 1)).reshape(N + 1, 5)
-    x0 = case.x0()
-    q, dq, qm, dqm = (np.full(B, v) for v in x0)
-    t = dt * np.arange(N + 1)
-    half = t >= 0.5 * t[-1]
-    sum_e2 = np.zeros(B); sum_half = np.zeros(B); max_u = np.zeros(B); tv = np.zeros(B)
-    last_out = np.full(B, -1.0); u_prev = np.zeros(B)
-    h = 0.5 * dt
-
-    def f(q, dq, qm, dqm, u):
-        spring = K * (q - qm)
-        return dq, -(MgL * np.sin(q) + spring) / Jl, dqm, (spring - Bm * dqm + u) / Jm
-
-    for k in range(N + 1):
-        r = R[k]
-        sq, cq = np.sin(q), np.cos(q)
-        spring = nK * (q - qm)
-        y3 = -(nMgL * sq + spring) / nJl
-        y4 = -(nMgL * cq * dq + nK * (dq - dqm)) / nJl
-        a = -(-nMgL * sq * dq * dq + nMgL * cq * y3 + nK * (y3 - (spring - nBm * dqm) / nJm)) / nJl
-        beta = nJl * nJm / nK
-        e1, e2, e3, e4 = q - r[0], dq - r[1], y3 - r[2], y4 - r[3]
-        s = c1 * e1 + c2 * e2 + c3 * e3 + e4
-        nu = r[4] - (c1 * e2 + c2 * e3 + c3 * e4) - k_s * np.clip(s / delta, -1.0, 1.0)
-        u = -beta * a + (beta_hat if beta_hat is not None else beta) * nu
-        e2sq = e1 * e1
-        sum_e2 += e2sq
-        if half[k]:
-            sum_half += e2sq
-        np.maximum(max_u, np.abs(u), out=max_u)
-        if k:
-            tv += np.abs(u - u_prev)
-        u_prev = u
-        last_out = np.where(np.abs(s) > delta, float(k), last_out)
-        if k == N:
-            break
-        a1 = f(q, dq, qm, dqm, u)
-        a2 = f(q + h * a1[0], dq + h * a1[1], qm + h * a1[2], dqm + h * a1[3], u)
-        a3 = f(q + h * a2[0], dq + h * a2[1], qm + h * a2[2], dqm + h * a2[3], u)
-        a4 = f(q + dt * a3[0], dq + dt * a3[1], qm + dt * a3[2], dqm + dt * a3[3], u)
-        q = q + dt / 6 * (a1[0] + 2 * a2[0] + 2 * a3[0] + a4[0])
-        dq = dq + dt / 6 * (a1[1] + 2 * a2[1] + 2 * a3[1] + a4[1])
-        qm = qm + dt / 6 * (a1[2] + 2 * a2[2] + 2 * a3[2] + a4[2])
-        dqm = dqm + dt / 6 * (a1[3] + 2 * a2[3] + 2 * a3[3] + a4[3])
-    return {
-        **metrics_from_sums(t, np.abs(q - R[N, 0]), sum_e2, sum_half, max_u, last_out, tv, 1),
-        "x_final": np.stack([q, dq, qm, dqm], axis=1),
-    }

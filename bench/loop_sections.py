@@ -91,7 +91,8 @@ def bench_batch(reps: int, slow_reps: int, checks: list, n_runs: int = 1000) -> 
     import warnings
     from fjm_runtime.batch.runner import METRIC_NAMES, SimdFallbackWarning, simulate_batch
     from fjm_runtime.batch.simd import vector_isa
-    from .closed_loop import PEER_INTERFACE, link1_case, numpy_batch
+    from .closed_loop import PEER_INTERFACE, link1_case
+    from .numpy_batch import JOINT_PEER_FIGURES, numpy_batch
     case = link1_case()
     from fjm_runtime.control.defaults import PAPER_K_RANGE
     Ks = np.random.default_rng(0).uniform(*PAPER_K_RANGE, n_runs)
@@ -121,6 +122,10 @@ def bench_batch(reps: int, slow_reps: int, checks: list, n_runs: int = 1000) -> 
           metric_diff(one.metrics, nb, METRIC_NAMES), TOLERANCES["metrics"])
     check(checks, "batch.numpy_states", "NumPy batch peer vs simulate_batch, final states (max abs)",
           float(np.max(np.abs(one.x_final - nb["x_final"]))), TOLERANCES["numpy_batch_states"])
+    check(checks, "batch.numpy_joint_metrics", "NumPy batch peer vs simulate_batch, per-joint figures (rms "
+          "second half, peak torque, time at limit, torque jitter; relative) and divergence (0 = same runs)",
+          max(metric_diff(one.joint_metrics, nb["joint_metrics"], JOINT_PEER_FIGURES),
+              float(np.any(one.diverged != nb["diverged"]))), TOLERANCES["metrics"])
     # timed in alternation: numpy (1 thread) | batch on 1 thread | batch on all threads
     np_s, one_s, all_s = alternate([lambda: numpy_batch(case, Ks), lambda: run(threads=1), run],
                                    slow_reps, [1, 2 if reps > 1 else 1, 2 if reps > 1 else 1])

@@ -12,7 +12,9 @@ generated code uses, and every Lie derivative by CasADi AD
     structured: beta = J_m K^-1 D(q), alpha = -beta a   (b known in closed form)
 
 The structured variant is what a CasADi user who read the paper would write;
-both are measured and the faster one is the reported peer.
+both are measured and the faster one is the reported peer. Each is given as two Functions
+(``alpha``, ``beta``) and as one (``core``: ``T = [q; dq; y3; y4]``, ``alpha``, ``beta`` jointly CSE'd),
+the form of the generated laws' core.
 Build-time tool (needs SymPy): used by ``python -m bench`` and the tests only.
 """
 from __future__ import annotations
@@ -57,16 +59,17 @@ def peer_expressions(model_name: str):
     beta_s = ca.mtimes(ca.diag(Jm / K), D)
     exprs["structured_alpha"] = -ca.mtimes(beta_s, a)
     exprs["structured_beta"] = beta_s
+    exprs["T"] = ca.vertcat(q, dq, y3, y4)
     return x, p, exprs
 
 
 def peer_functions(model_name: str, variant: str = "structured") -> Dict[str, ca.Function]:
-    """SX Functions ``peer_<variant>_alpha/_beta(x, p)`` (CSE'd like the generated ones)."""
+    """SX Functions ``peer_<variant>_alpha/_beta(x, p)`` and ``peer_<variant>_core(x, p) -> (y_hat, alpha, beta)``
+    (CSE'd like the generated ones)."""
     x, p, e = peer_expressions(model_name)
-    out = {}
-    for q in ("alpha", "beta"):
-        val = e[f"{variant}_{q}"]
-        if q == "alpha":
-            val = ca.vec(val)
-        out[q] = ca.Function(f"peer_{variant}_{q}", [x, p], [ca.cse(val)], ["x", "p"], [q])
+    alpha, beta = ca.vec(e[f"{variant}_alpha"]), e[f"{variant}_beta"]
+    out = {q: ca.Function(f"peer_{variant}_{q}", [x, p], [ca.cse(val)], ["x", "p"], [q])
+           for q, val in (("alpha", alpha), ("beta", beta))}
+    out["core"] = ca.Function(f"peer_{variant}_core", [x, p], ca.cse([e["T"], alpha, beta]),
+                              ["x", "p"], ["y_hat", "alpha", "beta"])
     return out

@@ -84,17 +84,22 @@ def adam_expressions(model) -> Tuple[ca.SX, ca.SX, Dict[str, ca.SX], float]:
     a = ca.jtimes(y4, x, f)
     beta = ca.mtimes(ca.diag(Jm / K), D)
     alpha = -ca.mtimes(beta, a)
-    exprs = {"D": D, "h": h, "y3": y3, "y4": y4, "a": a, "alpha": alpha, "beta": beta}
+    exprs = {"D": D, "h": h, "y3": y3, "y4": y4, "a": a, "alpha": alpha, "beta": beta,
+             "T": ca.vertcat(q, dq, y3, y4)}
     return x, p, exprs, time.perf_counter() - t0
 
 
 def adam_functions(model) -> Tuple[Dict[str, ca.Function], float]:
-    """``peer_adam_alpha/_beta(x, p)`` (CSE'd) and the seconds to build them (adam + AD + CSE)."""
+    """``peer_adam_alpha/_beta(x, p)``, ``peer_adam_core(x, p) -> (y_hat, alpha, beta)`` (CSE'd) and the seconds
+    to build the first two (adam + AD + CSE)."""
     t0 = time.perf_counter()
     x, p, e, _ = adam_expressions(model)
     out = {q: ca.Function(f"peer_adam_{q}", [x, p], [ca.cse(ca.vec(e[q]) if q == "alpha" else e[q])],
                           ["x", "p"], [q]) for q in ("alpha", "beta")}
-    return out, time.perf_counter() - t0
+    seconds = time.perf_counter() - t0
+    out["core"] = ca.Function("peer_adam_core", [x, p], ca.cse([e["T"], ca.vec(e["alpha"]), e["beta"]]),
+                              ["x", "p"], ["y_hat", "alpha", "beta"])
+    return out, seconds
 
 
 def _codegen(stem: str, fns, workdir: Path) -> Path:
@@ -105,25 +110,28 @@ def _codegen(stem: str, fns, workdir: Path) -> Path:
 
 
 def build_adam_peer(model, workdir: Path):
-    """Code-generate, compile and load the adam peer.
+    """Code-generate, compile and load the adam peer, as two calls (alpha, beta) and as one (its core).
 
     Returns
     -------
-    (CompiledAlphaBeta, dict)
-        The loaded peer and ``{"gcc_seconds", "c_bytes", "build_seconds", "ops"}``.
+    (CompiledAlphaBeta, CompiledAlphaBeta, dict)
+        The two-call and the one-call peer, and ``{"gcc_seconds", "c_bytes", "build_seconds", "ops"}``
+        (C size and gcc time of alpha and beta; operations of alpha, beta and core).
     """
     from derive.emit.functions import operation_count
     workdir.mkdir(parents=True, exist_ok=True)
     fns, build_s = adam_functions(model)
-    src = _codegen("peer_adam", [fns["alpha"], fns["beta"]], workdir)
-    obj = workdir / "peer_adam.o"
-    gcc_s = compile_object(src, obj)
-    drv = workdir / "driver_peer_adam.o"
-    compile_object(DRIVER, drv, ["-DALPHA=peer_adam_alpha", "-DBETA=peer_adam_beta"])
-    lib = link_shared([obj, drv], workdir / "peer_adam.so")
-    info = {"gcc_seconds": gcc_s, "c_bytes": src.stat().st_size, "build_seconds": build_s,
-            "ops": {q: operation_count(fns[q]) for q in fns}}  # counted as derive counts ours
-    return CompiledAlphaBeta(lib, model.n, model.nx), info
+    libs, info = [], {"build_seconds": build_s, "ops": {q: operation_count(fns[q]) for q in fns}}
+    for stem, parts, defines in (("peer_adam", ["alpha", "beta"], ["-DALPHA=peer_adam_alpha", "-DBETA=peer_adam_beta"]),
+                                 ("peer_adam_core", ["core"], ["-DCORE=peer_adam_core"])):
+        src = _codegen(stem, [fns[q] for q in parts], workdir)
+        gcc_s = compile_object(src, workdir / f"{stem}.o")
+        if not libs:  # the size and compile time of alpha and beta, as for the generated ones
+            info.update(gcc_seconds=gcc_s, c_bytes=src.stat().st_size)
+        compile_object(DRIVER, workdir / f"driver_{stem}.o", defines)
+        lib = link_shared([workdir / f"{stem}.o", workdir / f"driver_{stem}.o"], workdir / f"{stem}.so")
+        libs.append(CompiledAlphaBeta(lib, model.n, model.nx))
+    return libs[0], libs[1], info
 
 
 def generated_alpha_beta_c(model, workdir: Path) -> Dict[str, float]:

@@ -26,6 +26,10 @@ def test_ad_peer_alpha_beta_equal_generated(name, variant):
         b = np.asarray(fns["beta"](x, p))
         assert np.allclose(a, m.alpha(x, p), rtol=1e-9, atol=1e-9 * max(1.0, np.max(np.abs(a))))
         assert np.allclose(b, m.beta(x, p), rtol=1e-12, atol=1e-12)
+        y_hat, a1, b1 = (np.asarray(v) for v in fns["core"](x, p))   # the one-call form: same numbers, and T
+        assert np.allclose(y_hat.ravel(), m.T(x, p), rtol=1e-9, atol=1e-9 * max(1.0, np.max(np.abs(y_hat))))
+        assert np.allclose(a1.ravel(), a, rtol=1e-12, atol=1e-12 * max(1.0, np.max(np.abs(a))))
+        assert np.allclose(b1, b, rtol=1e-12, atol=1e-12)
 
 
 def test_ad_peer_y3_y4_equal_generated_T():
@@ -42,14 +46,17 @@ def test_ad_peer_y3_y4_equal_generated_T():
     assert np.allclose(y4, T[3], rtol=1e-12, atol=1e-12)
 
 
+@pytest.mark.parametrize("one_call", [False, True], ids=["two_calls", "one_call"])
 @pytest.mark.parametrize("name", ["link1", "planar2"])
-def test_compiled_alpha_beta_drivers_agree(tmp_path, name):
+def test_compiled_alpha_beta_drivers_agree(tmp_path, name, one_call):
+    """Both forms the bench times, alpha then beta, and one call of a core (the generated control_core, the
+    peer's core Function), return alpha and beta and time the loop they claim."""
     from bench.alpha_beta import build_generated, build_peer
     m = fjm_runtime.load(name)
     x = np.random.default_rng(5).normal(scale=0.5, size=m.nx)
     p = m.params_array()
-    gen = build_generated(m, tmp_path)
-    peer, _, _ = build_peer(name, "structured", tmp_path, m.n, m.nx)
+    gen = build_generated(m, tmp_path, one_call=one_call)
+    peer, _, _ = build_peer(name, "structured", tmp_path, m.n, m.nx, one_call=one_call)
     iters = 11   # the timed loop perturbs x[0] by 1e-9 (k mod 8) on call k
     want = sum(float(m.alpha(xk, p)[0]) + float(m.beta(xk, p)[0, 0])
                for xk in (np.concatenate([[x[0] + 1e-9 * (k % 8)], x[1:]]) for k in range(iters)))
@@ -96,20 +103,28 @@ def test_python_and_solve_ivp_peers_track_the_same_loop():
 
 
 def test_numpy_batch_peer_equals_simulate_batch():
-    """The NumPy peer (one RK4 step per sample, closed forms) == the sampled batch with substeps=1, row by row."""
-    from bench.closed_loop import PEER_INTERFACE, link1_case, numpy_batch
+    """The NumPy peer (one RK4 step per sample, closed forms) == the sampled batch with substeps=1, row by row:
+    the metrics, the final states, the per-joint figures and the divergence check (K = 4e7 N m/rad makes RK4 at
+    1 ms unstable: that run is frozen at its last good state in both, at the same time)."""
+    from bench.closed_loop import PEER_INTERFACE, link1_case
+    from bench.numpy_batch import JOINT_PEER_FIGURES, numpy_batch
     from fjm_runtime.batch.runner import METRIC_NAMES, simulate_batch
     case = link1_case(duration=1.0)
-    Ks = np.array([100.0, 140.0, 200.0])
-    P = np.tile(case.p_true, (3, 1))
+    Ks = np.array([100.0, 140.0, 200.0, 4e7])
+    P = np.tile(case.p_true, (4, 1))
     P[:, 2] = Ks
     b = simulate_batch(case.model, case.controller, case.reference, P, duration=1.0, x0=case.x0(), substeps=1,
                        interface=PEER_INTERFACE)
     nb = numpy_batch(case, Ks)
+    assert list(b.diverged) == list(nb["diverged"]) == [False, False, False, True]
+    assert np.array_equal(b.divergence_time, nb["divergence_time"], equal_nan=True)
     for k in METRIC_NAMES:
-        assert np.allclose(b.metrics[k], nb[k], rtol=1e-9, atol=1e-12), k
+        assert np.allclose(b.metrics[k], nb[k], rtol=1e-9, atol=1e-12, equal_nan=True), k
+    for k in JOINT_PEER_FIGURES:
+        assert np.allclose(b.joint_metrics[k], nb["joint_metrics"][k], rtol=1e-9, atol=1e-12, equal_nan=True), k
     assert np.allclose(b.x_final, nb["x_final"], rtol=1e-9, atol=1e-12)
-    assert len(set(np.round(b.x_final[:, 0], 9))) == 3        # three different plants
+    assert len(set(np.round(b.x_final[:3, 0], 9))) == 3        # three different plants
+    assert np.all(np.isfinite(nb["x_final"])) and np.max(np.abs(b.joint_metrics["torque_jitter"][:3])) > 0
 
 
 def test_closed_loop_design_is_computed_not_pasted(monkeypatch):
