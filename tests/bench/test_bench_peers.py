@@ -198,7 +198,8 @@ def test_differing_files_finds_one_changed_byte(tmp_path):
 
 def test_readme_tables_equal_the_report_of_the_committed_results():
     from bench import report
-    r = report.load()
+    from bench.result_values import get, load
+    r = load()
     assert r.get("quick") is False and r.get("checks"), "bench/results.json must come from a full run"
     assert all(c["ok"] for c in r["checks"])
     for path, block in report.targets(r).items():
@@ -208,9 +209,10 @@ def test_readme_tables_equal_the_report_of_the_committed_results():
 
 def test_report_uses_the_results_and_flags_missed_targets():
     from bench import report
-    r = report.load()
+    from bench.result_values import get, load
+    r = load()
     block = report.render_readme(r)
-    speed = report.get(r, "closed_loop.speedup_vs_python")
+    speed = get(r, "closed_loop.speedup_vs_python")
     assert f"{speed:.0f}x faster" in block
     worse = json.loads(json.dumps(r))
     worse["batch"]["speedup_vs_numpy"] = 1.5

@@ -1,7 +1,7 @@
 """The scaling section's arithmetic: fitted exponents, targets and the rendered table (no derive run)."""
 import math
 
-from bench import report
+from bench import report_blocks
 from bench.scaling import TARGETS, fit_exponents, run_measured, target_rows
 
 
@@ -26,7 +26,7 @@ def test_targets_met_and_missed_and_rendered():
     assert rows["panda alpha_beta_ops"]["ok"] is False
     assert rows["panda alpha_beta_us"]["ok"] is None
     assert len(rows) == len(TARGETS) + 2
-    text = "\n".join(report.scaling_lines({"scaling": {"runs": runs, "fits": fit_exponents(runs),
+    text = "\n".join(report_blocks.scaling_lines({"scaling": {"runs": runs, "fits": fit_exponents(runs),
                                                         "targets": list(rows.values())}}))
     assert "**missed**" in text and "| 30 |" in text and "2.00" in text
 

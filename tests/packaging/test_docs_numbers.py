@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-from bench import report
+from bench import report, report_blocks, result_values
 
 from support.paths import REPO  # noqa: E402
 DOCS = [REPO / "README.md", *sorted((REPO / "docs").glob("*.md"))]
@@ -21,7 +21,7 @@ MARKER = re.compile(r"<!-- (/?)fjm:bench:([a-z0-9-]+) -->")
 
 @pytest.fixture(scope="module")
 def results():
-    return report.load()
+    return result_values.load()
 
 
 @pytest.mark.parametrize("path", DOCS, ids=lambda p: p.name)
@@ -36,7 +36,7 @@ def test_markers_are_paired_and_known(path):
     stack = []
     for m in MARKER.finditer(path.read_text(encoding="utf-8")):
         closing, name = m.group(1) == "/", m.group(2)
-        assert name in report.BLOCKS, f"{path.name}: unknown block {name}"
+        assert name in report_blocks.BLOCKS, f"{path.name}: unknown block {name}"
         if closing:
             assert stack and stack.pop() == name, f"{path.name}: </{name}> closes nothing"
         else:
@@ -54,7 +54,7 @@ def test_readme_and_docs_quote_the_derive_and_realtime_results():
 
 def _unmarked(text: str) -> str:
     """``text`` without the marked blocks and the bench tables (what a person typed)."""
-    text = report.NAMED.sub(" ", text)
+    text = report_blocks.NAMED.sub(" ", text)
     if report.BEGIN in text and report.END in text:
         text = text[:text.index(report.BEGIN)] + text[text.index(report.END):]
     return text
@@ -77,7 +77,7 @@ def test_no_hand_typed_measurement_outside_markers(path):
     text = _unmarked(path.read_text(encoding="utf-8"))
     found = [(text[:m.start()].count("\n") + 1, m.group(0)) for pat in HAND_TYPED for m in pat.finditer(text)]
     assert not found, (f"{path.name}: measured numbers typed by hand (line in the unmarked text, match): {found}; "
-                       "quote bench/results.json through a <!-- fjm:bench:NAME --> block (bench/report.py BLOCKS)")
+                       "quote bench/results.json through a <!-- fjm:bench:NAME --> block (bench/report_blocks.py BLOCKS)")
 
 
 def test_the_pattern_check_catches_a_typed_timing():
@@ -88,14 +88,14 @@ def test_the_pattern_check_catches_a_typed_timing():
 def test_rendering_is_idempotent(results):
     for path in DOCS:
         once = report.render_file(path, results)
-        assert report.render_named(once, results) == once
+        assert report_blocks.render_named(once, results) == once
 
 
 def test_a_changed_result_changes_the_documents(results):
     import json
     worse = json.loads(json.dumps(results))
     worse["derive"]["total_seconds"] = 99.25
-    text = report.render_named("a <!-- fjm:bench:derive-time -->13.9 s<!-- /fjm:bench:derive-time --> b", worse)
+    text = report_blocks.render_named("a <!-- fjm:bench:derive-time -->13.9 s<!-- /fjm:bench:derive-time --> b", worse)
     assert "99.2 s" in text or "99.3 s" in text
     with pytest.raises(ValueError, match="unknown block"):
-        report.render_named("<!-- fjm:bench:nope -->1<!-- /fjm:bench:nope -->", results)
+        report_blocks.render_named("<!-- fjm:bench:nope -->1<!-- /fjm:bench:nope -->", results)
