@@ -9,8 +9,8 @@ loop can match: ``u_k = law(x_k)`` held over the sample, one RK4 step of the pla
   timed against the whole compiled ``simulate()`` call (same arguments);
 * scipy: ``solve_ivp`` (RK45) of the same closed loop with the control law evaluated
   continuously (no zero-order hold), rtol 1e-6, atol 1e-9;
-* numpy batch: RK4 vectorized over the runs (closed forms, same metrics as
-  ``simulate_batch(..., substeps=1)``).
+* numpy batch: RK4 vectorized over the runs, every figure of ``simulate_batch(..., substeps=1)``
+  (:mod:`bench.numpy_batch`, on this module's case).
 """
 from __future__ import annotations
 
