@@ -228,7 +228,7 @@ def real_interface_section(ctx) -> Tuple[List[str], list]:
           "(panda_ismc_tau_1000hz_d1, designed under the white `panda` sensor), `fl_tau` with its quadruple "
           f"pole at {FL_LAM:g} rad/s, `impedance` and `joint_impedance` with the shipped designs' gains "
           "(panda_impedance_1000hz_d1 on `motor`, panda_joint_impedance_1000hz_d1 on `franka`, both searched "
-          "under `franka_like` on other draws than these), `pdg` with k_p = {list(PDG_GAINS['k_p'])} N m/rad, k_d = {list(PDG_GAINS['k_d'])} "
+          f"under `franka_like` on other draws than these), `pdg` with k_p = {list(PDG_GAINS['k_p'])} N m/rad, k_d = {list(PDG_GAINS['k_d'])} "
           "N m s/rad. A motor-torque law's output sent as tau_d means nothing, so the franka interface runs "
           "only the law made for it.", "", *table(rows), "",
           "Worst RMS: the largest per-joint RMS of e1 over the run, over the plants that did not diverge. "

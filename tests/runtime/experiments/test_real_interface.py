@@ -77,6 +77,9 @@ def test_quick_section_rows_are_sane(section):
     assert len(table) == 2 + len(ri.LAWS) + len(ri.SENSORS) * len(ri.FOURTH_ORDER) + 1 + len(rechecked_files())
     imp = "impedance (shipped design)"
     assert table[1 + list(rows).index(imp)].split(" | ")[2] == f"{1e3 * rows[imp]['rms']:.3g}"
+    # the stated pdg gains are the section's numbers, not the source text of an f-string without its f
+    text = "\n".join(md)
+    assert f"k_p = {list(ri.PDG_GAINS['k_p'])} N m/rad" in text and "{" not in text
 
 
 def test_metrics_are_the_worst_over_plants(panda):
