@@ -217,7 +217,9 @@ def rnea_jets(bodies: Sequence[BodyNumbers], q, rates: Sequence, g0: Scalar, ord
     if order not in range(MAX_ORDER + 1):
         raise ValueError(f"order = {order!r}; expected 0, 1 or 2")
     n, M = len(bodies), order + 2  # momenta up to order + 1
-    joint_rates = [[0.0 if r is None else r[i] for r in list(rates)[:M]] for i in range(n)]
+    rates = list(rates)[:M]
+    rates += [None] * (M - len(rates))
+    joint_rates = [[0.0 if r is None else r[i] for r in rates] for i in range(n)]  # q_i^(1..M), missing ones 0
     rot, w, v, P, L = ([None] * n for _ in range(5))
     for i, (R0, p, m, h, I, parent) in enumerate(bodies):
         Ri = rot[i] = _JointRotation(R0, q[i], joint_rates[i])
@@ -225,8 +227,7 @@ def rnea_jets(bodies: Sequence[BodyNumbers], q, rates: Sequence, g0: Scalar, ord
             w_p, v_p = [_ZERO] * M, [_ZERO, [0.0, 0.0, g0]] + [_ZERO] * (M - 2)
         else:
             w_p, v_p = w[parent], v[parent]
-        spin = Ri.rates + [0.0] * M
-        w[i] = [_vadd(x, _ez(spin[k])) for k, x in enumerate(Ri.jets_to_body(w_p))]
+        w[i] = [_vadd(x, _ez(Ri.rates[k])) for k, x in enumerate(Ri.jets_to_body(w_p))]
         v[i] = Ri.jets_to_body([_vadd(v_p[k], _cross(w_p[k], list(p))) for k in range(M)])
         P[i] = [_vadd(_scale(m, v[i][k]), _cross(w[i][k], list(h))) for k in range(M)]
         L[i] = [_vadd(_matvec(I, w[i][k]), _cross(list(h), v[i][k])) for k in range(M)]
