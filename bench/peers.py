@@ -27,7 +27,8 @@ import casadi as ca
 def peer_expressions(model_name: str):
     """SX ``(x, p, exprs)`` with ``exprs`` = dict of alpha/beta variants and y3, y4."""
     from derive.registry import build
-    from derive.emit.sx import SympyToSX, ldl_factor, ldl_solve
+    from derive.emit.ldl import ldl_factor, ldl_solve
+    from derive.emit.sx import SympyToSX
 
     m = build(model_name)
     n = m.n
@@ -44,8 +45,7 @@ def peer_expressions(model_name: str):
     Bm = ca.vertcat(*[conv(b) for b in m.Bm])
     q, dq, qm, dqm = (x[i * n:(i + 1) * n] for i in range(4))
     r3 = -(h + K * (q - qm))
-    L, d = ldl_factor(D)
-    y3 = ldl_solve(L, d, r3)
+    y3 = ldl_solve(ldl_factor(D), r3)
     f = ca.vertcat(dq, y3, dqm, (K * (q - qm) - Bm * dqm) / Jm)
     g = ca.vertcat(ca.SX(3 * n, n), ca.diag(1.0 / Jm))
     y4 = ca.jtimes(y3, x, f)

@@ -54,7 +54,7 @@ def adam_expressions(model) -> Tuple[ca.SX, ca.SX, Dict[str, ca.SX], float]:
         Wall time to build the expressions (adam + AD).
     """
     from adam.casadi import KinDynComputations
-    from derive.emit.sx import ldl_factor, ldl_solve
+    from derive.emit.ldl import ldl_factor, ldl_solve
 
     t0 = time.perf_counter()
     src = model.manifest["source"]
@@ -77,8 +77,7 @@ def adam_expressions(model) -> Tuple[ca.SX, ca.SX, Dict[str, ca.SX], float]:
     v0 = ca.SX.zeros(6)
     D = kd.mass_matrix(H, q)[6:, 6:]
     h = kd.bias_force(H, q, v0, dq)[6:]
-    L, inv_d = ldl_factor(D)
-    y3 = ldl_solve(L, inv_d, -(h + K * (q - qm)))
+    y3 = ldl_solve(ldl_factor(D), -(h + K * (q - qm)))
     f = ca.vertcat(dq, y3, dqm, (K * (q - qm) - Bm * dqm) / Jm)
     y4 = ca.jtimes(y3, x, f)
     a = ca.jtimes(y4, x, f)

@@ -42,7 +42,8 @@ from typing import Tuple
 import casadi as ca
 
 from .dynamics import elastic_diagonals, programme
-from .sx import ldl_factor, packed_factor_fn, packed_solve_fn, skew_congruence, symmetric_inverse
+from .ldl import ldl_factor, packed_factor_fn, packed_solve_fn, symmetric_inverse
+from .sx import skew_congruence
 
 __all__ = ["closed_form_brackets", "bracket_twin", "assemble_brackets", "coriolis_difference_along",
            "inertia_times"]
@@ -90,7 +91,7 @@ def closed_form_brackets(model, x: ca.SX, p: ca.SX) -> ca.SX:
     D = programme(model)(q, dq, ca.SX.zeros(n), p)[0]
     k, jm, b = elastic_diagonals(model, p)
     a = 1 / jm
-    W = symmetric_inverse(*ldl_factor(D))
+    W = symmetric_inverse(ldl_factor(D))
     X = ca.mtimes(W, ca.diag(k * a))
     N = ca.jacobian(inertia_times(model, q, dq, p), q)  # d(D(q) dq)/dq, dq held
     R3 = ca.mtimes(skew_congruence(W, N.T - N), ca.diag(k * a)) - ca.mtimes(X, ca.diag(b * a))
@@ -122,17 +123,20 @@ def coriolis_difference_along(model, q, dq, v, p):
 
 
 def _column_function(model) -> ca.Function:
-    """``(q, dq, L, d, c, ba, p) -> (x_j, r_j)``: column j of ``X`` and of ``R3`` from ``c = (K A)_j e_j``."""
+    """``(q, dq, N, r, c, ba, p) -> (x_j, r_j)``: column j of ``X`` and of ``R3`` from ``c = (K A)_j e_j``.
+
+    ``N``, ``r``: the packed (negated) LDL^T factors of ``A`` (:func:`derive.emit.ldl.packed_factor_fn`).
+    """
     n = model.n
     q, dq, c = ca.SX.sym("q", n), ca.SX.sym("dq", n), ca.SX.sym("c", n)
     ba, p = ca.SX.sym("ba"), ca.SX.sym("p", len(model.params))
-    L, d = ca.SX.sym("L", n * (n - 1) // 2), ca.SX.sym("d", n)
+    N, r = ca.SX.sym("N", n * (n - 1) // 2), ca.SX.sym("r", n)
     solve = packed_solve_fn(n)
-    xj = solve(L, d, c)
-    rj = solve(L, d, coriolis_difference_along(model, q, dq, xj, p)) - xj * ba
+    xj = solve(N, r, c)
+    rj = solve(N, r, coriolis_difference_along(model, q, dq, xj, p)) - xj * ba
     xj, rj = ca.cse([xj, rj])
-    return ca.Function(f"{model.name}_bracket_column", [q, dq, L, d, c, ba, p], [xj, rj],
-                       ["q", "dq", "L", "d", "c", "ba", "p"], ["x_j", "r_j"])
+    return ca.Function(f"{model.name}_bracket_column", [q, dq, N, r, c, ba, p], [xj, rj],
+                       ["q", "dq", "N", "r", "c", "ba", "p"], ["x_j", "r_j"])
 
 
 def bracket_twin(model, inertia: ca.Function) -> ca.Function:
@@ -146,8 +150,8 @@ def bracket_twin(model, inertia: ca.Function) -> ca.Function:
     q, dq = x[:n], x[n:2 * n]
     k, jm, b = elastic_diagonals(model, p)
     a = 1 / jm
-    L, d = packed_factor_fn(n)(inertia(x, p))
+    N, r = packed_factor_fn(n)(inertia(x, p))
     columns = _column_function(model).map(n)
-    X, R3 = columns(q, dq, L, d, ca.diag(k * a), (b * a).T, p)
+    X, R3 = columns(q, dq, N, r, ca.diag(k * a), (b * a).T, p)
     value = assemble_brackets(a, b, k, X, R3)
     return ca.Function(f"{model.name}_ad", [x, p], [value], ["x", "p"], ["ad"])

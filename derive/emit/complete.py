@@ -14,7 +14,8 @@ from typing import Dict, Tuple
 import casadi as ca
 
 from ..core.linearize import Linearization
-from .sx import SympyToSX, ldl_factor, ldl_solve, spd_inverse, state_symbols
+from .ldl import ldl_factor, ldl_solve, spd_inverse
+from .sx import SympyToSX, state_symbols
 
 #: Quantities emitted for a complete model, in file order, with their meaning.
 COMPLETE_QUANTITIES: Tuple[Tuple[str, str], ...] = (
@@ -46,9 +47,9 @@ def build_complete_functions(lin: Linearization, cse: bool = True) -> Dict[str, 
     x, p, bindings = state_symbols(m)
     conv = SympyToSX(bindings, dict(m.program.definitions), {})
     M = conv(lin.outputs["inertia"])
-    L, inv_d = ldl_factor(M)
-    acc = ldl_solve(L, inv_d, conv(lin.outputs["rhs"]))
-    Minv = spd_inverse(L, inv_d)
+    factors = ldl_factor(M)
+    acc = ldl_solve(factors, conv(lin.outputs["rhs"]))
+    Minv = spd_inverse(factors)
     zero = ca.SX.zeros(n, n)
     values = {
         "f": ca.vertcat(x[n:2 * n], acc[:n], x[3 * n:], acc[n:]),

@@ -40,8 +40,10 @@ from typing import Callable, Dict, Sequence, Tuple
 import casadi as ca
 import sympy as sp
 
+from .regroup import regroup
 from .rnea_jets import rnea_jets
-from .sx import SympyToSX, ldl_factor, ldl_solve, packed_factor_fn, packed_solve_fn
+from .ldl import ldl_factor, ldl_solve, packed_factor_fn, packed_solve_fn
+from .sx import SympyToSX
 
 
 def _converter(model, q, dq, p) -> SympyToSX:
@@ -112,11 +114,15 @@ def time_derivatives(model) -> Tuple[ca.Function, ca.Function]:
 
 
 def _body_numbers(model, conv: SympyToSX) -> list:
-    """The model's :class:`derive.core.model_base.RigidBody` records with numbers as floats, parameters as SX."""
+    """The model's :class:`derive.core.model_base.RigidBody` records, regrouped, numbers as floats, parameters as SX.
+
+    Regrouped (:func:`derive.emit.regroup.regroup`): the same joint torques, with no mass and
+    fewer nonzero inertials per body, for the recursion of the torques and their derivatives.
+    """
     def scalar(e):
         return float(e) if getattr(e, "is_Number", False) else conv(e)
-    return [(b.R0, b.p, scalar(b.mass), [scalar(v) for v in b.first_moment],
-             [[scalar(v) for v in row] for row in b.inertia], b.parent) for b in model.bodies]
+    return regroup([(b.R0, b.p, scalar(b.mass), [scalar(v) for v in b.first_moment],
+                     [[scalar(v) for v in row] for row in b.inertia], b.parent) for b in model.bodies])
 
 
 def build_kernel(model) -> ca.Function:
@@ -148,27 +154,27 @@ def _kernel(model, route: str) -> ca.Function:
         Y4 = tuple(sp.Symbol(f"y4_{i + 1}", real=True) for i in range(n))
         R1, W = inverse_dynamics_derivatives(model, Y3, Y4)
     D, h, _ = programme(model)(q, dq, ca.SX.zeros(n), p)
-    L, inv_d = ldl_factor(D)
+    factors = ldl_factor(D)
     zero = ca.SX.zeros(n)
     if route == "jets":
         bodies = _body_numbers(model, _converter(model, q, dq, p))
         g0 = p[list(model.param_names).index("g0")]
         h = rnea_jets(bodies, q, [dq], g0, 0)[0]  # shares the velocity terms with the jets
-        y3 = ldl_solve(L, inv_d, s - h)
-        y4 = ldl_solve(L, inv_d, ds - rnea_jets(bodies, q, [dq, y3], g0, 1)[1])
+        y3 = ldl_solve(factors, s - h)
+        y4 = ldl_solve(factors, ds - rnea_jets(bodies, q, [dq, y3], g0, 1)[1])
         w = rnea_jets(bodies, q, [dq, y3, y4], g0, 2)[2]
     elif route == "ad":
-        y3 = ldl_solve(L, inv_d, s - h)
+        y3 = ldl_solve(factors, s - h)
         d1, d2 = time_derivatives(model)
         z = ca.vertcat(q, dq, y3)
-        y4 = ldl_solve(L, inv_d, ds - d1(z, ca.vertcat(dq, y3, zero), p))
+        y4 = ldl_solve(factors, ds - d1(z, ca.vertcat(dq, y3, zero), p))
         w = d2(z, ca.vertcat(dq, y3, y4), ca.vertcat(y3, y4, zero), p)
     else:
-        y3 = ldl_solve(L, inv_d, s - h)
+        y3 = ldl_solve(factors, s - h)
         conv = _converter(model, q, dq, p)
         for i in range(n):
             conv.bind(Y3[i], y3[i])
-        y4 = ldl_solve(L, inv_d, ds - ca.vec(conv(R1)))
+        y4 = ldl_solve(factors, ds - ca.vec(conv(R1)))
         for i in range(n):
             conv.bind(Y4[i], y4[i])
         w = ca.vec(conv(W))
@@ -337,8 +343,8 @@ def f_twin(model, inertia: ca.Function) -> ca.Function:
     def body(x, p):
         q, dq, qm, dqm = state_blocks(x, n)
         K, Jm, Bm = elastic_diagonals(model, p)
-        L, d = packed_factor_fn(n)(inertia(x, p))
-        y3 = packed_solve_fn(n)(L, d, -(bias(q, dq, p) + K * (q - qm)))
+        N, r = packed_factor_fn(n)(inertia(x, p))
+        y3 = packed_solve_fn(n)(N, r, -(bias(q, dq, p) + K * (q - qm)))
         return ca.vertcat(dq, y3, dqm, motor_acceleration(K, Jm, Bm, q, qm, dqm))
 
     return mx_function(f"{model.name}_f", body, [4 * n, n_p], ["x", "p"], ["f"])

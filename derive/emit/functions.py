@@ -23,7 +23,8 @@ import casadi as ca
 from ..core.linearize import Linearization
 from .brackets import closed_form_brackets
 from .dynamics import build_kernel, elastic_kernel, state_bodies, sx_function
-from .sx import SympyToSX, ldl_factor, ldl_solve, state_symbols
+from .ldl import ldl_factor, ldl_solve
+from .sx import SympyToSX, state_symbols
 
 #: Quantities emitted for every model, in file order, with their meaning.
 QUANTITIES: Tuple[Tuple[str, str], ...] = (
@@ -64,7 +65,7 @@ def ad_by_ad(x: ca.SX, D: ca.SX, r3: ca.SX, acc_m: ca.SX, g: ca.SX, factors, k: 
         Motor acceleration ``J_m^-1 (K (q - q_m) - B_m dq_m)``.
     g : casadi.SX, shape (4n, n)
     factors : tuple
-        :func:`derive.emit.sx.ldl_factor` of ``D``.
+        :func:`derive.emit.ldl.ldl_factor` of ``D``.
     k : int
         Number of brackets after ``g``.
 
@@ -73,11 +74,11 @@ def ad_by_ad(x: ca.SX, D: ca.SX, r3: ca.SX, acc_m: ca.SX, g: ca.SX, factors, k: 
     casadi.SX, shape (4n, (k + 1) n)
     """
     n = D.shape[0]
-    y3 = ldl_solve(*factors, r3)
+    y3 = ldl_solve(factors, r3)
     f = ca.vertcat(x[n:2 * n], y3, x[3 * n:], acc_m)
 
     def df_along(v: ca.SX) -> ca.SX:  # (df/dx) v, one column
-        dy3 = ldl_solve(*factors, ca.jtimes(r3, x, v) - ca.mtimes(ca.jtimes(D, x, v), y3))
+        dy3 = ldl_solve(factors, ca.jtimes(r3, x, v) - ca.mtimes(ca.jtimes(D, x, v), y3))
         return ca.vertcat(v[n:2 * n], dy3, v[3 * n:], ca.jtimes(acc_m, x, v))
 
     blocks = [g]
@@ -109,7 +110,7 @@ def build_model_functions(lin: Linearization, cse: bool = True,
         if key not in lazy:
             if rhs is None:
                 raise ValueError(f"{m.name}: y4 is bound only by linearize(..., symbolic=True)")
-            lazy[key] = ldl_solve(*factors(), conv(rhs))
+            lazy[key] = ldl_solve(factors(), conv(rhs))
         return lazy[key]
 
     implicit = {}

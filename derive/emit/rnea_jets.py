@@ -47,80 +47,26 @@ exact zeros and ones of the URDF's rotations and offsets cost nothing.
 from __future__ import annotations
 
 from math import comb
-from typing import List, Sequence, Tuple, Union
+from typing import List, Sequence, Tuple
 
 import casadi as ca
 
+from .sparse_scalar import ZERO3, Scalar, Vec, add, cross, is_zero, matTvec, matvec, mul, neg, scale, sub, vadd
+
 __all__ = ["BodyNumbers", "rnea_jets"]
 
-Scalar = Union[float, ca.SX]
-Vec = List[Scalar]
 #: ``(R0, p, mass, first_moment, inertia, parent)`` of one body, numbers as floats, parameters as SX.
 BodyNumbers = Tuple[Sequence[Sequence[float]], Sequence[float], Scalar, Sequence[Scalar],
                     Sequence[Sequence[Scalar]], int]
 
-_ZERO: Vec = [0.0, 0.0, 0.0]
 _BINOMIAL = ((1.0,), (1.0, 1.0), (1.0, 2.0, 1.0))
 #: Highest derivative of the inverse dynamics: ``tau^(k)`` needs the trajectory up to ``q^(k+2)``.
 MAX_ORDER = 2
 
 
-def _is_zero(x) -> bool:
-    return isinstance(x, float) and x == 0.0
-
-
-def _mul(a: Scalar, b: Scalar) -> Scalar:
-    if _is_zero(a) or _is_zero(b):
-        return 0.0
-    for u, v in ((a, b), (b, a)):
-        if isinstance(u, float) and u == 1.0:
-            return v
-        if isinstance(u, float) and u == -1.0:
-            return _neg(v)
-    return a * b
-
-
-def _neg(a: Scalar) -> Scalar:
-    return 0.0 if _is_zero(a) else -a
-
-
-def _add(*terms: Scalar) -> Scalar:
-    total: Scalar = 0.0
-    for t in terms:
-        if not _is_zero(t):
-            total = t if _is_zero(total) else total + t
-    return total
-
-
-def _sub(a: Scalar, b: Scalar) -> Scalar:
-    return a if _is_zero(b) else _add(a, _neg(b))
-
-
-def _vadd(*vs: Vec) -> Vec:
-    return [_add(*c) for c in zip(*vs)]
-
-
-def _scale(k: Scalar, v: Vec) -> Vec:
-    return [_mul(k, x) for x in v]
-
-
-def _cross(u: Vec, v: Vec) -> Vec:
-    return [_sub(_mul(u[1], v[2]), _mul(u[2], v[1])),
-            _sub(_mul(u[2], v[0]), _mul(u[0], v[2])),
-            _sub(_mul(u[0], v[1]), _mul(u[1], v[0]))]
-
-
-def _matvec(M, v: Vec) -> Vec:
-    return [_add(*[_mul(M[r][k], v[k]) for k in range(3)]) for r in range(3)]
-
-
-def _matTvec(M, v: Vec) -> Vec:
-    return [_add(*[_mul(M[k][r], v[k]) for k in range(3)]) for r in range(3)]
-
-
 def _J(v: Vec) -> Vec:
     """``v x e_z``."""
-    return [v[1], _neg(v[0]), 0.0]
+    return [v[1], neg(v[0]), 0.0]
 
 
 def _ez(x: Scalar) -> Vec:
@@ -136,14 +82,14 @@ class _JointRotation:
 
     def to_body(self, u: Vec) -> Vec:
         """``R^T u``: a parent-frame vector in body coordinates."""
-        u = _matTvec(self.R0, u)
+        u = matTvec(self.R0, u)
         c, s = self.c, self.s
-        return [_add(_mul(c, u[0]), _mul(s, u[1])), _sub(_mul(c, u[1]), _mul(s, u[0])), u[2]]
+        return [add(mul(c, u[0]), mul(s, u[1])), sub(mul(c, u[1]), mul(s, u[0])), u[2]]
 
     def to_parent(self, v: Vec) -> Vec:
         """``R v``: a body vector in parent coordinates."""
         c, s = self.c, self.s
-        return _matvec(self.R0, [_sub(_mul(c, v[0]), _mul(s, v[1])), _add(_mul(s, v[0]), _mul(c, v[1])), v[2]])
+        return matvec(self.R0, [sub(mul(c, v[0]), mul(s, v[1])), add(mul(s, v[0]), mul(c, v[1])), v[2]])
 
     def jets_to_body(self, u: List[Vec]) -> List[Vec]:
         """Jets of ``R^T u(t)`` from the jets of ``u`` (parent coordinates), same length."""
@@ -170,10 +116,10 @@ def _rotated(rho: List[Vec], rates: Sequence[Scalar], sign: float) -> List[Vec]:
             else:
                 terms = [X(k - 1, j + 1)]
                 for m in range(k):
-                    weight = _mul(sign * comb(k - 1, m), rates[m]) if m < len(rates) else 0.0
-                    if not _is_zero(weight):
-                        terms.append(_scale(weight, _J(X(k - 1 - m, j))))
-                memo[k, j] = _vadd(*terms)
+                    weight = mul(sign * comb(k - 1, m), rates[m]) if m < len(rates) else 0.0
+                    if not is_zero(weight):
+                        terms.append(scale(weight, _J(X(k - 1 - m, j))))
+                memo[k, j] = vadd(*terms)
         return memo[k, j]
 
     return [X(k, 0) for k in range(len(rho))]
@@ -181,14 +127,14 @@ def _rotated(rho: List[Vec], rates: Sequence[Scalar], sign: float) -> List[Vec]:
 
 def _z_cross(u: Vec, v: Vec) -> Scalar:
     """``e_z . (u x v)``."""
-    return _sub(_mul(u[0], v[1]), _mul(u[1], v[0]))
+    return sub(mul(u[0], v[1]), mul(u[1], v[0]))
 
 
 def _joint_torque(k: int, w: List[Vec], v: List[Vec], P: List[Vec], L: List[Vec]) -> Scalar:
     """``tau^(k)`` of a joint from its subtree's momenta (see the module docstring)."""
-    products = [_mul(_BINOMIAL[k][j], _add(_z_cross(w[j], L[k - j]), _z_cross(v[j], P[k - j])))
+    products = [mul(_BINOMIAL[k][j], add(_z_cross(w[j], L[k - j]), _z_cross(v[j], P[k - j])))
                 for j in range(k + 1)]
-    return _add(L[k + 1][2], *products)
+    return add(L[k + 1][2], *products)
 
 
 def rnea_jets(bodies: Sequence[BodyNumbers], q, rates: Sequence, g0: Scalar, order: int) -> List[ca.SX]:
@@ -224,13 +170,13 @@ def rnea_jets(bodies: Sequence[BodyNumbers], q, rates: Sequence, g0: Scalar, ord
     for i, (R0, p, m, h, I, parent) in enumerate(bodies):
         Ri = rot[i] = _JointRotation(R0, q[i], joint_rates[i])
         if parent < 0:
-            w_p, v_p = [_ZERO] * M, [_ZERO, [0.0, 0.0, g0]] + [_ZERO] * (M - 2)
+            w_p, v_p = [ZERO3] * M, [ZERO3, [0.0, 0.0, g0]] + [ZERO3] * (M - 2)
         else:
             w_p, v_p = w[parent], v[parent]
-        w[i] = [_vadd(x, _ez(Ri.rates[k])) for k, x in enumerate(Ri.jets_to_body(w_p))]
-        v[i] = Ri.jets_to_body([_vadd(v_p[k], _cross(w_p[k], list(p))) for k in range(M)])
-        P[i] = [_vadd(_scale(m, v[i][k]), _cross(w[i][k], list(h))) for k in range(M)]
-        L[i] = [_vadd(_matvec(I, w[i][k]), _cross(list(h), v[i][k])) for k in range(M)]
+        w[i] = [vadd(x, _ez(Ri.rates[k])) for k, x in enumerate(Ri.jets_to_body(w_p))]
+        v[i] = Ri.jets_to_body([vadd(v_p[k], cross(w_p[k], list(p))) for k in range(M)])
+        P[i] = [vadd(scale(m, v[i][k]), cross(w[i][k], list(h))) for k in range(M)]
+        L[i] = [vadd(matvec(I, w[i][k]), cross(list(h), v[i][k])) for k in range(M)]
     tau = [[None] * n for _ in range(order + 1)]
     for i in reversed(range(n)):  # children come after their parents: each subtree is complete here
         for k in range(order + 1):
@@ -239,6 +185,6 @@ def rnea_jets(bodies: Sequence[BodyNumbers], q, rates: Sequence, g0: Scalar, ord
         if parent >= 0:
             RP, RL = rot[i].jets_to_parent(P[i]), rot[i].jets_to_parent(L[i])
             p = list(bodies[i][1])
-            P[parent] = [_vadd(P[parent][k], RP[k]) for k in range(M)]
-            L[parent] = [_vadd(L[parent][k], RL[k], _cross(p, RP[k])) for k in range(M)]
+            P[parent] = [vadd(P[parent][k], RP[k]) for k in range(M)]
+            L[parent] = [vadd(L[parent][k], RL[k], cross(p, RP[k])) for k in range(M)]
     return [ca.vertcat(*[ca.SX(t) if isinstance(t, float) else t for t in col]) for col in tau]

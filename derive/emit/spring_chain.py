@@ -40,7 +40,8 @@ import sympy as sp
 from ..core.spring import newton_inverse
 from .dynamics import build_kernel, elastic_diagonals, mx_function, programme, state_blocks, sx_function
 from .functions import QUANTITIES, ad_by_ad
-from .sx import SympyToSX, ldl_factor
+from .ldl import ldl_factor
+from .sx import SympyToSX
 from .torque import TORQUE_QUANTITIES
 
 __all__ = ["spring_sx_function", "friction_sx_function", "inverse_sx_function", "chain_bodies", "build_chain_functions",

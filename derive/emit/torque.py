@@ -29,7 +29,8 @@ from ..core.linearize import Linearization
 from ..core.torque import TorqueLinearization
 from .dynamics import mx_function, sx_function, torque_bodies
 from .impedance import split_blocks
-from .sx import SympyToSX, ldl_factor, ldl_solve
+from .ldl import ldl_factor, ldl_solve
+from .sx import SympyToSX
 
 #: Torque-coordinate functions emitted for every model, in file order, with their meaning.
 TORQUE_QUANTITIES: Tuple[Tuple[str, str], ...] = (
@@ -66,7 +67,7 @@ def _converter(tl: TorqueLinearization, m_sym: ca.SX, p: ca.SX) -> SympyToSX:
         if "ldl" not in lazy:
             lazy["ldl"] = ldl_factor(conv(model.D))
         if key not in lazy:
-            lazy[key] = ldl_solve(*lazy["ldl"], conv(rhs))
+            lazy[key] = ldl_solve(lazy["ldl"], conv(rhs))
         return lazy[key]
 
     implicit = {}

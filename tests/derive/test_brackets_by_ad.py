@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 from derive.emit.functions import build_functions
-from derive.emit.sx import SympyToSX, ldl_factor, ldl_solve, spd_inverse
+from derive.emit.ldl import ldl_factor, ldl_solve, spd_inverse
+from derive.emit.sx import SympyToSX
 from derive.core.linearize import linearize
 from derive.registry import build
 
@@ -30,9 +31,9 @@ def test_ad_by_ad_equals_symbolic_brackets(name):
 
     implicit = {}
     for i in range(m.n):
-        implicit[lin.Y3[i]] = lambda i=i: ldl_solve(*fac(), conv(lin.rhs3))[i]
+        implicit[lin.Y3[i]] = lambda i=i: ldl_solve(fac(), conv(lin.rhs3))[i]
         for j in range(i, m.n):
-            implicit[lin.W[i, j]] = lambda i=i, j=j: spd_inverse(*fac())[i, j]
+            implicit[lin.W[i, j]] = lambda i=i, j=j: spd_inverse(fac())[i, j]
     conv = SympyToSX(bind, dict(m.program.definitions), implicit)
     symbolic = ca.Function("ad_sym", [x, p], [conv(lin.outputs["ad"])])
     emitted = build_functions(linearize(build(name)))["ad"]  # a fresh model: its own program

@@ -15,7 +15,8 @@ import pytest
 from derive.emit.brackets import bracket_twin, coriolis_difference_along
 from derive.emit.dynamics import programme
 from derive.emit.functions import ad_by_ad, build_functions
-from derive.emit.sx import SympyToSX, ldl_factor, ldl_solve
+from derive.emit.ldl import ldl_factor, ldl_solve
+from derive.emit.sx import SympyToSX
 from derive.core.linearize import linearize
 from derive.registry import build
 
@@ -41,7 +42,7 @@ def _generic_brackets(m, lin) -> ca.Function:
 
     def y3(i):
         if "y3" not in lazy:
-            lazy["y3"] = ldl_solve(*factors, conv(lin.rhs3))
+            lazy["y3"] = ldl_solve(factors, conv(lin.rhs3))
         return lazy["y3"][i]
 
     conv = SympyToSX(bind, dict(m.program.definitions), {lin.Y3[i]: (lambda i=i: y3(i)) for i in range(n)})

@@ -6,7 +6,8 @@ import pytest
 import sympy as sp
 
 from derive.emit.functions import QUANTITIES, build_functions
-from derive.emit.sx import SympyToSX, ldl_factor, ldl_solve, skew_congruence, spd_inverse, symmetric_inverse
+from derive.emit.ldl import ldl_factor, ldl_solve, spd_inverse, symmetric_inverse
+from derive.emit.sx import SympyToSX, skew_congruence
 from derive.core.linearize import linearize
 from derive.registry import build
 
@@ -55,12 +56,12 @@ def test_ldl_solve_and_inverse_match_numpy():
         B = rng.normal(size=(n, n))
         A = B @ B.T + n * np.eye(n)
         b = rng.normal(size=n)
-        L, d = ldl_factor(ca.SX(ca.DM(A)))
-        x = np.array(ca.evalf(ldl_solve(L, d, ca.SX(ca.DM(b))))).ravel()
+        factors = ldl_factor(ca.SX(ca.DM(A)))
+        x = np.array(ca.evalf(ldl_solve(factors, ca.SX(ca.DM(b))))).ravel()
         np.testing.assert_allclose(x, np.linalg.solve(A, b), rtol=1e-12)
-        Ainv = np.array(ca.evalf(spd_inverse(L, d)))
+        Ainv = np.array(ca.evalf(spd_inverse(factors)))
         np.testing.assert_allclose(Ainv, np.linalg.inv(A), rtol=1e-11, atol=1e-13)
-        np.testing.assert_allclose(np.array(ca.evalf(symmetric_inverse(L, d))), np.linalg.inv(A),
+        np.testing.assert_allclose(np.array(ca.evalf(symmetric_inverse(factors))), np.linalg.inv(A),
                                    rtol=1e-11, atol=1e-13)
 
 

@@ -3,7 +3,8 @@
 * every runtime path (python, fused CasADi, compiled) gives the trajectories of an
   independent NumPy implementation of each law, written here from the formulas of the
   README / fjm_runtime.control.adaptive docstring (not from the emitted code) and run through the
-  sampled-data loop of docs/simulation.md, to 1e-12 over 10 s;
+  sampled-data loop of docs/simulation.md, to 1e-11 over 10 s (10^4 samples of closed loop: the two
+  implementations' rounding, 1e-16 per step, grows to 1.6e-12 on the adaptive planar2 law);
 * the emitted C equals the emitted CasADi Function for every law;
 * bad gains are rejected by the runtime with the errors that existed before.
 """
@@ -15,7 +16,7 @@ from fjm_runtime.control.factory import make_controller
 from fjm_runtime.control.references import Sinusoid, SmoothStep
 from fjm_runtime.sim.simulate import simulate
 
-TOL = 1e-12
+TOL = 1e-11
 
 
 def sat(v):
