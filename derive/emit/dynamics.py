@@ -42,6 +42,7 @@ import sympy as sp
 
 from .regroup import regroup
 from .rnea_jets import rnea_jets
+from .crba import joint_inertia
 from .ldl import ldl_factor, ldl_solve, packed_factor_fn, packed_solve_fn
 from .sx import SympyToSX
 
@@ -153,23 +154,27 @@ def _kernel(model, route: str) -> ca.Function:
         Y3 = tuple(sp.Symbol(f"y3_{i + 1}", real=True) for i in range(n))
         Y4 = tuple(sp.Symbol(f"y4_{i + 1}", real=True) for i in range(n))
         R1, W = inverse_dynamics_derivatives(model, Y3, Y4)
-    D, h, _ = programme(model)(q, dq, ca.SX.zeros(n), p)
-    factors = ldl_factor(D)
     zero = ca.SX.zeros(n)
-    if route == "jets":
+    if route == "jets":  # D by the CRBA and h by the jets, both on the regrouped bodies
         bodies = _body_numbers(model, _converter(model, q, dq, p))
         g0 = p[list(model.param_names).index("g0")]
+        D = joint_inertia(bodies, q)
+        factors = ldl_factor(D)
         h = rnea_jets(bodies, q, [dq], g0, 0)[0]  # shares the velocity terms with the jets
         y3 = ldl_solve(factors, s - h)
         y4 = ldl_solve(factors, ds - rnea_jets(bodies, q, [dq, y3], g0, 1)[1])
         w = rnea_jets(bodies, q, [dq, y3, y4], g0, 2)[2]
     elif route == "ad":
+        D, h, _ = programme(model)(q, dq, zero, p)
+        factors = ldl_factor(D)
         y3 = ldl_solve(factors, s - h)
         d1, d2 = time_derivatives(model)
         z = ca.vertcat(q, dq, y3)
         y4 = ldl_solve(factors, ds - d1(z, ca.vertcat(dq, y3, zero), p))
         w = d2(z, ca.vertcat(dq, y3, y4), ca.vertcat(y3, y4, zero), p)
     else:
+        D, h, _ = programme(model)(q, dq, zero, p)
+        factors = ldl_factor(D)
         y3 = ldl_solve(factors, s - h)
         conv = _converter(model, q, dq, p)
         for i in range(n):

@@ -32,30 +32,21 @@ from __future__ import annotations
 from typing import List, Sequence
 
 from .rnea_jets import BodyNumbers
-from .sparse_scalar import Scalar, Vec, add, mul, neg, scale, sub, vadd
+from .sparse_scalar import Scalar, add, matmul3, mul, neg, scale, skew, sub, vadd
 
 __all__ = ["regroup"]
-
-
-def _skew(x: Vec) -> List[Vec]:
-    """``[x]x``, the matrix of ``x cross .``."""
-    return [[0.0, neg(x[2]), x[1]], [x[2], 0.0, neg(x[0])], [neg(x[1]), x[0], 0.0]]
-
-
-def _matmul(A, B) -> List[Vec]:
-    return [[add(*[mul(A[r][k], B[k][c]) for k in range(3)]) for c in range(3)] for r in range(3)]
 
 
 def _moved_part(R0, p, m: Scalar, hz: Scalar, lam: Scalar):
     """``(m, h, I)`` about the parent's origin, parent coordinates, of the part of a body that moves with its parent."""
     axis = [float(R0[r][2]) for r in range(3)]  # the joint axis in parent coordinates
     h_axis = scale(hz, axis)
-    P, H = _skew([float(v) for v in p]), _skew(h_axis)
-    HP, PH, PP = _matmul(H, P), _matmul(P, H), _matmul(P, P)
+    P, H = skew(list(p)), skew(h_axis)
+    HP, PH, PP = matmul3(H, P), matmul3(P, H), matmul3(P, P)
     across = [[(1.0 if r == c else 0.0) - axis[r] * axis[c] for c in range(3)] for r in range(3)]
     inertia = [[sub(add(mul(lam, across[r][c]), neg(HP[r][c]), neg(PH[r][c])), mul(m, PP[r][c]))
                 for c in range(3)] for r in range(3)]
-    return m, vadd(h_axis, scale(m, [float(v) for v in p])), inertia
+    return m, vadd(h_axis, scale(m, list(p))), inertia
 
 
 def regroup(bodies: Sequence[BodyNumbers]) -> List[BodyNumbers]:

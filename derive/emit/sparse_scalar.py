@@ -12,7 +12,7 @@ from typing import List, Union
 import casadi as ca
 
 __all__ = ["Scalar", "Vec", "ZERO3", "is_zero", "mul", "neg", "add", "sub", "vadd", "scale", "cross",
-           "matvec", "matTvec"]
+           "matvec", "matTvec", "matmul3", "skew"]
 
 Scalar = Union[float, ca.SX]
 Vec = List[Scalar]
@@ -74,3 +74,13 @@ def matvec(M, v: Vec) -> Vec:
 def matTvec(M, v: Vec) -> Vec:
     """``M^T v`` for a 3x3 ``M`` (rows)."""
     return [add(*[mul(M[k][r], v[k]) for k in range(3)]) for r in range(3)]
+
+
+def matmul3(A, B) -> List[Vec]:
+    """``A B`` for 3x3 matrices (rows)."""
+    return [[add(*[mul(A[r][k], B[k][c]) for k in range(3)]) for c in range(3)] for r in range(3)]
+
+
+def skew(x: Vec) -> List[Vec]:
+    """``[x]x``, the matrix of ``x cross .``."""
+    return [[0.0, neg(x[2]), x[1]], [x[2], 0.0, neg(x[0])], [neg(x[1]), x[0], 0.0]]

@@ -1,4 +1,4 @@
-"""The regrouped inertials (derive/emit/regroup.py): the same joint torques with fewer nonzero inertials.
+"""The regrouped inertials (derive/emit/regroup.py) and the CRBA on them (derive/emit/crba.py): same torques, same D.
 
 The recursion's own tests (test_rnea_jets: AD of the programme, finite differences of Pinocchio)
 run on the regrouped bodies; these check the regrouping by itself, against the bodies as the
@@ -68,3 +68,29 @@ def test_a_point_mass_on_the_axis_moves_to_the_parent_whole():
     assert new_root[3] == [0.6, 0.0, 0.0]
     # I = diag(0, 0.18, 0.18) before the root's own I_yy = 0.18 leaves it (from I_xx too)
     assert np.allclose(np.array(new_root[4], float), np.diag([-0.18, 0.0, 0.18]), rtol=0, atol=1e-15)
+
+
+@pytest.mark.parametrize("name", ["panda", "baxter"])
+def test_the_crba_on_regrouped_bodies_is_the_models_joint_inertia(name):
+    from derive.emit.crba import joint_inertia
+    from derive.emit.dynamics import programme
+    m = build(name)
+    n = m.n
+    q, dq, p = ca.SX.sym("q", n), ca.SX.sym("dq", n), ca.SX.sym("p", len(m.params))
+    stated = _as_stated(m, _converter(m, q, dq, p))
+    f = ca.Function("f", [q, p], [joint_inertia(regroup(stated), q), programme(m)(q, dq, ca.SX.zeros(n), p)[0]])
+    pv = np.array([pp.default for pp in m.params])
+    if "m_load" in m.param_names:
+        names = list(m.param_names)
+        pv[names.index("m_load")], pv[names.index("y_load")], pv[names.index("z_load")] = 1.5, -0.04, 0.1
+    rng = np.random.default_rng(8)
+    for _ in range(3):
+        ours, model_D = (np.asarray(x, float) for x in f(rng.uniform(-2.5, 2.5, n), pv))
+        assert np.max(np.abs(ours - model_D)) < 1e-13 * max(1.0, np.max(np.abs(model_D)))
+
+
+def test_the_crba_refuses_bodies_that_still_carry_mass():
+    from derive.emit.crba import joint_inertia
+    R0 = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0))
+    with pytest.raises(ValueError, match="regrouped bodies"):
+        joint_inertia([(R0, (0.0, 0.0, 0.0), 1.0, [0.0] * 3, [[0.0] * 3] * 3, -1)], [0.0])
