@@ -12,6 +12,7 @@ from __future__ import annotations
 import ctypes
 import statistics
 from pathlib import Path
+from typing import Sequence
 
 import casadi as ca
 import numpy as np
@@ -71,20 +72,22 @@ def _driver_defines(prefix: str, one_call: bool):
     return [f"-DCORE={prefix}"] if one_call else [f"-DALPHA={prefix}_alpha", f"-DBETA={prefix}_beta"]
 
 
-def build_generated(model, workdir: Path, obj: Path = None, one_call: bool = False) -> CompiledAlphaBeta:
+def build_generated(model, workdir: Path, obj: Path = None, one_call: bool = False,
+                    extra: Sequence[str] = ()) -> CompiledAlphaBeta:
     """Generated ``<model>.c`` (all of it, as shipped) + driver. ``obj``: a precompiled object.
 
     ``one_call``: time ``<model>_control_core`` (y_hat, alpha, beta in one call) instead of
-    ``<model>_alpha`` then ``<model>_beta``.
+    ``<model>_alpha`` then ``<model>_beta``. ``extra``: flags after the bench's own (both files).
     """
     name = model.name
     workdir.mkdir(parents=True, exist_ok=True)
+    suffix = "_" + "".join(c for c in "".join(extra) if c.isalnum()) if extra else ""
     if obj is None:
-        obj = workdir / f"{name}.o"
-        compile_object(REPO / "generated" / name / f"{name}.c", obj)
-    tag = "core" if one_call else "pair"
+        obj = workdir / f"{name}{suffix}.o"
+        compile_object(REPO / "generated" / name / f"{name}.c", obj, extra)
+    tag = ("core" if one_call else "pair") + suffix
     drv = workdir / f"driver_{name}_{tag}.o"
-    compile_object(DRIVER, drv, _driver_defines(f"{name}_control_core" if one_call else name, one_call))
+    compile_object(DRIVER, drv, [*_driver_defines(f"{name}_control_core" if one_call else name, one_call), *extra])
     lib = link_shared([obj, drv], workdir / f"gen_{name}_{tag}.so")
     return CompiledAlphaBeta(lib, model.n, model.nx)
 

@@ -166,6 +166,7 @@ def bench_spatial(work: Path, reps: int, checks: list, name: str = "panda") -> d
     gen_us, peer_us, gen2_us, peer2_us = time_interleaved(libs, x, p, reps=3 * reps)
     log(f"  {name}: one call: generated {gen_us:.2f} us, adam peer {peer_us:.2f} us; "
         f"two calls: {gen2_us:.2f} / {peer2_us:.2f} us")
+    native = _native_cores(m, work / "spatial", xs, p, refs, reps, checks)
     manifest = json.loads((REPO / "generated" / name / "manifest.json").read_text())
     return {
         "n": int(m.n),
@@ -179,4 +180,36 @@ def bench_spatial(work: Path, reps: int, checks: list, name: str = "panda") -> d
         "peer_c_bytes": int(info["c_bytes"]), "peer_gcc_seconds": info["gcc_seconds"],
         "peer_build_seconds": info["build_seconds"], "peer_ops": info["ops"],
         "max_rel_diff_peer_vs_generated": err,
+        "native": native,
     }
+
+
+#: Flags of the informative row compiled for the machine's own CPU (every target stays at the bench's ``-O2``).
+NATIVE_FLAGS = ("-march=native",)
+
+
+def _native_cores(m, work: Path, xs, p, refs, reps: int, checks: list) -> dict:
+    """The one-call cores of the generated C and of the adam peer, both compiled with :data:`NATIVE_FLAGS` too.
+
+    What a user gets by compiling for the robot computer's CPU (vector instructions of three
+    operands, fused multiply-add): the same work, the same flags on both sides, interleaved. A
+    compiler that refuses the flags leaves ``{"error": ...}``.
+    """
+    import subprocess
+    from .alpha_beta import build_generated, time_interleaved
+    from .spatial import build_adam_peer
+    try:
+        gen = build_generated(m, work, one_call=True, extra=NATIVE_FLAGS)
+        peer = build_adam_peer(m, work, extra=NATIVE_FLAGS)[1]
+    except subprocess.CalledProcessError as exc:
+        log(f"  {m.name}: {' '.join(NATIVE_FLAGS)} refused by the compiler ({exc}); not measured")
+        return {"error": f"{' '.join(NATIVE_FLAGS)}: {exc}"}
+    gen_out = [gen(xi, p) for xi in xs]
+    err = max(_pair_outputs_error(lib, xs, p, gen_out, refs) for lib in (gen, peer))
+    check(checks, f"spatial.{m.name}.native",
+          f"{m.name}: generated C and adam peer compiled with `-O2 {' '.join(NATIVE_FLAGS)}` (one call) vs the "
+          "`.casadi` Functions", err, TOLERANCES["alpha_beta"])
+    gen_us, peer_us = time_interleaved([gen, peer], xs[0], p, reps=3 * reps)
+    log(f"  {m.name}, -O2 {' '.join(NATIVE_FLAGS)}: one call: generated {gen_us:.2f} us, adam peer {peer_us:.2f} us")
+    return {"flags": "-O2 " + " ".join(NATIVE_FLAGS), "generated_us": gen_us, "peer_us": peer_us,
+            "ratio": gen_us / peer_us}

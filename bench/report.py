@@ -102,6 +102,10 @@ def main_table(r: dict) -> List[str]:
         ("same, as two calls (`alpha`, then `beta`)", "the peer's alpha and beta Functions",
          f"{g('spatial.two_calls.generated_us', '.2f')} us", f"{g('spatial.two_calls.peer_us', '.2f')} us",
          f"ratio {g('spatial.two_calls.ratio', '.2f')}", "-", []),
+        ("same, one call, both compiled for this machine's CPU (`-O2 -march=native`); informative, every "
+         "target above is at `-O2`", "the peer's core, same flags",
+         f"{g('spatial.native.generated_us', '.2f')} us", f"{g('spatial.native.peer_us', '.2f')} us",
+         f"ratio {g('spatial.native.ratio', '.2f')}", "-", []),
         ("C of alpha + beta, Panda", "the adam peer's C",
          f"{g('spatial.generated_c_bytes', '.0f', 1e-3)} kB, gcc -O2 {g('spatial.generated_gcc_seconds', '.1f')} s",
          f"{g('spatial.peer_c_bytes', '.0f', 1e-3)} kB, gcc -O2 {g('spatial.peer_gcc_seconds', '.1f')} s",

@@ -25,7 +25,7 @@ import contextlib
 import io
 import time
 from pathlib import Path
-from typing import Dict, Tuple
+from typing import Dict, Sequence, Tuple
 
 import casadi as ca
 
@@ -108,8 +108,10 @@ def _codegen(stem: str, fns, workdir: Path) -> Path:
     return Path(cg.generate(str(workdir) + "/"))
 
 
-def build_adam_peer(model, workdir: Path):
+def build_adam_peer(model, workdir: Path, extra: Sequence[str] = ()):
     """Code-generate, compile and load the adam peer, as two calls (alpha, beta) and as one (its core).
+
+    ``extra``: compiler flags after the bench's own.
 
     Returns
     -------
@@ -121,14 +123,16 @@ def build_adam_peer(model, workdir: Path):
     workdir.mkdir(parents=True, exist_ok=True)
     fns, build_s = adam_functions(model)
     libs, info = [], {"build_seconds": build_s, "ops": {q: operation_count(fns[q]) for q in fns}}
+    suffix = "_" + "".join(c for c in "".join(extra) if c.isalnum()) if extra else ""
     for stem, parts, defines in (("peer_adam", ["alpha", "beta"], ["-DALPHA=peer_adam_alpha", "-DBETA=peer_adam_beta"]),
                                  ("peer_adam_core", ["core"], ["-DCORE=peer_adam_core"])):
         src = _codegen(stem, [fns[q] for q in parts], workdir)
-        gcc_s = compile_object(src, workdir / f"{stem}.o")
+        gcc_s = compile_object(src, workdir / f"{stem}{suffix}.o", extra)
         if not libs:  # the size and compile time of alpha and beta, as for the generated ones
             info.update(gcc_seconds=gcc_s, c_bytes=src.stat().st_size)
-        compile_object(DRIVER, workdir / f"driver_{stem}.o", defines)
-        lib = link_shared([workdir / f"{stem}.o", workdir / f"driver_{stem}.o"], workdir / f"{stem}.so")
+        compile_object(DRIVER, workdir / f"driver_{stem}{suffix}.o", [*defines, *extra])
+        lib = link_shared([workdir / f"{stem}{suffix}.o", workdir / f"driver_{stem}{suffix}.o"],
+                          workdir / f"{stem}{suffix}.so")
         libs.append(CompiledAlphaBeta(lib, model.n, model.nx))
     return libs[0], libs[1], info
 
