@@ -69,6 +69,28 @@ def _status(results: dict, keys: Sequence[str]) -> str:
     return "met" if all(met) else "**missed**"
 
 
+def _panda_rows(g) -> list:
+    """The Panda's rows of :func:`main_table`: alpha + beta in one call, in two, under native flags, and their C."""
+    return [
+        ("alpha + beta compiled, Panda (7 joints), in one call (`control_core`)",
+         "adam-robotics 0.5.0 (CasADi backend) on the same URDF, elastic model and Lie derivatives by "
+         "CasADi AD (`jtimes`), T, alpha, beta in one Function, same codegen and flags",
+         f"{g('spatial.generated_us', '.2f')} us", f"{g('spatial.peer_us', '.2f')} us",
+         f"ratio {g('spatial.ratio', '.2f')}", "<= 0.5", ["spatial.ratio"]),
+        ("same, as two calls (`alpha`, then `beta`)", "the peer's alpha and beta Functions",
+         f"{g('spatial.two_calls.generated_us', '.2f')} us", f"{g('spatial.two_calls.peer_us', '.2f')} us",
+         f"ratio {g('spatial.two_calls.ratio', '.2f')}", "-", []),
+        ("same, one call, both compiled for this machine's CPU (`-O2 -march=native`); informative, every "
+         "target above is at `-O2`", "the peer's core, same flags",
+         f"{g('spatial.native.generated_us', '.2f')} us", f"{g('spatial.native.peer_us', '.2f')} us",
+         f"ratio {g('spatial.native.ratio', '.2f')}", "-", []),
+        ("C of alpha + beta, Panda", "the adam peer's C",
+         f"{g('spatial.generated_c_bytes', '.0f', 1e-3)} kB, gcc -O2 {g('spatial.generated_gcc_seconds', '.1f')} s",
+         f"{g('spatial.peer_c_bytes', '.0f', 1e-3)} kB, gcc -O2 {g('spatial.peer_gcc_seconds', '.1f')} s",
+         "-", "-", []),
+    ]
+
+
 def main_table(r: dict) -> List[str]:
     """The comparison table shared by both READMEs (markdown lines)."""
     g = lambda k, f, s=1.0: _f(r, k, f, s)  # noqa: E731
@@ -94,22 +116,7 @@ def main_table(r: dict) -> List[str]:
         ("`python -m derive` of the 7-joint Panda (URDF), inside `make derive`", "-",
          f"{g('derive.panda.seconds', '.1f')} s (symbolic {g('derive.panda.derive_seconds', '.1f')} s, emit "
          f"{g('derive.panda.emit_seconds', '.1f')} s), {g('derive.panda.ops', '.0f')} operations", "-", "-", "-", []),
-        ("alpha + beta compiled, Panda (7 joints), in one call (`control_core`)",
-         "adam-robotics 0.5.0 (CasADi backend) on the same URDF, elastic model and Lie derivatives by "
-         "CasADi AD (`jtimes`), T, alpha, beta in one Function, same codegen and flags",
-         f"{g('spatial.generated_us', '.2f')} us", f"{g('spatial.peer_us', '.2f')} us",
-         f"ratio {g('spatial.ratio', '.2f')}", "<= 0.5", ["spatial.ratio"]),
-        ("same, as two calls (`alpha`, then `beta`)", "the peer's alpha and beta Functions",
-         f"{g('spatial.two_calls.generated_us', '.2f')} us", f"{g('spatial.two_calls.peer_us', '.2f')} us",
-         f"ratio {g('spatial.two_calls.ratio', '.2f')}", "-", []),
-        ("same, one call, both compiled for this machine's CPU (`-O2 -march=native`); informative, every "
-         "target above is at `-O2`", "the peer's core, same flags",
-         f"{g('spatial.native.generated_us', '.2f')} us", f"{g('spatial.native.peer_us', '.2f')} us",
-         f"ratio {g('spatial.native.ratio', '.2f')}", "-", []),
-        ("C of alpha + beta, Panda", "the adam peer's C",
-         f"{g('spatial.generated_c_bytes', '.0f', 1e-3)} kB, gcc -O2 {g('spatial.generated_gcc_seconds', '.1f')} s",
-         f"{g('spatial.peer_c_bytes', '.0f', 1e-3)} kB, gcc -O2 {g('spatial.peer_gcc_seconds', '.1f')} s",
-         "-", "-", []),
+        *_panda_rows(g),
         ("closed loop link1, 10 s at 1 kHz, RK4 + SMC: the bare compiled loop (outputs preallocated)",
          "hand-written C of the same loop (`bench/hand_loop.c`, -O2)",
          f"{g('closed_loop.generated_ms', '.2f')} ms", f"{g('closed_loop.hand_c_ms', '.2f')} ms",

@@ -23,22 +23,16 @@ from typing import List, Sequence
 
 import casadi as ca
 
-from .rnea_jets import BodyNumbers
-from .sparse_scalar import Vec, add, cross, matmul3, matvec, mul, skew, sub, vadd
+from .rnea_jets import BodyNumbers, JointRotation
+from .sparse_scalar import Vec, add, cross, matmul3, mul, skew, sub, vadd
 
 __all__ = ["joint_inertia"]
 
 
-class _Rotation:
-    """``R = R0 Rz(q)`` of one joint: vectors and symmetric matrices to the parent's axes."""
+class _Rotation(JointRotation):
+    """``R = R0 Rz(q)`` of one joint (:class:`derive.emit.rnea_jets.JointRotation`), and symmetric matrices by it."""
 
-    def __init__(self, R0, q):
-        self.R0, self.c, self.s = R0, ca.cos(q), ca.sin(q)
-        self._squares = None
-
-    def vector(self, v: Vec) -> Vec:
-        c, s = self.c, self.s
-        return matvec(self.R0, [sub(mul(c, v[0]), mul(s, v[1])), add(mul(s, v[0]), mul(c, v[1])), v[2]])
+    _squares = None
 
     def symmetric(self, A) -> List[Vec]:
         """``R A R^T`` for a symmetric ``A``."""
@@ -78,7 +72,7 @@ def joint_inertia(bodies: Sequence[BodyNumbers], q) -> ca.SX:
         parent, p = bodies[i][5], list(bodies[i][1])
         if parent < 0:
             continue
-        Rh, RI = rot[i].vector(h[i]), rot[i].symmetric(inertia[i])
+        Rh, RI = rot[i].to_parent(h[i]), rot[i].symmetric(inertia[i])
         HP, PH = matmul3(skew(Rh), skew(p)), matmul3(skew(p), skew(Rh))
         h[parent] = vadd(h[parent], Rh)
         inertia[parent] = [[sub(sub(add(inertia[parent][r][c], RI[r][c]), HP[r][c]), PH[r][c]) for c in range(3)]
@@ -88,8 +82,8 @@ def joint_inertia(bodies: Sequence[BodyNumbers], q) -> ca.SX:
         P, L = cross([0.0, 0.0, 1.0], h[i]), [inertia[i][r][2] for r in range(3)]
         D[i][i], j = L[2], i
         while bodies[j][5] >= 0:
-            RP = rot[j].vector(P)
-            L, P = vadd(rot[j].vector(L), cross(list(bodies[j][1]), RP)), RP
+            RP = rot[j].to_parent(P)
+            L, P = vadd(rot[j].to_parent(L), cross(list(bodies[j][1]), RP)), RP
             j = bodies[j][5]
             D[j][i] = D[i][j] = L[2]
     return ca.vertcat(*[ca.horzcat(*[ca.SX(x) if isinstance(x, float) else x for x in row]) for row in D])

@@ -53,7 +53,7 @@ import casadi as ca
 
 from .sparse_scalar import ZERO3, Scalar, Vec, add, cross, is_zero, matTvec, matvec, mul, neg, scale, sub, vadd
 
-__all__ = ["BodyNumbers", "rnea_jets"]
+__all__ = ["BodyNumbers", "JointRotation", "rnea_jets"]
 
 #: ``(R0, p, mass, first_moment, inertia, parent)`` of one body, numbers as floats, parameters as SX.
 BodyNumbers = Tuple[Sequence[Sequence[float]], Sequence[float], Scalar, Sequence[Scalar],
@@ -73,10 +73,10 @@ def _ez(x: Scalar) -> Vec:
     return [0.0, 0.0, x]
 
 
-class _JointRotation:
+class JointRotation:
     """``R = R0 Rz(q_i)`` of one joint and the jets of vectors rotated by it along the trajectory."""
 
-    def __init__(self, R0, q_i, rates: Sequence[Scalar]):
+    def __init__(self, R0, q_i, rates: Sequence[Scalar] = ()):
         self.R0, self.c, self.s = R0, ca.cos(q_i), ca.sin(q_i)
         self.rates = list(rates)  # q_i^(1), q_i^(2), ... (float zeros where the trajectory has none)
 
@@ -168,7 +168,7 @@ def rnea_jets(bodies: Sequence[BodyNumbers], q, rates: Sequence, g0: Scalar, ord
     joint_rates = [[0.0 if r is None else r[i] for r in rates] for i in range(n)]  # q_i^(1..M), missing ones 0
     rot, w, v, P, L = ([None] * n for _ in range(5))
     for i, (R0, p, m, h, I, parent) in enumerate(bodies):
-        Ri = rot[i] = _JointRotation(R0, q[i], joint_rates[i])
+        Ri = rot[i] = JointRotation(R0, q[i], joint_rates[i])
         if parent < 0:
             w_p, v_p = [ZERO3] * M, [ZERO3, [0.0, 0.0, g0]] + [ZERO3] * (M - 2)
         else:
