@@ -114,16 +114,18 @@ def time_derivatives(model) -> Tuple[ca.Function, ca.Function]:
     return d1, d2
 
 
-def _body_numbers(model, conv: SympyToSX) -> list:
-    """The model's :class:`derive.core.model_base.RigidBody` records, regrouped, numbers as floats, parameters as SX.
-
-    Regrouped (:func:`derive.emit.regroup.regroup`): the same joint torques, with no mass and
-    fewer nonzero inertials per body, for the recursion of the torques and their derivatives.
-    """
+def _stated_body_numbers(model, conv: SympyToSX) -> list:
+    """The model's :class:`derive.core.model_base.RigidBody` records as stated, numbers as floats, parameters as SX."""
     def scalar(e):
         return float(e) if getattr(e, "is_Number", False) else conv(e)
-    return regroup([(b.R0, b.p, scalar(b.mass), [scalar(v) for v in b.first_moment],
-                     [[scalar(v) for v in row] for row in b.inertia], b.parent) for b in model.bodies])
+    return [(b.R0, b.p, scalar(b.mass), [scalar(v) for v in b.first_moment],
+             [[scalar(v) for v in row] for row in b.inertia], b.parent) for b in model.bodies]
+
+
+def _body_numbers(model, conv: SympyToSX) -> list:
+    """:func:`_stated_body_numbers`, regrouped (:func:`derive.emit.regroup.regroup`): the same joint torques,
+    with no mass and fewer nonzero inertials per body, for the recursion of the torques and their derivatives."""
+    return regroup(_stated_body_numbers(model, conv))
 
 
 def build_kernel(model) -> ca.Function:
@@ -159,23 +161,20 @@ def _kernel(model, route: str) -> ca.Function:
         bodies = _body_numbers(model, _converter(model, q, dq, p))
         g0 = p[list(model.param_names).index("g0")]
         D = joint_inertia(bodies, q)
-        factors = ldl_factor(D)
         h = rnea_jets(bodies, q, [dq], g0, 0)[0]  # shares the velocity terms with the jets
-        y3 = ldl_solve(factors, s - h)
+    else:
+        D, h, _ = programme(model)(q, dq, zero, p)
+    factors = ldl_factor(D)
+    y3 = ldl_solve(factors, s - h)
+    if route == "jets":
         y4 = ldl_solve(factors, ds - rnea_jets(bodies, q, [dq, y3], g0, 1)[1])
         w = rnea_jets(bodies, q, [dq, y3, y4], g0, 2)[2]
     elif route == "ad":
-        D, h, _ = programme(model)(q, dq, zero, p)
-        factors = ldl_factor(D)
-        y3 = ldl_solve(factors, s - h)
         d1, d2 = time_derivatives(model)
         z = ca.vertcat(q, dq, y3)
         y4 = ldl_solve(factors, ds - d1(z, ca.vertcat(dq, y3, zero), p))
         w = d2(z, ca.vertcat(dq, y3, y4), ca.vertcat(y3, y4, zero), p)
     else:
-        D, h, _ = programme(model)(q, dq, zero, p)
-        factors = ldl_factor(D)
-        y3 = ldl_solve(factors, s - h)
         conv = _converter(model, q, dq, p)
         for i in range(n):
             conv.bind(Y3[i], y3[i])

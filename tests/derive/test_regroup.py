@@ -11,17 +11,10 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from derive.emit.dynamics import _converter
+from derive.emit.dynamics import _converter, _stated_body_numbers
 from derive.emit.regroup import regroup
 from derive.emit.rnea_jets import rnea_jets
 from derive.registry import build
-
-
-def _as_stated(m, conv):
-    def scalar(e):
-        return float(e) if getattr(e, "is_Number", False) else conv(e)
-    return [(b.R0, b.p, scalar(b.mass), [scalar(v) for v in b.first_moment],
-             [[scalar(v) for v in row] for row in b.inertia], b.parent) for b in m.bodies]
 
 
 @pytest.mark.parametrize("name", ["panda", "baxter"])
@@ -30,7 +23,7 @@ def test_regrouped_bodies_give_the_stated_bodies_torques_and_derivatives(name):
     n = m.n
     q, dq, a, ar = (ca.SX.sym(s, n) for s in ("q", "dq", "a", "ar"))
     p = ca.SX.sym("p", len(m.params))
-    stated = _as_stated(m, _converter(m, q, dq, p))
+    stated = _stated_body_numbers(m, _converter(m, q, dq, p))
     g0 = p[list(m.param_names).index("g0")]
     f = ca.Function("f", [q, dq, a, ar, p],
                     rnea_jets(stated, q, [dq, a, ar], g0, 2) + rnea_jets(regroup(stated), q, [dq, a, ar], g0, 2))
@@ -51,7 +44,7 @@ def test_each_regrouped_body_keeps_no_mass_no_axial_moment_and_no_yy_inertia():
         m = build(name)
         n = m.n
         conv = _converter(m, ca.SX.sym("q", n), ca.SX.sym("dq", n), ca.SX.sym("p", len(m.params)))
-        for R0, p, mass, h, I, parent in regroup(_as_stated(m, conv)):
+        for R0, p, mass, h, I, parent in regroup(_stated_body_numbers(m, conv)):
             assert mass == 0.0 and h[2] == 0.0 and I[1][1] == 0.0
 
 
@@ -77,7 +70,7 @@ def test_the_crba_on_regrouped_bodies_is_the_models_joint_inertia(name):
     m = build(name)
     n = m.n
     q, dq, p = ca.SX.sym("q", n), ca.SX.sym("dq", n), ca.SX.sym("p", len(m.params))
-    stated = _as_stated(m, _converter(m, q, dq, p))
+    stated = _stated_body_numbers(m, _converter(m, q, dq, p))
     f = ca.Function("f", [q, p], [joint_inertia(regroup(stated), q), programme(m)(q, dq, ca.SX.zeros(n), p)[0]])
     pv = np.array([pp.default for pp in m.params])
     if "m_load" in m.param_names:
