@@ -17,7 +17,7 @@ from typing import Sequence
 import casadi as ca
 import numpy as np
 
-from .ccutil import compile_object, link_shared
+from .ccutil import compile_object, flags_tag, link_shared
 from .peers import peer_functions
 
 HERE = Path(__file__).resolve().parent
@@ -67,7 +67,7 @@ class CompiledAlphaBeta:
         return self.timed_run(x, p, iters)[0]
 
 
-def _driver_defines(prefix: str, one_call: bool):
+def driver_defines(prefix: str, one_call: bool):
     """``-D`` flags of ``driver_alpha_beta.c`` for ``<prefix>_alpha``/``_beta`` or one ``<prefix>_<core>``."""
     return [f"-DCORE={prefix}"] if one_call else [f"-DALPHA={prefix}_alpha", f"-DBETA={prefix}_beta"]
 
@@ -81,13 +81,13 @@ def build_generated(model, workdir: Path, obj: Path = None, one_call: bool = Fal
     """
     name = model.name
     workdir.mkdir(parents=True, exist_ok=True)
-    suffix = "_" + "".join(c for c in "".join(extra) if c.isalnum()) if extra else ""
+    suffix = flags_tag(extra)
     if obj is None:
         obj = workdir / f"{name}{suffix}.o"
         compile_object(REPO / "generated" / name / f"{name}.c", obj, extra)
     tag = ("core" if one_call else "pair") + suffix
     drv = workdir / f"driver_{name}_{tag}.o"
-    compile_object(DRIVER, drv, [*_driver_defines(f"{name}_control_core" if one_call else name, one_call), *extra])
+    compile_object(DRIVER, drv, [*driver_defines(f"{name}_control_core" if one_call else name, one_call), *extra])
     lib = link_shared([obj, drv], workdir / f"gen_{name}_{tag}.so")
     return CompiledAlphaBeta(lib, model.n, model.nx)
 
@@ -108,7 +108,7 @@ def build_peer(model_name: str, variant: str, workdir: Path, n: int, nx: int, on
     obj = workdir / f"{stem}.o"
     gcc_s = compile_object(src, obj)
     drv = workdir / f"driver_{stem}.o"
-    compile_object(DRIVER, drv, _driver_defines(f"peer_{variant}" + ("_core" if one_call else ""), one_call))
+    compile_object(DRIVER, drv, driver_defines(f"peer_{variant}" + ("_core" if one_call else ""), one_call))
     lib = link_shared([obj, drv], workdir / f"{stem}.so")
     return CompiledAlphaBeta(lib, n, nx), gcc_s, src.stat().st_size
 

@@ -19,6 +19,11 @@ def cc() -> str:
     return exe
 
 
+def flags_tag(extra: Sequence[str]) -> str:
+    """A file-name suffix for objects built with ``extra`` flags (``""`` without): ``-march=native`` -> ``_marchnative``."""
+    return "_" + "".join(c for c in "".join(extra) if c.isalnum()) if extra else ""
+
+
 def compile_object(src: Path, obj: Path, extra: Sequence[str] = ()) -> float:
     """``gcc CFLAGS -c src -o obj``; returns the wall time in s."""
     t0 = time.perf_counter()

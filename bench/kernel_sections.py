@@ -200,7 +200,7 @@ def _native_cores(m, work: Path, xs, p, refs, reps: int, checks: list) -> dict:
     from .spatial import build_adam_peer
     try:
         gen = build_generated(m, work, one_call=True, extra=NATIVE_FLAGS)
-        peer = build_adam_peer(m, work, extra=NATIVE_FLAGS)[1]
+        peer = build_adam_peer(m, work, extra=NATIVE_FLAGS, two_calls=False)[1]
     except subprocess.CalledProcessError as exc:
         log(f"  {m.name}: {' '.join(NATIVE_FLAGS)} refused by the compiler ({exc}); not measured")
         return {"error": f"{' '.join(NATIVE_FLAGS)}: {exc}"}

@@ -29,8 +29,8 @@ from typing import Dict, Sequence, Tuple
 
 import casadi as ca
 
-from .alpha_beta import DRIVER, CompiledAlphaBeta
-from .ccutil import compile_object, link_shared
+from .alpha_beta import DRIVER, CompiledAlphaBeta, driver_defines
+from .ccutil import compile_object, flags_tag, link_shared
 
 REPO = Path(__file__).resolve().parent.parent
 
@@ -108,10 +108,11 @@ def _codegen(stem: str, fns, workdir: Path) -> Path:
     return Path(cg.generate(str(workdir) + "/"))
 
 
-def build_adam_peer(model, workdir: Path, extra: Sequence[str] = ()):
+def build_adam_peer(model, workdir: Path, extra: Sequence[str] = (), two_calls: bool = True):
     """Code-generate, compile and load the adam peer, as two calls (alpha, beta) and as one (its core).
 
-    ``extra``: compiler flags after the bench's own.
+    ``extra``: compiler flags after the bench's own. ``two_calls=False`` builds the core alone
+    (the first of the returned peers is then None, and ``info`` has no C size nor gcc time).
 
     Returns
     -------
@@ -122,19 +123,20 @@ def build_adam_peer(model, workdir: Path, extra: Sequence[str] = ()):
     from derive.emit.functions import operation_count
     workdir.mkdir(parents=True, exist_ok=True)
     fns, build_s = adam_functions(model)
-    libs, info = [], {"build_seconds": build_s, "ops": {q: operation_count(fns[q]) for q in fns}}
-    suffix = "_" + "".join(c for c in "".join(extra) if c.isalnum()) if extra else ""
-    for stem, parts, defines in (("peer_adam", ["alpha", "beta"], ["-DALPHA=peer_adam_alpha", "-DBETA=peer_adam_beta"]),
-                                 ("peer_adam_core", ["core"], ["-DCORE=peer_adam_core"])):
+    libs, info = {}, {"build_seconds": build_s, "ops": {q: operation_count(fns[q]) for q in fns}}
+    suffix = flags_tag(extra)
+    for stem, parts, one_call in (("peer_adam", ["alpha", "beta"], False), ("peer_adam_core", ["core"], True)):
+        if not (one_call or two_calls):
+            continue
         src = _codegen(stem, [fns[q] for q in parts], workdir)
         gcc_s = compile_object(src, workdir / f"{stem}{suffix}.o", extra)
-        if not libs:  # the size and compile time of alpha and beta, as for the generated ones
+        if not one_call:  # the size and compile time of alpha and beta, as for the generated ones
             info.update(gcc_seconds=gcc_s, c_bytes=src.stat().st_size)
-        compile_object(DRIVER, workdir / f"driver_{stem}{suffix}.o", [*defines, *extra])
+        compile_object(DRIVER, workdir / f"driver_{stem}{suffix}.o", [*driver_defines(stem, one_call), *extra])
         lib = link_shared([workdir / f"{stem}{suffix}.o", workdir / f"driver_{stem}{suffix}.o"],
                           workdir / f"{stem}{suffix}.so")
-        libs.append(CompiledAlphaBeta(lib, model.n, model.nx))
-    return libs[0], libs[1], info
+        libs[one_call] = CompiledAlphaBeta(lib, model.n, model.nx)
+    return libs.get(False), libs[True], info
 
 
 def generated_alpha_beta_c(model, workdir: Path) -> Dict[str, float]:
