@@ -112,7 +112,7 @@ extern "C" {
   #endif
 #endif
 
-casadi_real casadi_sq(casadi_real x) { return x*x;}
+static casadi_real casadi_sq(casadi_real x) { return x*x;}
 
 static const casadi_int casadi_s0[3] = {28, 1, 1};
 static const casadi_int casadi_s1[3] = {33, 1, 1};

@@ -154,9 +154,9 @@ extern "C" {
   #endif
 #endif
 
-casadi_real casadi_sq(casadi_real x) { return x*x;}
+static casadi_real casadi_sq(casadi_real x) { return x*x;}
 
-void casadi_copy(const casadi_real* x, casadi_int n, casadi_real* y) {
+static void casadi_copy(const casadi_real* x, casadi_int n, casadi_real* y) {
   casadi_int i;
   if (y) {
     if (x) {
@@ -167,9 +167,9 @@ void casadi_copy(const casadi_real* x, casadi_int n, casadi_real* y) {
   }
 }
 
-casadi_real casadi_sign(casadi_real x) { return x<0 ? -1 : x>0 ? 1 : x;}
+static casadi_real casadi_sign(casadi_real x) { return x<0 ? -1 : x>0 ? 1 : x;}
 
-casadi_real casadi_fmax(casadi_real x, casadi_real y) {
+static casadi_real casadi_fmax(casadi_real x, casadi_real y) {
 /* Pre-c99 compatibility */
 #if __STDC_VERSION__ < 199901L
   return x>y ? x : y;
@@ -178,7 +178,7 @@ casadi_real casadi_fmax(casadi_real x, casadi_real y) {
 #endif
 }
 
-casadi_real casadi_fmin(casadi_real x, casadi_real y) {
+static casadi_real casadi_fmin(casadi_real x, casadi_real y) {
 /* Pre-c99 compatibility */
 #if __STDC_VERSION__ < 199901L
   return x<y ? x : y;
@@ -187,7 +187,7 @@ casadi_real casadi_fmin(casadi_real x, casadi_real y) {
 #endif
 }
 
-void casadi_clear(casadi_real* x, casadi_int n) {
+static void casadi_clear(casadi_real* x, casadi_int n) {
   casadi_int i;
   if (x) {
     for (i=0; i<n; ++i) *x++ = 0;

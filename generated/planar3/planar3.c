@@ -170,9 +170,9 @@ extern "C" {
   #endif
 #endif
 
-casadi_real casadi_sq(casadi_real x) { return x*x;}
+static casadi_real casadi_sq(casadi_real x) { return x*x;}
 
-void casadi_copy(const casadi_real* x, casadi_int n, casadi_real* y) {
+static void casadi_copy(const casadi_real* x, casadi_int n, casadi_real* y) {
   casadi_int i;
   if (y) {
     if (x) {
@@ -183,14 +183,14 @@ void casadi_copy(const casadi_real* x, casadi_int n, casadi_real* y) {
   }
 }
 
-void casadi_clear(casadi_real* x, casadi_int n) {
+static void casadi_clear(casadi_real* x, casadi_int n) {
   casadi_int i;
   if (x) {
     for (i=0; i<n; ++i) *x++ = 0;
   }
 }
 
-void casadi_trans(const casadi_real* x, const casadi_int* sp_x, casadi_real* y,
+static void casadi_trans(const casadi_real* x, const casadi_int* sp_x, casadi_real* y,
     const casadi_int* sp_y, casadi_int* tmp) {
   casadi_int ncol_x, nnz_x, ncol_y, k;
   const casadi_int* row_x, *colind_y;
@@ -207,7 +207,7 @@ void casadi_trans(const casadi_real* x, const casadi_int* sp_x, casadi_real* y,
 
 #define CASADI_CAST(x,y) ((x) y)
 
-void casadi_densify(const casadi_real* x, const casadi_int* sp_x, casadi_real* y, casadi_int tr) {
+static void casadi_densify(const casadi_real* x, const casadi_int* sp_x, casadi_real* y, casadi_int tr) {
   casadi_int nrow_x, ncol_x, i, el;
   const casadi_int *colind_x, *row_x;
   if (!y) return;
@@ -231,16 +231,16 @@ void casadi_densify(const casadi_real* x, const casadi_int* sp_x, casadi_real* y
   }
 }
 
-casadi_real casadi_dot(casadi_int n, const casadi_real* x, const casadi_real* y) {
+static casadi_real casadi_dot(casadi_int n, const casadi_real* x, const casadi_real* y) {
   casadi_int i;
   casadi_real r = 0;
   for (i=0; i<n; ++i) r += *x++ * *y++;
   return r;
 }
 
-casadi_real casadi_sign(casadi_real x) { return x<0 ? -1 : x>0 ? 1 : x;}
+static casadi_real casadi_sign(casadi_real x) { return x<0 ? -1 : x>0 ? 1 : x;}
 
-casadi_real casadi_fmax(casadi_real x, casadi_real y) {
+static casadi_real casadi_fmax(casadi_real x, casadi_real y) {
 /* Pre-c99 compatibility */
 #if __STDC_VERSION__ < 199901L
   return x>y ? x : y;
@@ -249,7 +249,7 @@ casadi_real casadi_fmax(casadi_real x, casadi_real y) {
 #endif
 }
 
-casadi_real casadi_fmin(casadi_real x, casadi_real y) {
+static casadi_real casadi_fmin(casadi_real x, casadi_real y) {
 /* Pre-c99 compatibility */
 #if __STDC_VERSION__ < 199901L
   return x<y ? x : y;
@@ -258,7 +258,7 @@ casadi_real casadi_fmin(casadi_real x, casadi_real y) {
 #endif
 }
 
-void casadi_fill(casadi_real* x, casadi_int n, casadi_real alpha) {
+static void casadi_fill(casadi_real* x, casadi_int n, casadi_real alpha) {
   casadi_int i;
   if (x) {
     for (i=0; i<n; ++i) *x++ = alpha;
