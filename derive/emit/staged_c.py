@@ -37,7 +37,7 @@ from typing import Dict, List, Sequence, Tuple
 
 import casadi as ca
 
-__all__ = ["STAGE_OPERATIONS", "staged_c", "replace_function"]
+__all__ = ["STAGE_OPERATIONS", "needs_stages", "staged_c", "replace_function"]
 
 #: Operations per stage. Measured from 50 to 250 on five models: the Panda was fastest at 80 to 100, Baxter,
 #: elbow3, planar3 and planar7 at 100 to 150.
@@ -229,6 +229,11 @@ def staged_c(fn: ca.Function, c_name: str, stage_ops: int = STAGE_OPERATIONS) ->
     text += [f"  {c_name}_s{s}(x, y, t);\n" for s in range(n_stages)]
     text.append("  return 0;\n}\n")
     return "".join(text)
+
+
+def needs_stages(fn: ca.Function, stage_ops: int = STAGE_OPERATIONS) -> bool:
+    """Whether ``fn`` has more than one stage's operations: one stage is CasADi's function plus a call."""
+    return _stages(_algorithm(fn), stage_ops)[1] > 1
 
 
 def replace_function(src: str, fn_name: str, definition_of) -> str:

@@ -743,72 +743,55 @@ CASADI_SYMBOL_EXPORT int link1_ad_work_bytes(casadi_int *sz_arg, casadi_int* sz_
 }
 
 /* link1_elastic_kernel:(q,dq,s,ds,dq_m,p[7])->(y3,y4,alpha,beta) */
-#ifndef FJM_NOINLINE  /* the stages below must stay separate functions (derive/emit/staged_c.py) */
-#if defined(__GNUC__) || defined(__clang__)
-#define FJM_NOINLINE __attribute__((noinline))
-#elif defined(_MSC_VER)
-#define FJM_NOINLINE __declspec(noinline)
-#else
-#define FJM_NOINLINE
-#endif
-#endif
-static FJM_NOINLINE void casadi_f9_s0(const casadi_real* const* x, casadi_real* const* y, casadi_real* t) {
-  (void)t;
-  casadi_real a0,a1,a2,a3,a4,a5,a6,a7,a8,a9,a10,a11,a12,a13,a14,a15,a16,a17,a18,a19,a20,a21,a22,a23,a24,a25,a26,a27,a28;
-  a0=x[5][5]*x[5][3];
-  a1=a0*x[5][4];
-  a2=sin(x[0][0]);
-  a3=a1*a2;
-  a4=x[2][0]-a3;
-  a5=(-1.0)/x[5][0];
-  a6=a4*a5;
-  a7=-a6;
-  y[0][0]=a7;
-  a8=a0*x[1][0];
-  a9=a8*x[5][4];
-  a10=cos(x[0][0]);
-  a11=a9*a10;
-  a12=x[3][0]-a11;
-  a13=a12*a5;
-  a14=-a13;
-  y[1][0]=a14;
-  a15=x[5][1]/x[5][2];
-  a16=a1*a6;
-  a17=a16*a10;
-  a18=x[1][0]*x[1][0];
-  a19=a1*a18;
-  a20=a19*a2;
-  a21=a17+a20;
-  a22=a15*a21;
-  a23=x[5][1]*a6;
-  a24=a22+a23;
-  a25=x[2][0]-a24;
-  a26=x[5][6]*x[4][0];
-  a27=a25+a26;
-  y[2][0]=a27;
-  a28=a15*x[5][0];
-  y[3][0]=a28;
-}
-
-static const casadi_real casadi_f9_zeros[7] = {0};
-
 static int casadi_f9(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)arg; (void)iw; (void)w; (void)mem;
-  casadi_real t[1], y0[1], y1[1], y2[1], y3[1];  /* values between stages; outputs nobody asked for */
-  const casadi_real* x[6];
-  casadi_real* y[4];
-  (void)iw; (void)w; (void)mem;
-  x[0] = arg[0] ? arg[0] : casadi_f9_zeros;
-  x[1] = arg[1] ? arg[1] : casadi_f9_zeros;
-  x[2] = arg[2] ? arg[2] : casadi_f9_zeros;
-  x[3] = arg[3] ? arg[3] : casadi_f9_zeros;
-  x[4] = arg[4] ? arg[4] : casadi_f9_zeros;
-  x[5] = arg[5] ? arg[5] : casadi_f9_zeros;
-  y[0] = res[0] ? res[0] : y0;
-  y[1] = res[1] ? res[1] : y1;
-  y[2] = res[2] ? res[2] : y2;
-  y[3] = res[3] ? res[3] : y3;
-  casadi_f9_s0(x, y, t);
+  casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10;
+  a00=arg[2]? arg[2][0] : 0;
+  a01=arg[5]? arg[5][5] : 0;
+  a02=arg[5]? arg[5][3] : 0;
+  a01=(a01*a02);
+  a02=arg[5]? arg[5][4] : 0;
+  a03=(a01*a02);
+  a04=arg[0]? arg[0][0] : 0;
+  a05=sin(a04);
+  a06=(a03*a05);
+  a06=(a00-a06);
+  a07=-1.;
+  a08=arg[5]? arg[5][0] : 0;
+  a07=(a07/a08);
+  a06=(a06*a07);
+  a09=(-a06);
+  if (res[0]!=0) res[0][0]=a09;
+  a09=arg[3]? arg[3][0] : 0;
+  a10=arg[1]? arg[1][0] : 0;
+  a01=(a01*a10);
+  a01=(a01*a02);
+  a04=cos(a04);
+  a01=(a01*a04);
+  a09=(a09-a01);
+  a09=(a09*a07);
+  a09=(-a09);
+  if (res[1]!=0) res[1][0]=a09;
+  a09=arg[5]? arg[5][1] : 0;
+  a07=arg[5]? arg[5][2] : 0;
+  a07=(a09/a07);
+  a01=(a03*a06);
+  a01=(a01*a04);
+  a10=casadi_sq(a10);
+  a03=(a03*a10);
+  a03=(a03*a05);
+  a01=(a01+a03);
+  a01=(a07*a01);
+  a09=(a09*a06);
+  a01=(a01+a09);
+  a00=(a00-a01);
+  a01=arg[5]? arg[5][6] : 0;
+  a09=arg[4]? arg[4][0] : 0;
+  a01=(a01*a09);
+  a00=(a00+a01);
+  if (res[2]!=0) res[2][0]=a00;
+  a07=(a07*a08);
+  if (res[3]!=0) res[3][0]=a07;
   return 0;
 }
 

@@ -748,73 +748,56 @@ CASADI_SYMBOL_EXPORT int planar1_ad_work_bytes(casadi_int *sz_arg, casadi_int* s
 }
 
 /* planar1_elastic_kernel:(q,dq,s,ds,dq_m,p[8])->(y3,y4,alpha,beta) */
-#ifndef FJM_NOINLINE  /* the stages below must stay separate functions (derive/emit/staged_c.py) */
-#if defined(__GNUC__) || defined(__clang__)
-#define FJM_NOINLINE __attribute__((noinline))
-#elif defined(_MSC_VER)
-#define FJM_NOINLINE __declspec(noinline)
-#else
-#define FJM_NOINLINE
-#endif
-#endif
-static FJM_NOINLINE void casadi_f9_s0(const casadi_real* const* x, casadi_real* const* y, casadi_real* t) {
-  (void)t;
-  casadi_real a0,a1,a2,a3,a4,a5,a6,a7,a8,a9,a10,a11,a12,a13,a14,a15,a16,a17,a18,a19,a20,a21,a22,a23,a24,a25,a26,a27,a28,a29;
-  a0=x[5][0]*x[5][2];
-  a1=a0*x[5][7];
-  a2=sin(x[0][0]);
-  a3=a1*a2;
-  a4=x[2][0]-a3;
-  a5=x[5][2]*x[5][2];
-  a6=x[5][0]*a5;
-  a7=x[5][3]+a6;
-  a8=(-1.0)/a7;
-  a9=a4*a8;
-  a10=-a9;
-  y[0][0]=a10;
-  a11=cos(x[0][0]);
-  a12=x[1][0]*a11;
-  a13=a1*a12;
-  a14=x[3][0]-a13;
-  a15=a14*a8;
-  a16=-a15;
-  y[1][0]=a16;
-  a17=x[5][5]/x[5][4];
-  a18=a9*a11;
-  a19=x[1][0]*x[1][0];
-  a20=a19*a2;
-  a21=a18+a20;
-  a22=a1*a21;
-  a23=a17*a22;
-  a24=x[5][5]*a9;
-  a25=a23+a24;
-  a26=x[2][0]-a25;
-  a27=x[5][6]*x[4][0];
-  a28=a26+a27;
-  y[2][0]=a28;
-  a29=a17*a7;
-  y[3][0]=a29;
-}
-
-static const casadi_real casadi_f9_zeros[8] = {0};
-
 static int casadi_f9(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)arg; (void)iw; (void)w; (void)mem;
-  casadi_real t[1], y0[1], y1[1], y2[1], y3[1];  /* values between stages; outputs nobody asked for */
-  const casadi_real* x[6];
-  casadi_real* y[4];
-  (void)iw; (void)w; (void)mem;
-  x[0] = arg[0] ? arg[0] : casadi_f9_zeros;
-  x[1] = arg[1] ? arg[1] : casadi_f9_zeros;
-  x[2] = arg[2] ? arg[2] : casadi_f9_zeros;
-  x[3] = arg[3] ? arg[3] : casadi_f9_zeros;
-  x[4] = arg[4] ? arg[4] : casadi_f9_zeros;
-  x[5] = arg[5] ? arg[5] : casadi_f9_zeros;
-  y[0] = res[0] ? res[0] : y0;
-  y[1] = res[1] ? res[1] : y1;
-  y[2] = res[2] ? res[2] : y2;
-  y[3] = res[3] ? res[3] : y3;
-  casadi_f9_s0(x, y, t);
+  casadi_real a0, a1, a2, a3, a4, a5, a6, a7, a8, a9;
+  a0=arg[2]? arg[2][0] : 0;
+  a1=arg[5]? arg[5][0] : 0;
+  a2=arg[5]? arg[5][2] : 0;
+  a3=(a1*a2);
+  a4=arg[5]? arg[5][7] : 0;
+  a3=(a3*a4);
+  a4=arg[0]? arg[0][0] : 0;
+  a5=sin(a4);
+  a6=(a3*a5);
+  a6=(a0-a6);
+  a7=-1.;
+  a8=arg[5]? arg[5][3] : 0;
+  a2=casadi_sq(a2);
+  a1=(a1*a2);
+  a8=(a8+a1);
+  a7=(a7/a8);
+  a6=(a6*a7);
+  a1=(-a6);
+  if (res[0]!=0) res[0][0]=a1;
+  a1=arg[3]? arg[3][0] : 0;
+  a2=arg[1]? arg[1][0] : 0;
+  a4=cos(a4);
+  a9=(a2*a4);
+  a9=(a3*a9);
+  a1=(a1-a9);
+  a1=(a1*a7);
+  a1=(-a1);
+  if (res[1]!=0) res[1][0]=a1;
+  a1=arg[5]? arg[5][5] : 0;
+  a7=arg[5]? arg[5][4] : 0;
+  a7=(a1/a7);
+  a4=(a6*a4);
+  a2=casadi_sq(a2);
+  a2=(a2*a5);
+  a4=(a4+a2);
+  a3=(a3*a4);
+  a3=(a7*a3);
+  a1=(a1*a6);
+  a3=(a3+a1);
+  a0=(a0-a3);
+  a3=arg[5]? arg[5][6] : 0;
+  a1=arg[4]? arg[4][0] : 0;
+  a3=(a3*a1);
+  a0=(a0+a3);
+  if (res[2]!=0) res[2][0]=a0;
+  a7=(a7*a8);
+  if (res[3]!=0) res[3][0]=a7;
   return 0;
 }
 

@@ -19,7 +19,7 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from derive.emit.staged_c import replace_function, staged_c
+from derive.emit.staged_c import needs_stages, replace_function, staged_c
 
 pytestmark = pytest.mark.slow  # builds C
 
@@ -68,6 +68,7 @@ def _build(fn: ca.Function, stage_ops: int, tmp: Path, monkeypatch) -> _CFunctio
     stages of ``stage_ops``, compiled strictly."""
     from derive.emit import writer
     monkeypatch.setattr(writer, "staged_c", partial(staged_c, stage_ops=stage_ops))
+    monkeypatch.setattr(writer, "needs_stages", partial(needs_stages, stage_ops=stage_ops))
     src = writer.generate_c("f", {fn.name(): fn}, tmp, staged=(fn,))["f.c"]
     assert "FJM_NOINLINE void" in src  # the definition was replaced
     (tmp / "staged.c").write_text(src)
@@ -81,7 +82,7 @@ def _expected(fn: ca.Function, inputs):
     return [np.asarray(v, float).ravel(order="F") for v in fn.call([ca.DM(v) for v in inputs])]
 
 
-@pytest.mark.parametrize("stage_ops", [1, 2, 7, 1000])
+@pytest.mark.parametrize("stage_ops", [1, 2, 7, 40])
 def test_staged_c_equals_casadi_bitwise(stage_ops, tmp_path, monkeypatch):
     fn = _sample_function()
     c = _build(fn, stage_ops, tmp_path, monkeypatch)
@@ -128,3 +129,12 @@ def test_errors_name_what_is_wrong():
         staged_c(ca.Function("h", [xm], [2 * xm]), "casadi_f0")
     with pytest.raises(ValueError, match="no definition of K"):
         replace_function("/* F:(x)->(y) */\nstatic int casadi_f0(const casadi_real** arg) {\n}\n", "K", str)
+
+
+def test_a_function_of_one_stage_keeps_casadis_code(tmp_path):
+    """One stage would be CasADi's function plus a call: make derive leaves such a kernel as it is."""
+    from derive.emit.writer import generate_c
+    fn = _sample_function()
+    n_ops = sum(fn.instruction_id(k) not in (ca.OP_CONST, ca.OP_INPUT, ca.OP_OUTPUT) for k in range(fn.n_instructions()))
+    assert needs_stages(fn, stage_ops=n_ops // 3) and not needs_stages(fn, stage_ops=n_ops)
+    assert "FJM_NOINLINE" not in generate_c("f", {"F": fn}, tmp_path, staged=(fn,))["f.c"]  # n_ops < 1.5 x 100
