@@ -45,10 +45,15 @@ STAGE_OPERATIONS = 100
 
 _FREE = (ca.OP_CONST, ca.OP_INPUT)
 # one operation a statement, so no outer parentheses (negative literals have their own, :func:`_literal`)
-_BINARY = {ca.OP_ADD: "{0}+{1}", ca.OP_SUB: "{0}-{1}", ca.OP_MUL: "{0}*{1}", ca.OP_DIV: "{0}/{1}"}
+# (CasADi's C writes the same expressions; what it writes through a helper of its own, such as
+# casadi_fmin or casadi_log1p, is not here, and a Function using it keeps CasADi's code)
+_BINARY = {ca.OP_ADD: "{0}+{1}", ca.OP_SUB: "{0}-{1}", ca.OP_MUL: "{0}*{1}", ca.OP_DIV: "{0}/{1}",
+           ca.OP_POW: "pow({0},{1})", ca.OP_CONSTPOW: "pow({0},{1})", ca.OP_ATAN2: "atan2({0},{1})"}
 _UNARY = {ca.OP_NEG: "-{0}", ca.OP_SQ: "{0}*{0}", ca.OP_TWICE: "2.*{0}", ca.OP_INV: "1./{0}",
           ca.OP_SIN: "sin({0})", ca.OP_COS: "cos({0})", ca.OP_TAN: "tan({0})", ca.OP_SQRT: "sqrt({0})",
-          ca.OP_EXP: "exp({0})", ca.OP_LOG: "log({0})", ca.OP_FABS: "fabs({0})"}
+          ca.OP_EXP: "exp({0})", ca.OP_LOG: "log({0})", ca.OP_FABS: "fabs({0})", ca.OP_TANH: "tanh({0})",
+          ca.OP_ASIN: "asin({0})", ca.OP_ACOS: "acos({0})", ca.OP_ATAN: "atan({0})", ca.OP_SINH: "sinh({0})",
+          ca.OP_COSH: "cosh({0})"}
 _NOINLINE = """#ifndef FJM_NOINLINE  /* the stages below must stay separate functions (derive/emit/staged_c.py) */
 #if defined(__GNUC__) || defined(__clang__)
 #define FJM_NOINLINE __attribute__((noinline))
@@ -232,8 +237,12 @@ def staged_c(fn: ca.Function, c_name: str, stage_ops: int = STAGE_OPERATIONS) ->
 
 
 def needs_stages(fn: ca.Function, stage_ops: int = STAGE_OPERATIONS) -> bool:
-    """Whether ``fn`` has more than one stage's operations: one stage is CasADi's function plus a call."""
-    return _stages(_algorithm(fn), stage_ops)[1] > 1
+    """Whether to write ``fn`` in stages: it has more than one stage's operations (one stage is CasADi's
+    function plus a call), and every operation has a C form here (otherwise CasADi's code stays)."""
+    try:
+        return _stages(_algorithm(fn), stage_ops)[1] > 1
+    except NotImplementedError:
+        return False
 
 
 def replace_function(src: str, fn_name: str, definition_of) -> str:
