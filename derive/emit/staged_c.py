@@ -159,7 +159,8 @@ def _literal(c: float) -> str:
 
 def _stage_body(alg, ks: Sequence[int], slot: Dict[int, int]) -> List[str]:
     """The statements of one stage, its locals declared first (one per value: gcc allocated registers
-    worse when a local was reused, and the Panda's stages were 4 % slower)."""
+    worse when a local was reused, and the Panda's stages were 4 % slower). Not indented: a stage is a
+    flat list of assignments, and the 21-joint chain's C would be 50 kB larger."""
     local: Dict[int, str] = {}
     lines = []
     read_here = {p for k in ks if alg[k][0] != ca.OP_INPUT for p in alg[k][1]}
@@ -175,17 +176,17 @@ def _stage_body(alg, ks: Sequence[int], slot: Dict[int, int]) -> List[str]:
     for k in ks:
         op, deps, out, _ = alg[k]
         if op == ca.OP_OUTPUT:
-            lines.append(f"  y[{out[0]}][{out[1]}]={ref(deps[0])};")
+            lines.append(f"y[{out[0]}][{out[1]}]={ref(deps[0])};")
             continue
         expr = (_BINARY.get(op) or _UNARY[op]).format(*map(ref, deps))
         if k not in read_here:  # read only by later stages
-            lines.append(f"  t[{slot[k]}]={expr};")
+            lines.append(f"t[{slot[k]}]={expr};")
             continue
         local[k] = f"a{len(local)}"
         store = f"t[{slot[k]}]=" if k in slot else ""  # read by a later stage too
-        lines.append(f"  {local[k]}={store}{expr};")
+        lines.append(f"{local[k]}={store}{expr};")
     if local:
-        lines.insert(0, "  casadi_real " + ",".join(local.values()) + ";")
+        lines.insert(0, "casadi_real " + ",".join(local.values()) + ";")
     return lines
 
 
@@ -209,6 +210,13 @@ def staged_c(fn: ca.Function, c_name: str, stage_ops: int = STAGE_OPERATIONS) ->
     if not fn.is_a("SXFunction"):
         raise TypeError(f"{fn.name()}: staged_c takes an SX Function, got {fn.class_name()}")
     alg = _algorithm(fn)
+    # names through CasADi's CASADI_PREFIX (the model's name), like CasADi's own: two generated files
+    # may then share one translation unit
+    base = c_name[len("casadi_"):] if c_name.startswith("casadi_") else c_name
+
+    def local(what) -> str:
+        return f"CASADI_PREFIX({base}_{what})"
+
     stage, n_stages = _stages(alg, stage_ops)
     slot, n_slots = _slots(alg, stage)
     text = [_NOINLINE]
@@ -218,20 +226,20 @@ def staged_c(fn: ca.Function, c_name: str, stage_ops: int = STAGE_OPERATIONS) ->
     for s, ks in enumerate(members):
         body = "\n".join(_stage_body(alg, ks, slot))
         unused = "".join(f"(void){v};" for v in "xyt" if f"{v}[" not in body)
-        text.append(f"static FJM_NOINLINE void {c_name}_s{s}(const casadi_real* const* x, casadi_real* const* y, "
-                    f"casadi_real* t) {{\n" + (f"  {unused}\n" if unused else "") + body + "\n}\n\n")
+        text.append(f"static FJM_NOINLINE void {local(s)}(const casadi_real* const* x, casadi_real* const* y, "
+                    f"casadi_real* t) {{\n" + (f"{unused}\n" if unused else "") + body + "\n}\n\n")
     n_in, n_out = fn.n_in(), fn.n_out()
     zeros = max([fn.nnz_in(i) for i in range(n_in)] + [1])
-    text.append(f"static const casadi_real {c_name}_zeros[{zeros}] = {{0}};\n\n")
+    text.append(f"static const casadi_real {local('zeros')}[{zeros}] = {{0}};\n\n")
     text.append(f"static int {c_name}(const casadi_real** arg, casadi_real** res, casadi_int* iw, "
                 f"casadi_real* w, int mem) {{\n")
     scratch = ", ".join(f"y{i}[{max(fn.nnz_out(i), 1)}]" for i in range(n_out))
     text.append(f"  casadi_real t[{max(n_slots, 1)}], {scratch};  /* values between stages; outputs nobody asked for */\n")
     text.append(f"  const casadi_real* x[{max(n_in, 1)}];\n  casadi_real* y[{max(n_out, 1)}];\n")
     text.append("  (void)iw; (void)w; (void)mem;\n")
-    text += [f"  x[{i}] = arg[{i}] ? arg[{i}] : {c_name}_zeros;\n" for i in range(n_in)]
+    text += [f"  x[{i}] = arg[{i}] ? arg[{i}] : {local('zeros')};\n" for i in range(n_in)]
     text += [f"  y[{i}] = res[{i}] ? res[{i}] : y{i};\n" for i in range(n_out)]
-    text += [f"  {c_name}_s{s}(x, y, t);\n" for s in range(n_stages)]
+    text += [f"  {local(s)}(x, y, t);\n" for s in range(n_stages)]
     text.append("  return 0;\n}\n")
     return "".join(text)
 
