@@ -25,7 +25,8 @@ less than they cost. ``make bench`` measures the shipped code.
 The entry keeps CasADi's calling convention, ``static int f(const casadi_real** arg,
 casadi_real** res, casadi_int* iw, casadi_real* w, int mem)``: an absent input (null) reads as
 zeros and an absent output (null) is written to scratch, as in CasADi's own code.
-:func:`replace_function` puts it in place of CasADi's definition in a generated file.
+:func:`replace_function` puts it in place of CasADi's definition in a generated file, where
+:func:`staged_writer` says stages are worth it.
 """
 
 from __future__ import annotations
@@ -33,11 +34,12 @@ from __future__ import annotations
 import heapq
 import math
 import re
-from typing import Dict, List, Sequence, Tuple
+from functools import partial
+from typing import Callable, Dict, List, Optional, Sequence, Tuple
 
 import casadi as ca
 
-__all__ = ["STAGE_OPERATIONS", "needs_stages", "staged_c", "replace_function"]
+__all__ = ["STAGE_OPERATIONS", "staged_c", "staged_writer", "replace_function"]
 
 #: Operations per stage. Measured from 50 to 250 on five models: the Panda was fastest at 80 to 100, Baxter,
 #: elbow3, planar3 and planar7 at 100 to 150.
@@ -190,6 +192,14 @@ def _stage_body(alg, ks: Sequence[int], slot: Dict[int, int]) -> List[str]:
     return lines
 
 
+def _plan(fn: ca.Function, stage_ops: int):
+    """``(algorithm, stage of each instruction, number of stages)`` of ``fn``."""
+    if not fn.is_a("SXFunction"):
+        raise TypeError(f"{fn.name()}: staged_c takes an SX Function, got {fn.class_name()}")
+    alg = _algorithm(fn)
+    return (alg, *_stages(alg, stage_ops))
+
+
 def staged_c(fn: ca.Function, c_name: str, stage_ops: int = STAGE_OPERATIONS) -> str:
     """C of ``fn`` (an SX Function) as ``static int c_name(arg, res, iw, w, mem)`` and its stages.
 
@@ -207,9 +217,21 @@ def staged_c(fn: ca.Function, c_name: str, stage_ops: int = STAGE_OPERATIONS) ->
     str
         The definitions: the ``FJM_NOINLINE`` macro, the stages, then the entry.
     """
-    if not fn.is_a("SXFunction"):
-        raise TypeError(f"{fn.name()}: staged_c takes an SX Function, got {fn.class_name()}")
-    alg = _algorithm(fn)
+    return _write(fn, c_name, *_plan(fn, stage_ops))
+
+
+def staged_writer(fn: ca.Function, stage_ops: int = STAGE_OPERATIONS) -> Optional[Callable[[str], str]]:
+    """``c_name -> staged_c(fn, c_name)``, planned once; None where CasADi's code should stay: ``fn`` has
+    one stage's operations (one stage is CasADi's function plus a call), or an operation with no C form here."""
+    try:
+        alg, stage, n_stages = _plan(fn, stage_ops)
+    except NotImplementedError:
+        return None
+    return None if n_stages <= 1 else partial(_write, fn, alg=alg, stage=stage, n_stages=n_stages)
+
+
+def _write(fn: ca.Function, c_name: str, alg, stage: Dict[int, int], n_stages: int) -> str:
+    """:func:`staged_c` of a planned ``fn``."""
     # names through CasADi's CASADI_PREFIX (the model's name), like CasADi's own: two generated files
     # may then share one translation unit
     base = c_name[len("casadi_"):] if c_name.startswith("casadi_") else c_name
@@ -217,7 +239,6 @@ def staged_c(fn: ca.Function, c_name: str, stage_ops: int = STAGE_OPERATIONS) ->
     def local(what) -> str:
         return f"CASADI_PREFIX({base}_{what})"
 
-    stage, n_stages = _stages(alg, stage_ops)
     slot, n_slots = _slots(alg, stage)
     text = [_NOINLINE]
     members: List[List[int]] = [[] for _ in range(n_stages)]
@@ -231,26 +252,17 @@ def staged_c(fn: ca.Function, c_name: str, stage_ops: int = STAGE_OPERATIONS) ->
     n_in, n_out = fn.n_in(), fn.n_out()
     zeros = max([fn.nnz_in(i) for i in range(n_in)] + [1])
     text.append(f"static const casadi_real {local('zeros')}[{zeros}] = {{0}};\n\n")
+    # (iw, w and mem are unused, like in CasADi's own functions: the writer's _silence_unused says so for both)
     text.append(f"static int {c_name}(const casadi_real** arg, casadi_real** res, casadi_int* iw, "
                 f"casadi_real* w, int mem) {{\n")
     scratch = ", ".join(f"y{i}[{max(fn.nnz_out(i), 1)}]" for i in range(n_out))
     text.append(f"  casadi_real t[{max(n_slots, 1)}], {scratch};  /* values between stages; outputs nobody asked for */\n")
     text.append(f"  const casadi_real* x[{max(n_in, 1)}];\n  casadi_real* y[{max(n_out, 1)}];\n")
-    text.append("  (void)iw; (void)w; (void)mem;\n")
     text += [f"  x[{i}] = arg[{i}] ? arg[{i}] : {local('zeros')};\n" for i in range(n_in)]
     text += [f"  y[{i}] = res[{i}] ? res[{i}] : y{i};\n" for i in range(n_out)]
     text += [f"  {local(s)}(x, y, t);\n" for s in range(n_stages)]
     text.append("  return 0;\n}\n")
     return "".join(text)
-
-
-def needs_stages(fn: ca.Function, stage_ops: int = STAGE_OPERATIONS) -> bool:
-    """Whether to write ``fn`` in stages: it has more than one stage's operations (one stage is CasADi's
-    function plus a call), and every operation has a C form here (otherwise CasADi's code stays)."""
-    try:
-        return _stages(_algorithm(fn), stage_ops)[1] > 1
-    except NotImplementedError:
-        return False
 
 
 def replace_function(src: str, fn_name: str, definition_of) -> str:

@@ -4484,7 +4484,6 @@ static int casadi_f10(const casadi_real** arg, casadi_real** res, casadi_int* iw
   casadi_real t[223], y0[6], y1[6], y2[6], y3[36];  /* values between stages; outputs nobody asked for */
   const casadi_real* x[6];
   casadi_real* y[4];
-  (void)iw; (void)w; (void)mem;
   x[0] = arg[0] ? arg[0] : CASADI_PREFIX(f10_zeros);
   x[1] = arg[1] ? arg[1] : CASADI_PREFIX(f10_zeros);
   x[2] = arg[2] ? arg[2] : CASADI_PREFIX(f10_zeros);

@@ -19,7 +19,7 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from derive.emit.staged_c import needs_stages, replace_function, staged_c
+from derive.emit.staged_c import replace_function, staged_c, staged_writer
 
 pytestmark = pytest.mark.slow  # builds C
 
@@ -71,8 +71,7 @@ def _build(fn: ca.Function, stage_ops: int, tmp: Path, monkeypatch) -> _CFunctio
     """``fn``'s C as make derive writes it (:func:`derive.emit.writer.generate_c` with ``fn`` staged), in
     stages of ``stage_ops``, compiled strictly."""
     from derive.emit import writer
-    monkeypatch.setattr(writer, "staged_c", partial(staged_c, stage_ops=stage_ops))
-    monkeypatch.setattr(writer, "needs_stages", partial(needs_stages, stage_ops=stage_ops))
+    monkeypatch.setattr(writer, "staged_writer", partial(staged_writer, stage_ops=stage_ops))
     src = writer.generate_c("f", {fn.name(): fn}, tmp, staged=(fn,))["f.c"]
     assert "FJM_NOINLINE void" in src  # the definition was replaced
     (tmp / "staged.c").write_text(src)
@@ -140,7 +139,7 @@ def test_a_function_of_one_stage_keeps_casadis_code(tmp_path):
     from derive.emit.writer import generate_c
     fn = _sample_function()
     n_ops = sum(fn.instruction_id(k) not in (ca.OP_CONST, ca.OP_INPUT, ca.OP_OUTPUT) for k in range(fn.n_instructions()))
-    assert needs_stages(fn, stage_ops=n_ops // 3) and not needs_stages(fn, stage_ops=n_ops)
+    assert staged_writer(fn, stage_ops=n_ops // 3) is not None and staged_writer(fn, stage_ops=n_ops) is None
     assert "FJM_NOINLINE" not in generate_c("f", {"F": fn}, tmp_path, staged=(fn,))["f.c"]  # n_ops < 1.5 x 100
 
 
@@ -152,5 +151,5 @@ def test_a_function_with_an_operation_staged_c_cannot_write_keeps_casadis_code(t
     for _ in range(80):
         e = ca.sin(e) * 1.01 + ca.cos(e[::-1])
     fn = ca.Function("G", [x], [ca.fmin(e, 0.5)])
-    assert not needs_stages(fn, stage_ops=10)
+    assert staged_writer(fn, stage_ops=10) is None
     assert "FJM_NOINLINE" not in generate_c("g", {"G": fn}, tmp_path, staged=(fn,))["g.c"]
