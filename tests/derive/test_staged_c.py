@@ -18,6 +18,7 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 import pytest
+from support.c_function import CFunction
 
 from derive.emit.staged_c import replace_function, staged_c, staged_writer
 
@@ -44,30 +45,7 @@ def _sample_function() -> ca.Function:
     return ca.Function("F", [x, y], [f1, f2], ["x", "y"], ["f1", "f2"])
 
 
-class _CFunction:
-    """``name`` of a shared library in CasADi's calling convention, dense inputs and outputs."""
-
-    def __init__(self, lib: Path, name: str, fn: ca.Function):
-        self.fn = getattr(ctypes.CDLL(str(lib)), name)
-        self.fn.restype = ctypes.c_int
-        self.n_in, self.n_out = fn.n_in(), fn.n_out()
-        self.nnz_out = [fn.nnz_out(i) for i in range(fn.n_out())]
-
-    def __call__(self, inputs, skip_out=()):
-        dbl = ctypes.POINTER(ctypes.c_double)
-        arg = (dbl * self.n_in)(*[None if v is None else np.ascontiguousarray(v, float).ctypes.data_as(dbl)
-                                   for v in inputs])
-        outs = [np.full(n, np.nan) for n in self.nnz_out]
-        res = (dbl * self.n_out)(*[None if i in skip_out else o.ctypes.data_as(dbl) for i, o in enumerate(outs)])
-        keep = [np.ascontiguousarray(v, float) for v in inputs if v is not None]  # alive during the call
-        iw = (ctypes.c_longlong * 64)()
-        w = (ctypes.c_double * 4096)()
-        assert self.fn(arg, res, iw, w, 0) == 0
-        del keep
-        return outs
-
-
-def _build(fn: ca.Function, stage_ops: int, tmp: Path, monkeypatch) -> _CFunction:
+def _build(fn: ca.Function, stage_ops: int, tmp: Path, monkeypatch) -> CFunction:
     """``fn``'s C as make derive writes it (:func:`derive.emit.writer.generate_c` with ``fn`` staged), in
     stages of ``stage_ops``, compiled strictly."""
     from derive.emit import writer
@@ -78,7 +56,12 @@ def _build(fn: ca.Function, stage_ops: int, tmp: Path, monkeypatch) -> _CFunctio
     lib = tmp / f"staged{stage_ops}.so"
     proc = subprocess.run(["gcc", *STRICT, str(tmp / "staged.c"), "-o", str(lib), "-lm"], capture_output=True, text=True)
     assert proc.returncode == 0, proc.stderr[:3000]
-    return _CFunction(lib, fn.name(), fn)
+    return CFunction(ctypes.CDLL(str(lib)), fn.name(), ctypes.c_double)
+
+
+def _call(c: CFunction, inputs, skip_out=()):
+    """The outputs' nonzeros (dense, column by column), as :func:`_expected` gives them."""
+    return [o.ravel(order="F") for o in c(*inputs, skip_out=skip_out)]
 
 
 def _expected(fn: ca.Function, inputs):
@@ -92,7 +75,7 @@ def test_staged_c_equals_casadi_bitwise(stage_ops, tmp_path, monkeypatch):
     rng = np.random.default_rng(stage_ops)
     for _ in range(5):
         inputs = [rng.uniform(-2, 2, 5), rng.uniform(-2, 2, 3)]
-        for got, want in zip(c(inputs), _expected(fn, inputs)):
+        for got, want in zip(_call(c, inputs), _expected(fn, inputs)):
             np.testing.assert_array_equal(got, want)
 
 
@@ -100,10 +83,10 @@ def test_absent_inputs_read_as_zeros_and_absent_outputs_are_skipped(tmp_path, mo
     fn = _sample_function()
     c = _build(fn, 3, tmp_path, monkeypatch)
     x = np.linspace(-1, 1, 5)
-    got = c([x, None])
+    got = _call(c, [x, None])
     for g, w in zip(got, _expected(fn, [x, np.zeros(3)])):
         np.testing.assert_array_equal(g, w)
-    got = c([x, np.ones(3)], skip_out=(0,))
+    got = _call(c, [x, np.ones(3)], skip_out=(0,))
     assert np.all(np.isnan(got[0]))  # not written
     np.testing.assert_array_equal(got[1], _expected(fn, [x, np.ones(3)])[1])
 
@@ -119,7 +102,7 @@ def test_a_model_kernel_staged_equals_casadi(tmp_path, monkeypatch):
     p = np.array([pp.default for pp in m.params])
     for _ in range(3):
         inputs = [rng.uniform(-1, 1, m.n) for _ in range(5)] + [p]
-        for got, want in zip(c(inputs), _expected(kernel, inputs)):
+        for got, want in zip(_call(c, inputs), _expected(kernel, inputs)):
             np.testing.assert_array_equal(got, want)
 
 
